@@ -1,0 +1,12 @@
+"""bemlearn: learn the balance equilibrium manifold (BEM) of underactuated balance robots.
+
+Layout (each layer only imports the ones before it):
+``robots`` (models, dynamics, model-based BEM, zero dynamics) → ``data`` (excitation,
+trajectory files, derivatives, GP datasets) → ``models`` (GPs, GPDM: math only) →
+``fitting`` (training loops, logging) → ``export`` (TorchScript / torch.export
+predictors) → ``control`` / ``sim`` (EIC controller, closed loop) → ``cli``.
+"""
+
+from bemlearn._version import __version__
+
+__all__ = ["__version__"]

@@ -1,0 +1,5 @@
+import sys
+
+from bemlearn.cli.main import main
+
+sys.exit(main())

@@ -1,0 +1,5 @@
+"""The ``bemlearn`` command line."""
+
+from bemlearn.cli.main import main
+
+__all__ = ["main"]

@@ -1,0 +1,62 @@
+"""Entry point of the ``bemlearn`` command.
+
+Each subcommand lives in its own module of this package exposing
+``add_parser(subparsers)``, which registers the parser and sets ``func`` (a callable
+taking the parsed namespace and returning an exit code).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+from bemlearn._version import __version__
+from bemlearn.config import ConfigError
+
+__all__ = ["main", "build_parser"]
+
+#: Subcommand modules, in the order they appear in ``bemlearn --help``.
+SUBCOMMANDS: tuple[str, ...] = (
+    "bemlearn.cli.data_cmd",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="bemlearn",
+        description="Learn the balance equilibrium manifold of underactuated balance robots "
+        "and use it in an EIC control loop.",
+    )
+    parser.add_argument("--version", action="version", version=f"bemlearn {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in SUBCOMMANDS:
+        importlib.import_module(name).add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 0
+    try:
+        return int(args.func(args) or 0)
+    except (ConfigError, ValueError, FileNotFoundError, KeyError) as exc:
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+        print(f"bemlearn {args.command}: error: {msg}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"bemlearn {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,134 @@
+"""The frozen posterior of a trained GP, in the one form every predictor kind shares.
+
+For an ARD squared-exponential kernel (eq. 11)
+
+    k(x, x') = σ_f² exp(−½ (x − x')ᵀ W (x − x')),   W = diag(1/ℓ²),
+
+the posterior of every bemlearn GP kind (exact, sgpr, svgp) at a *normalized* input
+x̃ = (x − x_mean) / x_std is, with k_Z(x̃) = k(x̃, Z) ∈ R^M,
+
+    μ̃(x̃)  = k_Z(x̃)ᵀ α                          (eq. 12, mean)
+    σ̃²(x̃) = σ_f² − k_Z(x̃)ᵀ S k_Z(x̃)             (eq. 12, latent variance)
+
+    exact:  Z = X (training inputs), α = K⁻¹ Y,      S = K⁻¹,  K = K_XX + σ_0² I
+    sgpr:   Z = inducing points,     α = Σ K_ZX Y / σ_0²,  S = K_ZZ⁻¹ − Σ,
+            Σ = (K_ZZ + σ_0⁻² K_ZX K_XZ)⁻¹               (Titsias, 2009)
+    svgp:   Z = inducing points, q(u) = N(μ_u, S_u) (un-whitened),
+            α = K_ZZ⁻¹ μ_u,  S = K_ZZ⁻¹ − K_ZZ⁻¹ S_u K_ZZ⁻¹
+
+and in physical units μ(x) = y_mean + y_std μ̃(x̃), σ(x) = y_std σ̃(x̃).  S need not be
+positive definite (sgpr/svgp); it is symmetric.  The observation noise σ_0² is kept for
+predictive (noisy) variances but is *not* part of σ̃² above.
+
+This is what export (TorchScript / torch.export) consumes; it holds plain float64
+tensors and nothing of GPyTorch.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Literal
+
+import torch
+
+__all__ = ["PredictorState", "GPKind"]
+
+GPKind = Literal["exact", "sgpr", "svgp"]
+
+
+@dataclass(frozen=True)
+class PredictorState:
+    """A GP posterior frozen for prediction (see module docstring for the formulas).
+
+    Attributes:
+        kind: ``"exact"``, ``"sgpr"`` or ``"svgp"``.
+        Z: ``(M, d)`` normalized support inputs (training inputs for exact, inducing points otherwise).
+        alpha: ``(M,)`` mean weights, normalized output units.
+        S: ``(M, M)`` symmetric variance matrix, σ̃² = σ_f² − kᵀ S k.
+        lengthscale: ``(d,)`` ARD lengthscales ℓ in normalized input units (W = diag(ℓ⁻²)).
+        outputscale: ``()`` σ_f² (normalized output units squared).
+        noise: ``()`` σ_0² (normalized output units squared).
+        x_mean, x_std: ``(d,)`` input normalization, physical units of each column.
+        y_mean, y_std: ``()`` output normalization, rad.
+        input_names: the d column names, in order, e.g. ``("qdd_theta", ..., "qd_alpha")``.
+        n_train: number of training points the posterior was conditioned on.
+    """
+
+    kind: GPKind
+    Z: torch.Tensor
+    alpha: torch.Tensor
+    S: torch.Tensor
+    lengthscale: torch.Tensor
+    outputscale: torch.Tensor
+    noise: torch.Tensor
+    x_mean: torch.Tensor
+    x_std: torch.Tensor
+    y_mean: torch.Tensor
+    y_std: torch.Tensor
+    input_names: tuple[str, ...]
+    n_train: int
+
+    def __post_init__(self) -> None:
+        M, d = self.Z.shape
+        checks = {
+            "alpha": (self.alpha, (M,)),
+            "S": (self.S, (M, M)),
+            "lengthscale": (self.lengthscale, (d,)),
+            "outputscale": (self.outputscale, ()),
+            "noise": (self.noise, ()),
+            "x_mean": (self.x_mean, (d,)),
+            "x_std": (self.x_std, (d,)),
+            "y_mean": (self.y_mean, ()),
+            "y_std": (self.y_std, ()),
+        }
+        for name, (t, shape) in checks.items():
+            if tuple(t.shape) != shape:
+                raise ValueError(f"PredictorState.{name}: expected shape {shape}, got {tuple(t.shape)}")
+        if len(self.input_names) != d:
+            raise ValueError(f"PredictorState.input_names: expected {d} names, got {len(self.input_names)}")
+
+    @property
+    def n_support(self) -> int:
+        return int(self.Z.shape[0])
+
+    @property
+    def dim(self) -> int:
+        return int(self.Z.shape[1])
+
+    def tensors(self) -> dict[str, torch.Tensor]:
+        """All tensor fields by name (for ``torch.save`` / ``weights_only`` loading)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if isinstance(getattr(self, f.name), torch.Tensor)}
+
+    def to_dict(self) -> dict:
+        """A ``torch.load(weights_only=True)``-safe dict (tensors, str, int, tuples)."""
+        out: dict = dict(self.tensors())
+        out["kind"] = self.kind
+        out["input_names"] = list(self.input_names)
+        out["n_train"] = int(self.n_train)
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "PredictorState":
+        kw = dict(data)
+        kw["input_names"] = tuple(kw["input_names"])
+        return cls(**kw)
+
+    def to(self, device: torch.device | str | None = None, dtype: torch.dtype | None = None) -> "PredictorState":
+        moved = {k: v.to(device=device, dtype=dtype) for k, v in self.tensors().items()}
+        return dataclasses.replace(self, **moved)
+
+    # Reference (slow, obvious) evaluation, used by tests as the common ground truth.
+    def predict_reference(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Mean and latent std in physical units for ``x``: ``(B, d)`` physical inputs.
+
+        Returns:
+            mean ``(B,)`` rad and std ``(B,)`` rad.
+        """
+        xt = (x - self.x_mean) / self.x_std
+        diff = (xt[:, None, :] - self.Z[None, :, :]) / self.lengthscale
+        k = self.outputscale * torch.exp(-0.5 * (diff**2).sum(-1))
+        mean = k @ self.alpha
+        var = self.outputscale - ((k @ self.S) * k).sum(-1)
+        std = var.clamp_min(0.0).sqrt()
+        return self.y_mean + self.y_std * mean, self.y_std * std

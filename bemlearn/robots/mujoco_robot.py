@@ -1,0 +1,266 @@
+"""A :class:`~bemlearn.robots.robot.Robot` whose dynamics come from a MuJoCo model.
+
+Any MJCF whose joints are hinges or slides and whose actuators drive joints directly
+works: D(q) is MuJoCo's composite-rigid-body mass matrix, C q̇ + G its recursive
+Newton–Euler bias (``mj_rne`` with zero acceleration), τ_p its passive forces
+(``mj_passive``: joint damping, stiffness).  The unactuated coordinate is the one whose
+row of the input matrix B is zero; exactly one is required.
+
+Coordinates.  By default the coordinates are the MJCF joints in model order.  A model may
+declare a constant linear change of coordinates q = T q_joint, which is how a planar
+biped with a pinned stance foot (an ankle-rooted kinematic tree) exposes the absolute
+torso angle as its unactuated coordinate:
+
+.. code-block:: xml
+
+    <custom>
+      <numeric name="bemlearn_coordinates" data="..."/>       <!-- T, n×n row-major -->
+      <text name="bemlearn_coordinate_names" data="q1 q2 ..."/>
+      <numeric name="bemlearn_qu_range" data="-1.5708 1.5708"/> <!-- optional -->
+      <numeric name="bemlearn_qu_nominal" data="0"/>            <!-- optional -->
+    </custom>
+
+With q_j = T⁻¹ q, the dynamics transform as D = T⁻ᵀ D_j T⁻¹, C q̇ + G = T⁻ᵀ (C q̇ + G)_j,
+τ_p = T⁻ᵀ τ_p,j and B = T⁻ᵀ B_j (T constant, so no extra velocity terms).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import torch
+
+from bemlearn.robots._mujoco_compat import full_mass_matrix, make_mass_matrix
+from bemlearn.robots.robot import Robot, as_batch
+
+__all__ = ["MujocoRobot", "RobotModelError"]
+
+log = logging.getLogger(__name__)
+
+_JOINT_KIND = {
+    int(mujoco.mjtJoint.mjJNT_HINGE): "hinge",
+    int(mujoco.mjtJoint.mjJNT_SLIDE): "slide",
+    int(mujoco.mjtJoint.mjJNT_BALL): "ball",
+    int(mujoco.mjtJoint.mjJNT_FREE): "free",
+}
+
+
+class RobotModelError(ValueError):
+    """The model is not an underactuated balance robot bemlearn can handle."""
+
+
+def _custom_numeric(model: mujoco.MjModel, name: str) -> np.ndarray | None:
+    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, name)
+    if i < 0:
+        return None
+    start, size = int(model.numeric_adr[i]), int(model.numeric_size[i])
+    return np.array(model.numeric_data[start : start + size], dtype=np.float64)
+
+
+def _custom_text(model: mujoco.MjModel, name: str) -> str | None:
+    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, name)
+    if i < 0:
+        return None
+    start, size = int(model.text_adr[i]), int(model.text_size[i])
+    return bytes(model.text_data[start : start + size]).split(b"\0")[0].decode()
+
+
+class MujocoRobot(Robot):
+    """A robot defined by an MJCF model (see module docstring).
+
+    Args:
+        model: a compiled ``mujoco.MjModel``.
+        name: a name for the robot (default: the model name).
+        source: where the model came from (path or registry name), for messages.
+    """
+
+    def __init__(self, model: mujoco.MjModel, *, name: str | None = None, source: str | None = None) -> None:
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.source = source or "<MjModel>"
+        self.name = name or model.names[: model.names.find(b"\0")].decode() or "robot"
+        where = f"{self.source}"
+        if model.njnt == 0:
+            raise RobotModelError(f"{where}: the model has no joints")
+        kinds = [_JOINT_KIND.get(int(t), str(t)) for t in model.jnt_type]
+        names = [model.joint(i).name or f"joint{i}" for i in range(model.njnt)]
+        bad = [(n, k) for n, k in zip(names, kinds) if k not in ("hinge", "slide")]
+        if bad:
+            raise RobotModelError(
+                f"{where}: joints {bad} are ball/free joints; bemlearn robots need hinge or slide joints "
+                "only (one unactuated, the rest actuated)"
+            )
+        n = model.njnt
+        self.joint_kinds = tuple(kinds)
+        self.mjcf_joint_names = tuple(names)
+        self._qadr = np.array(model.jnt_qposadr, dtype=np.int64)
+        self._dadr = np.array(model.jnt_dofadr, dtype=np.int64)
+        # input matrix in joint coordinates (nv x nu)
+        Bj = np.zeros((n, model.nu))
+        dof_to_joint = {int(a): j for j, a in enumerate(self._dadr)}
+        for i in range(model.nu):
+            act = model.actuator(i)
+            if int(model.actuator_trntype[i]) != int(mujoco.mjtTrn.mjTRN_JOINT):
+                raise RobotModelError(
+                    f"{where}: actuator {act.name or i!r} does not drive a joint directly "
+                    "(bemlearn supports joint transmissions only)"
+                )
+            j = int(model.actuator_trnid[i, 0])
+            Bj[dof_to_joint[int(self._dadr[j])], i] = model.actuator_gear[i, 0]
+        # coordinate map
+        T = _custom_numeric(model, "bemlearn_coordinates")
+        if T is None:
+            T = np.eye(n)
+        elif T.size != n * n:
+            raise RobotModelError(f"{where}: custom numeric 'bemlearn_coordinates' must have {n * n} entries (n×n), got {T.size}")
+        T = T.reshape(n, n)
+        if abs(np.linalg.det(T)) < 1e-12:
+            raise RobotModelError(f"{where}: 'bemlearn_coordinates' matrix is singular")
+        coord_names = _custom_text(model, "bemlearn_coordinate_names")
+        self.joint_names = tuple(coord_names.split()) if coord_names else tuple(names)
+        if len(self.joint_names) != n:
+            raise RobotModelError(f"{where}: 'bemlearn_coordinate_names' lists {len(self.joint_names)} names, expected {n}")
+        self.T = torch.as_tensor(T, dtype=torch.float64)
+        self.Tinv = torch.linalg.inv(self.T)
+        B = self.Tinv.T @ torch.as_tensor(Bj)
+        self.input_matrix = B  # (n, nu): generalized force = B @ actuator force
+        zero_rows = [i for i in range(n) if bool((B[i].abs() < 1e-12).all())]
+        if len(zero_rows) != 1:
+            desc = "no" if not zero_rows else f"{len(zero_rows)} ({[self.joint_names[i] for i in zero_rows]})"
+            raise RobotModelError(
+                f"{where}: expected exactly one unactuated coordinate (a hinge/slide joint no actuator "
+                f"drives), found {desc}; joints: {list(self.joint_names)}, actuators: {model.nu}"
+            )
+        self.unactuated_index = zero_rows[0]
+        # admissible range and nominal value of q_u
+        rng = _custom_numeric(model, "bemlearn_qu_range")
+        nom = _custom_numeric(model, "bemlearn_qu_nominal")
+        self.qu_nominal = float(nom[0]) if nom is not None else 0.0
+        if rng is not None:
+            self.qu_range = (float(rng[0]), float(rng[1]))
+        elif np.allclose(T, np.eye(n)) and model.jnt_limited[self.unactuated_index]:
+            lo, hi = model.jnt_range[self.unactuated_index]
+            self.qu_range = (float(lo), float(hi))
+        else:
+            half = math.pi / 2 if self.joint_kinds[self.unactuated_index] == "hinge" or not np.allclose(T, np.eye(n)) else 1.0
+            self.qu_range = (self.qu_nominal - half, self.qu_nominal + half)
+        if model.neq:
+            log.warning("%s: equality constraints are ignored by the robot dynamics", where)
+        self._M = np.zeros((model.nv, model.nv))
+        self._vec = np.zeros(model.nv)
+        self._chain = None
+
+    @classmethod
+    def from_xml(cls, path: str | Path, *, name: str | None = None) -> "MujocoRobot":
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: MJCF file not found")
+        try:
+            model = mujoco.MjModel.from_xml_path(str(path))
+        except ValueError as exc:
+            raise RobotModelError(f"{path}: MuJoCo could not load the model: {exc}") from exc
+        return cls(model, name=name or path.stem, source=str(path))
+
+    @classmethod
+    def from_xml_string(cls, xml: str, *, name: str | None = None) -> "MujocoRobot":
+        try:
+            model = mujoco.MjModel.from_xml_string(xml)
+        except ValueError as exc:
+            raise RobotModelError(f"<xml string>: MuJoCo could not load the model: {exc}") from exc
+        return cls(model, name=name, source=name or "<xml string>")
+
+    # ---- per-state MuJoCo evaluation ---------------------------------------------------
+    def _load_state(self, qj: np.ndarray, qdj: np.ndarray | None) -> None:
+        d = self.data
+        d.qpos[self._qadr] = qj
+        if qdj is not None:
+            d.qvel[self._dadr] = qdj
+        mujoco.mj_kinematics(self.model, d)
+        mujoco.mj_comPos(self.model, d)
+
+    def _to_joint(self, q: torch.Tensor) -> np.ndarray:
+        return (q @ self.Tinv.T).numpy()
+
+    def _from_joint_force(self, f: np.ndarray) -> torch.Tensor:
+        # generalized force in coordinates: T^{-T} f_j  -> row form f_j @ T^{-1}
+        return torch.as_tensor(f) @ self.Tinv
+
+    def mass_matrix(self, q: torch.Tensor) -> torch.Tensor:
+        """D(q) (eq. 1) from MuJoCo's CRB algorithm. ``q: (B, n)`` → ``(B, n, n)``."""
+        q = as_batch(q, self.n, "q", func="mass_matrix", units="rad")
+        qj = self._to_joint(q)
+        out = np.empty((q.shape[0], self.n, self.n))
+        idx = np.ix_(self._dadr, self._dadr)
+        for b in range(q.shape[0]):
+            self._load_state(qj[b], None)
+            make_mass_matrix(self.model, self.data)
+            out[b] = full_mass_matrix(self.model, self.data, self._M)[idx]
+        Dj = torch.as_tensor(out)
+        return self.Tinv.T @ Dj @ self.Tinv
+
+    def _rne(self, q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor | None) -> np.ndarray:
+        qj, qdj = self._to_joint(q), self._to_joint(qd)
+        qddj = None if qdd is None else self._to_joint(qdd)
+        out = np.empty((q.shape[0], self.n))
+        d = self.data
+        for b in range(q.shape[0]):
+            self._load_state(qj[b], qdj[b])
+            mujoco.mj_comVel(self.model, d)
+            if qddj is not None:
+                d.qacc[self._dadr] = qddj[b]
+            mujoco.mj_rne(self.model, d, 0 if qddj is None else 1, self._vec)
+            out[b] = self._vec[self._dadr]
+        return out
+
+    def bias(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        """C(q, q̇) q̇ + G(q) (eq. 1) from MuJoCo's RNE. ``q, qd: (B, n)`` → ``(B, n)``."""
+        q, qd = self._states(q, qd, func="bias")
+        return self._from_joint_force(self._rne(q, qd, None))
+
+    def passive(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        """Passive forces τ_p (joint damping and stiffness, ``mj_passive``), ``(B, n)``."""
+        q, qd = self._states(q, qd, func="passive")
+        qj, qdj = self._to_joint(q), self._to_joint(qd)
+        out = np.empty((q.shape[0], self.n))
+        d = self.data
+        for b in range(q.shape[0]):
+            self._load_state(qj[b], qdj[b])
+            mujoco.mj_comVel(self.model, d)
+            mujoco.mj_passive(self.model, d)
+            out[b] = d.qfrc_passive[self._dadr]
+        return self._from_joint_force(out)
+
+    def inverse_dynamics(self, q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor) -> torch.Tensor:
+        """D q̈ + C q̇ + G − τ_p in one RNE pass per state (same value as the base class)."""
+        q, qd, qdd = self._states(q, qd, qdd, func="inverse_dynamics")
+        return self._from_joint_force(self._rne(q, qd, qdd)) - self.passive(q, qd)
+
+    # ---- kinematics --------------------------------------------------------------------
+    @property
+    def chain(self):
+        """The pytorch-kinematics chain of the model (built once, float64)."""
+        if self._chain is None:
+            from bemlearn.robots.kinematics import chain_from_model
+
+            self._chain = chain_from_model(self.model)
+        return self._chain
+
+    def forward_kinematics(self, q: torch.Tensor, frames: list[str] | tuple[str, ...]) -> dict[str, torch.Tensor]:
+        """World positions of named bodies/sites via pytorch-kinematics.
+
+        Args:
+            q: ``(B, n)`` coordinates (rad / m).
+            frames: body or site names.
+
+        Returns:
+            ``{name: (B, 3)}`` positions in m, world frame.
+        """
+        from bemlearn.robots.kinematics import frame_positions
+
+        q = as_batch(q, self.n, "q", func="forward_kinematics", units="rad")
+        qj = q @ self.Tinv.T
+        return frame_positions(self.chain, self.model, qj, frames)

@@ -1,0 +1,85 @@
+"""Desired actuated trajectories q_a^d(t): composite sinusoids with exact derivatives.
+
+    q_a^d(t) = c + Σ_k A_k sin(2π f_k t + φ_k)        (per actuated joint)
+
+The paper's Fig. 2 reference ("a composite sinusoidal curve") and the excitation
+reference θ_t of Section IV-A are of this form.  When every f_k is an integer multiple
+of 1/T the trajectory is T-periodic (:attr:`CompositeSinusoid.period`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from fractions import Fraction
+
+import numpy as np
+import torch
+
+__all__ = ["CompositeSinusoid"]
+
+
+@dataclass(frozen=True)
+class CompositeSinusoid:
+    """A sum of sines per actuated joint.
+
+    Attributes:
+        amplitudes: ``(m, K)`` rad.
+        frequencies: ``(m, K)`` Hz.
+        phases: ``(m, K)`` rad.
+        offsets: ``(m,)`` rad.
+    """
+
+    amplitudes: tuple[tuple[float, ...], ...]
+    frequencies: tuple[tuple[float, ...], ...]
+    phases: tuple[tuple[float, ...], ...]
+    offsets: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        m = len(self.offsets)
+        for name in ("amplitudes", "frequencies", "phases"):
+            arr = getattr(self, name)
+            if len(arr) != m or len({len(r) for r in arr}) > 1:
+                raise ValueError(f"CompositeSinusoid.{name}: expected {m} rows of equal length, got {arr}")
+
+    @classmethod
+    def single(cls, amplitudes, frequencies, phases=None, offset: float = 0.0) -> "CompositeSinusoid":
+        """One actuated joint: ``amplitudes`` (rad), ``frequencies`` (Hz), ``phases`` (rad)."""
+        phases = [0.0] * len(amplitudes) if phases is None else phases
+        return cls((tuple(map(float, amplitudes)),), (tuple(map(float, frequencies)),), (tuple(map(float, phases)),), (float(offset),))
+
+    @property
+    def m(self) -> int:
+        return len(self.offsets)
+
+    @property
+    def period(self) -> float:
+        """Smallest common period (s) of all components (frequencies taken to 1e-9 Hz)."""
+        fracs = [Fraction(f).limit_denominator(10**9) for row in self.frequencies for f in row if f != 0]
+        if not fracs:
+            return math.inf
+        # common period = 1 / gcd of the frequencies
+        num = 0
+        den = 1
+        for fr in fracs:
+            den = den * fr.denominator // math.gcd(den, fr.denominator)
+        for fr in fracs:
+            num = math.gcd(num, fr.numerator * (den // fr.denominator))
+        return float(Fraction(den, num))
+
+    def derivative(self, t, order: int = 0) -> torch.Tensor:
+        """The ``order``-th time derivative of q_a^d at times ``t``: ``(T,)`` s → ``(T, m)``."""
+        t = torch.as_tensor(np.asarray(t, dtype=np.float64))
+        A = torch.tensor(self.amplitudes, dtype=torch.float64)  # (m, K)
+        w = 2 * math.pi * torch.tensor(self.frequencies, dtype=torch.float64)
+        ph = torch.tensor(self.phases, dtype=torch.float64)
+        arg = w[None] * t[:, None, None] + ph[None] + order * math.pi / 2  # d/dt sin = sin(· + π/2)
+        out = (A * w**order)[None] * torch.sin(arg)
+        out = out.sum(-1)
+        if order == 0:
+            out = out + torch.tensor(self.offsets, dtype=torch.float64)
+        return out
+
+    def __call__(self, t) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(q_a^d, q̇_a^d, q̈_a^d)`` at times ``t``, each ``(T, m)`` (rad, rad/s, rad/s²)."""
+        return self.derivative(t, 0), self.derivative(t, 1), self.derivative(t, 2)
