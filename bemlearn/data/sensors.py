@@ -1,0 +1,75 @@
+"""What a real rig measures: quantized encoder angles and a filtered velocity estimate.
+
+* Encoder: y = step · round((q + n) / step), step = 2π / counts_per_rev (Quanser: 4096
+  counts/rev → 1.53 mrad), n ~ N(0, noise_std²) optional.
+* Velocity estimate used by the *controller* (never written to data files): the
+  bilinear (Tustin) discretization of the high-pass differentiator H(s) = ω_c s / (s + ω_c)
+  that Quanser's controllers use (ω_c = 50 rad/s by default):
+      v_k = a v_{k−1} + b (y_k − y_{k−1}),  a = (2 − ω_c Δt)/(2 + ω_c Δt),  b = 2ω_c/(2 + ω_c Δt).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["SensorConfig", "Encoder", "FilteredDifferentiator"]
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """Sensor model options.
+
+    Attributes:
+        counts_per_rev: encoder resolution; 0 disables quantization.
+        noise_std: additive angle noise before quantization, rad.
+        velocity_cutoff: ω_c of the controller's velocity filter, rad/s.
+    """
+
+    counts_per_rev: int = 4096
+    noise_std: float = 0.0
+    velocity_cutoff: float = 50.0
+
+    def __post_init__(self) -> None:
+        if self.counts_per_rev < 0:
+            raise ValueError(f"sensor.counts_per_rev must be ≥ 0, got {self.counts_per_rev}")
+        if self.noise_std < 0:
+            raise ValueError(f"sensor.noise_std must be ≥ 0, got {self.noise_std}")
+        if self.velocity_cutoff <= 0:
+            raise ValueError(f"sensor.velocity_cutoff must be > 0 rad/s, got {self.velocity_cutoff}")
+
+    @property
+    def step(self) -> float:
+        """Quantization step, rad (0 when disabled)."""
+        return 2 * math.pi / self.counts_per_rev if self.counts_per_rev else 0.0
+
+
+class Encoder:
+    """Quantize (and optionally perturb) joint angles: ``q (n,)`` rad → ``(n,)`` rad."""
+
+    def __init__(self, config: SensorConfig, rng: np.random.Generator) -> None:
+        self.step = config.step
+        self.noise_std = config.noise_std
+        self.rng = rng
+
+    def __call__(self, q: np.ndarray) -> np.ndarray:
+        y = q + self.rng.normal(0.0, self.noise_std, size=q.shape) if self.noise_std > 0 else q.copy()
+        return np.round(y / self.step) * self.step if self.step > 0 else y
+
+
+class FilteredDifferentiator:
+    """Tustin-discretized ω_c s/(s + ω_c) velocity estimate of sampled angles (module docstring)."""
+
+    def __init__(self, n: int, *, cutoff: float, dt: float) -> None:
+        self.a = (2 - cutoff * dt) / (2 + cutoff * dt)
+        self.b = 2 * cutoff / (2 + cutoff * dt)
+        self.v = np.zeros(n)
+        self.prev: np.ndarray | None = None
+
+    def __call__(self, y: np.ndarray) -> np.ndarray:
+        if self.prev is not None:
+            self.v = self.a * self.v + self.b * (y - self.prev)
+        self.prev = y.copy()
+        return self.v.copy()

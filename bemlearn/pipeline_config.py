@@ -1,0 +1,39 @@
+"""The whole-pipeline configuration: one YAML file with a section per stage.
+
+.. code-block:: yaml
+
+    robot: furuta          # registry name or MJCF path
+    collect: {...}         # bemlearn.data.collect.CollectConfig
+    dataset: {...}         # bemlearn.data.dataset.DatasetConfig
+    train: {...}           # bemlearn.fitting.GPConfig
+
+Every section is a strict dataclass defined next to its component; an unknown key
+anywhere is an error naming the file and the key path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from bemlearn.config import from_dict, load_yaml
+from bemlearn.data.collect import CollectConfig
+from bemlearn.data.dataset import DatasetConfig
+from bemlearn.fitting.gp_config import GPConfig
+
+__all__ = ["PipelineConfig", "load_pipeline_config"]
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """All stages' options (module docstring)."""
+
+    robot: str = "furuta"
+    collect: CollectConfig = field(default_factory=CollectConfig)
+    dataset: DatasetConfig = field(default_factory=DatasetConfig)
+    train: GPConfig = field(default_factory=GPConfig)
+
+
+def load_pipeline_config(path: str | Path) -> PipelineConfig:
+    """Parse a pipeline YAML file strictly (unknown keys and bad types are errors naming the key)."""
+    return from_dict(PipelineConfig, load_yaml(path), where=str(path))
