@@ -19,6 +19,8 @@ __all__ = ["main", "build_parser"]
 
 #: Subcommand modules, in the order they appear in ``bemlearn --help``.
 SUBCOMMANDS: tuple[str, ...] = (
+    "bemlearn.cli.robot_cmd",
+    "bemlearn.cli.collect_cmd",
     "bemlearn.cli.data_cmd",
 )
 

@@ -1,0 +1,111 @@
+"""``bemlearn data``: check and convert trajectory files.
+
+    bemlearn data check FILE [--robot NAME] [--min-trial-samples K] [--rate-rtol R] [--json]
+    bemlearn data convert IN OUT [--force]
+
+``check`` validates FILE (NPZ or CSV) and prints a summary; on a bad file it exits with
+status 2 and an error naming the file, column and row.  ``convert`` rewrites a file in the
+format given by OUT's suffix, losslessly (floats as ``%.17g`` in CSV).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from bemlearn.data.quantization import counts_per_revolution
+from bemlearn.data.trajectory_io import SUFFIXES, read_trajectory, write_trajectory
+from bemlearn.data.validation import MIN_TRIAL_SAMPLES, RATE_RTOL
+
+__all__ = ["add_parser", "format_summary"]
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    parser = subparsers.add_parser(
+        "data", help="check and convert trajectory files",
+        description="Check and convert trajectory files (format: docs/trajectory-format.md).",
+    )
+    sub = parser.add_subparsers(dest="data_command", metavar="ACTION", required=True)
+
+    check = sub.add_parser("check", help="validate a trajectory file and print a summary")
+    check.add_argument("file", type=Path, help="trajectory file (.npz or .csv)")
+    check.add_argument("--robot", metavar="NAME", help="also require the joint names of this registered robot")
+    check.add_argument("--min-trial-samples", type=int, default=MIN_TRIAL_SAMPLES, metavar="K",
+                       help=f"shortest accepted trial in samples (default {MIN_TRIAL_SAMPLES})")
+    check.add_argument("--rate-rtol", type=float, default=RATE_RTOL, metavar="R",
+                       help=f"accepted relative deviation of time steps from 1/sample_rate (default {RATE_RTOL:g})")
+    check.add_argument("--json", action="store_true", help="print the summary as JSON")
+    check.set_defaults(func=run_check)
+
+    convert = sub.add_parser("convert", help="convert between CSV and NPZ (lossless)")
+    convert.add_argument("input", type=Path, help="input trajectory file (.npz or .csv)")
+    convert.add_argument("output", type=Path, help="output file; its suffix (.npz or .csv) picks the format")
+    convert.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
+    convert.add_argument("--min-trial-samples", type=int, default=MIN_TRIAL_SAMPLES, metavar="K",
+                         help=f"shortest accepted trial in samples (default {MIN_TRIAL_SAMPLES})")
+    convert.add_argument("--rate-rtol", type=float, default=RATE_RTOL, metavar="R",
+                         help=f"accepted relative deviation of time steps from 1/sample_rate (default {RATE_RTOL:g})")
+    convert.set_defaults(func=run_convert)
+    return parser
+
+
+def format_summary(path: Path | str, s: dict[str, Any]) -> str:
+    """Human-readable lines for :meth:`Trajectory.summary` output ``s``."""
+    lengths = s["trial_samples_min_median_max"]
+    lines = [
+        f"file:         {path}",
+        f"robot:        {s['robot']}",
+        f"joints:       {', '.join(s['joints'])} (unactuated: {s['unactuated']})",
+        f"actuators:    {', '.join(s['actuators'])} [{s['units'].get('u', '?')}]",
+        f"trials:       {s['trials']} ({s['failed_trials']} failed"
+        + (f": {_ids(s['failed_trial_ids'])})" if s["failed_trials"] else ")"),
+        f"samples:      {s['samples']} ({s['duration_s']:.6g} s; per trial min/median/max "
+        + (f"{lengths[0]}/{lengths[1]:g}/{lengths[2]})" if lengths else "-)"),
+        f"sample rate:  {s['sample_rate_hz']:g} Hz",
+        f"ground truth: {'yes (qd, qdd)' if s['ground_truth'] else 'no'}",
+        "angle ranges (rad):",
+    ]
+    for joint, rng in s["angle_ranges_rad"].items():
+        lines.append(f"  {joint:<12} [{rng[0]:+.6g}, {rng[1]:+.6g}]" if rng else f"  {joint:<12} -")
+    lines.append("quantization step (rad):")
+    for joint, step in s["quantization_step_rad"].items():
+        if step is None:
+            lines.append(f"  {joint:<12} none detected")
+        else:
+            counts = counts_per_revolution(step)
+            lines.append(f"  {joint:<12} {step:.10g}" + (f" (= 2π/{counts}, {counts} counts/rev)" if counts else ""))
+    return "\n".join(lines)
+
+
+def _ids(ids: list[int], limit: int = 20) -> str:
+    shown = ", ".join(str(i) for i in ids[:limit])
+    return shown + (f", … ({len(ids) - limit} more)" if len(ids) > limit else "")
+
+
+def run_check(args: argparse.Namespace) -> int:
+    traj = read_trajectory(args.file, robot=args.robot, min_trial_samples=args.min_trial_samples,
+                           rate_rtol=args.rate_rtol)
+    summary = traj.summary()
+    if args.json:
+        print(json.dumps({"file": str(args.file), **summary}, indent=2))
+    else:
+        print(format_summary(args.file, summary))
+        print("OK")
+    return 0
+
+
+def run_convert(args: argparse.Namespace) -> int:
+    if args.output.suffix.lower() not in SUFFIXES:
+        raise ValueError(
+            f"{args.output}: unsupported output suffix {args.output.suffix!r}; expected one of {list(SUFFIXES)}"
+        )
+    if args.output.exists() and not args.force:
+        raise ValueError(f"{args.output}: already exists (use --force to overwrite)")
+    if args.output.resolve() == args.input.resolve():
+        raise ValueError(f"{args.output}: output is the input file")
+    traj = read_trajectory(args.input, min_trial_samples=args.min_trial_samples, rate_rtol=args.rate_rtol)
+    write_trajectory(traj, args.output, min_trial_samples=args.min_trial_samples, rate_rtol=args.rate_rtol)
+    print(f"wrote {args.output} ({traj.n_samples} samples, {len(traj.meta.trial_failed)} trials)")
+    return 0

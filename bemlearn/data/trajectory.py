@@ -1,0 +1,328 @@
+"""Recorded (or simulated) robot trajectories: samples of time, trial id, joints and inputs.
+
+A trajectory holds T samples of an n-joint robot with one unactuated joint q_u and
+m = n − 1 actuated joints q_a (eq. 1, 2):
+
+    t (T,) s,  trial (T,) int64,  q (T, n) rad (robot joint order),  u (T, n − 1) inputs,
+
+optionally with the simulator's true q̇ (T, n) rad/s and q̈ (T, n) rad/s² (a ground-truth
+file).  Samples of one trial are contiguous and time increases within a trial at the
+nominal sample rate.  The on-disk format (NPZ and CSV) is described in
+``docs/trajectory-format.md`` and implemented in :mod:`bemlearn.data.trajectory_io`;
+the checks in :mod:`bemlearn.data.validation`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from bemlearn.data.quantization import detect_quantization_step
+
+__all__ = ["TrajectoryMeta", "Trajectory", "TrialSlice", "TrajectoryFormatError", "DEFAULT_UNITS"]
+
+#: Units assumed when none are given; ``q`` must be rad, ``t`` must be s.
+DEFAULT_UNITS: dict[str, str] = {"t": "s", "q": "rad", "u": "V"}
+
+
+class TrajectoryFormatError(ValueError):
+    """A trajectory file or array set is malformed; the message names file, column and row."""
+
+
+@dataclass(frozen=True)
+class TrajectoryMeta:
+    """What a trajectory's columns mean.
+
+    Attributes:
+        robot: robot name, e.g. ``"furuta"`` (compared with ``bemlearn.robots.load(name).name``).
+        joint_names: the n joint (coordinate) names in the robot's joint order; the columns of q.
+        unactuated: the name of the unactuated joint q_u (one of ``joint_names``).
+        actuator_names: the n − 1 input names; the columns of u.
+        sample_rate_hz: nominal sample rate, Hz (samples within a trial are 1/rate apart).
+        units: unit of each array, e.g. ``{"t": "s", "q": "rad", "u": "V"}``.
+        trial_failed: per trial id, whether the trial fell / failed (every trial id present).
+        extra: free-form JSON-serializable provenance (seed, config, ...).
+    """
+
+    robot: str
+    joint_names: tuple[str, ...]
+    unactuated: str
+    actuator_names: tuple[str, ...]
+    sample_rate_hz: float
+    trial_failed: dict[int, bool]
+    units: dict[str, str] = field(default_factory=lambda: dict(DEFAULT_UNITS))
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "joint_names", tuple(self.joint_names))
+        object.__setattr__(self, "actuator_names", tuple(self.actuator_names))
+        object.__setattr__(self, "trial_failed", {int(k): bool(v) for k, v in self.trial_failed.items()})
+        object.__setattr__(self, "units", dict(self.units))
+        object.__setattr__(self, "extra", dict(self.extra))
+        n = len(self.joint_names)
+        if n < 2:
+            raise TrajectoryFormatError(f"meta.joint_names: expected at least 2 joints, got {list(self.joint_names)}")
+        if len(set(self.joint_names)) != n:
+            raise TrajectoryFormatError(f"meta.joint_names: duplicate names in {list(self.joint_names)}")
+        if self.unactuated not in self.joint_names:
+            raise TrajectoryFormatError(
+                f"meta.unactuated: {self.unactuated!r} is not one of the joints {list(self.joint_names)}"
+            )
+        if len(self.actuator_names) != n - 1 or len(set(self.actuator_names)) != n - 1:
+            raise TrajectoryFormatError(
+                f"meta.actuator_names: expected {n - 1} distinct names (n − 1 for {n} joints), "
+                f"got {list(self.actuator_names)}"
+            )
+        for name in (*self.joint_names, *self.actuator_names):
+            if not name or "," in name or ":" in name or name != name.strip():
+                raise TrajectoryFormatError(
+                    f"meta: joint/actuator name {name!r} must be non-empty, without ',' ':' or surrounding spaces"
+                )
+        rate = self.sample_rate_hz
+        if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not math.isfinite(rate) or rate <= 0:
+            raise TrajectoryFormatError(f"meta.sample_rate_hz: expected a positive number, got {rate!r}")
+        object.__setattr__(self, "sample_rate_hz", float(rate))
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.joint_names)
+
+    @property
+    def unactuated_index(self) -> int:
+        """Column of q_u in q."""
+        return self.joint_names.index(self.unactuated)
+
+    @property
+    def actuated_names(self) -> tuple[str, ...]:
+        """The m = n − 1 actuated joint names q_a, in the robot's joint order."""
+        return tuple(j for j in self.joint_names if j != self.unactuated)
+
+    @property
+    def actuated_indices(self) -> tuple[int, ...]:
+        """Columns of q_a in q, in the robot's joint order."""
+        return tuple(i for i, j in enumerate(self.joint_names) if j != self.unactuated)
+
+    @property
+    def dt(self) -> float:
+        """Nominal sample period, s."""
+        return 1.0 / self.sample_rate_hz
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The JSON form stored in files (trial ids become string keys)."""
+        return {
+            "robot": self.robot,
+            "joint_names": list(self.joint_names),
+            "unactuated": self.unactuated,
+            "actuator_names": list(self.actuator_names),
+            "sample_rate_hz": self.sample_rate_hz,
+            "units": dict(self.units),
+            "trial_failed": {str(k): v for k, v in sorted(self.trial_failed.items())},
+            "extra": dict(self.extra),
+        }
+
+    def to_json(self) -> str:
+        try:
+            return json.dumps(self.to_json_dict(), sort_keys=False, allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise TypeError(
+                f"TrajectoryMeta.extra must be JSON-serializable (finite numbers, str, lists, dicts): {exc}"
+            ) from exc
+
+    @classmethod
+    def from_json_dict(cls, data: Mapping[str, Any], *, source: str = "meta") -> TrajectoryMeta:
+        """Parse the stored JSON form; errors name ``source`` and the offending key."""
+        if not isinstance(data, Mapping):
+            raise TrajectoryFormatError(f"{source}: metadata must be a JSON object, got {type(data).__name__}")
+        required = ("robot", "joint_names", "unactuated", "actuator_names", "sample_rate_hz", "trial_failed")
+        optional = ("units", "extra")
+        missing = [k for k in required if k not in data]
+        unknown = sorted(set(data) - set(required) - set(optional))
+        if missing:
+            raise TrajectoryFormatError(f"{source}: metadata is missing key(s) {missing}")
+        if unknown:
+            raise TrajectoryFormatError(
+                f"{source}: unknown metadata key(s) {unknown}; valid keys are {sorted(required + optional)}"
+            )
+        expect = {
+            "robot": str, "joint_names": list, "unactuated": str, "actuator_names": list,
+            "trial_failed": dict, "units": dict, "extra": dict,
+        }
+        for key, typ in expect.items():
+            if key in data and not isinstance(data[key], typ):
+                raise TrajectoryFormatError(
+                    f"{source}: metadata key {key!r} must be a JSON {typ.__name__}, got {data[key]!r}"
+                )
+        for key in ("joint_names", "actuator_names"):
+            if not all(isinstance(s, str) for s in data[key]):
+                raise TrajectoryFormatError(f"{source}: metadata key {key!r} must list strings, got {data[key]!r}")
+        failed: dict[int, bool] = {}
+        for k, v in data["trial_failed"].items():
+            try:
+                tid = int(k)
+            except ValueError:
+                raise TrajectoryFormatError(
+                    f"{source}: meta.trial_failed key {k!r} is not an integer trial id"
+                ) from None
+            if not isinstance(v, bool):
+                raise TrajectoryFormatError(f"{source}: meta.trial_failed[{k!r}] must be true or false, got {v!r}")
+            failed[tid] = v
+        try:
+            return cls(
+                robot=data["robot"],
+                joint_names=tuple(data["joint_names"]),
+                unactuated=data["unactuated"],
+                actuator_names=tuple(data["actuator_names"]),
+                sample_rate_hz=data["sample_rate_hz"],
+                trial_failed=failed,
+                units=dict(data.get("units", DEFAULT_UNITS)),
+                extra=dict(data.get("extra", {})),
+            )
+        except TrajectoryFormatError as exc:
+            raise TrajectoryFormatError(f"{source}: {exc}") from None
+
+
+@dataclass(frozen=True)
+class TrialSlice:
+    """The contiguous rows ``rows`` of trial ``trial_id`` (``failed``: it fell)."""
+
+    trial_id: int
+    failed: bool
+    rows: slice
+
+    @property
+    def n_samples(self) -> int:
+        return self.rows.stop - self.rows.start
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """Samples of one or more trials (see module docstring).
+
+    Attributes:
+        t: (T,) float64 time, s.
+        trial: (T,) int64 trial id; each trial's rows are contiguous.
+        q: (T, n) float64 joint angles, rad, columns ``meta.joint_names``.
+        u: (T, n − 1) float64 inputs, ``meta.units["u"]``, columns ``meta.actuator_names``.
+        meta: what the columns mean, sample rate, per-trial outcome.
+        qd: optional (T, n) float64 true joint velocities, rad/s (ground-truth files).
+        qdd: optional (T, n) float64 true joint accelerations, rad/s² (ground-truth files).
+
+    Construction checks only shapes and dtypes; :func:`bemlearn.data.validate` checks values.
+    """
+
+    t: np.ndarray
+    trial: np.ndarray
+    q: np.ndarray
+    u: np.ndarray
+    meta: TrajectoryMeta
+    qd: np.ndarray | None = None
+    qdd: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        trial = np.asarray(self.trial)
+        if trial.dtype.kind not in "iu":
+            raise TrajectoryFormatError(f"Trajectory.trial: expected an integer array, got dtype {trial.dtype}")
+        if trial.ndim != 1:
+            raise TrajectoryFormatError(f"Trajectory.trial: expected shape (T,), got {trial.shape}")
+        object.__setattr__(self, "trial", trial.astype(np.int64, copy=False))
+        n = self.meta.n_joints
+        shapes = {"t": None, "q": n, "u": n - 1, "qd": n, "qdd": n}
+        for name, width in shapes.items():
+            arr = getattr(self, name)
+            if arr is None:
+                if name in ("qd", "qdd"):
+                    continue
+                raise TrajectoryFormatError(f"Trajectory.{name}: required")
+            arr = np.asarray(arr)
+            if arr.dtype.kind not in "fiu":
+                raise TrajectoryFormatError(f"Trajectory.{name}: expected a real numeric array, got dtype {arr.dtype}")
+            arr = arr.astype(np.float64, copy=False)
+            expected = (len(trial),) if width is None else (len(trial), width)
+            if arr.shape != expected:
+                raise TrajectoryFormatError(
+                    f"Trajectory.{name}: expected shape {expected} (T = len(trial), n = {n} joints), got {arr.shape}"
+                )
+            object.__setattr__(self, name, arr)
+        if (self.qd is None) != (self.qdd is None):
+            raise TrajectoryFormatError("Trajectory: ground truth needs both qd and qdd, or neither")
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def n_joints(self) -> int:
+        return self.meta.n_joints
+
+    @property
+    def has_ground_truth(self) -> bool:
+        return self.qd is not None
+
+    def trial_slices(self) -> list[TrialSlice]:
+        """Contiguous row blocks, one per trial, in file order (a trial split in two blocks gives two entries)."""
+        if self.n_samples == 0:
+            return []
+        starts = np.flatnonzero(np.diff(self.trial)) + 1
+        bounds = np.concatenate([[0], starts, [self.n_samples]])
+        return [
+            TrialSlice(int(self.trial[a]), self.meta.trial_failed.get(int(self.trial[a]), False), slice(int(a), int(b)))
+            for a, b in zip(bounds[:-1], bounds[1:])
+        ]
+
+    def iter_trials(self) -> Iterator[TrialSlice]:
+        """Yield each trial's :class:`TrialSlice` (use ``traj.q[s.rows]`` for its samples)."""
+        yield from self.trial_slices()
+
+    @property
+    def trial_ids(self) -> tuple[int, ...]:
+        """Trial ids in file order."""
+        return tuple(s.trial_id for s in self.trial_slices())
+
+    def select_rows(self, rows: np.ndarray) -> Trajectory:
+        """A new trajectory with rows ``rows`` (bool mask or index array); ``trial_failed`` keeps present trials."""
+        keys = ("t", "trial", "q", "u", "qd", "qdd")
+        pick = {k: (None if getattr(self, k) is None else getattr(self, k)[rows]) for k in keys}
+        present = set(np.unique(pick["trial"]).tolist())
+        failed = {k: v for k, v in self.meta.trial_failed.items() if k in present}
+        meta = dataclasses.replace(self.meta, trial_failed=failed)
+        return Trajectory(meta=meta, **pick)
+
+    def select_trials(self, trial_ids: set[int] | list[int] | tuple[int, ...]) -> Trajectory:
+        """A new trajectory holding only the given trials (rows keep their order)."""
+        return self.select_rows(np.isin(self.trial, np.fromiter(trial_ids, dtype=np.int64)))
+
+    def summary(self) -> dict[str, Any]:
+        """A JSON-serializable overview: robot, joints, trials, samples, rate, failures, ranges, quantization."""
+        slices = self.trial_slices()
+        lengths = np.array([s.n_samples for s in slices]) if slices else np.zeros(0, dtype=int)
+        failed = sorted(k for k, v in self.meta.trial_failed.items() if v)
+        ranges = {
+            name: [float(self.q[:, i].min()), float(self.q[:, i].max())] if self.n_samples else None
+            for i, name in enumerate(self.meta.joint_names)
+        }
+        steps = {name: detect_quantization_step(self.q[:, i]) for i, name in enumerate(self.meta.joint_names)}
+        return {
+            "robot": self.meta.robot,
+            "joints": list(self.meta.joint_names),
+            "unactuated": self.meta.unactuated,
+            "actuators": list(self.meta.actuator_names),
+            "units": dict(self.meta.units),
+            "trials": int(len(np.unique(self.trial))),
+            "failed_trials": len(failed),
+            "failed_trial_ids": failed,
+            "samples": self.n_samples,
+            "sample_rate_hz": self.meta.sample_rate_hz,
+            "duration_s": float(lengths.sum() / self.meta.sample_rate_hz),
+            "trial_samples_min_median_max": (
+                [int(lengths.min()), float(np.median(lengths)), int(lengths.max())] if len(lengths) else None
+            ),
+            "angle_ranges_rad": ranges,
+            "quantization_step_rad": steps,
+            "ground_truth": self.has_ground_truth,
+        }

@@ -1,0 +1,298 @@
+"""Reading and writing trajectory files (NPZ and CSV, format in ``docs/trajectory-format.md``).
+
+The suffix chooses the format: ``.npz`` (arrays ``meta``, ``t``, ``trial``, ``q``, ``u``
+and, in ground-truth files, ``qd``, ``qdd``) or ``.csv`` (two ``#`` metadata lines, a
+header ``t,trial,q:<joint>...,u:<actuator>...[,qd:<joint>...,qdd:<joint>...]``, one row
+per sample, floats written with ``%.17g`` so CSV ↔ NPZ is lossless).  Every read is
+validated (:func:`bemlearn.data.validation.validate`); nothing is dropped or repaired.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, TrajectoryMeta
+from bemlearn.data.validation import MIN_TRIAL_SAMPLES, RATE_RTOL, RobotLike, column_names, validate
+
+__all__ = ["read_trajectory", "read_ground_truth", "write_trajectory", "ground_truth_path", "CSV_MAGIC", "SUFFIXES"]
+
+logger = logging.getLogger(__name__)
+
+#: First line of every CSV trajectory file.
+CSV_MAGIC = "# bemlearn-trajectory v1"
+_CSV_META_PREFIX = "# meta: "
+#: Supported file suffixes.
+SUFFIXES = (".npz", ".csv")
+_NPZ_REQUIRED = ("meta", "t", "trial", "q", "u")
+_NPZ_OPTIONAL = ("qd", "qdd")
+
+
+def _suffix(path: Path) -> str:
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise ValueError(
+            f"{path}: unsupported trajectory file suffix {path.suffix!r}; expected one of {list(SUFFIXES)}"
+        )
+    return suffix
+
+
+def _resolve_robot(robot: str | RobotLike | None) -> RobotLike | None:
+    if robot is None or not isinstance(robot, str):
+        return robot
+    from bemlearn.robots import load  # lazy: robots is heavier than data
+
+    return load(robot)
+
+
+def ground_truth_path(path: str | Path) -> Path:
+    """Where the ground truth of data file ``path`` lives by convention: ``<stem>.truth<suffix>``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.truth{path.suffix}")
+
+
+def read_trajectory(
+    path: str | Path,
+    *,
+    robot: str | RobotLike | None = None,
+    min_trial_samples: int = MIN_TRIAL_SAMPLES,
+    rate_rtol: float = RATE_RTOL,
+) -> Trajectory:
+    """Read and validate a trajectory file (``.npz`` or ``.csv``).
+
+    Args:
+        path: the file.
+        robot: a registry name (``bemlearn.robots.load``) or robot object to match joint names against.
+        min_trial_samples: shortest accepted trial, samples.
+        rate_rtol: accepted relative deviation of each time step from 1 / sample_rate_hz.
+
+    Returns:
+        The trajectory (with ``qd``/``qdd`` when the file holds ground truth).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: unsupported suffix.
+        TrajectoryFormatError: malformed file, naming file, column and row.
+    """
+    path = Path(path)
+    suffix = _suffix(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: trajectory file not found")
+    if suffix == ".npz":
+        traj, first_line = _read_npz(path), None
+    else:
+        traj, first_line = _read_csv(path)
+    validate(
+        traj, source=str(path), min_trial_samples=min_trial_samples, rate_rtol=rate_rtol,
+        robot=_resolve_robot(robot), first_line=first_line,
+    )
+    logger.debug("read %s: %d samples, %d trials", path, traj.n_samples, len(traj.meta.trial_failed))
+    return traj
+
+
+def read_ground_truth(path: str | Path, **kwargs: Any) -> Trajectory:
+    """Like :func:`read_trajectory`, but the file must hold the true ``qd`` and ``qdd``."""
+    traj = read_trajectory(path, **kwargs)
+    if not traj.has_ground_truth:
+        what = "arrays" if Path(path).suffix.lower() == ".npz" else "columns"
+        raise TrajectoryFormatError(f"{path}: not a ground-truth file (no qd/qdd {what})")
+    return traj
+
+
+def write_trajectory(
+    traj: Trajectory, path: str | Path, *, min_trial_samples: int = MIN_TRIAL_SAMPLES, rate_rtol: float = RATE_RTOL
+) -> Path:
+    """Validate ``traj`` and write it to ``path`` (format from the suffix; replaces an existing file).
+
+    Ground truth (``qd``, ``qdd``) is written when present.
+
+    Returns:
+        ``path`` as a :class:`~pathlib.Path`.
+    """
+    path = Path(path)
+    suffix = _suffix(path)
+    validate(traj, source=f"write {path}", min_trial_samples=min_trial_samples, rate_rtol=rate_rtol)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    try:
+        if suffix == ".npz":
+            _write_npz(traj, tmp)
+        else:
+            _write_csv(traj, tmp)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    logger.debug("wrote %s: %d samples", path, traj.n_samples)
+    return path
+
+
+# ---------------------------------------------------------------- NPZ
+
+
+def _write_npz(traj: Trajectory, path: Path) -> None:
+    arrays: dict[str, np.ndarray] = {
+        "meta": np.array(traj.meta.to_json()),
+        "t": traj.t, "trial": traj.trial, "q": traj.q, "u": traj.u,
+    }
+    if traj.has_ground_truth:
+        arrays["qd"], arrays["qdd"] = traj.qd, traj.qdd
+    with open(path, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
+
+
+def _read_npz(path: Path) -> Trajectory:
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+        raise TrajectoryFormatError(f"{path}: not a readable NPZ file ({exc})") from None
+    missing = [k for k in _NPZ_REQUIRED if k not in arrays]
+    unknown = sorted(set(arrays) - set(_NPZ_REQUIRED) - set(_NPZ_OPTIONAL))
+    if missing:
+        raise TrajectoryFormatError(f"{path}: missing array(s) {missing}; a trajectory NPZ holds {list(_NPZ_REQUIRED)}")
+    if unknown:
+        raise TrajectoryFormatError(
+            f"{path}: unknown array(s) {unknown}; allowed are {list(_NPZ_REQUIRED + _NPZ_OPTIONAL)}"
+        )
+    if ("qd" in arrays) != ("qdd" in arrays):
+        raise TrajectoryFormatError(f"{path}: ground truth needs both arrays 'qd' and 'qdd', found only one")
+    raw = arrays["meta"]
+    if raw.dtype.kind != "U" or raw.size != 1:
+        raise TrajectoryFormatError(
+            f"{path}: array 'meta' must hold one JSON string, got dtype {raw.dtype} shape {raw.shape}"
+        )
+    meta = _parse_meta(str(raw.reshape(())), path)
+    n = meta.n_joints
+    names = {"q": meta.joint_names, "qd": meta.joint_names, "qdd": meta.joint_names, "u": meta.actuator_names}
+    if arrays["t"].ndim != 1:
+        raise TrajectoryFormatError(f"{path}: array 't' must be 1-D (T,), got shape {arrays['t'].shape}")
+    T = arrays["t"].shape[0]
+    for key in ("t", "trial", "q", "u", "qd", "qdd"):
+        if key not in arrays:
+            continue
+        arr = arrays[key]
+        if key == "trial" and arr.dtype.kind not in "iu":
+            raise TrajectoryFormatError(
+                f"{path}: column 'trial' (array 'trial') must be integer, got dtype {arr.dtype}"
+            )
+        if arr.dtype.kind not in "fiu":
+            raise TrajectoryFormatError(f"{path}: array {key!r} must be real numbers, got dtype {arr.dtype}")
+        if key in ("t", "trial"):
+            want: tuple[int, ...] = (T,)
+        else:
+            want = (T, len(names[key]))
+        if arr.shape != want:
+            cols = "" if key in ("t", "trial") else f" (columns {[f'{key}:{j}' for j in names[key]]})"
+            raise TrajectoryFormatError(
+                f"{path}: array {key!r} has shape {arr.shape}, expected {want}{cols} for {n} joints"
+            )
+    return Trajectory(
+        t=arrays["t"], trial=arrays["trial"], q=arrays["q"], u=arrays["u"], meta=meta,
+        qd=arrays.get("qd"), qdd=arrays.get("qdd"),
+    )
+
+
+def _parse_meta(text: str, path: Path) -> TrajectoryMeta:
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise TrajectoryFormatError(f"{path}: metadata is not valid JSON ({exc})") from None
+    return TrajectoryMeta.from_json_dict(data, source=str(path))
+
+
+# ---------------------------------------------------------------- CSV
+
+
+def _write_csv(traj: Trajectory, path: Path) -> None:
+    cols = column_names(traj.meta, ground_truth=traj.has_ground_truth)
+    blocks = [traj.t[:, None], traj.trial[:, None].astype(np.float64), traj.q, traj.u]
+    if traj.has_ground_truth:
+        blocks += [traj.qd, traj.qdd]
+    table = np.concatenate(blocks, axis=1) if traj.n_samples else np.zeros((0, len(cols)))
+    if traj.n_samples and np.abs(traj.trial).max() >= 2**53:
+        raise ValueError(f"{path}: trial ids must be below 2**53 in magnitude to be written as CSV")
+    fmt = ["%.17g", "%d"] + ["%.17g"] * (len(cols) - 2)
+    with open(path, "w", newline="\n", encoding="utf-8") as fh:
+        fh.write(f"{CSV_MAGIC}\n{_CSV_META_PREFIX}{traj.meta.to_json()}\n{','.join(cols)}\n")
+        np.savetxt(fh, table, fmt=fmt, delimiter=",")
+
+
+def _read_csv(path: Path) -> tuple[Trajectory, int]:
+    """The trajectory and the file line (1-based) of its first data row."""
+    with open(path, encoding="utf-8") as fh:
+        lines = fh.read().splitlines()
+    if not lines or lines[0].strip() != CSV_MAGIC:
+        first = lines[0][:60] if lines else "<empty file>"
+        raise TrajectoryFormatError(
+            f"{path}: line 1: expected {CSV_MAGIC!r}, found {first!r} (not a bemlearn trajectory CSV)"
+        )
+    if len(lines) < 2 or not lines[1].startswith(_CSV_META_PREFIX):
+        raise TrajectoryFormatError(f"{path}: line 2: expected the metadata line '{_CSV_META_PREFIX}{{json}}'")
+    meta = _parse_meta(lines[1][len(_CSV_META_PREFIX):], path)
+    if len(lines) < 3:
+        raise TrajectoryFormatError(f"{path}: line 3: missing the header row")
+    header = [h.strip() for h in lines[2].split(",")]
+    gt = any(h.startswith(("qd:", "qdd:")) for h in header)
+    expected = column_names(meta, ground_truth=gt)
+    missing = [c for c in expected if c not in header]
+    unknown = [c for c in header if c not in expected]
+    want = ",".join(expected)
+    if missing:
+        raise TrajectoryFormatError(f"{path}: line 3: missing column(s) {missing}; expected header {want}")
+    if unknown:
+        raise TrajectoryFormatError(f"{path}: line 3: unknown column(s) {unknown}; expected header {want}")
+    if header != expected:
+        raise TrajectoryFormatError(
+            f"{path}: line 3: columns out of order ({','.join(header)}); expected {','.join(expected)}"
+        )
+    first_line = 4
+    body = lines[3:]
+    table = _parse_rows(body, expected, path, first_line)
+    trial_col = table[:, 1]
+    frac = np.flatnonzero((trial_col != np.round(trial_col)) | ~np.isfinite(trial_col))
+    if len(frac):
+        i = int(frac[0])
+        raise TrajectoryFormatError(
+            f"{path}: column 'trial', row {i} (line {first_line + i}): trial id must be an integer, "
+            f"got {body[i].split(',')[1]!r}"
+        )
+    n, m = meta.n_joints, meta.n_joints - 1
+    kw: dict[str, Any] = {}
+    if gt:
+        kw = {"qd": table[:, 2 + n + m: 2 + 2 * n + m], "qdd": table[:, 2 + 2 * n + m:]}
+    traj = Trajectory(
+        t=table[:, 0], trial=trial_col.astype(np.int64), q=table[:, 2:2 + n], u=table[:, 2 + n:2 + n + m],
+        meta=meta, **kw,
+    )
+    return traj, first_line
+
+
+def _parse_rows(body: list[str], cols: list[str], path: Path, first_line: int) -> np.ndarray:
+    if not body:
+        return np.zeros((0, len(cols)))
+    try:
+        table = np.loadtxt(body, delimiter=",", dtype=np.float64, comments=None, ndmin=2)
+    except ValueError:
+        table = None
+    if table is not None and table.shape == (len(body), len(cols)):
+        return table
+    # Slow path, only to name the first offending row/column.
+    for i, line in enumerate(body):
+        where = f"{path}: row {i} (line {first_line + i})"
+        fields = line.split(",")
+        if not line.strip():
+            raise TrajectoryFormatError(f"{where}: blank line inside the data")
+        if len(fields) != len(cols):
+            raise TrajectoryFormatError(f"{where}: {len(fields)} fields, expected {len(cols)} ({','.join(cols)})")
+        for name, value in zip(cols, fields):
+            try:
+                float(value)
+            except ValueError:
+                raise TrajectoryFormatError(f"{where}: column {name!r}: {value.strip()!r} is not a number") from None
+    raise TrajectoryFormatError(f"{path}: could not parse the data rows")  # pragma: no cover
