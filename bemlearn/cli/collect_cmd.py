@@ -31,7 +31,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     from bemlearn.data.collect import collect
     from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
-    from bemlearn.pipeline_config import load_pipeline_config
+    from bemlearn.pipeline.config import load_pipeline_config
 
     cfg = load_pipeline_config(args.config)
     overrides = {k: v for k, v in (("n_trials", args.trials), ("seed", args.seed), ("workers", args.workers)) if v is not None}

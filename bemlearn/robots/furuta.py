@@ -35,6 +35,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
 import torch
 
 from bemlearn.robots.robot import Robot, as_batch
@@ -184,6 +185,27 @@ class AnalyticFuruta(Robot):
         ha = 2 * self._K * s * c * td * ad + self._mLl * s * ad**2
         hu = -self._K * s * c * td**2 - self._mgl * s
         return torch.stack([ha, hu], -1)
+
+    def terms(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """D(q) and h = C q̇ + G − τ_p for one state, numpy fast path for control loops.
+
+        Args:
+            q, qd: ``(2,)`` [θ, α] rad and [θ̇, α̇] rad/s.
+        """
+        s, c = math.sin(q[1]), math.cos(q[1])
+        td, ad = float(qd[0]), float(qd[1])
+        daa = self._Daa0 + self._sin2 * s * s + self._cos2 * c * c
+        dau = -self._mLl * c
+        D = np.array([[daa, dau], [dau, self._Duu]])
+        ha = 2 * self._K * s * c * td * ad + self._mLl * s * ad * ad + self.params.B_r * td
+        hu = -self._K * s * c * td * td - self._mgl * s + self.params.B_p * ad
+        return D, np.array([ha, hu])
+
+    def gamma0_scalar(self, qu: float, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray) -> float:
+        """Γ_0(α; θ) (eq. 7) for one state: −m L_r l cos α θ̈ − K sin α cos α θ̇² − m g l sin α."""
+        s, c = math.sin(qu), math.cos(qu)
+        td, tdd = float(qad[0]), float(qadd[0])
+        return -self._mLl * c * tdd - self._K * s * c * td * td - self._mgl * s
 
     def passive(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
         """Viscous joint damping [−B_r θ̇, −B_p α̇], ``(B, 2)`` N·m."""

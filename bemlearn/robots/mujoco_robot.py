@@ -126,6 +126,7 @@ class MujocoRobot(Robot):
             raise RobotModelError(f"{where}: 'bemlearn_coordinate_names' lists {len(self.joint_names)} names, expected {n}")
         self.T = torch.as_tensor(T, dtype=torch.float64)
         self.Tinv = torch.linalg.inv(self.T)
+        self._Tinv_np = self.Tinv.numpy().copy()
         B = self.Tinv.T @ torch.as_tensor(Bj)
         self.input_matrix = B  # (n, nu): generalized force = B @ actuator force
         zero_rows = [i for i in range(n) if bool((B[i].abs() < 1e-12).all())]
@@ -238,6 +239,46 @@ class MujocoRobot(Robot):
         """D q̈ + C q̇ + G − τ_p in one RNE pass per state (same value as the base class)."""
         q, qd, qdd = self._states(q, qd, qdd, func="inverse_dynamics")
         return self._from_joint_force(self._rne(q, qd, qdd)) - self.passive(q, qd)
+
+    # ---- single-state numpy fast path (control loops) ------------------------------------
+    def terms(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """D(q) and h = C(q, q̇)q̇ + G(q) − τ_p for one state, as numpy, without torch overhead.
+
+        Args:
+            q, qd: ``(n,)`` coordinates (rad) and rates (rad/s).
+
+        Returns:
+            ``D (n, n)`` and ``h (n,)`` in coordinates (eq. 1: D q̈ + h = B u).
+        """
+        Tinv = self._Tinv_np
+        self._load_state(Tinv @ q, Tinv @ qd)
+        m, d = self.model, self.data
+        make_mass_matrix(m, d)
+        Dj = full_mass_matrix(m, d, self._M)[np.ix_(self._dadr, self._dadr)]
+        mujoco.mj_comVel(m, d)
+        mujoco.mj_rne(m, d, 0, self._vec)
+        mujoco.mj_passive(m, d)
+        hj = self._vec[self._dadr] - d.qfrc_passive[self._dadr]
+        return Tinv.T @ Dj @ Tinv, Tinv.T @ hj
+
+    def gamma0_scalar(self, qu: float, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray) -> float:
+        """Γ_0(q_u; q_a) (eq. 7) for one state, numpy fast path (N·m)."""
+        n, u = self.n, self.unactuated_index
+        ia = list(self.actuated_index)
+        q = np.empty(n)
+        qd = np.zeros(n)
+        qdd = np.zeros(n)
+        q[ia], q[u] = qa, qu
+        qd[ia] = qad
+        qdd[ia] = qadd
+        Tinv = self._Tinv_np
+        m, d = self.model, self.data
+        self._load_state(Tinv @ q, Tinv @ qd)
+        mujoco.mj_comVel(m, d)
+        mujoco.mj_passive(m, d)
+        d.qacc[self._dadr] = Tinv @ qdd
+        mujoco.mj_rne(m, d, 1, self._vec)
+        return float((Tinv.T @ (self._vec[self._dadr] - d.qfrc_passive[self._dadr]))[u])
 
     # ---- kinematics --------------------------------------------------------------------
     @property

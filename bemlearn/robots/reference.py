@@ -41,6 +41,17 @@ class CompositeSinusoid:
             arr = getattr(self, name)
             if len(arr) != m or len({len(r) for r in arr}) > 1:
                 raise ValueError(f"CompositeSinusoid.{name}: expected {m} rows of equal length, got {arr}")
+        # numpy copies for the per-tick fast path (:meth:`evaluate`)
+        object.__setattr__(self, "_A", np.asarray(self.amplitudes, dtype=np.float64))
+        object.__setattr__(self, "_w", 2 * math.pi * np.asarray(self.frequencies, dtype=np.float64))
+        object.__setattr__(self, "_ph", np.asarray(self.phases, dtype=np.float64))
+        object.__setattr__(self, "_c", np.asarray(self.offsets, dtype=np.float64))
+
+    def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Numpy fast path of :meth:`__call__`: ``t (T,)`` s → three ``(T, m)`` arrays."""
+        arg = self._w[None] * np.asarray(t, dtype=np.float64)[:, None, None] + self._ph[None]
+        s, c = np.sin(arg), np.cos(arg)
+        return (self._A * s).sum(-1) + self._c, (self._A * self._w * c).sum(-1), -(self._A * self._w**2 * s).sum(-1)
 
     @classmethod
     def single(cls, amplitudes, frequencies, phases=None, offset: float = 0.0) -> "CompositeSinusoid":

@@ -1,0 +1,47 @@
+"""``bemlearn train CONFIG``: learn the BEM GP (eq. 11–14) from a trajectory file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+__all__ = ["add_parser"]
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser(
+        "train",
+        help="train the BEM GP on excitation data into a run folder",
+        description="Build the GP dataset (eq. 11) from a trajectory file, fit the GP by maximizing the marginal "
+        "likelihood, and write RUN_DIR/{config.yaml,checkpoint.pt,metrics.json,tb/}. Ctrl-C leaves a usable checkpoint.",
+    )
+    p.add_argument("config", type=Path, help="pipeline YAML ('robot', 'dataset' and 'train' sections)")
+    p.add_argument("--data", type=Path, help="trajectory file (.npz/.csv); default: data/<robot>_excitation.npz")
+    p.add_argument("--out", type=Path, help="run folder (default: runs/train-<timestamp>)")
+    p.add_argument("--device", choices=["cpu", "cuda"], help="override train.device")
+    p.add_argument("--resume", action="store_true", help="continue from the run folder's checkpoint")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    import time
+
+    from bemlearn.pipeline.config import load_pipeline_config
+    from bemlearn.pipeline.train import train_run
+
+    cfg = load_pipeline_config(args.config)
+    data = args.data or Path("data") / f"{cfg.robot}_excitation.npz"
+    if not data.is_file():
+        raise FileNotFoundError(f"--data: trajectory file {data} not found (collect one with `bemlearn collect {args.config} --out {data}`)")
+    out = args.out or Path("runs") / time.strftime("train-%Y%m%d-%H%M%S")
+    if args.resume and not (out / "checkpoint.pt").is_file():
+        raise FileNotFoundError(f"--resume: no checkpoint in {out}")
+    m = train_run(cfg, data, out, device=args.device, resume=args.resume, progress=not args.no_progress)
+    b = m["bem_heldout"]
+    print(f"run folder: {out}")
+    print(f"fit: {m['fit'].get('stop_reason')} in {m['fit'].get('seconds', float('nan')):.1f} s on {m['n_train']} points")
+    if "val_rmse" in m:
+        print(f"validation: RMSE {m['val_rmse']:.5f} rad, mean predictive log-likelihood {m['val_mean_log_likelihood']:.3f}")
+    print(f"held-out BEM vs model: RMSE {b['rmse']:.5f} rad, max {b['max_abs']:.5f} rad, "
+          f"inside ±2σ: {100 * b['coverage_2sigma_latent']:.1f}% (latent), {100 * b['coverage_2sigma_predictive']:.1f}% (predictive)")
+    return 0

@@ -1,0 +1,128 @@
+"""Where the controller gets its BEM q_u^e from, chosen by name (``BEM_SOURCES``).
+
+Every source maps a batch of BEM inputs ``x (B, 3m)`` = [q̈_a, q̇_a, q_a] (rad/s², rad/s,
+rad; the exported predictor's column order, eq. 14) to ``q_u^e (B,)`` rad.
+
+* ``predictor`` — the exported TorchScript file (``bem_predictor.pt``), its ``bem_mean``
+  called every control tick: the learned BEM μ(x_0^e) of eq. (14).
+* ``model`` — the model-based BEM of the *nominal* robot (eq. 9), by a warm-started,
+  safeguarded Newton iteration on Γ_0 per row (falls back to the bracketed solver).
+* ``zero`` — q_u^e ≡ nominal (plain balancing), a baseline.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import torch
+
+__all__ = ["BEM_SOURCES", "PredictorBEM", "ModelBEM", "ZeroBEM", "make_bem_source"]
+
+
+class PredictorBEM:
+    """The exported TorchScript predictor's ``bem_mean`` (module docstring)."""
+
+    name = "predictor"
+
+    def __init__(self, path: str | Path, *, robot=None) -> None:
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"BEM predictor file {path} not found (run `bemlearn export RUN_DIR` first)")
+        try:
+            self.module = torch.jit.load(str(path), map_location="cpu")
+        except RuntimeError as exc:
+            raise ValueError(f"{path}: not a TorchScript BEM predictor: {exc}") from exc
+        self.meta = json.loads(self.module.metadata())
+        if robot is not None:
+            if self.meta.get("robot") != robot.name or int(self.meta.get("m", -1)) != robot.m:
+                raise ValueError(
+                    f"{path}: predictor is for robot {self.meta.get('robot')!r} (m = {self.meta.get('m')}), "
+                    f"but the controller runs {robot.name!r} (m = {robot.m})"
+                )
+        self.path = path
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return self.module.bem_mean(torch.from_numpy(x)).numpy()
+
+    def mean_std(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and posterior std (rad) for logging/plots (slower than ``__call__``)."""
+        with torch.no_grad():
+            mean, std = self.module(torch.from_numpy(np.ascontiguousarray(x)))
+        return mean.numpy(), std.numpy()
+
+
+class ModelBEM:
+    """Model-based BEM of a nominal robot with a ``gamma0_scalar`` fast path (eq. 6–9)."""
+
+    name = "model"
+
+    def __init__(self, robot) -> None:
+        self.robot = robot
+        self.m = robot.m
+        self.lo, self.hi = robot.qu_range
+        self._last: np.ndarray | None = None
+
+    def _newton(self, x0: float, qa, qad, qadd) -> float | None:
+        g = self.robot.gamma0_scalar
+        x = x0
+        h = 1e-7
+        for _ in range(30):
+            f = g(x, qa, qad, qadd)
+            if abs(f) <= 1e-12:
+                return x
+            df = (g(x + h, qa, qad, qadd) - g(x - h, qa, qad, qadd)) / (2 * h)
+            if df == 0 or not math.isfinite(df):
+                return None
+            x_new = x - f / df
+            if not (self.lo <= x_new <= self.hi):
+                return None
+            if abs(x_new - x) <= 1e-14:
+                return x_new
+            x = x_new
+        return None
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        m = self.m
+        out = np.empty(x.shape[0])
+        start = self._last if self._last is not None and self._last.shape[0] == x.shape[0] else np.full(x.shape[0], self.robot.qu_nominal)
+        for i in range(x.shape[0]):
+            qadd, qad, qa = x[i, :m], x[i, m : 2 * m], x[i, 2 * m :]
+            r = self._newton(float(start[i]), qa, qad, qadd)
+            if r is None:  # no convergence from the warm start: bracket from scratch
+                res = self.robot.bem(torch.from_numpy(qa[None]), torch.from_numpy(qad[None]), torch.from_numpy(qadd[None]))
+                r = float(res.qu[0])
+            out[i] = r
+        self._last = out.copy()
+        return out
+
+
+class ZeroBEM:
+    """q_u^e ≡ nominal (upright): plain balancing without a balance manifold."""
+
+    name = "zero"
+
+    def __init__(self, nominal: float = 0.0) -> None:
+        self.nominal = nominal
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        return np.full(x.shape[0], self.nominal)
+
+
+BEM_SOURCES = ("predictor", "model", "zero")
+
+
+def make_bem_source(name: str, *, robot, predictor: str | Path | None = None):
+    """Build a BEM source by name for ``robot`` (the nominal robot for ``model``)."""
+    if name == "predictor":
+        if predictor is None:
+            raise ValueError("BEM source 'predictor' needs a predictor file (simulate.predictor or --predictor)")
+        return PredictorBEM(predictor, robot=robot)
+    if name == "model":
+        return ModelBEM(robot)
+    if name == "zero":
+        return ZeroBEM(robot.qu_nominal)
+    raise ValueError(f"unknown BEM source {name!r}; choose one of {list(BEM_SOURCES)}")

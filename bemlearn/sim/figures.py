@@ -1,0 +1,70 @@
+"""Figures of a closed-loop run, in the layout of the paper's Fig. 2.
+
+(a) q_a and q_a^d; (b) q_u, the BEM used in the loop with its ±2σ band (learned
+predictor) and the model-based BEM; (c) Lemma 1: ΔΓ against Ḣ_u (eq. 10); (d) the
+actuator command.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["plot_run"]
+
+
+def plot_run(result, path: str | Path, *, model_bem: np.ndarray | None = None, band: tuple[np.ndarray, np.ndarray] | None = None,
+             lemma: dict[str, np.ndarray] | None = None, joint_names=("θ", "α"), input_label: str = "V (V)") -> Path:
+    """Write a PNG of a :class:`~bemlearn.sim.closed_loop.SimResult`.
+
+    Args:
+        result: the run.
+        path: output PNG.
+        model_bem: ``(T,)`` model-based BEM at the loop's BEM inputs, rad.
+        band: ``(mean, std)`` of the learned BEM, ``(T,)`` each, rad.
+        lemma: ``{"t", "delta_gamma", "hdot"}`` arrays for panel (c).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = result.t
+    rows = 4 if lemma is not None else 3
+    fig, ax = plt.subplots(rows, 1, figsize=(9, 2.3 * rows), sharex=lemma is None)
+    a_name, u_name = joint_names
+    ax[0].plot(t, result.q[:, 0], label=f"{a_name}")
+    ax[0].plot(t, result.qa_ref[:, 0], "--", label=f"{a_name}$_d$")
+    ax[0].set_ylabel(f"{a_name} (rad)")
+    ax[0].legend(loc="upper right")
+    ax[0].set_title("(a) actuated joint tracking")
+    iu = 1
+    ax[1].plot(t, result.q[:, iu], color="k", lw=1, label=f"{u_name}")
+    ax[1].plot(t, result.qu_e, color="C1", lw=1, label=f"BEM in the loop ({result.metrics['bem_source']})")
+    if band is not None:
+        mean, std = band
+        ax[1].fill_between(t, mean - 2 * std, mean + 2 * std, color="C1", alpha=0.25, label="learned BEM ±2σ")
+    if model_bem is not None:
+        ax[1].plot(t, model_bem, "--", color="C2", lw=1, label="model-based BEM")
+    ax[1].set_ylabel(f"{u_name} (rad)")
+    ax[1].legend(loc="upper right", fontsize=8)
+    ax[1].set_title("(b) unactuated joint and the BEM")
+    k = 2
+    if lemma is not None:
+        ax[2].plot(lemma["t"], lemma["hdot"], label="$\\dot H_u$ (model)")
+        ax[2].plot(lemma["t"], lemma["delta_gamma"], "--", label="ΔΓ (learned)")
+        ax[2].set_ylabel("N·m")
+        ax[2].set_xlabel("t (s) over one reference period")
+        ax[2].legend(loc="upper right", fontsize=8)
+        ax[2].set_title("(c) Lemma 1: ΔΓ vs rate of momentum")
+        k = 3
+    ax[k].plot(t, result.u[:, 0], lw=0.8)
+    ax[k].set_ylabel(input_label)
+    ax[k].set_xlabel("t (s)")
+    ax[k].set_title("(d) actuator command")
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
