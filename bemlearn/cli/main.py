@@ -22,6 +22,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "bemlearn.cli.robot_cmd",
     "bemlearn.cli.collect_cmd",
     "bemlearn.cli.train_cmd",
+    "bemlearn.cli.evaluate_cmd",
     "bemlearn.cli.data_cmd",
     "bemlearn.cli.export_cmd",
     "bemlearn.cli.bench_cmd",

@@ -48,6 +48,11 @@ class PredictorBEM:
         with torch.no_grad():
             return self.module.bem_mean(torch.from_numpy(x)).numpy()
 
+    def full(self, x: np.ndarray) -> np.ndarray:
+        """The full learned map f of eq. (11): ``x (B, 3m + 2)`` = [q̈_a, q̇_a, q_a, q̈_u, q̇_u] → q_u (B,)."""
+        with torch.no_grad():
+            return self.module.predict_full(torch.from_numpy(x))[0].numpy()
+
     def mean_std(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Mean and posterior std (rad) for logging/plots (slower than ``__call__``)."""
         with torch.no_grad():
@@ -66,15 +71,15 @@ class ModelBEM:
         self.lo, self.hi = robot.qu_range
         self._last: np.ndarray | None = None
 
-    def _newton(self, x0: float, qa, qad, qadd) -> float | None:
+    def _newton(self, x0: float, qa, qad, qadd, qud: float = 0.0, qudd: float = 0.0) -> float | None:
         g = self.robot.gamma0_scalar
         x = x0
         h = 1e-7
         for _ in range(30):
-            f = g(x, qa, qad, qadd)
+            f = g(x, qa, qad, qadd, qud, qudd)
             if abs(f) <= 1e-12:
                 return x
-            df = (g(x + h, qa, qad, qadd) - g(x - h, qa, qad, qadd)) / (2 * h)
+            df = (g(x + h, qa, qad, qadd, qud, qudd) - g(x - h, qa, qad, qadd, qud, qudd)) / (2 * h)
             if df == 0 or not math.isfinite(df):
                 return None
             x_new = x - f / df
@@ -99,6 +104,17 @@ class ModelBEM:
         self._last = out.copy()
         return out
 
+    def full(self, x: np.ndarray) -> np.ndarray:
+        """Root of Γ(q_u; q_a, with q̈_u, q̇_u given) = 0 (eq. 5): ``x (B, 3m + 2)`` → (B,)."""
+        m = self.m
+        out = np.empty(x.shape[0])
+        for i in range(x.shape[0]):
+            qadd, qad, qa = x[i, :m], x[i, m : 2 * m], x[i, 2 * m : 3 * m]
+            start = float(self._last[0]) if self._last is not None else self.robot.qu_nominal
+            r = self._newton(start, qa, qad, qadd, float(x[i, 3 * m + 1]), float(x[i, 3 * m]))
+            out[i] = np.nan if r is None else r
+        return out
+
 
 class ZeroBEM:
     """q_u^e ≡ nominal (upright): plain balancing without a balance manifold."""
@@ -110,6 +126,8 @@ class ZeroBEM:
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         return np.full(x.shape[0], self.nominal)
+
+    full = __call__
 
 
 BEM_SOURCES = ("predictor", "model", "zero")

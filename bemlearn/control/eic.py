@@ -5,6 +5,14 @@ Per control tick, with the measured q, estimated q̇ and the desired q_a^d(t):
 1. External (tracking) loop:  v_a^ext = q̈_a^d − k_d,a (q̇_a − q̇_a^d) − k_p,a (q_a − q_a^d).
 2. BEM: q_u^e = BEM(v_a^ext, q̇_a, q_a) from a pluggable source (learned predictor, model,
    zero) — the instantaneous equilibrium of the unactuated row under v_a^ext (eq. 6, 14).
+   With ``momentum_correction`` (default) the source's full map (eq. 11) is evaluated at
+   the BEM's own rates instead: q_u^* = f(v_a^ext, q̇_a, q_a, q̈_u^e, q̇_u^e).  Why: with the
+   plain BEM, perfect balance gives v_a^int − v_a^ext = −ΔΓ/D_ua (Lemma 1, eq. 10), i.e. the
+   rate of momentum Ḣ_u leaks into the actuated acceleration; linearized about upright
+   this is θ̈ ≈ v_ext − (D_uu / Γ_q) v̈_ext, a (1 + D_uu ω²/Γ_q) gain at frequency ω.  One
+   correction step removes the first-order term; iterating it would converge only for
+   ω² < Γ_q/D_uu (≈ (6.6 rad/s)² for the Furuta), so references well below ~1 Hz are
+   tracked best (measured: `bemlearn bench sim`).
 3. Internal (balance) loop:  v_u = q̈_u^e − k_d,u (q̇_u − q̇_u^e) − k_p,u (q_u − q_u^e).
    The BEM's time derivatives are taken *along the reference*: the same source is
    evaluated at x^d(t ± h) = [q̈_a^d, q̇_a^d, q_a^d](t ± h) in the same batched call and
@@ -38,13 +46,18 @@ class EICGains:
         kp_a, kd_a: external loop, 1/s², 1/s (same for every actuated joint).
         kp_u, kd_u: internal loop on q_u, 1/s², 1/s.
         deriv_step: h of the BEM derivatives along the reference, s.
+        momentum_correction: evaluate the BEM source's full map (eq. 11) at the BEM's own
+            rates, q_u^* = f(v_a^ext, q̇_a, q_a, q̈_u^e, q̇_u^e), instead of at q̇_u = q̈_u = 0
+            (eq. 14).  By Lemma 1 the plain BEM leaves v_a^int − v_a^ext = −ΔΓ/D_ua = −Ḣ_u/D_ua
+            (plus damping), which drives a tracking error; the correction removes it.
     """
 
-    kp_a: float = 16.0
-    kd_a: float = 8.0
-    kp_u: float = 400.0
-    kd_u: float = 40.0
+    kp_a: float = 4.0
+    kd_a: float = 4.0
+    kp_u: float = 200.0
+    kd_u: float = 30.0
     deriv_step: float = 0.01
+    momentum_correction: bool = True
 
 
 class EICController:
@@ -66,6 +79,7 @@ class EICController:
         self.iu = nominal.unactuated_index
         self.m = nominal.m
         self._x = np.empty((4, 3 * nominal.m))
+        self._xf = np.empty((1, 3 * nominal.m + 2))
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, dict[str, float | np.ndarray]]:
         """Commands ``u (nu,)`` and a dict of internals for logging.
@@ -84,10 +98,19 @@ class EICController:
         x = self._x
         x[0, :m], x[0, m : 2 * m], x[0, 2 * m :] = v_ext, qad, qa
         x[1:, :m], x[1:, m : 2 * m], x[1:, 2 * m :] = qadd_d, qad_d, qa_d
-        b = self.bem(x)
-        qu_e = float(b[0])
-        qud_e = (b[3] - b[1]) / (2 * h)
-        qudd_e = (b[3] - 2 * b[2] + b[1]) / (h * h)
+        if g.momentum_correction:
+            b = self.bem(x[1:])  # BEM along the reference, for its rates
+            qud_e = (b[2] - b[0]) / (2 * h)
+            qudd_e = (b[2] - 2 * b[1] + b[0]) / (h * h)
+            xf = self._xf
+            xf[0, : 3 * m] = x[0]
+            xf[0, 3 * m], xf[0, 3 * m + 1] = qudd_e, qud_e
+            qu_e = float(self.bem.full(xf)[0])
+        else:
+            b = self.bem(x)
+            qu_e = float(b[0])
+            qud_e = (b[3] - b[1]) / (2 * h)
+            qudd_e = (b[3] - 2 * b[2] + b[1]) / (h * h)
         v_u = qudd_e - g.kd_u * (qd[iu] - qud_e) - g.kp_u * (q[iu] - qu_e)
         D, hv = self.nominal.terms(q, qd)
         D_ua = D[iu, ia]  # (m,)

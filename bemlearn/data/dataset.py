@@ -58,7 +58,7 @@ class DatasetConfig:
     """
 
     derivative: str = "savgol"
-    derivative_options: dict[str, Any] = field(default_factory=lambda: {"window_s": 0.2, "polyorder": 4})
+    derivative_options: dict[str, Any] = field(default_factory=lambda: {"window_s": 0.3, "polyorder": 4})
     qu_window: float | None = 0.5
     n_points: int | None = 500
     n_val_points: int | None = None

@@ -6,6 +6,8 @@
     collect: {...}         # bemlearn.data.collect.CollectConfig
     dataset: {...}         # bemlearn.data.dataset.DatasetConfig
     train: {...}           # bemlearn.fitting.GPConfig
+    evaluate: {...}        # bemlearn.pipeline.evaluation.EvaluationConfig
+    simulate: {...}        # bemlearn.sim.closed_loop.SimulateConfig
 
 Every section is a strict dataclass defined next to its component; an unknown key
 anywhere is an error naming the file and the key path.
@@ -20,6 +22,8 @@ from bemlearn.config import from_dict, load_yaml
 from bemlearn.data.collect import CollectConfig
 from bemlearn.data.dataset import DatasetConfig
 from bemlearn.fitting.gp_config import GPConfig
+from bemlearn.pipeline.evaluation import EvaluationConfig
+from bemlearn.sim.closed_loop import SimulateConfig
 
 __all__ = ["PipelineConfig", "load_pipeline_config"]
 
@@ -32,6 +36,8 @@ class PipelineConfig:
     collect: CollectConfig = field(default_factory=CollectConfig)
     dataset: DatasetConfig = field(default_factory=DatasetConfig)
     train: GPConfig = field(default_factory=GPConfig)
+    evaluate: EvaluationConfig = field(default_factory=EvaluationConfig)
+    simulate: SimulateConfig = field(default_factory=SimulateConfig)
 
 
 def load_pipeline_config(path: str | Path) -> PipelineConfig:

@@ -201,11 +201,12 @@ class AnalyticFuruta(Robot):
         hu = -self._K * s * c * td * td - self._mgl * s + self.params.B_p * ad
         return D, np.array([ha, hu])
 
-    def gamma0_scalar(self, qu: float, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray) -> float:
-        """Γ_0(α; θ) (eq. 7) for one state: −m L_r l cos α θ̈ − K sin α cos α θ̇² − m g l sin α."""
+    def gamma0_scalar(self, qu: float, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray, qud: float = 0.0, qudd: float = 0.0) -> float:
+        """Γ (eq. 5) for one state, numpy fast path; with the default q̇_u = q̈_u = 0 it is Γ_0 (eq. 7):
+        −m L_r l cos α θ̈ − K sin α cos α θ̇² − m g l sin α (+ D_uu α̈ + B_p α̇ for nonzero rates)."""
         s, c = math.sin(qu), math.cos(qu)
         td, tdd = float(qad[0]), float(qadd[0])
-        return -self._mLl * c * tdd - self._K * s * c * td * td - self._mgl * s
+        return -self._mLl * c * tdd - self._K * s * c * td * td - self._mgl * s + self._Duu * qudd + self.params.B_p * qud
 
     def passive(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
         """Viscous joint damping [−B_r θ̇, −B_p α̇], ``(B, 2)`` N·m."""

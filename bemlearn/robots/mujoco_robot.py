@@ -261,16 +261,16 @@ class MujocoRobot(Robot):
         hj = self._vec[self._dadr] - d.qfrc_passive[self._dadr]
         return Tinv.T @ Dj @ Tinv, Tinv.T @ hj
 
-    def gamma0_scalar(self, qu: float, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray) -> float:
-        """Γ_0(q_u; q_a) (eq. 7) for one state, numpy fast path (N·m)."""
+    def gamma0_scalar(self, qu: float, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray, qud: float = 0.0, qudd: float = 0.0) -> float:
+        """Γ (eq. 5) for one state, numpy fast path (N·m); Γ_0 (eq. 7) with the default q̇_u = q̈_u = 0."""
         n, u = self.n, self.unactuated_index
         ia = list(self.actuated_index)
         q = np.empty(n)
         qd = np.zeros(n)
         qdd = np.zeros(n)
         q[ia], q[u] = qa, qu
-        qd[ia] = qad
-        qdd[ia] = qadd
+        qd[ia], qd[u] = qad, qud
+        qdd[ia], qdd[u] = qadd, qudd
         Tinv = self._Tinv_np
         m, d = self.model, self.data
         self._load_state(Tinv @ q, Tinv @ qd)

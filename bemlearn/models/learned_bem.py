@@ -1,0 +1,102 @@
+"""The learned BEM with its uncertainty and probabilistic bound (eq. 12–15).
+
+    E_l = { q_u^e = μ(x_0^e) },   x_0^e = [q̈_a, q̇_a, q_a, 0, 0]                       (14)
+    Σ(x*) = k* − kᵀ K⁻¹ k                                                           (12)
+
+In the paper's notation the kernel includes the noise term (K_ij = σ_f² exp(·) + σ_0² δ_ij),
+so k* = k(x*, x*) = σ_f² + σ_0² and Σ is the *predictive* variance.  Both are exposed:
+``std`` is √Σ as printed (latent + σ_0²), ``latent_std`` the posterior std of f alone.
+
+Bound (eq. 13, 15): with probability ≥ η,
+    |q_u^d − μ(x_0^e)| ≤ κ Σ^{1/2}(x_0^e) + ΔΓ_max / F_min.
+The κ of Srinivas et al. (2012, Thm. 6) is available (:func:`srinivas_kappa`), but it is
+very conservative (it grows like ln^{3/2} N and needs the RKHS norm and the information
+gain); bemlearn's documented default is the Gaussian quantile κ = 2 (≈ 95 % for a
+calibrated Gaussian posterior), used as a heuristic, as is common practice in safe
+GP control.  ΔΓ_max / F_min (the BEM–zero-dynamics gap of Lemma 1) is a model property;
+pass the measured max |q_u^d − q_u^e| (``bemlearn robot lemma1``) or 0.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from bemlearn.models.predictor_state import PredictorState
+
+__all__ = ["LearnedBEM", "BEMPrediction", "srinivas_kappa"]
+
+
+@dataclass(frozen=True)
+class BEMPrediction:
+    """Learned BEM for a batch: ``mean``, ``std`` (√Σ, eq. 12 as printed), ``latent_std``, all ``(B,)`` rad."""
+
+    mean: torch.Tensor
+    std: torch.Tensor
+    latent_std: torch.Tensor
+
+
+def srinivas_kappa(rkhs_norm: float, info_gain: float, n: int, eta: float) -> float:
+    """κ = √(2‖q_u‖_k² + 300 γ ln³(N / (1 − η))) of Srinivas et al. (2012), Theorem 6 (eq. 13)."""
+    if not 0 < eta < 1:
+        raise ValueError(f"srinivas_kappa: eta must be in (0, 1), got {eta}")
+    return math.sqrt(2 * rkhs_norm**2 + 300 * info_gain * math.log(n / (1 - eta)) ** 3)
+
+
+class LearnedBEM:
+    """The learned BEM of a trained run (module docstring).
+
+    Args:
+        state: the frozen posterior.
+        robot, actuated_names, unactuated_name: what the columns mean.
+    """
+
+    def __init__(self, state: PredictorState, *, robot: str, actuated_names: tuple[str, ...], unactuated_name: str) -> None:
+        self.state = state
+        self.robot = robot
+        self.actuated_names = tuple(actuated_names)
+        self.unactuated_name = unactuated_name
+        self.m = len(self.actuated_names)
+        if state.dim != 3 * self.m + 2:
+            raise ValueError(f"LearnedBEM: the posterior has d = {state.dim} inputs, expected 3m + 2 = {3 * self.m + 2}")
+
+    @classmethod
+    def from_checkpoint(cls, path: str | Path) -> "LearnedBEM":
+        """Load ``RUN_DIR`` or ``RUN_DIR/checkpoint.pt``."""
+        from bemlearn.export.checkpoint import load_checkpoint
+
+        ck = load_checkpoint(path)
+        md = ck.metadata
+        return cls(ck.predictor_state, robot=md.robot, actuated_names=md.actuated_names, unactuated_name=md.unactuated_name)
+
+    def predict(self, x: torch.Tensor) -> BEMPrediction:
+        """The full learned map f of eq. (11): ``x (B, 3m + 2)`` = [q̈_a, q̇_a, q_a, q̈_u, q̇_u] → q_u."""
+        x = torch.as_tensor(x, dtype=torch.float64)
+        if x.ndim != 2 or x.shape[1] != 3 * self.m + 2:
+            raise ValueError(f"LearnedBEM.predict: x must have shape (B, {3 * self.m + 2}) [q̈_a, q̇_a, q_a, q̈_u, q̇_u], got {tuple(x.shape)}")
+        if not bool(torch.isfinite(x).all()):
+            raise ValueError("LearnedBEM.predict: x has non-finite values")
+        out = []
+        for chunk in x.split(4096):
+            out.append(self.state.predict_reference(chunk))
+        mean = torch.cat([o[0] for o in out])
+        latent = torch.cat([o[1] for o in out])
+        noise = self.state.y_std**2 * self.state.noise
+        return BEMPrediction(mean, (latent**2 + noise).sqrt(), latent)
+
+    def bem(self, qa, qad, qadd) -> BEMPrediction:
+        """μ(x_0^e) and its std (eq. 14, 12): ``qa, qad, qadd (B, m)`` rad, rad/s, rad/s²."""
+        parts = [torch.as_tensor(v, dtype=torch.float64) for v in (qadd, qad, qa)]
+        for name, p in zip(("qadd", "qad", "qa"), parts):
+            if p.ndim != 2 or p.shape[1] != self.m:
+                raise ValueError(f"LearnedBEM.bem: {name} must have shape (B, {self.m}), got {tuple(p.shape)}")
+        x = torch.cat(parts + [torch.zeros(parts[0].shape[0], 2, dtype=torch.float64)], dim=1)
+        return self.predict(x)
+
+    @staticmethod
+    def bound(std: torch.Tensor, *, kappa: float = 2.0, zero_dynamics_gap: float = 0.0) -> torch.Tensor:
+        """Half-width of eq. (15): κ Σ^{1/2} + ΔΓ_max/F_min, rad (see module docstring for κ)."""
+        return kappa * std + zero_dynamics_gap

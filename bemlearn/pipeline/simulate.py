@@ -1,0 +1,71 @@
+"""A closed-loop stage: run the EIC loop with one or more BEM sources, log, plot, measure.
+
+Writes ``simulate/metrics.json``, ``simulate/fig2_<source>.png`` (the paper's Fig. 2
+layout) and TensorBoard scalars under ``tb/simulate``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from bemlearn.pipeline.config import PipelineConfig
+from bemlearn.sim.closed_loop import nominal_robot, simulate
+from bemlearn.sim.figures import plot_run
+
+__all__ = ["simulate_stage"]
+
+log = logging.getLogger(__name__)
+
+
+def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: str | Path | None = None,
+                   sources: tuple[str, ...] = ("predictor", "model", "zero"), progress: bool = True) -> dict:
+    """Run the closed loop for each BEM source in ``sources``; returns ``{source: metrics}``."""
+    out = Path(out_dir) / "simulate"
+    out.mkdir(parents=True, exist_ok=True)
+    scfg = config.simulate
+    predictor = predictor or scfg.predictor
+    results = {}
+    from torch.utils.tensorboard import SummaryWriter
+
+    writer = SummaryWriter(str(Path(out_dir) / "tb" / "simulate"))
+    nominal = nominal_robot(config.robot, scfg.nominal)
+    for src in sources:
+        cfg = dataclasses.replace(scfg, bem_source=src, predictor=str(predictor) if predictor else None)
+        res = simulate(config.robot, cfg, progress=progress)
+        m = dict(res.metrics)
+        # model-based BEM of the nominal robot at the loop's BEM inputs (eq. 9), for comparison
+        x = torch.from_numpy(res.bem_x)
+        mm = nominal.m
+        model_bem = nominal.bem(x[:, 2 * mm :], x[:, mm : 2 * mm], x[:, :mm]).qu.numpy() if len(x) else np.zeros(0)
+        band = None
+        lemma = None
+        if src == "predictor":
+            from bemlearn.control.bem_sources import PredictorBEM
+
+            pred = PredictorBEM(predictor, robot=nominal)
+            mean, std = pred.mean_std(res.bem_x) if len(x) else (np.zeros(0), np.zeros(0))
+            band = (mean, std)
+            m["bem_vs_model_rmse"] = float(np.sqrt(np.nanmean((mean - model_bem) ** 2))) if len(x) else float("nan")
+            m["bem_inside_2sigma"] = float(np.mean(np.abs(mean - model_bem) <= 2 * std)) if len(x) else float("nan")
+            ref = cfg.reference.build(mm)
+            if np.isfinite(ref.period):
+                from bemlearn.pipeline.lemma import learned_lemma1
+
+                L = learned_lemma1(pred, pred.full, nominal, ref)
+                m["lemma1"] = {"r_learned_vs_model_delta_gamma": L["r"], "r_learned_vs_hdot": L["r_hdot"], "model_gap": L["model_gap"]}
+                lemma = {"t": L["t"], "delta_gamma": L["delta_gamma_learned"], "hdot": L["hdot"]}
+        plot_run(res, out / f"fig2_{src}.png", model_bem=model_bem, band=band, lemma=lemma)
+        for k in ("tracking_rmse", "tracking_max", "qu_max", "u_max", "real_time_factor"):
+            if isinstance(m.get(k), float):
+                writer.add_scalar(f"simulate/{src}/{k}", m[k], 0)
+        results[src] = m
+        log.info("simulate %s: %s", src, {k: m[k] for k in ("fell", "tracking_rmse", "u_max")})
+    writer.close()
+    (out / "metrics.json").write_text(json.dumps(results, indent=2, default=float))
+    return results
