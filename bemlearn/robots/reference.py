@@ -16,7 +16,7 @@ from fractions import Fraction
 import numpy as np
 import torch
 
-__all__ = ["CompositeSinusoid"]
+__all__ = ["CompositeSinusoid", "ConstantAcceleration"]
 
 
 @dataclass(frozen=True)
@@ -94,3 +94,39 @@ class CompositeSinusoid:
     def __call__(self, t) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(q_a^d, q̇_a^d, q̈_a^d)`` at times ``t``, each ``(T, m)`` (rad, rad/s, rad/s²)."""
         return self.derivative(t, 0), self.derivative(t, 1), self.derivative(t, 2)
+
+
+@dataclass(frozen=True)
+class ConstantAcceleration:
+    """q_a^d(t) = q0 + v0 t + ½ a t² per actuated joint (Section III-A's constant-θ̈ example).
+
+    Attributes:
+        q0: ``(m,)`` rad.  v0: ``(m,)`` rad/s.  a: ``(m,)`` rad/s².
+    """
+
+    q0: tuple[float, ...]
+    v0: tuple[float, ...]
+    a: tuple[float, ...]
+
+    @property
+    def m(self) -> int:
+        return len(self.q0)
+
+    @property
+    def period(self) -> float:
+        return math.inf
+
+    def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``t (T,)`` s → ``(q, q̇, q̈)`` each ``(T, m)``."""
+        t = np.asarray(t, dtype=np.float64)[:, None]
+        q0, v0, a = (np.asarray(v, dtype=np.float64)[None] for v in (self.q0, self.v0, self.a))
+        return q0 + v0 * t + 0.5 * a * t**2, v0 + a * t, np.broadcast_to(a, (t.shape[0], a.shape[1])).copy()
+
+    def derivative(self, t, order: int = 0) -> torch.Tensor:
+        q, qd, qdd = self.evaluate(np.asarray(t, dtype=np.float64))
+        if order > 2:
+            return torch.zeros(q.shape, dtype=torch.float64)
+        return torch.from_numpy((q, qd, qdd)[order])
+
+    def __call__(self, t) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        return tuple(torch.from_numpy(x) for x in self.evaluate(np.asarray(t, dtype=np.float64)))

@@ -144,8 +144,13 @@ class _Timed:
         return out
 
 
-def simulate(robot_name: str, config: SimulateConfig, *, progress: bool = True) -> SimResult:
-    """Run the closed loop (module docstring) and return logs and metrics."""
+def simulate(robot_name: str, config: SimulateConfig, *, progress: bool = True, reference=None) -> SimResult:
+    """Run the closed loop (module docstring) and return logs and metrics.
+
+    ``reference`` overrides ``config.reference`` with any object offering ``m``,
+    ``evaluate(t)`` and ``derivative(t, order)`` (e.g. a
+    :class:`~bemlearn.robots.reference.ConstantAcceleration`).
+    """
     from bemlearn.robots import MujocoRobot, load
 
     plant = load(robot_name)
@@ -153,7 +158,7 @@ def simulate(robot_name: str, config: SimulateConfig, *, progress: bool = True) 
         raise ValueError(f"simulate: robot {robot_name!r} has no MuJoCo model")
     nominal = nominal_robot(robot_name, config.nominal)
     bem = _Timed(make_bem_source(config.bem_source, robot=nominal, predictor=config.predictor))
-    ref = config.reference.build(plant.m)
+    ref = reference if reference is not None else config.reference.build(plant.m)
     actuator = FurutaMotor() if plant.name == "furuta" else DirectTorque(plant.input_matrix[list(plant.actuated_index)].numpy(), plant.model.actuator_ctrlrange[:, 1])
     ctrl = EICController(nominal, bem, ref, actuator, config.gains)
     model = plant.model
@@ -209,7 +214,7 @@ def simulate(robot_name: str, config: SimulateConfig, *, progress: bool = True) 
     bar.close()
     K = k
     tt = np.arange(K) * dt
-    qa_ref, qad_ref, qadd_ref = (x.numpy() for x in ref(tt))
+    qa_ref, qad_ref, qadd_ref = ref.evaluate(tt)
     logs = {name: arr[:K] for name, arr in log.items()}
     mask = tt >= config.warmup_s
     err = logs["q"][mask][:, ia] - qa_ref[mask]
