@@ -99,3 +99,25 @@ def test_unknown_name_and_missing_file(tmp_path):
 def test_planar_walker_is_not_a_balance_robot():
     with pytest.raises(RobotModelError, match="exactly one unactuated"):
         load(asset_path("biped_planar.xml"))
+
+
+def test_kinematics_of_bodies_with_several_joints_and_offset_pivots():
+    """The planar walker's torso has x, z slides and a hinge; a user model puts a hinge off the body origin."""
+    from bemlearn.robots.kinematics import chain_from_model, frame_positions
+
+    models = [mujoco.MjModel.from_xml_path(str(asset_path("biped_planar.xml"))), mujoco.MjModel.from_xml_string(
+        '<mujoco><worldbody><body name="b" pos="0.1 0 0.2"><joint name="s" type="slide" axis="1 0 0" pos="0.3 0 0"/>'
+        '<joint name="h" type="hinge" axis="0 1 0" pos="0 0 0.4"/><geom size="0.1"/><site name="tip" pos="0.2 0 -0.5"/>'
+        '</body></worldbody></mujoco>')]
+    g = torch.Generator().manual_seed(0)
+    for m in models:
+        chain = chain_from_model(m)
+        sites = [m.site(i).name for i in range(m.nsite)]
+        qj = (torch.rand(8, m.njnt, generator=g, dtype=torch.float64) - 0.5) * 1.5
+        fk = frame_positions(chain, m, qj, sites)
+        d = mujoco.MjData(m)
+        for i in range(qj.shape[0]):
+            d.qpos[:] = qj[i].numpy()
+            mujoco.mj_kinematics(m, d)
+            for k, name in enumerate(sites):
+                torch.testing.assert_close(fk[name][i], torch.as_tensor(d.site_xpos[k].copy()), rtol=0, atol=1e-12)

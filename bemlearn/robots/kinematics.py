@@ -8,8 +8,9 @@ MuJoCo version bemlearn supports and uses the compiled (resolved) body poses.
 
 A MuJoCo body frame is ``T_parent · (pos, quat) · Tr(p) · J(θ) · Tr(−p)`` for a joint at
 ``p`` in the body frame.  pytorch-kinematics composes ``link offset · joint offset · J(θ)``
-per frame, so a joint with ``p ≠ 0`` gets a pivot frame (``<body>__pivot``) and the
-body frame is its fixed child with offset ``Tr(−p)``.  Sites are fixed child frames.
+per frame, so a joint with ``p ≠ 0`` (or a body with several joints, composed in order)
+gets pivot frames (``<body>__pivot<i>``) and the body frame is the last one's fixed child
+with offset ``Tr(−p)``.  Sites are fixed child frames.
 """
 
 from __future__ import annotations
@@ -57,22 +58,23 @@ def _body_frame(model: mujoco.MjModel, body_id: int) -> pkframe.Frame:
     offset = _tf(body.pos, body.quat)
     if njnt == 0:
         return _frame(body.name, offset, pkframe.Joint(body.name + "__fixed", dtype=_DT), children)
-    if njnt > 1:
-        raise ValueError(f"body {body.name!r} has {njnt} joints; bemlearn's kinematics needs at most one joint per body")
-    j = int(model.body_jntadr[body_id])
-    joint = model.joint(j)
-    jtype = {int(mujoco.mjtJoint.mjJNT_HINGE): "revolute", int(mujoco.mjtJoint.mjJNT_SLIDE): "prismatic"}.get(int(model.jnt_type[j]))
-    if jtype is None:
-        raise ValueError(f"joint {joint.name!r} is not a hinge or slide")
-    p = np.asarray(joint.pos, dtype=np.float64)
-    axis = torch.as_tensor(np.asarray(joint.axis, dtype=np.float64), dtype=_DT)
-    pk_joint = pkframe.Joint(joint.name, offset=None, joint_type=jtype, axis=axis, dtype=_DT)
-    if not np.any(p):
-        return _frame(body.name, offset, pk_joint, children)
-    # joint away from the body origin: pivot frame at p, body frame = pivot · Tr(−p)
-    pivot_offset = offset.compose(_tf(p))
-    body_frame = _frame(body.name, _tf(-p), pkframe.Joint(body.name + "__fixed", dtype=_DT), children)
-    return _frame(body.name + "__pivot", pivot_offset, pk_joint, [body_frame])
+    joints = []
+    for j in range(int(model.body_jntadr[body_id]), int(model.body_jntadr[body_id]) + njnt):
+        jtype = {int(mujoco.mjtJoint.mjJNT_HINGE): "revolute", int(mujoco.mjtJoint.mjJNT_SLIDE): "prismatic"}.get(int(model.jnt_type[j]))
+        if jtype is None:
+            raise ValueError(f"joint {model.joint(j).name!r} is not a hinge or slide")
+        axis = torch.as_tensor(np.asarray(model.jnt_axis[j], dtype=np.float64), dtype=_DT)
+        joints.append((pkframe.Joint(model.joint(j).name, offset=None, joint_type=jtype, axis=axis, dtype=_DT), np.asarray(model.jnt_pos[j], dtype=np.float64)))
+    if njnt == 1 and not np.any(joints[0][1]):
+        return _frame(body.name, offset, joints[0][0], children)
+    # Several joints, or one away from the body origin: MuJoCo composes J_k = Tr(p_k) R_k Tr(−p_k)
+    # in order; each joint gets a pivot frame, the body frame is the last pivot's child at Tr(−p).
+    frame = _frame(body.name, _tf(-joints[-1][1]), pkframe.Joint(body.name + "__fixed", dtype=_DT), children)
+    for i in range(njnt - 1, -1, -1):
+        p_i = joints[i][1]
+        link = offset.compose(_tf(p_i)) if i == 0 else _tf(p_i - joints[i - 1][1])
+        frame = _frame(f"{body.name}__pivot{i}", link, joints[i][0], [frame])
+    return frame
 
 
 def chain_from_model(model: mujoco.MjModel) -> pk.Chain:
