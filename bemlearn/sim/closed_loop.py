@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
+import torch
 from tqdm.auto import tqdm
 
 from bemlearn.control.actuators import DirectTorque, FurutaMotor
@@ -150,7 +151,20 @@ def simulate(robot_name: str, config: SimulateConfig, *, progress: bool = True, 
     ``reference`` overrides ``config.reference`` with any object offering ``m``,
     ``evaluate(t)`` and ``derivative(t, order)`` (e.g. a
     :class:`~bemlearn.robots.reference.ConstantAcceleration`).
+
+    The loop runs torch on one thread, as a controller would (intra-op threads only add
+    synchronization to these tiny per-tick calls and thrash under load); the previous
+    setting is restored afterwards.
     """
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return _simulate(robot_name, config, progress=progress, reference=reference)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _simulate(robot_name: str, config: SimulateConfig, *, progress: bool, reference) -> SimResult:
     from bemlearn.robots import MujocoRobot, load
 
     plant = load(robot_name)

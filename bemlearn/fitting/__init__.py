@@ -1,0 +1,36 @@
+"""bemlearn.fitting: build, initialize and fit the BEM GPs (functions, not model methods)."""
+
+from bemlearn.fitting.build import build_gp, initial_hyperparameters
+from bemlearn.fitting.exact import fit_exact
+from bemlearn.fitting.fit import fit_gp, train_gp
+from bemlearn.fitting.gp_config import GPConfig
+from bemlearn.fitting.gpdm_fit import GPDMConfig, fit_gpdm, gpdm_metrics
+from bemlearn.fitting.init import data_hyperparameters, select_inducing_points, set_hyperparameters
+from bemlearn.fitting.optimize import NumericalFailure, minimize
+from bemlearn.fitting.result import Callback, FitResult, hyperparameter_metrics
+from bemlearn.fitting.sgpr import fit_sgpr
+from bemlearn.fitting.svgp import fit_svgp
+from bemlearn.fitting.variational import optimal_variational
+
+__all__ = [
+    "GPDMConfig",
+    "fit_gpdm",
+    "gpdm_metrics",
+    "GPConfig",
+    "FitResult",
+    "Callback",
+    "NumericalFailure",
+    "build_gp",
+    "train_gp",
+    "fit_gp",
+    "fit_exact",
+    "fit_sgpr",
+    "fit_svgp",
+    "minimize",
+    "initial_hyperparameters",
+    "optimal_variational",
+    "data_hyperparameters",
+    "set_hyperparameters",
+    "select_inducing_points",
+    "hyperparameter_metrics",
+]

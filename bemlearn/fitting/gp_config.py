@@ -1,0 +1,104 @@
+"""Configuration of GP training (kind, optimizer, inducing points, minibatches)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import torch
+
+__all__ = ["GPConfig"]
+
+_DTYPES = {"float64": torch.float64, "float32": torch.float32}
+
+
+@dataclass(frozen=True)
+class GPConfig:
+    """How to build and train one BEM GP; parse with ``bemlearn.config.from_dict(GPConfig, mapping)``.
+
+    Attributes:
+        kind: ``"exact"``, ``"sgpr"`` or ``"svgp"`` (see ``bemlearn.models.GP_KINDS``).
+        n_inducing: number of inducing points M (sgpr, svgp).
+        inducing_init: ``"kmeans++"`` (D²-weighted seeding) or ``"random"`` subset of the inputs.
+        learn_inducing: optimize the inducing inputs Z.
+        init_subset: size of the random subset on which a small exact GP is fitted first to
+            initialize the sgpr/svgp hyperparameters (0: initialize from data statistics only).
+        fit_subset: sgpr only: optimize θ and Z on this many random points, then condition
+            on all N (0: optimize on all N).
+        optimizer: ``"lbfgs"`` or ``"adam"`` for exact and sgpr (svgp always uses natural gradients
+            for q(v) and Adam for θ, Z).
+        max_iter: L-BFGS iterations (≤ 1.5 · max_iter loss evaluations) or Adam steps; ``None``:
+            100 for exact, 30 for sgpr (each sgpr evaluation costs O(fit_subset · M²)).
+        lr: learning rate; ``None`` picks the default of the optimizer: 1.0 for L-BFGS (initial
+            step), 0.05 for Adam on exact/sgpr, 0.003 for the svgp hyperparameters.
+        ngd_lr: svgp natural-gradient step size for q(v).
+        tol: L-BFGS stops when the loss changes by less than ``tol`` (nats per point) between iterations.
+        batch_size: svgp minibatch size.
+        refresh_q: svgp: set q(v) to its optimum for the final θ, Z after training.
+        epochs: svgp passes over the data.
+        min_noise: lower bound of σ_0² (normalized output units squared).
+        jitter: first Cholesky jitter j₀ (and the fixed K_ZZ jitter of sgpr/svgp).
+        seed: seed of every random choice (subsets, k-means++, minibatch order).
+        device: torch device string, e.g. ``"cpu"`` or ``"cuda"``.
+        dtype: ``"float64"`` (default; GP work) or ``"float32"``.
+    """
+
+    kind: Literal["exact", "sgpr", "svgp"] = "exact"
+    n_inducing: int = 256
+    inducing_init: Literal["kmeans++", "random"] = "kmeans++"
+    learn_inducing: bool = True
+    init_subset: int = 500
+    fit_subset: int = 10_000
+    optimizer: Literal["lbfgs", "adam"] = "lbfgs"
+    max_iter: int | None = None
+    lr: float | None = None
+    ngd_lr: float = 0.01
+    tol: float = 1e-9
+    batch_size: int = 4096
+    epochs: int = 10
+    refresh_q: bool = True
+    min_noise: float = 1e-6
+    jitter: float = 1e-8
+    seed: int = 0
+    device: str = "cpu"
+    dtype: Literal["float64", "float32"] = "float64"
+
+    def __post_init__(self) -> None:
+        for name in ("n_inducing", "max_iter", "batch_size", "epochs"):
+            if getattr(self, name) is not None and getattr(self, name) < 1:
+                raise ValueError(f"{name}: expected a positive integer, got {getattr(self, name)}")
+        for name in ("init_subset", "fit_subset"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name}: expected a non-negative integer, got {getattr(self, name)}")
+        if self.lr is not None and not self.lr > 0.0:
+            raise ValueError(f"lr: expected a positive number, got {self.lr}")
+        for name in ("ngd_lr", "min_noise", "jitter"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name}: expected a positive number, got {getattr(self, name)}")
+        if self.tol < 0.0:
+            raise ValueError(f"tol: expected a non-negative number, got {self.tol}")
+        try:
+            torch.device(self.device)
+        except RuntimeError as exc:
+            raise ValueError(f"device: not a torch device string: {self.device!r}") from exc
+
+    @property
+    def resolved_max_iter(self) -> int:
+        """:attr:`max_iter`, or the kind's default when it is ``None``."""
+        if self.max_iter is not None:
+            return self.max_iter
+        return 30 if self.kind == "sgpr" else 100
+
+    @property
+    def resolved_lr(self) -> float:
+        """:attr:`lr`, or the optimizer's default when it is ``None``."""
+        if self.lr is not None:
+            return self.lr
+        if self.kind == "svgp":
+            return 0.003
+        return 1.0 if self.optimizer == "lbfgs" else 0.05
+
+    @property
+    def torch_dtype(self) -> torch.dtype:
+        """The torch dtype named by :attr:`dtype`."""
+        return _DTYPES[self.dtype]

@@ -1,0 +1,146 @@
+"""Full-batch minimization loops (L-BFGS, Adam) with callbacks, progress bar and failure recovery.
+
+An evaluation whose loss is not finite, or whose Cholesky fails even after jitter, restores
+the best parameters evaluated so far and stops the fit with a logged warning; it never
+leaves NaN parameters behind.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Sequence
+
+import torch
+from linear_operator.utils.errors import NanError, NotPSDError
+from tqdm.auto import tqdm
+
+from bemlearn.fitting.result import Callback
+
+__all__ = ["minimize", "checked_loss", "default_lr", "NumericalFailure"]
+
+logger = logging.getLogger(__name__)
+
+
+class NumericalFailure(RuntimeError):
+    """A loss evaluation produced NaN/inf or an unrecoverable Cholesky failure."""
+
+
+def checked_loss(loss_fn: Callable[[], torch.Tensor]) -> torch.Tensor:
+    """``loss_fn()``, raising :class:`NumericalFailure` if it is not finite or its Cholesky failed."""
+    try:
+        loss = loss_fn()
+    except (NotPSDError, NanError, ValueError, torch.linalg.LinAlgError) as exc:
+        raise NumericalFailure(str(exc)) from exc
+    if not bool(torch.isfinite(loss)):
+        raise NumericalFailure(f"loss is {float(loss.detach())}")
+    return loss
+
+
+def default_lr(optimizer: str, lr: float | None) -> float:
+    """``lr``, or 1.0 for L-BFGS (initial step) and 0.05 for Adam when it is ``None``."""
+    if lr is not None:
+        return lr
+    return 1.0 if optimizer == "lbfgs" else 0.05
+
+
+def minimize(
+    loss_fn: Callable[[], torch.Tensor],
+    params: Sequence[torch.nn.Parameter],
+    *,
+    optimizer: str,
+    max_iter: int,
+    lr: float,
+    tol: float,
+    metrics_fn: Callable[[], dict[str, float]],
+    callback: Callback | None = None,
+    progress: bool = False,
+    desc: str = "fit",
+) -> tuple[float, int, str, dict[str, float]]:
+    """Minimize ``loss_fn()`` over ``params`` with L-BFGS (strong Wolfe line search) or Adam.
+
+    The callback is called after every loss evaluation (L-BFGS: every function evaluation,
+    including line-search trials; Adam: every step) with the loss at the evaluated point.
+    At the end the parameters are those of the lowest loss evaluated.
+
+    Args:
+        loss_fn: returns the ``()`` loss for the current parameters (graph attached).
+        params: the parameters (those with ``requires_grad`` are optimized).
+        optimizer: ``"lbfgs"`` or ``"adam"``.
+        max_iter: L-BFGS iterations (≤ 1.5 · max_iter evaluations) or Adam steps.
+        lr: learning rate.
+        tol: L-BFGS stops when the loss or the parameters change by less than ``tol`` in an
+            iteration; Adam stops after 50 steps without an improvement larger than ``tol``
+            (0 disables both).
+        metrics_fn: extra metrics for the callback (hyperparameters).
+        callback: ``callback(step, metrics)``.
+        progress: show a tqdm progress bar.
+        desc: progress-bar label.
+
+    Returns:
+        ``(final_loss, evaluations, stop_reason, final_metrics)``.
+    """
+    params = [p for p in params if p.requires_grad]
+    if optimizer not in ("lbfgs", "adam"):
+        raise ValueError(f"optimizer: unknown {optimizer!r}; valid are ['adam', 'lbfgs']")
+    best_params = [p.detach().clone() for p in params]
+    state = {"best": math.inf, "evals": 0, "since_best": 0}
+    max_eval = int(max_iter * 1.5) if optimizer == "lbfgs" else max_iter
+    bar = tqdm(total=max_eval, desc=desc, disable=not progress, leave=False)
+
+    if optimizer == "lbfgs":
+        opt: torch.optim.Optimizer = torch.optim.LBFGS(
+            params, lr=lr, max_iter=max_iter, max_eval=max_eval, history_size=50,
+            line_search_fn="strong_wolfe", tolerance_grad=1e-9, tolerance_change=tol,
+        )
+    else:
+        opt = torch.optim.Adam(params, lr=lr)
+
+    def closure() -> torch.Tensor:
+        opt.zero_grad(set_to_none=True)
+        loss = checked_loss(loss_fn)
+        loss.backward()
+        value = float(loss.detach())
+        if value < state["best"] - tol:
+            state["since_best"] = 0
+        else:
+            state["since_best"] += 1
+        if value < state["best"]:
+            state["best"] = value
+            with torch.no_grad():
+                for p, b in zip(params, best_params):
+                    b.copy_(p)
+        metrics = {"loss": value, **metrics_fn(), "lr": float(opt.param_groups[0]["lr"])}
+        if callback is not None:
+            callback(state["evals"], metrics)
+        state["evals"] += 1
+        bar.update(1)
+        bar.set_postfix(loss=f"{value:.5f}")
+        return loss
+
+    stop = "max_iter"
+    try:
+        if optimizer == "lbfgs":
+            opt.step(closure)
+            n_iter = opt.state[opt._params[0]].get("n_iter", 0)
+            if n_iter < max_iter and state["evals"] < max_eval:
+                stop = "converged"
+        else:
+            for _ in range(max_iter):
+                opt.step(closure)
+                if tol > 0 and state["since_best"] >= 50:
+                    stop = "converged"
+                    break
+    except NumericalFailure as exc:
+        logger.warning("%s: numerical failure after %d evaluations (%s); keeping the best parameters", desc, state["evals"], exc)
+        stop = "numerical failure"
+    finally:
+        bar.close()
+    if state["evals"] > 0:
+        with torch.no_grad():
+            for p, b in zip(params, best_params):
+                p.copy_(b)
+    with torch.no_grad():
+        final = float(checked_loss(loss_fn))
+    metrics = {"loss": final, **metrics_fn(), "lr": float(opt.param_groups[0]["lr"])}
+    return final, state["evals"], stop, metrics

@@ -1,0 +1,113 @@
+"""Freeze a trained GP of any kind into a :class:`PredictorState` (μ = k_Zᵀ α, Σ = σ_f² − k_Zᵀ S k_Z)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import gpytorch
+import torch
+
+from bemlearn.models.exact_gp import ExactBEMGP
+from bemlearn.models.gp_kinds import gp_kind_of
+from bemlearn.models.kernels import kernel_matrix
+from bemlearn.models.predictor_state import PredictorState
+from bemlearn.models.sgpr import SGPRBEMGP
+from bemlearn.models.solver import DEFAULT_JITTER, DEFAULT_MAX_TRIES, cholesky_policy, robust_cholesky
+from bemlearn.models.svgp import SVGPBEMGP
+
+__all__ = ["predictor_state", "posterior_weights"]
+
+
+def posterior_weights(
+    model: torch.nn.Module,
+    likelihood: gpytorch.likelihoods.GaussianLikelihood,
+    *,
+    jitter: float = DEFAULT_JITTER,
+    max_tries: int = DEFAULT_MAX_TRIES,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Support inputs Z, mean weights α and variance matrix S of eq. (12) in frozen form.
+
+    exact: Z = X, α = K⁻¹Y, S = K⁻¹ (K = K_XX + σ_0² I);  sgpr: Titsias α, S;
+    svgp: α = L⁻ᵀ m, S = L⁻ᵀ (I − S_v) L⁻¹ (see the model modules).
+
+    Returns:
+        ``(M, d)`` Z, ``(M,)`` α, ``(M, M)`` S in normalized units.
+    """
+    model.eval()
+    likelihood.eval()
+    with torch.no_grad(), cholesky_policy(jitter=jitter, max_tries=max_tries):
+        if isinstance(model, ExactBEMGP):
+            X, Y = model.train_inputs[0], model.train_targets
+            K = kernel_matrix(model.covar_module, X, X)
+            K = K + likelihood.noise.squeeze() * torch.eye(X.shape[0], dtype=K.dtype, device=K.device)
+            L, _ = robust_cholesky(K, what="exact GP K_XX + σ_0² I", jitter=jitter, max_tries=max_tries)
+            alpha = torch.cholesky_solve(Y[:, None], L).squeeze(-1)
+            S = torch.cholesky_inverse(L)
+            return X, alpha, 0.5 * (S + S.mT)
+        if isinstance(model, SGPRBEMGP):
+            return model.posterior_weights()
+        if isinstance(model, SVGPBEMGP):
+            strategy = model.variational_strategy
+            Z = strategy.inducing_points
+            eye = torch.eye(Z.shape[0], dtype=Z.dtype, device=Z.device)
+            Kzz = kernel_matrix(model.covar_module, Z, Z) + model.jitter * eye
+            L, _ = robust_cholesky(Kzz, what="SVGP K_ZZ", jitter=jitter, max_tries=max_tries)
+            q = strategy.variational_distribution
+            m, Sv = q.mean, q.covariance_matrix
+            alpha = torch.linalg.solve_triangular(L.mT, m[:, None], upper=True).squeeze(-1)
+            Li = torch.linalg.solve_triangular(L, eye, upper=False)
+            S = Li.mT @ (eye - Sv) @ Li
+            return Z.detach().clone(), alpha, 0.5 * (S + S.mT)
+    raise TypeError(f"model: unsupported GP class {type(model).__name__}")
+
+
+def predictor_state(
+    model: torch.nn.Module,
+    likelihood: gpytorch.likelihoods.GaussianLikelihood,
+    *,
+    x_mean: torch.Tensor,
+    x_std: torch.Tensor,
+    y_mean: torch.Tensor | float,
+    y_std: torch.Tensor | float,
+    input_names: Sequence[str],
+    n_train: int,
+) -> PredictorState:
+    """The frozen float64 posterior of ``model`` (any kind), detached from GPyTorch.
+
+    Args:
+        model: a trained ``ExactBEMGP``, ``SGPRBEMGP`` or ``SVGPBEMGP``.
+        likelihood: its Gaussian likelihood (σ_0²).
+        x_mean, x_std: ``(d,)`` input normalization, physical units of each column.
+        y_mean, y_std: ``()`` output normalization, rad.
+        input_names: the d column names in order.
+        n_train: number of training points the posterior was conditioned on.
+
+    Returns:
+        a :class:`PredictorState` whose ``predict_reference`` equals :func:`~bemlearn.models.predict.predict`
+        mapped to physical units.
+    """
+    kind = gp_kind_of(model)
+    Z, alpha, S = posterior_weights(model, likelihood)
+    kernel = model.covar_module
+    f64 = dict(dtype=torch.float64, device="cpu")
+
+    def _t(v: torch.Tensor | float) -> torch.Tensor:
+        if not isinstance(v, torch.Tensor):  # a Python float must not pass through float32
+            return torch.tensor(v, **f64)
+        return v.detach().to(**f64).clone()
+
+    return PredictorState(
+        kind=kind,
+        Z=_t(Z),
+        alpha=_t(alpha),
+        S=_t(S),
+        lengthscale=_t(kernel.base_kernel.lengthscale.reshape(-1)),
+        outputscale=_t(kernel.outputscale.reshape(())),
+        noise=_t(likelihood.noise.reshape(())),
+        x_mean=_t(x_mean).reshape(-1),
+        x_std=_t(x_std).reshape(-1),
+        y_mean=_t(y_mean).reshape(()),
+        y_std=_t(y_std).reshape(()),
+        input_names=tuple(str(n) for n in input_names),
+        n_train=int(n_train),
+    )

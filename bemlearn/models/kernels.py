@@ -1,0 +1,91 @@
+"""The ARD squared-exponential kernel of the BEM GP (eq. 11) and its Gaussian likelihood.
+
+    k(x, x') = σ_f² exp(−½ (x − x')ᵀ W (x − x')),   W = diag(ℓ_1⁻², …, ℓ_d⁻²)   (eq. 11)
+
+ℓ and σ_f² are positive through GPyTorch constraints (softplus on raw parameters); the
+observation noise σ_0² of the likelihood is bounded below by ``min_noise`` so that
+K + σ_0² I stays numerically positive definite.
+"""
+
+from __future__ import annotations
+
+import gpytorch
+import torch
+from gpytorch.constraints import GreaterThan, Positive
+
+__all__ = ["ard_se_kernel", "gaussian_likelihood", "kernel_matrix", "se_cross_covariance"]
+
+
+def ard_se_kernel(dim: int, *, dtype: torch.dtype = torch.float64) -> gpytorch.kernels.ScaleKernel:
+    """σ_f² exp(−½ (x − x')ᵀ W (x − x')) with ARD W = diag(ℓ⁻²) (eq. 11).
+
+    Args:
+        dim: input dimension d (3n − 1; 5 for the Furuta pendulum).
+        dtype: parameter dtype.
+
+    Returns:
+        ``ScaleKernel(RBFKernel(ard_num_dims=dim))`` with positive constraints on ℓ and σ_f².
+    """
+    if dim < 1:
+        raise ValueError(f"dim: expected a positive input dimension, got {dim}")
+    base = gpytorch.kernels.RBFKernel(ard_num_dims=dim, lengthscale_constraint=Positive())
+    kernel = gpytorch.kernels.ScaleKernel(base, outputscale_constraint=Positive())
+    return kernel.to(dtype=dtype)
+
+
+def gaussian_likelihood(*, min_noise: float = 1e-6, dtype: torch.dtype = torch.float64) -> gpytorch.likelihoods.GaussianLikelihood:
+    """Homoscedastic Gaussian noise w ~ N(0, σ_0²) of eq. (11), with σ_0² > ``min_noise``.
+
+    Args:
+        min_noise: lower bound of σ_0² in normalized output units squared.
+        dtype: parameter dtype.
+    """
+    if not min_noise > 0.0:
+        raise ValueError(f"min_noise: expected a positive noise floor, got {min_noise}")
+    lik = gpytorch.likelihoods.GaussianLikelihood(noise_constraint=GreaterThan(min_noise))
+    return lik.to(dtype=dtype)
+
+
+def kernel_matrix(kernel: gpytorch.kernels.Kernel, x1: torch.Tensor, x2: torch.Tensor) -> torch.Tensor:
+    """Dense K_ij = k(x1_i, x2_j) (eq. 11).
+
+    Args:
+        kernel: the ARD kernel from :func:`ard_se_kernel`.
+        x1: ``(A, d)`` normalized inputs.
+        x2: ``(B, d)`` normalized inputs.
+
+    Returns:
+        ``(A, B)`` kernel matrix, normalized output units squared.
+    """
+    with gpytorch.settings.lazily_evaluate_kernels(False):
+        return kernel(x1, x2).to_dense()
+
+
+def se_cross_covariance(
+    z: torch.Tensor, x: torch.Tensor, lengthscale: torch.Tensor, outputscale: torch.Tensor
+) -> torch.Tensor:
+    """K_ZX of eq. (11) in one fused pass, for the O(N M) blocks of the sparse GPs.
+
+    With z̃ = (z − c)/ℓ, x̃ = (x − c)/ℓ (c = mean of z, for accuracy),
+
+        k(z, x) = exp(log σ_f² − ½|z̃|² − ½|x̃|² + z̃ᵀx̃),
+
+    i.e. one matrix product, one broadcast add and one exp over the (M, B) block (about
+    half the memory traffic of the generic GPyTorch kernel, with the same values to ~1e-15).
+
+    Args:
+        z: ``(M, d)`` normalized inputs (e.g. inducing points).
+        x: ``(B, d)`` normalized inputs.
+        lengthscale: ``(d,)`` or ``(1, d)`` ℓ.
+        outputscale: ``()`` σ_f².
+
+    Returns:
+        ``(M, B)`` kernel matrix.
+    """
+    ls = lengthscale.reshape(-1)
+    c = z.mean(0).detach()
+    zt = (z - c) / ls
+    xt = (x - c) / ls
+    a = torch.log(outputscale.reshape(())) - 0.5 * (zt * zt).sum(-1)
+    b = -0.5 * (xt * xt).sum(-1)
+    return torch.exp(torch.addmm(b[None, :], zt, xt.mT) + a[:, None])

@@ -1,0 +1,70 @@
+"""Input checks shared by the GP models: shapes, dtypes and finiteness, with named errors."""
+
+from __future__ import annotations
+
+import torch
+
+__all__ = ["check_inputs", "check_targets"]
+
+
+def check_inputs(x: object, *, name: str, dim: int | None = None, dtype: torch.dtype | None = None) -> torch.Tensor:
+    """Check that ``x`` is a finite ``(N, d)`` floating tensor and return it.
+
+    Args:
+        x: the candidate ``(N, d)`` tensor (normalized GP inputs).
+        name: the argument name used in error messages, e.g. ``"train_x"``.
+        dim: the required number of columns d, if known.
+        dtype: the required dtype, if known (GP work is float64).
+
+    Raises:
+        TypeError: ``x`` is not a tensor or has the wrong dtype.
+        ValueError: wrong shape, no rows, or non-finite entries (the first bad row is named).
+    """
+    if not isinstance(x, torch.Tensor):
+        raise TypeError(f"{name}: expected a torch.Tensor of shape (N, d), got {type(x).__name__}")
+    if not x.is_floating_point():
+        raise TypeError(f"{name}: expected a floating-point tensor, got dtype {x.dtype}")
+    if dtype is not None and x.dtype != dtype:
+        raise TypeError(f"{name}: expected dtype {dtype}, got {x.dtype}")
+    if x.ndim != 2:
+        raise ValueError(f"{name}: expected shape (N, d), got {tuple(x.shape)}")
+    if x.shape[0] == 0:
+        raise ValueError(f"{name}: expected at least one row, got shape {tuple(x.shape)}")
+    if dim is not None and x.shape[1] != dim:
+        raise ValueError(f"{name}: expected {dim} columns, got shape {tuple(x.shape)}")
+    _check_finite(x, name)
+    return x
+
+
+def check_targets(y: object, *, name: str, n: int, dtype: torch.dtype | None = None) -> torch.Tensor:
+    """Check that ``y`` is a finite ``(n,)`` floating tensor and return it.
+
+    Args:
+        y: the candidate ``(n,)`` tensor (normalized GP outputs).
+        name: the argument name used in error messages, e.g. ``"train_y"``.
+        n: the required length (the number of input rows).
+        dtype: the required dtype, if known.
+
+    Raises:
+        TypeError: ``y`` is not a tensor or has the wrong dtype.
+        ValueError: wrong shape or non-finite entries (the first bad row is named).
+    """
+    if not isinstance(y, torch.Tensor):
+        raise TypeError(f"{name}: expected a torch.Tensor of shape ({n},), got {type(y).__name__}")
+    if not y.is_floating_point():
+        raise TypeError(f"{name}: expected a floating-point tensor, got dtype {y.dtype}")
+    if dtype is not None and y.dtype != dtype:
+        raise TypeError(f"{name}: expected dtype {dtype}, got {y.dtype}")
+    if tuple(y.shape) != (n,):
+        raise ValueError(f"{name}: expected shape ({n},), got {tuple(y.shape)}")
+    _check_finite(y, name)
+    return y
+
+
+def _check_finite(t: torch.Tensor, name: str) -> None:
+    bad = ~torch.isfinite(t)
+    if bool(bad.any()):
+        rows = bad.reshape(t.shape[0], -1).any(dim=1).nonzero().flatten()
+        raise ValueError(
+            f"{name}: {int(rows.numel())} row(s) contain NaN or inf, first at row {int(rows[0])}"
+        )
