@@ -19,6 +19,7 @@ def add_parser(sub) -> None:
     p.add_argument("--out", type=Path, help="run folder (default: runs/train-<timestamp>)")
     p.add_argument("--device", choices=["cpu", "cuda"], help="override train.device")
     p.add_argument("--resume", action="store_true", help="continue from the run folder's checkpoint")
+    p.add_argument("--threads", type=int, default=1, help="torch threads during training (default 1; see README)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run)
 
@@ -36,7 +37,7 @@ def run(args) -> int:
     out = args.out or Path("runs") / time.strftime("train-%Y%m%d-%H%M%S")
     if args.resume and not (out / "checkpoint.pt").is_file():
         raise FileNotFoundError(f"--resume: no checkpoint in {out}")
-    m = train_run(cfg, data, out, device=args.device, resume=args.resume, progress=not args.no_progress)
+    m = train_run(cfg, data, out, device=args.device, resume=args.resume, progress=not args.no_progress, threads=args.threads)
     b = m["bem_heldout"]
     print(f"run folder: {out}")
     print(f"fit: {m['fit'].get('stop_reason')} in {m['fit'].get('seconds', float('nan')):.1f} s on {m['n_train']} points")

@@ -1,0 +1,103 @@
+"""Training runs: run folder contents, interruption, resume, learned BEM API, CLI errors."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import pytest
+import torch
+import yaml
+
+from bemlearn.cli.main import main
+from bemlearn.data.collect import CollectConfig, collect
+from bemlearn.data.trajectory_io import write_trajectory
+from bemlearn.models.learned_bem import LearnedBEM, srinivas_kappa
+from bemlearn.pipeline.config import PipelineConfig
+from bemlearn.pipeline.train import train_run
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    root = tmp_path_factory.mktemp("train")
+    data, _ = collect("furuta", CollectConfig(n_trials=6, duration_s=6.0, workers=1, seed=1), progress=False)
+    path = write_trajectory(data, root / "data.npz")
+    cfg = PipelineConfig()
+    cfg = dataclasses.replace(cfg, dataset=dataclasses.replace(cfg.dataset, n_points=150), train=dataclasses.replace(cfg.train, max_iter=30))
+    out = root / "run"
+    metrics = train_run(cfg, path, out, progress=False)
+    return cfg, path, out, metrics
+
+
+def test_run_folder_contents(small):
+    cfg, path, out, metrics = small
+    for name in ("config.yaml", "checkpoint.pt", "metrics.json", "bem_validation.png"):
+        assert (out / name).is_file(), name
+    assert any((out / "tb").iterdir())
+    ck = torch.load(out / "checkpoint.pt", weights_only=True)
+    assert ck["format"] == "bemlearn-checkpoint-v1" and ck["kind"] == "exact"
+    assert ck["metadata"]["robot"] == "furuta" and ck["metadata"]["n_train"] == 150
+    saved = yaml.safe_load((out / "config.yaml").read_text())
+    assert saved["dataset"]["n_points"] == 150 and saved["train"]["max_iter"] == 30
+    m = json.loads((out / "metrics.json").read_text())
+    for key in ("val_rmse", "val_mean_log_likelihood", "bem_heldout", "lengthscale_physical"):
+        assert key in m
+    assert set(m["lengthscale_physical"]) == {"qdd_theta", "qd_theta", "q_theta", "qdd_alpha", "qd_alpha"}
+    assert 0 <= m["bem_heldout"]["coverage_2sigma_latent"] <= m["bem_heldout"]["coverage_2sigma_predictive"] <= 1
+
+
+def test_learned_bem_api_matches_frozen_posterior(small):
+    _, _, out, _ = small
+    learned = LearnedBEM.from_checkpoint(out)
+    qa = torch.tensor([[0.1], [-0.2]], dtype=torch.float64)
+    qad = torch.tensor([[0.5], [1.0]], dtype=torch.float64)
+    qadd = torch.tensor([[3.0], [-6.0]], dtype=torch.float64)
+    pred = learned.bem(qa, qad, qadd)
+    x = torch.cat([qadd, qad, qa, torch.zeros(2, 2, dtype=torch.float64)], 1)
+    mean, latent = learned.state.predict_reference(x)
+    torch.testing.assert_close(pred.mean, mean, rtol=0, atol=0)
+    torch.testing.assert_close(pred.latent_std, latent, rtol=0, atol=0)
+    noise = learned.state.y_std**2 * learned.state.noise
+    torch.testing.assert_close(pred.std, (latent**2 + noise).sqrt(), rtol=1e-15, atol=0)
+    torch.testing.assert_close(learned.bound(pred.std, kappa=2.0, zero_dynamics_gap=0.01), 2 * pred.std + 0.01)
+    with pytest.raises(ValueError, match=r"qad must have shape \(B, 1\)"):
+        learned.bem(qa, torch.zeros(2, 2), qadd)
+    with pytest.raises(ValueError, match=r"shape \(B, 5\)"):
+        learned.predict(torch.zeros(3, 4))
+    assert srinivas_kappa(1.0, 10.0, 500, 0.9) > 100  # the theorem's κ is very conservative
+
+
+def test_interrupt_leaves_usable_checkpoint_and_resume_continues(small, tmp_path, monkeypatch):
+    cfg, path, _, _ = small
+    import bemlearn.pipeline.train as tr
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(tr, "fit_gp", interrupted)
+    out = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        train_run(cfg, path, out, progress=False)
+    ck = torch.load(out / "checkpoint.pt", weights_only=True)
+    assert ck["metadata"]["extra"]["interrupted"] is True
+    monkeypatch.undo()
+    m = train_run(cfg, path, out, resume=True, progress=False)
+    assert not m["interrupted"] and m["fit"]["stop_reason"] in ("converged", "max_iter")
+
+
+def test_train_cli_errors(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("robot: furuta\ntrain:\n  kindd: exact\n")
+    assert main(["train", str(bad), "--data", str(tmp_path / "x.npz")]) == 2
+    assert "unknown key(s) ['kindd']" in capsys.readouterr().err
+    good = tmp_path / "good.yaml"
+    good.write_text("robot: furuta\n")
+    assert main(["train", str(good), "--data", str(tmp_path / "missing.npz")]) == 2
+    assert "not found" in capsys.readouterr().err
+
+
+def test_evaluate_cli(small, capsys):
+    _, _, out, _ = small
+    assert main(["evaluate", str(out), "--references", "2"]) == 0
+    text = capsys.readouterr().out
+    assert "inside ±2σ" in text and (out / "evaluation.json").is_file()
