@@ -23,9 +23,12 @@ SUBCOMMANDS: tuple[str, ...] = (
     "bemlearn.cli.collect_cmd",
     "bemlearn.cli.train_cmd",
     "bemlearn.cli.evaluate_cmd",
+    "bemlearn.cli.run_cmd",
     "bemlearn.cli.data_cmd",
     "bemlearn.cli.export_cmd",
     "bemlearn.cli.bench_cmd",
+    "bemlearn.cli.walk_cmd",
+    "bemlearn.cli.gpdm_cmd",
 )
 
 

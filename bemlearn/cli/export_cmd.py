@@ -1,0 +1,43 @@
+"""``bemlearn export RUN_DIR [--out FILE] [--format torchscript|pt2|both]``.
+
+Writes the BEM predictor of a trained run (``RUN_DIR/bem_predictor.pt`` by default), a
+TorchScript module that loads with ``torch.jit.load`` without bemlearn; see
+docs/predictor-contract.md.  Each file is loaded back and checked against the dense
+posterior before the command succeeds.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from bemlearn.export.export_run import export_run
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "export",
+        help="write the BEM predictor (TorchScript .pt / torch.export .pt2) of a trained run",
+        description="Write RUN_DIR/bem_predictor.pt: forward(x) -> (mean, std) of the learned BEM "
+        "(eq. 12, 14) for x = [qdd_a, qd_a, q_a] float64 (B, 3m), plus bem_mean(x), predict_full(x) "
+        "and metadata().  The file loads with torch.jit.load, without bemlearn.",
+    )
+    parser.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="run directory holding checkpoint.pt (or the checkpoint file)")
+    parser.add_argument("--out", metavar="FILE", type=Path, default=None, help="output file (default RUN_DIR/bem_predictor.pt or .pt2)")
+    parser.add_argument(
+        "--format",
+        dest="fmt",
+        choices=("torchscript", "pt2", "both"),
+        default="torchscript",
+        help="torchscript (.pt, default), pt2 (torch.export) or both (.pt and .pt2 side by side)",
+    )
+    parser.add_argument("--no-verify", action="store_true", help="skip reloading and checking the written file(s)")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    for path in export_run(args.run_dir, out=args.out, fmt=args.fmt, verify=not args.no_verify):
+        print(f"wrote {path}")
+    return 0

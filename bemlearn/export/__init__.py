@@ -1,0 +1,49 @@
+"""Exported BEM predictors (TorchScript ``.pt``, torch.export ``.pt2``) and checkpoints.
+
+Everything here consumes a :class:`~bemlearn.models.predictor_state.PredictorState` plus
+metadata, never a GPyTorch model.  The contract of the exported files is in
+docs/predictor-contract.md.
+"""
+
+from bemlearn.export.bem_predictor import EXPORTED_METHODS, BEMPredictor
+from bemlearn.export.checkpoint import (
+    CHECKPOINT_FORMAT,
+    CHECKPOINT_NAME,
+    Checkpoint,
+    load_checkpoint,
+    write_checkpoint,
+)
+from bemlearn.export.export_run import ExportFormat, export_run
+from bemlearn.export.folded_posterior import FoldedPosterior
+from bemlearn.export.metadata import ARTIFACT_FORMAT, PredictorMetadata, artifact_metadata
+from bemlearn.export.pt2 import Pt2Predictor, load_pt2_predictor, save_pt2
+from bemlearn.export.torchscript import load_torchscript, save_torchscript, script_predictor
+from bemlearn.export.variance_factor import VarianceFactor, kernel_gram, variance_factor
+from bemlearn.export.verify import reference_posterior, verify_predictor
+
+__all__ = [
+    "ARTIFACT_FORMAT",
+    "BEMPredictor",
+    "CHECKPOINT_FORMAT",
+    "CHECKPOINT_NAME",
+    "Checkpoint",
+    "EXPORTED_METHODS",
+    "ExportFormat",
+    "FoldedPosterior",
+    "PredictorMetadata",
+    "Pt2Predictor",
+    "VarianceFactor",
+    "artifact_metadata",
+    "export_run",
+    "kernel_gram",
+    "load_checkpoint",
+    "load_pt2_predictor",
+    "load_torchscript",
+    "reference_posterior",
+    "save_pt2",
+    "save_torchscript",
+    "script_predictor",
+    "variance_factor",
+    "verify_predictor",
+    "write_checkpoint",
+]

@@ -1,0 +1,186 @@
+"""The training checkpoint ``RUN_DIR/checkpoint.pt``: write it, read it back, validated.
+
+``torch.load(path, weights_only=True)`` gives a dict::
+
+    format            "bemlearn-checkpoint-v1"
+    kind              "exact" | "sgpr" | "svgp"
+    model_state       the model's state dict (tensors)
+    predictor_state   PredictorState.to_dict(): the frozen posterior of eq. (12)
+    metadata          PredictorMetadata.to_dict(): robot, columns, units, provenance
+
+Export reads only ``predictor_state`` and ``metadata``; ``model_state`` is for resuming.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, get_args
+
+import torch
+
+from bemlearn.config import ConfigError
+from bemlearn.export.metadata import PredictorMetadata, artifact_metadata
+from bemlearn.models.predictor_state import GPKind, PredictorState
+
+__all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_NAME", "Checkpoint", "load_checkpoint", "write_checkpoint"]
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT_FORMAT = "bemlearn-checkpoint-v1"
+CHECKPOINT_NAME = "checkpoint.pt"
+
+_TOP_KEYS = ("format", "kind", "model_state", "predictor_state", "metadata")
+_STATE_TENSORS = tuple(
+    f.name for f in dataclasses.fields(PredictorState) if f.name not in ("kind", "input_names", "n_train")
+)
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """A validated checkpoint.
+
+    Attributes:
+        path: the file it was read from.
+        kind: GP kind, equal to ``predictor_state.kind``.
+        model_state: the model's state dict (opaque to export).
+        predictor_state: the frozen posterior (float64 tensors).
+        metadata: the validated metadata.
+    """
+
+    path: Path
+    kind: GPKind
+    model_state: dict[str, Any]
+    predictor_state: PredictorState
+    metadata: PredictorMetadata
+
+    def artifact_metadata(self) -> dict[str, Any]:
+        """The JSON document of the exported predictor (see :func:`artifact_metadata`)."""
+        return artifact_metadata(self.metadata, self.predictor_state)
+
+
+def _checkpoint_path(run_dir_or_file: str | os.PathLike[str]) -> Path:
+    path = Path(run_dir_or_file)
+    if path.is_dir():
+        path = path / CHECKPOINT_NAME
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no checkpoint in run directory {path.parent}")
+    elif not path.is_file():
+        raise FileNotFoundError(f"{path}: no such checkpoint file or run directory")
+    return path
+
+
+def _parse_state(data: Any, kind: str, where: str) -> PredictorState:
+    if not isinstance(data, dict):
+        raise ValueError(f"{where}: expected a dict (PredictorState.to_dict()), got {type(data).__name__}")
+    missing = [k for k in (*_STATE_TENSORS, "kind", "input_names", "n_train") if k not in data]
+    if missing:
+        raise ValueError(f"{where}: missing key(s) {missing}")
+    unknown = sorted(set(data) - {*_STATE_TENSORS, "kind", "input_names", "n_train"})
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {unknown}")
+    for name in _STATE_TENSORS:
+        t = data[name]
+        if not isinstance(t, torch.Tensor):
+            raise ValueError(f"{where}.{name}: expected a tensor, got {type(t).__name__}")
+        if t.dtype != torch.float64:
+            raise ValueError(f"{where}.{name}: expected float64 (GP posteriors are stored in float64), got {t.dtype}")
+        if not bool(torch.isfinite(t).all()):
+            raise ValueError(f"{where}.{name}: has non-finite values")
+    if data["kind"] != kind:
+        raise ValueError(f"{where}.kind: {data['kind']!r} differs from the checkpoint's kind {kind!r}")
+    if not isinstance(data["n_train"], int) or isinstance(data["n_train"], bool):
+        raise ValueError(f"{where}.n_train: expected an integer, got {data['n_train']!r}")
+    names = data["input_names"]
+    if not isinstance(names, (list, tuple)) or not all(isinstance(n, str) for n in names):
+        raise ValueError(f"{where}.input_names: expected a list of strings, got {names!r}")
+    try:
+        state = PredictorState.from_dict(data)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from exc
+    for name in ("lengthscale", "x_std", "y_std", "outputscale"):
+        if not bool((getattr(state, name) > 0).all()):
+            raise ValueError(f"{where}.{name}: expected positive values, got {getattr(state, name).tolist()}")
+    if float(state.noise) < 0:
+        raise ValueError(f"{where}.noise: expected >= 0, got {float(state.noise)}")
+    return state
+
+
+def load_checkpoint(run_dir_or_file: str | os.PathLike[str]) -> Checkpoint:
+    """Read and validate ``RUN_DIR/checkpoint.pt`` (or a checkpoint file given directly).
+
+    Raises:
+        FileNotFoundError: no such file, or a run directory without ``checkpoint.pt``.
+        ValueError: not loadable with ``weights_only=True``, wrong ``format``, a missing key,
+            a bad value, or metadata inconsistent with the posterior; the message names the
+            file and the key.
+    """
+    path = _checkpoint_path(run_dir_or_file)
+    try:
+        data = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many types for a corrupt or foreign file
+        raise ValueError(f"{path}: cannot be read as a bemlearn checkpoint ({type(exc).__name__}: {exc})") from exc
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a dict with keys {list(_TOP_KEYS)}, got {type(data).__name__}")
+    missing = [k for k in _TOP_KEYS if k not in data]
+    if missing:
+        raise ValueError(f"{path}: missing key(s) {missing}; a checkpoint has keys {list(_TOP_KEYS)}")
+    if data["format"] != CHECKPOINT_FORMAT:
+        raise ValueError(f"{path}: format is {data['format']!r}, expected {CHECKPOINT_FORMAT!r}")
+    kind = data["kind"]
+    if kind not in get_args(GPKind):
+        raise ValueError(f"{path}: kind is {kind!r}, expected one of {list(get_args(GPKind))}")
+    if not isinstance(data["model_state"], dict):
+        raise ValueError(f"{path}: model_state: expected a state dict, got {type(data['model_state']).__name__}")
+    state = _parse_state(data["predictor_state"], kind, f"{path}: predictor_state")
+    try:
+        meta = PredictorMetadata.from_dict(data["metadata"], where=f"{path}: metadata")
+        artifact_metadata(meta, state)  # cross-checks columns, n_train, n_inducing
+    except (ConfigError, ValueError, TypeError) as exc:
+        msg = str(exc)
+        raise ValueError(msg if msg.startswith(str(path)) else f"{path}: {msg}") from exc
+    log.debug("loaded %s: %s GP, %d support points, d = %d", path, kind, state.n_support, state.dim)
+    return Checkpoint(path=path, kind=kind, model_state=data["model_state"], predictor_state=state, metadata=meta)
+
+
+def write_checkpoint(
+    run_dir_or_file: str | os.PathLike[str],
+    *,
+    model_state: dict[str, Any],
+    predictor_state: PredictorState,
+    metadata: PredictorMetadata | dict[str, Any],
+) -> Path:
+    """Validate and write a checkpoint; returns the file written.
+
+    Args:
+        run_dir_or_file: a run directory (the file is ``checkpoint.pt`` inside, the directory
+            is created) or a ``.pt`` file path.
+        model_state: the model's ``state_dict()``.
+        predictor_state: the frozen float64 posterior; its ``kind`` is the checkpoint's kind.
+        metadata: a :class:`PredictorMetadata` or a dict with its keys.
+
+    The file is written to a temporary name and renamed, so a crash never leaves a
+    half-written checkpoint.  It is read back with :func:`load_checkpoint` before returning.
+    """
+    target = Path(run_dir_or_file)
+    path = target if target.suffix == ".pt" else target / CHECKPOINT_NAME
+    meta = metadata if isinstance(metadata, PredictorMetadata) else PredictorMetadata.from_dict(metadata)
+    artifact_metadata(meta, predictor_state)
+    data = {
+        "format": CHECKPOINT_FORMAT,
+        "kind": predictor_state.kind,
+        "model_state": dict(model_state),
+        "predictor_state": predictor_state.to_dict(),
+        "metadata": meta.to_dict(),
+    }
+    _parse_state(data["predictor_state"], predictor_state.kind, "predictor_state")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(data, tmp)
+    os.replace(tmp, path)
+    load_checkpoint(path)
+    log.info("wrote checkpoint %s (%s GP)", path, predictor_state.kind)
+    return path

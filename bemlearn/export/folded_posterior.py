@@ -1,0 +1,187 @@
+"""The GP posterior with normalization and hyperparameters folded into a few constants.
+
+With u = (x − x_mean) / (x_std ∘ ℓ) = a∘x − b the normalized, lengthscale-scaled input and
+z_j = Z_j / ℓ, the squared-exponential exponent (eq. 11) is one affine map of [v, v∘v] for
+either choice of the variable v:
+
+    v = x (raw):       e_j = −½‖a∘x − (b + z_j)‖² = [x, x∘x] · [a∘(b + z_j), −½ a∘a] − ½‖b + z_j‖²
+    v = u (centered):  e_j = −½‖u − z_j‖²         = [u, u∘u] · [z_j, −½ 1]          − ½‖z_j‖²
+
+The raw form saves the ``addcmul`` that forms u (≈1 µs a query) but its terms grow like
+(|b| + |u|)², so it is used only while Σ_i (|b_i| + 5)² ≤ 10³ (rounding in e_j stays below
+~2·10⁻¹³), i.e. unless a column's mean is far from zero in units of its spread; otherwise the
+centered form.  Either way a batch ``x: (B, n)`` costs one ``linear``, one ``exp`` and one
+``addmv`` for the mean (eq. 12) and one triangular solve or ``mm`` for the variance:
+
+    μ(x) = y_mean + Σ_j w_j exp(e_j),                  w = y_std σ_f² α
+    σ(x) = sqrt(max(0, y_std² σ_f² − Σ_i s_i v_i²)),   v = (y_std σ_f² F) exp(e)
+
+with F, s from :func:`~bemlearn.export.variance_factor.variance_factor`; for an exact GP
+F = L⁻¹ and v comes from one triangular solve, v (L / (y_std σ_f²))ᵀ = exp(e)ᵀ.  Columns
+n..d−1 of the GP input can be held at zero, which gives the BEM input
+x_0^e = [q̈_a, q̇_a, q_a, 0, 0] of eq. (14): their terms are constant and move into the offsets.
+
+One extra *sentinel* column j = M has zero linear weights, a tiny positive weight 10⁻³⁰⁰ on
+Σ v_i², offset 0 and w = 1 (with 1 taken off y_mean); the factor ignores it (zero row, or a
+10³⁰⁰ diagonal entry in the triangular case).  For finite |v| < 10¹⁴² its exp is exactly 1
+and it changes nothing (beyond one rounding of 1 ± y_mean); a NaN or ±inf input makes it NaN
+or +inf, so a non-finite input always shows up in μ and one check of μ replaces a pass over x.
+"""
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from bemlearn.export.variance_factor import VarianceFactor
+from bemlearn.models.predictor_state import PredictorState
+
+__all__ = ["FoldedPosterior", "RAW_FORM_LIMIT"]
+
+#: Weight of Σv² in the sentinel column (see module docstring).
+SENTINEL_WEIGHT = 1e-300
+#: Diagonal entry of the triangular factor at the sentinel (its v entry underflows to 0).
+SENTINEL_PIVOT = 1e300
+#: The raw form is used while Σ_i (|b_i| + 5)² is at most this.
+RAW_FORM_LIMIT = 1e3
+
+
+class FoldedPosterior(nn.Module):
+    """Mean and latent std of a :class:`PredictorState` for inputs in physical units.
+
+    Scriptable (``torch.jit.script``) and exportable (``torch.export``).  It does not check
+    its input (``x: (B, n_inputs)`` float64 with B ≥ 1; ``addmv`` mishandles B = 0);
+    :class:`~bemlearn.export.bem_predictor.BEMPredictor` does.
+
+    Args:
+        state: the posterior (float64).
+        factor: the variance factor of ``state``.
+        n_inputs: the inputs are the first ``n_inputs`` GP columns; the remaining
+            ``d − n_inputs`` are held at zero (physical units), e.g. ``3m`` for eq. (14).
+        share: another FoldedPosterior of the same state whose weight and factor buffers
+            are reused (no second copy of the M×M factor).
+        chunk: batches larger than this are evaluated in row blocks of this size.
+        form: ``"auto"`` (see module docstring), ``"raw"`` or ``"centered"``.
+    """
+
+    n_inputs: int
+    chunk: int
+    centered: bool
+    signed: bool
+    triangular: bool
+    var0: float
+
+    def __init__(
+        self,
+        state: PredictorState,
+        factor: VarianceFactor,
+        *,
+        n_inputs: int,
+        share: "FoldedPosterior | None" = None,
+        chunk: int = 1024,
+        form: str = "auto",
+    ) -> None:
+        super().__init__()
+        d, M = state.dim, state.n_support
+        if not 1 <= n_inputs <= d:
+            raise ValueError(f"n_inputs: expected 1..{d}, got {n_inputs}")
+        if chunk < 1:
+            raise ValueError(f"chunk: expected a positive row count, got {chunk}")
+        if form not in ("auto", "raw", "centered"):
+            raise ValueError(f"form: expected 'auto', 'raw' or 'centered', got {form!r}")
+        f64 = dict(dtype=torch.float64)
+        free, fixed = slice(0, n_inputs), slice(n_inputs, d)
+        a = 1.0 / (state.x_std * state.lengthscale)
+        b = state.x_mean * a
+        zs = state.Z / state.lengthscale                        # (M, d)
+        if form == "auto":
+            form = "raw" if float(((b[free].abs() + 5.0) ** 2).sum()) <= RAW_FORM_LIMIT else "centered"
+        self.centered = form == "centered"
+        W = torch.zeros(M + 1, 2 * n_inputs, **f64)             # linear weights, rows j
+        c = torch.zeros(M + 1, **f64)
+        fixed_part = -0.5 * ((b[fixed] + zs[:, fixed]) ** 2).sum(1)   # columns held at x = 0
+        if self.centered:
+            W[:M, :n_inputs] = zs[:, free]
+            W[:M, n_inputs:] = -0.5
+            c[:M] = -0.5 * (zs[:, free] ** 2).sum(1) + fixed_part
+        else:
+            W[:M, :n_inputs] = a[free] * (b[free] + zs[:, free])
+            W[:M, n_inputs:] = -0.5 * a[free] ** 2
+            c[:M] = -0.5 * ((b[free] + zs[:, free]) ** 2).sum(1) + fixed_part
+        W[M, n_inputs:] = SENTINEL_WEIGHT
+        gain = state.y_std * state.outputscale                  # y_std σ_f²
+        self.n_inputs = n_inputs
+        self.chunk = chunk
+        self.register_buffer("a", a[free].contiguous())
+        self.register_buffer("nb", -b[free].contiguous())
+        self.register_buffer("W", W)
+        self.register_buffer("c", c)
+        self.register_buffer("offset", (state.y_mean - 1.0).reshape(1).to(**f64))
+        if share is None:
+            w = torch.empty(M + 1, **f64)
+            w[:M] = gain * state.alpha
+            w[M] = 1.0
+            if factor.L is not None:    # exact: v = k̂ (L_ext / gain)⁻ᵀ, upper-triangular solve
+                FT = torch.zeros(M + 1, M + 1, **f64)
+                FT[:M, :M] = factor.L.T / gain
+                FT[M, M] = SENTINEL_PIVOT
+            else:                       # v = k̂ (gain F)ᵀ
+                FT = torch.zeros(M + 1, M, **f64)
+                FT[:M] = (gain * factor.F).T
+            signs = factor.signs if factor.signs is not None else torch.zeros(0, **f64)
+        else:
+            w, FT, signs = share.w, share.FT, share.signs
+        self.register_buffer("w", w)
+        self.register_buffer("FT", FT)
+        self.register_buffer("signs", signs)
+        self.signed = factor.signs is not None
+        self.triangular = factor.L is not None
+        self.var0 = float(state.y_std**2 * state.outputscale)
+
+    def _kernel(self, x: torch.Tensor) -> torch.Tensor:
+        """exp(e): ``(B, M + 1)`` kernel row / σ_f² (last column: sentinel) for ``x: (B, n)``."""
+        v = torch.addcmul(self.nb, x, self.a) if self.centered else x
+        return F.linear(torch.cat([v, v * v], 1), self.W, self.c).exp_()
+
+    def _chunked(self, x: torch.Tensor) -> bool:
+        # Large batches run in row blocks so the (rows, M + 1) kernel block stays in cache
+        # (≈2× faster at B = 10⁵); not while torch.export traces a dynamic batch size.
+        if torch.jit.is_scripting():
+            return x.size(0) > self.chunk
+        return not torch.compiler.is_exporting() and x.size(0) > self.chunk
+
+    @torch.jit.export
+    def mean(self, x: torch.Tensor) -> torch.Tensor:
+        """μ(x): ``(B,)`` rad for ``x: (B, n_inputs)`` float64 physical inputs (eq. 12)."""
+        if self._chunked(x):
+            out = torch.empty(x.size(0), dtype=x.dtype)
+            for i in range(0, x.size(0), self.chunk):
+                out[i : i + self.chunk] = self._mean(x[i : i + self.chunk])
+            return out
+        return self._mean(x)
+
+    @torch.jit.export
+    def mean_std(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(μ(x), σ(x)): each ``(B,)`` rad, σ the latent posterior std (eq. 12)."""
+        if self._chunked(x):
+            mean = torch.empty(x.size(0), dtype=x.dtype)
+            std = torch.empty(x.size(0), dtype=x.dtype)
+            for i in range(0, x.size(0), self.chunk):
+                mean[i : i + self.chunk], std[i : i + self.chunk] = self._mean_std(x[i : i + self.chunk])
+            return mean, std
+        return self._mean_std(x)
+
+    def _mean(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.addmv(self.offset, self._kernel(x), self.w)
+
+    def _mean_std(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        k = self._kernel(x)
+        mean = torch.addmv(self.offset, k, self.w)
+        if self.triangular:
+            v = torch.linalg.solve_triangular(self.FT, k, upper=True, left=False)
+        else:
+            v = torch.mm(k, self.FT)
+        if self.signed:
+            q = torch.mv(v * v, self.signs)
+        else:
+            q = torch.linalg.vecdot(v, v)
+        return mean, torch.rsub(q, self.var0).clamp_min_(0.0).sqrt_()

@@ -1,0 +1,139 @@
+"""``torch.export`` artifact ``bem_predictor.pt2``: the same contract as the TorchScript file.
+
+A ``.pt2`` archive (the format ``torch.export.save`` writes) with one ExportedProgram per
+method and the metadata JSON as an extra file:
+
+    models/model.json          forward(x: (B, 3m)) -> (mean (B,), std (B,))   [torch.export.load]
+    models/bem_mean.json       bem_mean(x: (B, 3m)) -> mean (B,)
+    models/predict_full.json   predict_full(x: (B, 3m + 2)) -> (mean, std)
+    extra/metadata.json        the metadata() JSON document
+
+``torch.export.load(path)`` returns the ``forward`` program (the archive's default ``model``);
+``torch.export.pt2_archive._package.load_pt2(path).exported_programs[name]`` returns any of them
+(:func:`load_pt2_predictor` wraps that).  B is dynamic (B ≥ 1).  A wrong width fails
+torch.export's input guard (AssertionError), a wrong rank its input unpacking (IndexError), a
+wrong dtype ``aten._assert_tensor_metadata`` ("Tensor dtype mismatch", RuntimeError), and
+non-finite inputs ``aten._assert_async`` with a BEMPredictor message (RuntimeError).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import warnings
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+
+from bemlearn.export.bem_predictor import BEMPredictor
+
+__all__ = ["save_pt2", "load_pt2_predictor", "Pt2Predictor", "PT2_PROGRAMS", "PT2_METADATA_FILE"]
+
+log = logging.getLogger(__name__)
+
+#: Program name in the archive → BEMPredictor method it exports.
+PT2_PROGRAMS = {"model": "forward", "bem_mean": "bem_mean", "predict_full": "predict_full"}
+PT2_METADATA_FILE = "metadata.json"
+
+
+class _Method(nn.Module):
+    """One method of a BEMPredictor as a module's forward, with a runtime dtype assertion."""
+
+    def __init__(self, predictor: BEMPredictor, method: str) -> None:
+        super().__init__()
+        self.predictor = predictor
+        self.method = method
+
+    def forward(self, x: torch.Tensor) -> Any:
+        torch.ops.aten._assert_tensor_metadata.default(x, dtype=torch.float64)
+        return getattr(self.predictor, self.method)(x)
+
+
+def _export_programs(predictor: BEMPredictor) -> dict[str, torch.export.ExportedProgram]:
+    predictor = predictor.eval()
+    batch = torch.export.Dim("batch", min=1)
+    programs = {}
+    for name, method in PT2_PROGRAMS.items():
+        width = predictor.n_full if method == "predict_full" else predictor.n_bem
+        example = torch.zeros(4, width, dtype=torch.float64)
+        with torch.no_grad():
+            programs[name] = torch.export.export(
+                _Method(predictor, method), (example,), dynamic_shapes={"x": {0: batch}}, strict=False
+            )
+    return programs
+
+
+def save_pt2(predictor: BEMPredictor, path: str | os.PathLike[str]) -> Path:
+    """Export ``predictor``'s three methods with ``torch.export`` and write one ``.pt2``."""
+    from torch.export.pt2_archive._package import package_pt2
+
+    path = Path(path)
+    programs = _export_programs(predictor)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".partial.pt2")
+    with warnings.catch_warnings():
+        # bem and full share their weight/factor tensors; torch warns about the shared group,
+        # harmless for CPU weights (the test suite checks every program's numbers after loading)
+        warnings.filterwarnings("ignore", message="No complete tensor found in the group")
+        package_pt2(tmp, exported_programs=programs, extra_files={PT2_METADATA_FILE: predictor.metadata_json})
+    os.replace(tmp, path)
+    log.info("wrote torch.export BEM predictor %s", path)
+    return path
+
+
+class Pt2Predictor:
+    """The loaded ``.pt2`` predictor: callables with the BEMPredictor contract.
+
+    Args:
+        programs: the ExportedPrograms by archive name (``model`` is ``forward``).
+        metadata_json: the metadata document.
+    """
+
+    def __init__(self, programs: dict[str, torch.export.ExportedProgram], metadata_json: str) -> None:
+        self.programs = dict(programs)
+        self.metadata_json = metadata_json
+        self._forward = self.programs["model"].module()
+        self._bem_mean = self.programs["bem_mean"].module()
+        self._predict_full = self.programs["predict_full"].module()
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(μ(x_0^e), σ(x_0^e)) for ``x: (B, 3m)`` float64, each ``(B,)`` rad (eq. 12, 14)."""
+        return self._forward(x)
+
+    def __call__(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self._forward(x)
+
+    def bem_mean(self, x: torch.Tensor) -> torch.Tensor:
+        """μ(x_0^e) ``(B,)`` rad for ``x: (B, 3m)`` float64."""
+        return self._bem_mean(x)
+
+    def predict_full(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(mean, std) of f(x) (eq. 11) for ``x: (B, 3m + 2)`` float64."""
+        return self._predict_full(x)
+
+    def metadata(self) -> str:
+        """The metadata JSON document."""
+        return self.metadata_json
+
+
+def load_pt2_predictor(path: str | os.PathLike[str]) -> Pt2Predictor:
+    """Load a ``.pt2`` written by :func:`save_pt2`."""
+    from torch.export.pt2_archive._package import load_pt2
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such .pt2 predictor file")
+    try:
+        contents = load_pt2(path)
+    except Exception as exc:  # torch raises several types for foreign archives
+        raise ValueError(f"{path}: not a torch.export .pt2 archive ({type(exc).__name__}: {exc})") from exc
+    missing = [k for k in PT2_PROGRAMS if k not in contents.exported_programs]
+    meta = contents.extra_files.get(PT2_METADATA_FILE)
+    if missing or not meta:
+        raise ValueError(f"{path}: not a bemlearn BEM predictor (missing {missing or [PT2_METADATA_FILE]})")
+    meta_text = meta.decode() if isinstance(meta, bytes) else str(meta)
+    json.loads(meta_text)
+    return Pt2Predictor(programs=dict(contents.exported_programs), metadata_json=meta_text)

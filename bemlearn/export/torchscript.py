@@ -1,0 +1,75 @@
+"""TorchScript artifact ``bem_predictor.pt``: loads with ``torch.jit.load`` alone, no bemlearn.
+
+The file holds a frozen (``torch.jit.freeze``) script module with ``forward``, ``bem_mean``,
+``predict_full`` and ``metadata`` (see :mod:`bemlearn.export.bem_predictor`), and the metadata
+JSON again as the extra file ``metadata.json`` (readable without running the module).
+torch ≥ 2.10 marks the ``torch.jit`` API deprecated; these helpers silence that one warning
+(the artifact is still the lowest-latency, C++-loadable form, see docs/predictor-contract.md).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import warnings
+from collections.abc import Iterator
+from pathlib import Path
+
+import torch
+
+from bemlearn.export.bem_predictor import EXPORTED_METHODS, BEMPredictor
+
+__all__ = ["script_predictor", "save_torchscript", "load_torchscript", "METADATA_FILE"]
+
+log = logging.getLogger(__name__)
+
+#: Name of the extra file holding the metadata JSON inside the artifact.
+METADATA_FILE = "metadata.json"
+
+
+@contextlib.contextmanager
+def _quiet_jit() -> Iterator[None]:
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r".*torch\.jit\..* is deprecated", category=DeprecationWarning)
+        yield
+
+
+def script_predictor(predictor: BEMPredictor, *, freeze: bool = True) -> torch.jit.ScriptModule:
+    """Compile ``predictor`` with ``torch.jit.script`` (and ``torch.jit.freeze`` it: buffers
+    become constants, submodule calls are inlined; the exported methods are preserved)."""
+    with _quiet_jit():
+        scripted = torch.jit.script(predictor.eval())
+        if freeze:
+            scripted = torch.jit.freeze(scripted, preserved_attrs=list(EXPORTED_METHODS))
+    return scripted
+
+
+def save_torchscript(predictor: BEMPredictor, path: str | os.PathLike[str], *, freeze: bool = True) -> Path:
+    """Script ``predictor`` and write it to ``path`` (parent directories are created)."""
+    path = Path(path)
+    scripted = script_predictor(predictor, freeze=freeze)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    with _quiet_jit():
+        torch.jit.save(scripted, str(tmp), _extra_files={METADATA_FILE: predictor.metadata_json})
+    os.replace(tmp, path)
+    log.info("wrote TorchScript BEM predictor %s", path)
+    return path
+
+
+def load_torchscript(path: str | os.PathLike[str]) -> torch.jit.ScriptModule:
+    """``torch.jit.load(path)`` with a clear error for a missing or foreign file."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such TorchScript predictor file")
+    extra = {METADATA_FILE: ""}
+    try:
+        with _quiet_jit():
+            module = torch.jit.load(str(path), map_location="cpu", _extra_files=extra)
+    except RuntimeError as exc:
+        raise ValueError(f"{path}: not a TorchScript file ({exc})") from exc
+    missing = [m for m in EXPORTED_METHODS if not hasattr(module, m)]
+    if missing or not extra[METADATA_FILE]:
+        raise ValueError(f"{path}: not a bemlearn BEM predictor (missing {missing or [METADATA_FILE]})")
+    return module

@@ -1,0 +1,110 @@
+"""A factor of the posterior-variance quadratic form, so one matvec gives σ̃² (eq. 12).
+
+The latent variance of every GP kind is σ̃²(x) = σ_f² − k_Zᵀ S k_Z (see
+:mod:`bemlearn.models.predictor_state`).  For fast evaluation we write
+
+    k_Zᵀ S k_Z = Σ_i s_i (F k_Z)_i²,    F ∈ R^{M×M},  s_i ∈ {+1, −1},
+
+    exact:       K = K_ZZ + σ_0² I = L Lᵀ,  S = K⁻¹ = L⁻ᵀ L⁻¹  ⇒  F = L⁻¹, s = +1, so
+                 σ̃² = σ_f² − ‖L⁻¹ k‖², one triangular solve with L (reads half of an M×M matrix
+                 and is backward stable).  K is rebuilt from Z and the hyperparameters (the same
+                 Cholesky route GPyTorch takes); S is only checked against it;
+    sgpr, svgp:  S = V Λ Vᵀ (symmetric eigendecomposition)  ⇒  F = |Λ|^{1/2} Vᵀ,  s = sign(Λ);
+                 S is positive semi-definite for sgpr, and for svgp whenever S_u ⪯ K_ZZ, in which
+                 case rounding-level negative eigenvalues are set to zero and s is dropped.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import torch
+
+from bemlearn.models.predictor_state import PredictorState
+
+__all__ = ["VarianceFactor", "variance_factor", "kernel_gram"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class VarianceFactor:
+    """kᵀ S k = Σ_i s_i (F k)_i².
+
+    Attributes:
+        F: ``(M, M)`` float64 factor (normalized output units), or ``None`` for a Cholesky factor.
+        L: ``(M, M)`` lower-triangular Cholesky factor of K = S⁻¹ (exact GPs; F = L⁻¹), or ``None``.
+        signs: ``(M,)`` float64 of ±1, or ``None`` when S is positive semi-definite (all +1).
+    """
+
+    F: torch.Tensor | None = None
+    L: torch.Tensor | None = None
+    signs: torch.Tensor | None = None
+
+    def __post_init__(self) -> None:
+        if (self.F is None) == (self.L is None):
+            raise ValueError("VarianceFactor: give exactly one of F and L")
+        if self.L is not None and self.signs is not None:
+            raise ValueError("VarianceFactor: a Cholesky factor has no signs")
+
+    def transformed(self, k: torch.Tensor) -> torch.Tensor:
+        """v = F k for ``k``: ``(B, M)`` kernel rows; returns ``(B, M)``."""
+        if self.L is not None:
+            return torch.linalg.solve_triangular(self.L, k.T, upper=False).T
+        return k @ self.F.T
+
+    def quadratic_form(self, k: torch.Tensor) -> torch.Tensor:
+        """kᵀ S k for ``k``: ``(B, M)`` kernel rows; returns ``(B,)``."""
+        v = self.transformed(k)
+        return (v * v).sum(-1) if self.signs is None else (v * v) @ self.signs
+
+
+def kernel_gram(state: PredictorState) -> torch.Tensor:
+    """K = K_ZZ + σ_0² I, K_ij = σ_f² exp(−½ ‖(z_i − z_j)/ℓ‖²) (eq. 11); ``(M, M)`` float64."""
+    zs = state.Z / state.lengthscale
+    sq = torch.cdist(zs, zs, compute_mode="donot_use_mm_for_euclid_dist").square()
+    K = state.outputscale * torch.exp(-0.5 * sq)
+    K.diagonal().add_(state.noise)
+    return K
+
+
+def variance_factor(state: PredictorState, *, exact_rtol: float = 1e-6, psd_rtol: float = 1e-10) -> VarianceFactor:
+    """Factor S of ``state`` (see module docstring).
+
+    Args:
+        state: the posterior.
+        exact_rtol: for ``exact``, the largest accepted ‖L⁻ᵀL⁻¹ − S‖_F / ‖S‖_F (a larger value
+            means S is not (K_ZZ + σ_0² I)⁻¹ of this state's own Z and hyperparameters).
+        psd_rtol: eigenvalues of S above −psd_rtol · max|λ| count as zero (rounding).
+
+    Raises:
+        ValueError: K is not positive definite, or S disagrees with it (exact).
+    """
+    if state.kind == "exact":
+        K = kernel_gram(state)
+        L, info = torch.linalg.cholesky_ex(K)
+        if int(info) != 0:
+            raise ValueError(
+                "PredictorState (exact): K_ZZ + σ_0² I is not positive definite "
+                f"(Cholesky failed at column {int(info)}); noise = {float(state.noise):.3g}"
+            )
+        rel = float(torch.linalg.matrix_norm(torch.cholesky_inverse(L) - state.S) / torch.linalg.matrix_norm(state.S))
+        if not rel <= exact_rtol:
+            raise ValueError(
+                "PredictorState.S (exact) is not (K_ZZ + σ_0² I)⁻¹ rebuilt from its own Z, lengthscale, "
+                f"outputscale and noise: relative difference {rel:.3g} > {exact_rtol:g}"
+            )
+        log.debug("exact variance factor: ‖L⁻ᵀL⁻¹ − S‖/‖S‖ = %.3g", rel)
+        return VarianceFactor(L=L)
+    S = 0.5 * (state.S + state.S.T)
+    lam, V = torch.linalg.eigh(S)
+    scale = float(lam.abs().max()) if lam.numel() else 0.0
+    negative = lam < -psd_rtol * scale
+    if bool(negative.any()):
+        log.info(
+            "%s posterior: S has %d negative eigenvalue(s) (min %.3g); using a signed factor",
+            state.kind, int(negative.sum()), float(lam.min()),
+        )
+        return VarianceFactor(F=lam.abs().sqrt()[:, None] * V.T, signs=torch.sign(lam) + (lam == 0).to(lam.dtype))
+    return VarianceFactor(F=lam.clamp_min(0.0).sqrt()[:, None] * V.T, signs=None)
