@@ -171,3 +171,13 @@ def test_loads_and_runs_without_bemlearn(model, tmp_path):
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "OK"
+
+
+def test_full_mean_equals_predict_full_mean(model):
+    """``full_mean`` (the loop path of momentum-corrected EIC) is ``predict_full``'s mean."""
+    state, _, _, scripted = model
+    x = _x(state, 17, seed=3, width=8)
+    mean, _ = scripted.predict_full(x)
+    torch.testing.assert_close(scripted.full_mean(x), mean, rtol=0, atol=1e-15)
+    with pytest.raises(Exception, match="full_mean"):
+        scripted.full_mean(x[:, :6])

@@ -51,7 +51,7 @@ class PredictorBEM:
     def full(self, x: np.ndarray) -> np.ndarray:
         """The full learned map f of eq. (11): ``x (B, 3m + 2)`` = [q̈_a, q̇_a, q_a, q̈_u, q̇_u] → q_u (B,)."""
         with torch.no_grad():
-            return self.module.predict_full(torch.from_numpy(x))[0].numpy()
+            return self.module.full_mean(torch.from_numpy(x)).numpy()
 
     def mean_std(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Mean and posterior std (rad) for logging/plots (slower than ``__call__``)."""

@@ -15,9 +15,11 @@ Per control tick, with the measured q, estimated q̇ and the desired q_a^d(t):
    tracked best (measured: `bemlearn bench sim`).
 3. Internal (balance) loop:  v_u = q̈_u^e − k_d,u (q̇_u − q̇_u^e) − k_p,u (q_u − q_u^e).
    The BEM's time derivatives are taken *along the reference*: the same source is
-   evaluated at x^d(t ± h) = [q̈_a^d, q̇_a^d, q_a^d](t ± h) in the same batched call and
-   differenced centrally (q̇_u^e ≈ (b₊ − b₋)/2h, q̈_u^e ≈ (b₊ − 2b₀ + b₋)/h²).  The
-   reference is known analytically, so this is free of sensor noise.
+   evaluated at x^d(t ± h) = [q̈_a^d, q̇_a^d, q_a^d](t ± h) and differenced centrally
+   (q̇_u^e ≈ (b₊ − b₋)/2h, q̈_u^e ≈ (b₊ − 2b₀ + b₋)/h²).  The reference is known
+   analytically, so this is free of sensor noise; with a known control rate these
+   reference-only rows are evaluated for ``chunk`` ticks ahead in one batched call, and the
+   source is called every tick for the measured state.
 4. Actuated acceleration (eq. 8, with the external loop in the null space of D_ua):
        v_a = −D_ua⁺ (D_uu v_u + h_u) + (I − D_ua⁺ D_ua) v_a^ext
    (for m = 1 the projector vanishes and v_a = v_a^int).
@@ -71,15 +73,43 @@ class EICController:
         gains: :class:`EICGains`.
     """
 
-    def __init__(self, nominal, bem, reference: CompositeSinusoid, actuator, gains: EICGains = EICGains()) -> None:
+    def __init__(self, nominal, bem, reference: CompositeSinusoid, actuator, gains: EICGains = EICGains(), *, rate_hz: float | None = None, chunk: int = 400) -> None:
         if reference.m != nominal.m:
             raise ValueError(f"EICController: reference has {reference.m} actuated joints, robot {nominal.name!r} has {nominal.m}")
         self.nominal, self.bem, self.reference, self.actuator, self.gains = nominal, bem, reference, actuator, gains
         self.ia = np.array(nominal.actuated_index)
+        self._aa = np.ix_(self.ia, self.ia)
         self.iu = nominal.unactuated_index
         self.m = nominal.m
-        self._x = np.empty((4, 3 * nominal.m))
+        self._x = np.empty((1, 3 * nominal.m))
         self._xf = np.empty((1, 3 * nominal.m + 2))
+        # with a known control rate, the reference-only quantities (q_a^d and the BEM along it at
+        # t and t ± h) are evaluated ``chunk`` ticks at a time in one batched call
+        self.rate_hz, self.chunk = rate_hz, chunk
+        self._cache_k0 = None
+
+    def _reference_terms(self, t: float):
+        """q_a^d, q̇_a^d, q̈_a^d at t and the BEM along the reference at (t − h, t, t + h)."""
+        g, m = self.gains, self.m
+        h = g.deriv_step
+        if self.rate_hz is None:
+            ts = np.array([t - h, t, t + h])
+            qa_d, qad_d, qadd_d = self.reference.evaluate(ts)
+            x = np.concatenate([qadd_d, qad_d, qa_d], axis=1)
+            return qa_d[1], qad_d[1], qadd_d[1], self.bem(x)
+        k = int(round(t * self.rate_hz))
+        if self._cache_k0 is None or not (self._cache_k0 <= k < self._cache_k0 + self.chunk):
+            ks = np.arange(k, k + self.chunk)
+            tk = ks / self.rate_hz
+            ts = np.concatenate([tk - h, tk, tk + h])
+            qa_d, qad_d, qadd_d = self.reference.evaluate(ts)
+            b = self.bem(np.ascontiguousarray(np.concatenate([qadd_d, qad_d, qa_d], axis=1))).reshape(3, self.chunk)
+            n = self.chunk
+            self._cache = (qa_d[n : 2 * n], qad_d[n : 2 * n], qadd_d[n : 2 * n], b)
+            self._cache_k0 = k
+        i = k - self._cache_k0
+        qa_d, qad_d, qadd_d, b = self._cache
+        return qa_d[i], qad_d[i], qadd_d[i], b[:, i]
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, dict[str, float | np.ndarray]]:
         """Commands ``u (nu,)`` and a dict of internals for logging.
@@ -91,31 +121,25 @@ class EICController:
         """
         g, m, ia, iu = self.gains, self.m, self.ia, self.iu
         h = g.deriv_step
-        ts = np.array([t - h, t, t + h])
-        qa_d, qad_d, qadd_d = self.reference.evaluate(ts)
+        qa_d, qad_d, qadd_d, b = self._reference_terms(t)
         qa, qad = q[ia], qd[ia]
-        v_ext = qadd_d[1] - g.kd_a * (qad - qad_d[1]) - g.kp_a * (qa - qa_d[1])
-        x = self._x
-        x[0, :m], x[0, m : 2 * m], x[0, 2 * m :] = v_ext, qad, qa
-        x[1:, :m], x[1:, m : 2 * m], x[1:, 2 * m :] = qadd_d, qad_d, qa_d
+        v_ext = qadd_d - g.kd_a * (qad - qad_d) - g.kp_a * (qa - qa_d)
+        qud_e = (b[2] - b[0]) / (2 * h)  # BEM rates along the reference
+        qudd_e = (b[2] - 2 * b[1] + b[0]) / (h * h)
         if g.momentum_correction:
-            b = self.bem(x[1:])  # BEM along the reference, for its rates
-            qud_e = (b[2] - b[0]) / (2 * h)
-            qudd_e = (b[2] - 2 * b[1] + b[0]) / (h * h)
             xf = self._xf
-            xf[0, : 3 * m] = x[0]
+            xf[0, :m], xf[0, m : 2 * m], xf[0, 2 * m : 3 * m] = v_ext, qad, qa
             xf[0, 3 * m], xf[0, 3 * m + 1] = qudd_e, qud_e
             qu_e = float(self.bem.full(xf)[0])
         else:
-            b = self.bem(x)
-            qu_e = float(b[0])
-            qud_e = (b[3] - b[1]) / (2 * h)
-            qudd_e = (b[3] - 2 * b[2] + b[1]) / (h * h)
+            x = self._x
+            x[0, :m], x[0, m : 2 * m], x[0, 2 * m :] = v_ext, qad, qa
+            qu_e = float(self.bem(x)[0])
         v_u = qudd_e - g.kd_u * (qd[iu] - qud_e) - g.kp_u * (q[iu] - qu_e)
         D, hv = self.nominal.terms(q, qd)
         D_ua = D[iu, ia]  # (m,)
         pinv = D_ua / (D_ua @ D_ua)  # D_ua⁺ of the 1×m row, (m,)
         v_a = -pinv * (D[iu, iu] * v_u + hv[iu]) + v_ext - pinv * (D_ua @ v_ext)
-        tau_a = D[np.ix_(ia, ia)] @ v_a + D[ia, iu] * v_u + hv[ia]
+        tau_a = D[self._aa] @ v_a + D[ia, iu] * v_u + hv[ia]
         u = self.actuator.command(tau_a, q, qd)
         return u, {"qu_e": qu_e, "qud_e": float(qud_e), "qudd_e": float(qudd_e), "v_ext": v_ext, "v_u": float(v_u), "tau_a": tau_a}

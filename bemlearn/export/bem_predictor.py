@@ -28,7 +28,7 @@ from bemlearn.models.predictor_state import PredictorState
 __all__ = ["BEMPredictor", "EXPORTED_METHODS"]
 
 #: Methods besides ``forward`` that the TorchScript artifact exports.
-EXPORTED_METHODS = ("bem_mean", "predict_full", "metadata")
+EXPORTED_METHODS = ("bem_mean", "predict_full", "full_mean", "metadata")
 
 
 def _dtype_name(x: torch.Tensor) -> str:
@@ -140,6 +140,15 @@ class BEMPredictor(nn.Module):
         mean, std = self.full.mean_std(x)
         self._check_finite(mean, x, "predict_full")
         return mean, std
+
+    @torch.jit.export
+    def full_mean(self, x: torch.Tensor) -> torch.Tensor:
+        """Mean of the full learned map f (eq. 11) only: ``x: (B, 3m + 2)`` as in
+        :meth:`predict_full`; returns ``(B,)`` rad (the control-loop path for momentum-corrected EIC)."""
+        self._check_input(x, self.n_full, "full_mean", self.full_columns)
+        mean = self.full.mean(x)
+        self._check_finite(mean, x, "full_mean")
+        return mean
 
     @torch.jit.export
     def metadata(self) -> str:

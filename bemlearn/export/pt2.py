@@ -35,7 +35,7 @@ __all__ = ["save_pt2", "load_pt2_predictor", "Pt2Predictor", "PT2_PROGRAMS", "PT
 log = logging.getLogger(__name__)
 
 #: Program name in the archive → BEMPredictor method it exports.
-PT2_PROGRAMS = {"model": "forward", "bem_mean": "bem_mean", "predict_full": "predict_full"}
+PT2_PROGRAMS = {"model": "forward", "bem_mean": "bem_mean", "predict_full": "predict_full", "full_mean": "full_mean"}
 PT2_METADATA_FILE = "metadata.json"
 
 
@@ -57,7 +57,7 @@ def _export_programs(predictor: BEMPredictor) -> dict[str, torch.export.Exported
     batch = torch.export.Dim("batch", min=1)
     programs = {}
     for name, method in PT2_PROGRAMS.items():
-        width = predictor.n_full if method == "predict_full" else predictor.n_bem
+        width = predictor.n_full if method in ("predict_full", "full_mean") else predictor.n_bem
         example = torch.zeros(4, width, dtype=torch.float64)
         with torch.no_grad():
             programs[name] = torch.export.export(
@@ -67,7 +67,7 @@ def _export_programs(predictor: BEMPredictor) -> dict[str, torch.export.Exported
 
 
 def save_pt2(predictor: BEMPredictor, path: str | os.PathLike[str]) -> Path:
-    """Export ``predictor``'s three methods with ``torch.export`` and write one ``.pt2``."""
+    """Export ``predictor``'s four methods with ``torch.export`` and write one ``.pt2``."""
     from torch.export.pt2_archive._package import package_pt2
 
     path = Path(path)
@@ -98,6 +98,7 @@ class Pt2Predictor:
         self._forward = self.programs["model"].module()
         self._bem_mean = self.programs["bem_mean"].module()
         self._predict_full = self.programs["predict_full"].module()
+        self._full_mean = self.programs["full_mean"].module() if "full_mean" in self.programs else None
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(μ(x_0^e), σ(x_0^e)) for ``x: (B, 3m)`` float64, each ``(B,)`` rad (eq. 12, 14)."""
@@ -113,6 +114,12 @@ class Pt2Predictor:
     def predict_full(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(mean, std) of f(x) (eq. 11) for ``x: (B, 3m + 2)`` float64."""
         return self._predict_full(x)
+
+    def full_mean(self, x: torch.Tensor) -> torch.Tensor:
+        """Mean of the full learned map only (eq. 11), ``(B,)`` rad."""
+        if self._full_mean is None:
+            return self._predict_full(x)[0]
+        return self._full_mean(x)
 
     def metadata(self) -> str:
         """The metadata JSON document."""

@@ -59,7 +59,7 @@ def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: st
 
                 L = learned_lemma1(pred, pred.full, nominal, ref)
                 m["lemma1"] = {"r_learned_vs_model_delta_gamma": L["r"], "r_learned_vs_hdot": L["r_hdot"], "model_gap": L["model_gap"]}
-                lemma = {"t": L["t"], "delta_gamma": L["delta_gamma_learned"], "hdot": L["hdot"]}
+                lemma = {"t": L["t"], "delta_gamma": L["delta_gamma_learned"], "hdot": L["hdot"], "delta_gamma_model": L["delta_gamma_model"]}
         plot_run(res, out / f"fig2_{src}.png", model_bem=model_bem, band=band, lemma=lemma)
         for k in ("tracking_rmse", "tracking_max", "qu_max", "u_max", "real_time_factor"):
             if isinstance(m.get(k), float):

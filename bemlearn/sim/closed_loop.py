@@ -174,7 +174,7 @@ def _simulate(robot_name: str, config: SimulateConfig, *, progress: bool, refere
     bem = _Timed(make_bem_source(config.bem_source, robot=nominal, predictor=config.predictor))
     ref = reference if reference is not None else config.reference.build(plant.m)
     actuator = FurutaMotor() if plant.name == "furuta" else DirectTorque(plant.input_matrix[list(plant.actuated_index)].numpy(), plant.model.actuator_ctrlrange[:, 1])
-    ctrl = EICController(nominal, bem, ref, actuator, config.gains)
+    ctrl = EICController(nominal, bem, ref, actuator, config.gains, rate_hz=config.rate_hz)
     model = plant.model
     data = mujoco.MjData(model)
     dt = 1.0 / config.rate_hz

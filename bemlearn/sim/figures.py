@@ -40,20 +40,23 @@ def plot_run(result, path: str | Path, *, model_bem: np.ndarray | None = None, b
     ax[0].legend(loc="upper right")
     ax[0].set_title("(a) actuated joint tracking")
     iu = 1
-    ax[1].plot(t, result.q[:, iu], color="k", lw=1, label=f"{u_name}")
-    ax[1].plot(t, result.qu_e, color="C1", lw=1, label=f"BEM in the loop ({result.metrics['bem_source']})")
+    w = t >= t[-1] - 10.0 if t.size else t.astype(bool)  # last 10 s: the lines are distinguishable
+    if model_bem is not None:
+        ax[1].plot(t[w], model_bem[w], color="C2", lw=0.6, alpha=0.6, label="model-based BEM (at the measured inputs)")
     if band is not None:
         mean, std = band
-        ax[1].fill_between(t, mean - 2 * std, mean + 2 * std, color="C1", alpha=0.25, label="learned BEM ±2σ")
-    if model_bem is not None:
-        ax[1].plot(t, model_bem, "--", color="C2", lw=1, label="model-based BEM")
+        ax[1].fill_between(t[w], (mean - 2 * std)[w], (mean + 2 * std)[w], color="C1", alpha=0.25, label="learned BEM ±2σ (eq. 12)")
+    ax[1].plot(t[w], result.qu_e[w], color="C1", lw=1.2, label=f"BEM in the loop ({result.metrics['bem_source']})")
+    ax[1].plot(t[w], result.q[w, iu], color="k", lw=1.2, label=f"{u_name}")
     ax[1].set_ylabel(f"{u_name} (rad)")
-    ax[1].legend(loc="upper right", fontsize=8)
-    ax[1].set_title("(b) unactuated joint and the BEM")
+    ax[1].legend(loc="upper right", fontsize=7, ncol=2)
+    ax[1].set_title("(b) unactuated joint and the BEM (last 10 s)")
     k = 2
     if lemma is not None:
         ax[2].plot(lemma["t"], lemma["hdot"], label="$\\dot H_u$ (model)")
-        ax[2].plot(lemma["t"], lemma["delta_gamma"], "--", label="ΔΓ (learned)")
+        if "delta_gamma_model" in lemma:
+            ax[2].plot(lemma["t"], lemma["delta_gamma_model"], ":", color="k", label="ΔΓ = $\\dot H_u$ + $b_u\\dot q_u^e$ (model)")
+        ax[2].plot(lemma["t"], lemma["delta_gamma"], "--", label="ΔΓ (learned, eq. 11 map only)")
         ax[2].set_ylabel("N·m")
         ax[2].set_xlabel("t (s) over one reference period")
         ax[2].legend(loc="upper right", fontsize=8)
