@@ -144,7 +144,8 @@ def test_subsampling_is_seeded(traj):
 
 def test_short_failed_and_edge_samples_are_counted(caplog):
     traj = make_trajectory((300, 60, 300, 250, 70), failed=(3,), seed=5)
-    cfg = DatasetConfig(n_points=None, qu_window=None, val_fraction=0.0)
+    # a 0.2 s Savitzky–Golay window at 400 Hz needs 81 samples (pinned: the default may change)
+    cfg = DatasetConfig(derivative_options={"window_s": 0.2, "polyorder": 4}, n_points=None, qu_window=None, val_fraction=0.0)
     with caplog.at_level(logging.INFO, logger="bemlearn.data.dataset"):
         data = build_datasets(traj, cfg)
     r = data.report
@@ -168,7 +169,8 @@ def test_config_parsing():
         where="cfg.yaml:dataset",
     )
     assert cfg.estimator().name == "central" and cfg.qu_window == 0.3
-    assert DatasetConfig().estimator().window_samples(400.0) == 81
+    # default: Savitzky–Golay 0.3 s, order 4 (best learned BEM in `bemlearn bench derivatives`) = 121 samples at 400 Hz
+    assert DatasetConfig().estimator().window_samples(400.0) == 121
     with pytest.raises(ConfigError, match=r"cfg\.yaml:dataset: unknown key\(s\) \['window'\]"):
         from_dict(DatasetConfig, {"window": 0.2}, where="cfg.yaml:dataset")
     with pytest.raises(ConfigError, match=r"valid names are \['central', 'savgol'\]"):

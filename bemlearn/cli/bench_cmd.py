@@ -1,7 +1,10 @@
-"""``bemlearn bench predict [CHECKPOINT]``: latency / throughput / parity of the BEM predictor.
+"""``bemlearn bench``: the measurements the issues name, kept out of the timed test suite.
 
-Provisional home of the ``bench`` command (only the ``predict`` benchmark so far); see
-:mod:`bemlearn.bench.predict_bench` for what is measured.
+* ``bench train [CONFIG]`` — exact / sgpr / svgp fit times and learned-BEM accuracy (issue 4);
+* ``bench predict [CHECKPOINT]`` — predictor latency, throughput and GPyTorch parity (issue 5);
+* ``bench sim PREDICTOR`` — the learned BEM in the EIC loop, mismatch study, Lemma 1, speed (issue 6);
+* ``bench derivatives [CONFIG]`` — derivative estimators and their effect on the learned BEM (issue 3);
+* ``bench gpdm`` — GPDM fit time and recovery on synthetic gait data (issue 7).
 """
 
 from __future__ import annotations
@@ -35,6 +38,27 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-pt2", action="store_true", help="skip the torch.export artifact")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_predict)
+    t = sub.add_parser("train", help="GP fit times and learned-BEM accuracy on the shipped Furuta config")
+    t.add_argument("config", type=Path, nargs="?", default=Path("configs/furuta.yaml"))
+    t.add_argument("--data", type=Path, default=Path("data/furuta_excitation.npz"))
+    t.add_argument("--no-svgp", action="store_true", help="skip the 10⁶-point svgp run (minutes)")
+    t.set_defaults(func=_train)
+    s = sub.add_parser("sim", help="learned BEM in the EIC loop: 5 references × 5 seeds, mismatch, Lemma 1, speed")
+    s.add_argument("predictor", type=Path, help="exported bem_predictor.pt (or a run folder holding one)")
+    s.add_argument("--config", type=Path, default=Path("configs/furuta.yaml"))
+    s.add_argument("--refs", type=int, default=5)
+    s.add_argument("--seeds", type=int, default=5)
+    s.add_argument("--duration", type=float, default=60.0, help="simulated seconds per run")
+    s.add_argument("--no-mismatch", action="store_true")
+    s.set_defaults(func=_sim)
+    d = sub.add_parser("derivatives", help="derivative estimators vs ground truth and their effect on the learned BEM")
+    d.add_argument("config", type=Path, nargs="?", default=Path("configs/furuta.yaml"))
+    d.add_argument("--data", type=Path, default=Path("data/furuta_excitation.npz"))
+    d.add_argument("--no-gp", action="store_true", help="only the derivative errors")
+    d.set_defaults(func=_derivatives)
+    g = sub.add_parser("gpdm", help="GPDM fit time and recovery of c and χ on synthetic gait data")
+    g.add_argument("--max-iter", type=int, default=500)
+    g.set_defaults(func=_gpdm)
 
 
 def run_predict(args: argparse.Namespace) -> int:
@@ -54,4 +78,56 @@ def run_predict(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
     )
     print(format_predict_bench(result))
+    return 0
+
+
+def _train(args: argparse.Namespace) -> int:
+    from bemlearn.bench.bem_train_bench import bench_bem_training
+    from bemlearn.pipeline.config import load_pipeline_config
+
+    cfg = load_pipeline_config(args.config)
+    rows = bench_bem_training(cfg, args.data, svgp=not args.no_svgp, progress=lambda r: None)
+    print("| model | N | threads | fit (s) | BEM RMSE (rad) | BEM max (rad) | inside ±2σ latent / predictive | notes |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for r in rows:
+        note = f"{r['seconds_per_epoch']:.0f} s/epoch, peak RSS {r['peak_rss_gib']:.2f} GiB" if "peak_rss_gib" in r else r["stop_reason"]
+        print(f"| {r['kind']} | {r['n_train']} | {r['threads']} | {r['seconds']:.1f} | {r['rmse']:.5f} | {r['max_abs']:.5f} | "
+              f"{100 * r['coverage_latent']:.0f}% / {100 * r['coverage_predictive']:.0f}% | {note} |")
+    return 0
+
+
+def _sim(args: argparse.Namespace) -> int:
+    from bemlearn.bench.sim_bench import format_sim_bench, run_sim_bench
+    from bemlearn.pipeline.config import load_pipeline_config
+
+    pred = args.predictor / "bem_predictor.pt" if args.predictor.is_dir() else args.predictor
+    cfg = load_pipeline_config(args.config)
+    r = run_sim_bench(pred, base=cfg.simulate, n_refs=args.refs, n_seeds=args.seeds, duration_s=args.duration, mismatch=not args.no_mismatch)
+    print(format_sim_bench(r))
+    return 0
+
+
+def _derivatives(args: argparse.Namespace) -> int:
+    from bemlearn.bench.derivatives_bench import run_derivatives_bench
+    from bemlearn.pipeline.config import load_pipeline_config
+
+    cfg = load_pipeline_config(args.config)
+    head = "| estimator | options | q̇ RMS θ / α (rad/s) | q̈ RMS θ / α (rad/s²) |"
+    if not args.no_gp:
+        head += " BEM RMSE (rad) | BEM max (rad) | inside ±2σ (latent) |"
+    print(head)
+    print("|" + " --- |" * (head.count("|") - 1))
+    run_derivatives_bench(cfg, args.data, with_gp=not args.no_gp, progress=print)
+    return 0
+
+
+def _gpdm(args: argparse.Namespace) -> int:
+    import dataclasses
+    import json
+
+    from bemlearn.bench.gpdm_bench import run_gpdm_bench
+    from bemlearn.fitting.gpdm_fit import GPDMConfig
+
+    result = run_gpdm_bench(config=dataclasses.replace(GPDMConfig(), max_iter=args.max_iter))
+    print(json.dumps(result, indent=2, default=float))
     return 0
