@@ -27,6 +27,8 @@ SUBCOMMANDS: tuple[str, ...] = (
     "bemlearn.cli.data_cmd",
     "bemlearn.cli.export_cmd",
     "bemlearn.cli.bench_cmd",
+    "bemlearn.cli.walk_cmd",
+    "bemlearn.cli.gpdm_cmd",
 )
 
 

@@ -34,9 +34,17 @@ def add_parser(sub) -> None:
 
 
 def _run(args) -> int:
+    from bemlearn.pipeline.biped import is_biped_config, load_biped_config, run_biped_pipeline
     from bemlearn.pipeline.config import load_pipeline_config
     from bemlearn.pipeline.run import run_pipeline
 
+    if is_biped_config(args.config):  # Section IV-B: walking data, learned torso BEM, GPDM (Fig. 4-5)
+        if args.device not in (None, "cpu"):
+            raise ValueError(f"--device {args.device}: the biped pipeline trains on the CPU (set train.device in the config)")
+        out = run_biped_pipeline(load_biped_config(args.config), args.out, progress=not args.no_progress)
+        print((out / "report.md").read_text())
+        print(f"\nrun folder: {out}")
+        return 0
     cfg = load_pipeline_config(args.config)
     out = run_pipeline(cfg, args.out, device=args.device, progress=not args.no_progress)
     print((out / "report.md").read_text())

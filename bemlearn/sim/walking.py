@@ -36,7 +36,7 @@ from tqdm.auto import tqdm
 from bemlearn.config import ConfigError, from_dict, load_yaml, to_dict
 from bemlearn.control.bem_sources import make_bem_source
 from bemlearn.control.gait import GaitConfig, build_gait, stance_frame
-from bemlearn.control.walking import WalkingController, WalkingGains
+from bemlearn.control.walking import WalkExcitation, WalkingController, WalkingGains
 from bemlearn.data.features import gp_inputs
 from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
 from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
@@ -67,6 +67,7 @@ class WalkConfig:
         min_step_phase: earliest phase at which a touchdown counts as a step.
         fall_hip_height: m.  fall_torso: rad.  max_step_time: s.
         seed: seeds the initial perturbation and the sensor noise.
+        excitation: sum-of-sines excitation of the references (data collection; off by default).
     """
 
     duration_s: float = 10.0
@@ -86,6 +87,7 @@ class WalkConfig:
     fall_torso: float = 1.0
     max_step_time: float = 2.0
     seed: int = 0
+    excitation: WalkExcitation = field(default_factory=WalkExcitation)
 
     def __post_init__(self) -> None:
         if self.duration_s <= 0 or self.rate_hz <= 0:
@@ -184,7 +186,7 @@ def simulate_walk(config: WalkConfig = WalkConfig(), *, bem=None, progress: bool
     gait = build_gait(config.gait)
     if bem is None:
         bem = make_bem_source(config.bem_source, robot=nominal, predictor=config.predictor)
-    ctrl = WalkingController(nominal, bem, gait, gains=config.gains)
+    ctrl = WalkingController(nominal, bem, gait, gains=config.gains, excitation=config.excitation)
     model = _planar_model()
     data = mujoco.MjData(model)
     dt = 1.0 / config.rate_hz
@@ -215,7 +217,7 @@ def simulate_walk(config: WalkConfig = WalkConfig(), *, bem=None, progress: bool
         y = enc(data.qpos[2:].copy())
         v = vf(y)
         c0 = time.perf_counter()
-        u, info = ctrl(y, v, stance)
+        u, info = ctrl(y, v, stance, t)
         wall += time.perf_counter() - c0
         data.ctrl[:] = u
         mujoco.mj_forward(model, data)
