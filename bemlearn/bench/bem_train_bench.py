@@ -10,23 +10,18 @@
 from __future__ import annotations
 
 import dataclasses
-import resource
 import time
 from pathlib import Path
 
 import torch
 
+from bemlearn.bench.train_bench import peak_rss_mib
 from bemlearn.data import build_datasets, read_trajectory
 from bemlearn.fitting import train_gp
 from bemlearn.models import predictor_state
 from bemlearn.pipeline.evaluation import evaluate_bem, ground_truth_robot, held_out_references
 
-__all__ = ["bench_bem_training", "peak_rss_gib"]
-
-
-def peak_rss_gib() -> float:
-    """Peak resident memory of this process so far, GiB (Linux ``ru_maxrss`` is in KiB)."""
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+__all__ = ["bench_bem_training"]
 
 
 def _fit_and_eval(ds, gp_cfg, config, *, threads: int) -> dict:
@@ -73,7 +68,7 @@ def bench_bem_training(config, data_path: str | Path, *, sgpr_points: int = 50_0
         gp_cfg = dataclasses.replace(config.train, kind="svgp", n_inducing=256, epochs=svgp_epochs, max_iter=None)
         row = _fit_and_eval(ds_huge, gp_cfg, config, threads=2)
         row["seconds_per_epoch"] = row["seconds"] / svgp_epochs
-        row["peak_rss_gib"] = peak_rss_gib()
+        row["peak_rss_gib"] = peak_rss_mib() / 1024
         rows.append(row)
         progress(row)
     return rows
