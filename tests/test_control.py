@@ -88,3 +88,23 @@ def test_nominal_mismatch_only_for_furuta():
     assert abs(bad.params.m_p - 1.2 * 0.127) < 1e-12
     with pytest.raises(ValueError, match="only modelled for the Furuta"):
         nominal_robot("biped", NominalConfig(mass_scale=1.2))
+
+
+def test_offscreen_gif_rendering(tmp_path):
+    """Rendering needs an OpenGL backend without a display (EGL here); skipped with the reason otherwise."""
+    import os
+    import subprocess
+    import sys
+
+    script = (
+        "import numpy as np; from bemlearn.robots import load; from bemlearn.sim.render import render_gif; "
+        "q = np.stack([np.linspace(0, 1, 40), np.zeros(40)], 1); "
+        f"p = render_gif(load('furuta'), q, r'{tmp_path / 'a.gif'}', rate_hz=400, fps=100); "
+        "from PIL import Image; im = Image.open(p); print(im.n_frames)"
+    )
+    env = dict(os.environ, MUJOCO_GL="egl")
+    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+    if out.returncode != 0 and "rendering is unavailable" in out.stderr:
+        pytest.skip(f"no offscreen OpenGL backend: {out.stderr.strip().splitlines()[-1]}")
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "10"

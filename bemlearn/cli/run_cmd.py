@@ -29,6 +29,7 @@ def add_parser(sub) -> None:
     s.add_argument("--predictor", type=Path, help="exported bem_predictor.pt (overrides simulate.predictor)")
     s.add_argument("--source", action="append", choices=["predictor", "model", "zero"], help="BEM source(s); default: simulate.bem_source")
     s.add_argument("--out", type=Path, default=Path("runs") / "simulate")
+    s.add_argument("--gif", action="store_true", help="also render OUT/simulate/<source>.gif (needs MUJOCO_GL=egl or osmesa without a display)")
     s.add_argument("--no-progress", action="store_true")
     s.set_defaults(func=_simulate)
 
@@ -58,7 +59,7 @@ def _simulate(args) -> int:
 
     cfg = load_pipeline_config(args.config)
     sources = tuple(args.source or [cfg.simulate.bem_source])
-    res = simulate_stage(cfg, args.out, predictor=args.predictor, sources=sources, progress=not args.no_progress)
+    res = simulate_stage(cfg, args.out, predictor=args.predictor, sources=sources, progress=not args.no_progress, gif=args.gif)
     print(f"{'source':<10}{'fell':>6}{'duration s':>12}{'RMSE rad':>10}{'max|V|':>8}{'×real time':>12}")
     for src, m in res.items():
         print(f"{src:<10}{str(m['fell']):>6}{m['duration_s']:>12.1f}{m['tracking_rmse']:>10.4f}{m['u_max']:>8.2f}{m['real_time_factor']:>12.1f}")

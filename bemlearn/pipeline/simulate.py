@@ -24,8 +24,12 @@ log = logging.getLogger(__name__)
 
 
 def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: str | Path | None = None,
-                   sources: tuple[str, ...] = ("predictor", "model", "zero"), progress: bool = True) -> dict:
-    """Run the closed loop for each BEM source in ``sources``; returns ``{source: metrics}``."""
+                   sources: tuple[str, ...] = ("predictor", "model", "zero"), progress: bool = True, gif: bool = False) -> dict:
+    """Run the closed loop for each BEM source in ``sources``; returns ``{source: metrics}``.
+
+    ``gif=True`` also writes ``simulate/<source>.gif`` (first 10 s, offscreen rendering;
+    needs ``MUJOCO_GL=egl`` or ``osmesa`` without a display).
+    """
     out = Path(out_dir) / "simulate"
     out.mkdir(parents=True, exist_ok=True)
     scfg = config.simulate
@@ -61,6 +65,11 @@ def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: st
                 m["lemma1"] = {"r_learned_vs_model_delta_gamma": L["r"], "r_learned_vs_hdot": L["r_hdot"], "model_gap": L["model_gap"]}
                 lemma = {"t": L["t"], "delta_gamma": L["delta_gamma_learned"], "hdot": L["hdot"], "delta_gamma_model": L["delta_gamma_model"]}
         plot_run(res, out / f"fig2_{src}.png", model_bem=model_bem, band=band, lemma=lemma)
+        if gif:
+            from bemlearn.robots import load
+            from bemlearn.sim.render import render_gif
+
+            render_gif(load(config.robot), res.q, out / f"{src}.gif", rate_hz=scfg.rate_hz)
         for k in ("tracking_rmse", "tracking_max", "qu_max", "u_max", "real_time_factor"):
             if isinstance(m.get(k), float):
                 writer.add_scalar(f"simulate/{src}/{k}", m[k], 0)
