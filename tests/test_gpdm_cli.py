@@ -6,7 +6,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from bemlearn.cli.main import main
 from bemlearn.data import read_ground_truth, read_trajectory, write_trajectory

@@ -8,7 +8,7 @@ import mujoco
 import pytest
 import torch
 
-from bemlearn.robots import AnalyticFuruta, FurutaParameters, asset_path, furuta_mjcf, load, torque_to_voltage, voltage_to_torque
+from bemlearn.robots import AnalyticFuruta, FurutaParameters, asset_path, load, torque_to_voltage, voltage_to_torque
 from bemlearn.robots.write_assets import GENERATED_ASSETS
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bemlearn.data import DatasetConfig, build_datasets, estimate_derivatives, make_estimator
+from bemlearn.data import build_datasets, estimate_derivatives, make_estimator
 
 __all__ = ["ESTIMATOR_GRID", "derivative_errors", "run_derivatives_bench", "load_or_collect"]
 

@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 
 from bemlearn.control.bem_sources import PredictorBEM
-from bemlearn.data.sensors import SensorConfig
 from bemlearn.pipeline.evaluation import EvaluationConfig, ground_truth_robot, held_out_references
 from bemlearn.pipeline.lemma import learned_lemma1
 from bemlearn.sim.closed_loop import NominalConfig, ReferenceConfig, SimulateConfig, nominal_robot, simulate

@@ -90,7 +90,7 @@ class EICController:
 
     def _reference_terms(self, t: float):
         """q_a^d, q̇_a^d, q̈_a^d at t and the BEM along the reference at (t − h, t, t + h)."""
-        g, m = self.gains, self.m
+        g = self.gains
         h = g.deriv_step
         if self.rate_hz is None:
             ts = np.array([t - h, t, t + h])

@@ -34,7 +34,8 @@ from tqdm.auto import tqdm
 
 from bemlearn._version import __version__
 from bemlearn.config import to_dict
-from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
+from bemlearn.data.plant import SensedPlant
+from bemlearn.data.sensors import SensorConfig
 from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
 
 __all__ = ["CollectConfig", "TrialResult", "collect", "simulate_trial"]
@@ -120,12 +121,8 @@ def simulate_trial(robot, config: CollectConfig, trial_id: int, seed_seq: np.ran
     """Run one excitation trial (module docstring) and return its logged and true signals."""
     rng = np.random.default_rng(seed_seq)
     model, n, m = robot.model, robot.n, robot.m
-    data = mujoco.MjData(model)
-    dt = 1.0 / config.rate_hz
-    substeps = dt / model.opt.timestep
-    if abs(substeps - round(substeps)) > 1e-6 or round(substeps) < 1:
-        raise ValueError(f"collect: 1/rate_hz = {dt} s is not a whole number of physics steps ({model.opt.timestep} s)")
-    substeps = int(round(substeps))
+    plant = SensedPlant(robot, rate_hz=config.rate_hz, sensor=config.sensor, rng=rng, where="collect")
+    dt = plant.dt
     K = np.asarray(config.gains, dtype=np.float64)
     if K.size != m * 2 * n:
         raise ValueError(f"collect.gains: expected m·2n = {m * 2 * n} values for robot {robot.name!r}, got {K.size}")
@@ -137,49 +134,33 @@ def simulate_trial(robot, config: CollectConfig, trial_id: int, seed_seq: np.ran
         for k in n_sines
     ]
     ia, iu = list(robot.actuated_index), robot.unactuated_index
-    T, Tinv = robot.T.numpy(), robot.Tinv.numpy()
     q0 = np.zeros(n)
     q0[ia] = rng.uniform(*config.initial_qa, size=m)
     q0[iu] = robot.qu_nominal + rng.uniform(*config.initial_qu)
-    data.qpos[:] = Tinv @ q0
-    encoder = Encoder(config.sensor, rng)
-    vfilt = FilteredDifferentiator(n, cutoff=config.sensor.velocity_cutoff, dt=dt)
+    plant.reset(q0)
     lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
     limited = model.actuator_ctrllimited.astype(bool)
     n_ticks = int(round(config.duration_s * config.rate_hz))
     rec = {k: np.empty((n_ticks, w)) for k, w in (("q_meas", n), ("u", m), ("q", n), ("qd", n), ("qdd", n))}
     failed = False
-    k = 0
-    for k in range(n_ticks):
-        t = k * dt
-        q_true = T @ data.qpos
+    k = n_ticks
+    for tick in range(n_ticks):
+        t = tick * dt
+        q_true = plant.true_q()
         if abs(q_true[iu] - robot.qu_nominal) > config.fall_window:
-            failed = True
+            failed, k = True, tick
             break
-        y = encoder(q_true)
-        v = vfilt(y)
+        y, v = plant.measure(q_true)
         q_ref = np.zeros(n)
         qd_ref = np.zeros(n)
         q_ref[iu] = robot.qu_nominal
         for j, (A, w, ph) in zip(ia, comps):
             q_ref[j] = np.sum(A * np.sin(w * t + ph))
             qd_ref[j] = np.sum(A * w * np.cos(w * t + ph))
-        e = np.concatenate([y - q_ref, v - qd_ref])
-        u = K @ e
+        u = K @ np.concatenate([y - q_ref, v - qd_ref])
         u = np.where(limited, np.clip(u, lo, hi), u)
-        data.ctrl[:] = u
-        mujoco.mj_forward(model, data)
-        rec["q_meas"][k] = y
-        rec["u"][k] = u
-        rec["q"][k] = q_true
-        rec["qd"][k] = T @ data.qvel
-        rec["qdd"][k] = T @ data.qacc
-        for _ in range(substeps):
-            mujoco.mj_step(model, data)
-    else:
-        k = n_ticks
-    if not failed:
-        k = n_ticks
+        qd, qdd = plant.apply(u)
+        rec["q_meas"][tick], rec["u"][tick], rec["q"][tick], rec["qd"][tick], rec["qdd"][tick] = y, u, q_true, qd, qdd
     t = np.arange(k) * dt
     return TrialResult(trial_id, failed, t, *(rec[name][:k] for name in ("q_meas", "u", "q", "qd", "qdd")))
 

@@ -23,13 +23,12 @@ import math
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from bemlearn._version import __version__
 from bemlearn.config import save_yaml
 from bemlearn.data import build_datasets, read_trajectory
-from bemlearn.export.checkpoint import CHECKPOINT_NAME, load_checkpoint, write_checkpoint
+from bemlearn.export.checkpoint import load_checkpoint, write_checkpoint
 from bemlearn.fitting import build_gp, fit_gp, hyperparameter_metrics
 from bemlearn.models import predict, predictor_state
 from bemlearn.pipeline.config import PipelineConfig

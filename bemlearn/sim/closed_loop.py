@@ -12,7 +12,6 @@ import dataclasses
 import time
 from dataclasses import dataclass, field
 
-import mujoco
 import numpy as np
 import torch
 from tqdm.auto import tqdm
@@ -20,7 +19,8 @@ from tqdm.auto import tqdm
 from bemlearn.control.actuators import DirectTorque, FurutaMotor
 from bemlearn.control.bem_sources import make_bem_source
 from bemlearn.control.eic import EICController, EICGains
-from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
+from bemlearn.data.plant import SensedPlant
+from bemlearn.data.sensors import SensorConfig
 from bemlearn.robots.reference import CompositeSinusoid
 
 __all__ = ["ReferenceConfig", "NominalConfig", "SimulateConfig", "SimResult", "simulate", "nominal_robot"]
@@ -176,55 +176,39 @@ def _simulate(robot_name: str, config: SimulateConfig, *, progress: bool, refere
     actuator = FurutaMotor() if plant.name == "furuta" else DirectTorque(plant.input_matrix[list(plant.actuated_index)].numpy(), plant.model.actuator_ctrlrange[:, 1])
     ctrl = EICController(nominal, bem, ref, actuator, config.gains, rate_hz=config.rate_hz)
     model = plant.model
-    data = mujoco.MjData(model)
-    dt = 1.0 / config.rate_hz
-    substeps = int(round(dt / model.opt.timestep))
-    if abs(substeps * model.opt.timestep - dt) > 1e-9:
-        raise ValueError(f"simulate: 1/rate_hz = {dt} s is not a whole number of physics steps ({model.opt.timestep} s)")
-    T, Tinv = plant.T.numpy(), plant.Tinv.numpy()
+    sensed = SensedPlant(plant, rate_hz=config.rate_hz, sensor=config.sensor, rng=np.random.default_rng(config.seed), where="simulate")
+    dt = sensed.dt
     n, m, iu, ia = plant.n, plant.m, plant.unactuated_index, list(plant.actuated_index)
-    q0 = np.zeros(n)
+    q0, qd0 = np.zeros(n), np.zeros(n)
     q0[ia] = ref.derivative(np.array([0.0]), 0).numpy()[0]
     q0[iu] = plant.qu_nominal + config.initial_qu
-    data.qpos[:] = Tinv @ q0
-    qd0 = np.zeros(n)
     qd0[ia] = ref.derivative(np.array([0.0]), 1).numpy()[0]
-    data.qvel[:] = Tinv @ qd0
-    rng = np.random.default_rng(config.seed)
-    enc = Encoder(config.sensor, rng)
-    vf = FilteredDifferentiator(n, cutoff=config.sensor.velocity_cutoff, dt=dt)
+    sensed.reset(q0, qd0)
     steps = int(round(config.duration_s * config.rate_hz))
     log = {k: np.empty((steps, w)) for k, w in (("q", n), ("qd", n), ("qdd", n), ("q_meas", n), ("qd_est", n), ("u", model.nu), ("bem_x", 3 * m))}
     qu_e = np.empty(steps)
     t_phys = t_ctrl = 0.0
     fell = False
-    k = 0
+    k = steps
     bar = tqdm(total=steps, desc=f"simulate ({config.bem_source})", unit="tick", disable=not progress, mininterval=0.5)
-    for k in range(steps):
-        t = k * dt
-        q_true = T @ data.qpos
+    for tick in range(steps):
+        q_true = sensed.true_q()
         if abs(q_true[iu] - plant.qu_nominal) > config.fall_window:
-            fell = True
+            fell, k = True, tick
             break
-        y = enc(q_true)
-        v = vf(y)
+        y, v = sensed.measure(q_true)
         c0 = time.perf_counter()
-        u, info = ctrl(t, y, v)
+        u, info = ctrl(tick * dt, y, v)
         c1 = time.perf_counter()
-        data.ctrl[:] = u
-        mujoco.mj_forward(model, data)
-        log["q"][k], log["qd"][k], log["qdd"][k] = q_true, T @ data.qvel, T @ data.qacc
-        log["q_meas"][k], log["qd_est"][k], log["u"][k] = y, v, u
-        log["bem_x"][k] = np.concatenate([info["v_ext"], v[ia], y[ia]])
-        qu_e[k] = info["qu_e"]
-        for _ in range(substeps):
-            mujoco.mj_step(model, data)
+        qd, qdd = sensed.apply(u)
         t_phys += time.perf_counter() - c1
         t_ctrl += c1 - c0
-        if k % 400 == 0:
-            bar.update(400 if k else 1)
-    else:
-        k = steps
+        log["q"][tick], log["qd"][tick], log["qdd"][tick] = q_true, qd, qdd
+        log["q_meas"][tick], log["qd_est"][tick], log["u"][tick] = y, v, u
+        log["bem_x"][tick] = np.concatenate([info["v_ext"], v[ia], y[ia]])
+        qu_e[tick] = info["qu_e"]
+        if tick % 400 == 0:
+            bar.update(400 if tick else 1)
     bar.close()
     K = k
     tt = np.arange(K) * dt

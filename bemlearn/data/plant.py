@@ -1,0 +1,67 @@
+"""A MuJoCo robot stepped at a control rate and observed like a real rig.
+
+Both the excitation collector (:mod:`bemlearn.data.collect`) and the closed-loop simulator
+(:mod:`bemlearn.sim.closed_loop`) run the same plant: per control tick the true coordinates
+are read, measured through the encoder and the velocity filter (:mod:`bemlearn.data.sensors`),
+the controller's command is held over ``round(1 / (rate · timestep))`` physics steps, and the
+true q̇, q̈ at the tick (with the new command) are returned for ground-truth logging.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
+
+__all__ = ["SensedPlant"]
+
+
+class SensedPlant:
+    """The robot's MuJoCo model with a zero-order-hold input and a sensor model.
+
+    Args:
+        robot: a :class:`~bemlearn.robots.MujocoRobot` (model, coordinate map, partition).
+        rate_hz: control and sampling rate, Hz; must be a whole number of physics steps.
+        sensor: encoder and velocity-filter options.
+        rng: the generator of the sensor noise.
+        where: a label for error messages (e.g. ``"collect"``).
+    """
+
+    def __init__(self, robot, *, rate_hz: float, sensor: SensorConfig, rng: np.random.Generator, where: str) -> None:
+        self.robot = robot
+        self.model = robot.model
+        self.data = mujoco.MjData(self.model)
+        self.dt = 1.0 / rate_hz
+        steps = self.dt / self.model.opt.timestep
+        if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
+            raise ValueError(f"{where}: 1/rate_hz = {self.dt} s is not a whole number of physics steps ({self.model.opt.timestep} s)")
+        self.substeps = int(round(steps))
+        self.T, self.Tinv = robot.T.numpy(), robot.Tinv.numpy()
+        self.encoder = Encoder(sensor, rng)
+        self.velocity = FilteredDifferentiator(robot.n, cutoff=sensor.velocity_cutoff, dt=self.dt)
+
+    def reset(self, q0: np.ndarray, qd0: np.ndarray | None = None) -> None:
+        """Set the true state: ``q0``, ``qd0`` ``(n,)`` coordinates (rad) and rates (rad/s)."""
+        self.data.qpos[:] = self.Tinv @ q0
+        if qd0 is not None:
+            self.data.qvel[:] = self.Tinv @ qd0
+
+    def true_q(self) -> np.ndarray:
+        """The true coordinates now, ``(n,)`` rad."""
+        return self.T @ self.data.qpos
+
+    def measure(self, q_true: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """What the rig sees of ``q_true``: quantized angles and the filtered rate, each ``(n,)``."""
+        y = self.encoder(q_true)
+        return y, self.velocity(y)
+
+    def apply(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Hold command ``u (nu,)`` for one tick; returns the true ``(q̇, q̈)`` at the tick, ``(n,)`` each."""
+        m, d = self.model, self.data
+        d.ctrl[:] = u
+        mujoco.mj_forward(m, d)
+        qd, qdd = self.T @ d.qvel, self.T @ d.qacc
+        for _ in range(self.substeps):
+            mujoco.mj_step(m, d)
+        return qd, qdd
