@@ -9,6 +9,8 @@ import textwrap
 import pytest
 import torch
 
+from tests.isolation import BLOCK_BEMLEARN
+
 from bemlearn.bench.predict_bench import synthetic_posterior
 from bemlearn.export import BEMPredictor, load_pt2_predictor, save_pt2, script_predictor
 
@@ -75,18 +77,8 @@ def test_load_errors(tmp_path):
         load_pt2_predictor(junk)
 
 
-_ISOLATED = textwrap.dedent(
+_ISOLATED = BLOCK_BEMLEARN + textwrap.dedent(
     """
-    import json, sys
-
-    class _NoBemlearn:
-        def find_spec(self, name, path=None, target=None):
-            if name == "bemlearn" or name.startswith("bemlearn."):
-                raise ImportError("bemlearn is blocked in this process")
-            return None
-
-    sys.meta_path.insert(0, _NoBemlearn())
-    import torch
     from torch.export.pt2_archive._package import load_pt2
 
     case = torch.load("case.pt")

@@ -9,6 +9,8 @@ import textwrap
 import pytest
 import torch
 
+from tests.isolation import BLOCK_BEMLEARN
+
 from bemlearn.bench.predict_bench import synthetic_posterior
 from bemlearn.export import BEMPredictor, load_torchscript, save_torchscript, script_predictor
 
@@ -120,18 +122,8 @@ def test_load_errors(tmp_path):
         load_torchscript(junk)
 
 
-_ISOLATED = textwrap.dedent(
+_ISOLATED = BLOCK_BEMLEARN + textwrap.dedent(
     """
-    import json, sys
-
-    class _NoBemlearn:
-        def find_spec(self, name, path=None, target=None):
-            if name == "bemlearn" or name.startswith("bemlearn."):
-                raise ImportError("bemlearn is blocked in this process")
-            return None
-
-    sys.meta_path.insert(0, _NoBemlearn())
-    import torch
     try:
         import bemlearn  # noqa: F401
     except ImportError:
