@@ -14,9 +14,14 @@ and NumPy cases are timed in 10 alternating rounds, so their ratios hold under c
 * the GPyTorch ExactGP (eval mode, ``torch.no_grad``) rebuilt from the posterior (exact GPs:
   Z = X, targets Y = (K_ZZ + σ_0² I) α), default settings and with ``fast_pred_var``;
 
-plus the time of 10⁵ queries in one batch, and parity of the TorchScript ``forward`` with
-that GPyTorch model on 10⁴ random inputs.  Latency depends on other load on the machine:
-the result records ``/proc/loadavg`` before and after.
+* an empty TorchScript method (``x -> x``): the fixed cost of calling a TorchScript module
+  from Python, which no formula can go below;
+
+plus the time of 10⁵ queries in one batch on ``batch_threads`` threads (default: every core),
+with the floor of the exact variance: the triangular solve v = L⁻¹k alone on the same batch
+(B·M² flops, memory- and BLAS-bound), and parity of the TorchScript ``forward`` with that
+GPyTorch model on 10⁴ random inputs.  Latency depends on other load on the machine: the
+result records ``/proc/loadavg`` before and after.
 """
 
 from __future__ import annotations
@@ -69,6 +74,7 @@ class PredictBenchResult:
     latencies: dict[str, Latency]
     batch: int
     batch_seconds: dict[str, float]
+    batch_threads: int
     parity: dict[str, float]
     loadavg: tuple[str, str]
     notes: list[str] = field(default_factory=list)
@@ -260,6 +266,7 @@ def run_predict_bench(
     batch: int = 100_000,
     n_parity: int = 10_000,
     threads: int = 1,
+    batch_threads: int | None = None,
     pt2: bool = True,
     progress: bool = True,
 ) -> PredictBenchResult:
@@ -273,6 +280,7 @@ def run_predict_bench(
         batch: queries in the throughput case.
         n_parity: random inputs for the GPyTorch parity check (exact GPs only).
         threads: torch / BLAS threads for the latency cases.
+        batch_threads: torch / BLAS threads for the batch case (``None``: ``os.cpu_count()``).
         pt2: also time the torch.export artifact (exporting takes a few seconds).
         progress: show a tqdm bar over the cases.
     """
@@ -284,6 +292,7 @@ def run_predict_bench(
         state, meta = ckpt.predictor_state, ckpt.metadata
         model = f"{ckpt.path}: {state.kind} GP, M = {state.n_support}, d = {state.dim}, m = {meta.m}"
     predictor = BEMPredictor(state, meta)
+    n_batch = batch_threads or os.cpu_count() or 1
     load_before = _loadavg()
     g = torch.Generator().manual_seed(seed)
     n_bem = 3 * meta.m
@@ -298,6 +307,7 @@ def run_predict_bench(
     with tempfile.TemporaryDirectory() as tmp, _threads(threads) as notes:
         ts = load_torchscript(save_torchscript(predictor, Path(tmp) / "bem_predictor.pt"))
         single: dict[str, tuple[Callable[[Any], Any], Any]] = {
+            "torchscript empty call (x -> x)": (torch.jit.script(_Identity()), x1),
             "torchscript forward": (ts.forward, x1),
             "torchscript bem_mean": (ts.bem_mean, x1),
         }
@@ -321,9 +331,31 @@ def run_predict_bench(
                     "std_rel": float(((s_ts - s_ref) / s_ref).abs().max()),
                 }
             else:
-                for name, fn in (("torchscript forward", ts.forward), ("torchscript bem_mean", ts.bem_mean)):
-                    batch_s[name] = _batch_seconds(fn, xb)
-    return PredictBenchResult(model, threads, lat, batch, batch_s, parity, (load_before, _loadavg()), notes)
+                with _threads(n_batch):
+                    for name, fn in (("torchscript forward", ts.forward), ("torchscript bem_mean", ts.bem_mean)):
+                        batch_s[name] = _batch_seconds(fn, xb)
+                    if predictor.bem.triangular:
+                        batch_s["floor: v = L⁻¹k alone"] = _solve_floor(predictor, xb)
+    return PredictBenchResult(model, threads, lat, batch, batch_s, n_batch, parity, (load_before, _loadavg()), notes)
+
+
+class _Identity(torch.nn.Module):
+    """``x -> x``: the fixed cost of a call into a TorchScript module."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x
+
+
+def _solve_floor(predictor: BEMPredictor, xb: torch.Tensor) -> float:
+    """Median seconds of the exact variance's triangular solve alone, in the predictor's row blocks."""
+    post = predictor.bem
+    blocks = [post._kernel(c) for c in xb.split(post.chunk)]
+
+    def solve(_: Any) -> None:
+        for k in blocks:
+            torch.linalg.solve_triangular(post.FT, k, upper=True, left=False)
+
+    return _batch_seconds(solve, xb)
 
 
 def _gpytorch_latency(gp: Callable[[torch.Tensor], Any], x1: torch.Tensor, *, repeats: int) -> dict[str, Latency]:
@@ -338,7 +370,7 @@ def _gpytorch_latency(gp: Callable[[torch.Tensor], Any], x1: torch.Tensor, *, re
 
 def _batch_seconds(fn: Callable[[torch.Tensor], Any], xb: torch.Tensor) -> float:
     """Median wall time of 3 calls on the whole batch (after one small warm-up call)."""
-    fn(xb[:1000])
+    fn(xb[:1000] if isinstance(xb, torch.Tensor) else xb)
     runs = []
     for _ in range(3):
         t0 = time.perf_counter()
@@ -365,10 +397,13 @@ def format_predict_bench(result: PredictBenchResult) -> str:
         f"TorchScript forward / NumPy textbook forward:     {ratio('torchscript forward', 'numpy textbook forward')}",
         f"TorchScript bem_mean / NumPy folded bem_mean:     {ratio('torchscript bem_mean', 'numpy folded bem_mean')}    (target <= 1; and <= 25 µs)",
         f"TorchScript bem_mean / NumPy textbook bem_mean:   {ratio('torchscript bem_mean', 'numpy textbook bem_mean')}",
+        f"empty TorchScript call / NumPy folded bem_mean:   {ratio('torchscript empty call (x -> x)', 'numpy folded bem_mean')}"
+        "    (the call alone, before any formula)",
         "",
     ]
+    lines.append(f"batch of {result.batch} queries on {result.batch_threads} thread(s) (target: 1e5 in <= 0.5 s):")
     for name, sec in result.batch_seconds.items():
-        lines.append(f"batch of {result.batch} queries, {name}: {sec:.3f} s   (target: 1e5 in <= 0.5 s)")
+        lines.append(f"  {name:38s} {sec:.3f} s")
     if result.parity:
         lines.append(
             f"parity with GPyTorch on {int(result.parity['n'])} inputs: max |Δmean| = {result.parity['mean_abs']:.2e} rad "

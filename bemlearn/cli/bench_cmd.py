@@ -33,7 +33,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--repeats", type=int, default=20000, help="timed calls per single-query case (default 20000)")
     p.add_argument("--gpytorch-repeats", type=int, default=200, help="timed GPyTorch calls (default 200)")
     p.add_argument("--batch", type=int, default=100_000, help="queries in the throughput case (default 1e5)")
-    p.add_argument("--threads", type=int, default=1, help="torch/BLAS threads (default 1)")
+    p.add_argument("--threads", type=int, default=1, help="torch/BLAS threads of the single-query cases (default 1)")
+    p.add_argument("--batch-threads", type=int, default=None,
+                   help="torch/BLAS threads of the batch case (default: every core)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-pt2", action="store_true", help="skip the torch.export artifact")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -62,8 +64,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_predict(args: argparse.Namespace) -> int:
-    for name in ("n_train", "repeats", "gpytorch_repeats", "batch", "threads"):
-        if getattr(args, name) < 1:
+    for name in ("n_train", "repeats", "gpytorch_repeats", "batch", "threads", "batch_threads"):
+        if getattr(args, name) is not None and getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')}: expected a positive integer, got {getattr(args, name)}")
     result = run_predict_bench(
         checkpoint=args.checkpoint,
@@ -74,6 +76,7 @@ def run_predict(args: argparse.Namespace) -> int:
         gpytorch_repeats=args.gpytorch_repeats,
         batch=args.batch,
         threads=args.threads,
+        batch_threads=args.batch_threads,
         pt2=not args.no_pt2,
         progress=not args.no_progress,
     )

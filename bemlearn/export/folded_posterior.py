@@ -10,8 +10,9 @@ either choice of the variable v:
 The raw form saves the ``addcmul`` that forms u (≈1 µs a query) but its terms grow like
 (|b| + |u|)², so it is used only while Σ_i (|b_i| + 5)² ≤ 10³ (rounding in e_j stays below
 ~2·10⁻¹³), i.e. unless a column's mean is far from zero in units of its spread; otherwise the
-centered form.  Either way a batch ``x: (B, n)`` costs one ``linear``, one ``exp`` and one
-``addmv`` for the mean (eq. 12) and one triangular solve or ``mm`` for the variance:
+centered form.  Either way a batch ``x: (B, n)`` costs one ``pow`` (which forms [v, v∘v] in one
+call, ≈1.5 µs a query less than ``cat`` of ``v`` and ``v * v``), one ``linear``, one ``exp`` and
+one ``addmv`` for the mean (eq. 12) and one triangular solve or ``mm`` for the variance:
 
     μ(x) = y_mean + Σ_j w_j exp(e_j),                  w = y_std σ_f² α
     σ(x) = sqrt(max(0, y_std² σ_f² − Σ_i s_i v_i²)),   v = (y_std σ_f² F) exp(e)
@@ -116,6 +117,7 @@ class FoldedPosterior(nn.Module):
         self.register_buffer("W", W)
         self.register_buffer("c", c)
         self.register_buffer("offset", (state.y_mean - 1.0).reshape(1).to(**f64))
+        self.register_buffer("powers", torch.tensor([[1.0], [2.0]], **f64))   # [v, v∘v] = v ** powers
         if share is None:
             w = torch.empty(M + 1, **f64)
             w[:M] = gain * state.alpha
@@ -140,7 +142,8 @@ class FoldedPosterior(nn.Module):
     def _kernel(self, x: torch.Tensor) -> torch.Tensor:
         """exp(e): ``(B, M + 1)`` kernel row / σ_f² (last column: sentinel) for ``x: (B, n)``."""
         v = torch.addcmul(self.nb, x, self.a) if self.centered else x
-        return F.linear(torch.cat([v, v * v], 1), self.W, self.c).exp_()
+        vv = torch.pow(v.unsqueeze(1), self.powers).reshape(v.size(0), 2 * self.n_inputs)   # rows [v, v∘v]
+        return F.linear(vv, self.W, self.c).exp_()
 
     def _chunked(self, x: torch.Tensor) -> bool:
         # Large batches run in row blocks so the (rows, M + 1) kernel block stays in cache
