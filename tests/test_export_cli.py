@@ -3,6 +3,8 @@
 import dataclasses
 import json
 
+import os
+
 import pytest
 import torch
 
@@ -86,10 +88,12 @@ def test_predict_bench_small_run(posterior):
     expected = {
         "torchscript forward", "torchscript bem_mean", "numpy folded bem_mean", "numpy folded forward",
         "numpy textbook bem_mean", "numpy textbook forward", "gpytorch forward", "gpytorch forward (fast_pred_var)",
+        "torchscript empty call (x -> x)",
     }
     assert set(result.latencies) == expected
     assert all(r.n in (30, 3) and r.p99_us >= r.median_us > 0 for r in result.latencies.values())
-    assert set(result.batch_seconds) == {"torchscript forward", "torchscript bem_mean"}
+    assert set(result.batch_seconds) == {"torchscript forward", "torchscript bem_mean", "floor: v = L⁻¹k alone"}
+    assert result.batch_threads == (os.cpu_count() or 1)
     assert result.parity["mean_abs"] <= 1e-10 and result.parity["std_rel"] <= 1e-8
     text = format_predict_bench(result)
     assert "GPyTorch forward / TorchScript forward" in text and "parity with GPyTorch on 300 inputs" in text
