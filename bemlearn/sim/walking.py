@@ -12,42 +12,36 @@ swap roles.  A run ends at ``duration_s``, after ``max_steps`` steps, or with a 
 below ``fall_hip_height``, |q1| above ``fall_torso``, or no step for ``max_step_time``).
 
 Afterwards the feet are located by batched pytorch-kinematics forward kinematics of the
-logged states (:func:`foot_positions`), giving step lengths and swing-foot clearance
-(:func:`walk_metrics`).  :func:`walk_trajectories` logs the run in the trajectory format
-(pinned-model coordinates q1..q5 relative to the stance leg, one trial per step, stance
-leg per trial in ``meta.extra``) and :func:`walking_data` turns the ground truth into GP
-inputs x ∈ R^14 (eq. 11, n = 5).
+logged states (:func:`foot_positions`, :mod:`bemlearn.sim.walk_kinematics`), giving step
+lengths and swing-foot clearance (:func:`walk_metrics`, :mod:`bemlearn.sim.walk_metrics`).
+:func:`walk_trajectories`, :func:`stance_per_sample` and :func:`walking_data`
+(:mod:`bemlearn.sim.walk_data`) turn the logged run into trajectory files and GP inputs
+x ∈ R^14 (eq. 11, n = 5); all are re-exported here.
 """
 
 from __future__ import annotations
 
-import functools
 import logging
-import math
 import time
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
-import torch
 from tqdm.auto import tqdm
 
-from bemlearn.config import ConfigError, from_dict, load_yaml, to_dict
+from bemlearn.config import ConfigError, from_dict, load_yaml
 from bemlearn.control.bem_sources import make_bem_source
-from bemlearn.control.gait import GaitConfig, build_gait, stance_frame
+from bemlearn.control.gait import GaitConfig, build_gait
 from bemlearn.control.walking import WalkExcitation, WalkingController, WalkingGains
-from bemlearn.data.features import gp_inputs
 from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
-from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
-from bemlearn.data.validation import MIN_TRIAL_SAMPLES
+from bemlearn.sim.walk_data import stance_per_sample, walk_trajectories, walking_data
+from bemlearn.sim.walk_kinematics import _FOOT_SITES, _planar_model, foot_positions
+from bemlearn.sim.walk_metrics import walk_metrics
 
 __all__ = ["WalkConfig", "WalkResult", "load_walk_config", "simulate_walk", "foot_positions", "walk_metrics",
            "walk_trajectories", "stance_per_sample", "walking_data"]
 
 log = logging.getLogger(__name__)
-
-_FOOT_SITES = ("foot1", "foot2")
 
 
 @dataclass(frozen=True)
@@ -138,12 +132,6 @@ class WalkResult:
     fell: bool
     metrics: dict
     config: WalkConfig
-
-
-def _planar_model() -> mujoco.MjModel:
-    from bemlearn.robots import asset_path
-
-    return mujoco.MjModel.from_xml_path(str(asset_path("biped_planar.xml")))
 
 
 def _initial_state(model, data, gait, config: WalkConfig, rng: np.random.Generator) -> None:
@@ -251,158 +239,3 @@ def simulate_walk(config: WalkConfig = WalkConfig(), *, bem=None, progress: bool
                           bem_invalid=ctrl.bem_invalid, controller_us_per_tick=1e6 * wall / max(k, 1))
     log.info("walked %d steps in %.2f s (fell: %s)", len(steps), k * dt, fell)
     return result
-
-
-@functools.lru_cache(maxsize=1)
-def _kinematic_chain():
-    """The planar walker re-rooted as a one-joint-per-body tree (x slide → z slide → torso), and its chain.
-
-    :func:`bemlearn.robots.kinematics.chain_from_model` needs at most one joint per body;
-    the walker's torso carries three (x, z, q1), so they are split into nested bodies with
-    the same joint order and a negligible inertia (kinematics only).
-    """
-    from bemlearn.robots import asset_path
-    from bemlearn.robots.kinematics import chain_from_model
-
-    root = ET.fromstring(asset_path("biped_planar.xml").read_text())
-    world = root.find("worldbody")
-    torso = world.find("body[@name='torso']")
-    joints = {j.get("name"): j for j in torso.findall("joint")}
-    inertial = dict(pos="0 0 0", mass="1e-6", diaginertia="1e-9 1e-9 1e-9")
-    base_x = ET.Element("body", name="base_x", pos=torso.get("pos", "0 0 0"))
-    base_z = ET.SubElement(base_x, "body", name="base_z")
-    for body, name in ((base_x, "x"), (base_z, "z")):
-        torso.remove(joints[name])
-        body.insert(0, joints[name])
-        ET.SubElement(body, "inertial", **inertial)
-    torso.set("pos", "0 0 0")
-    world.remove(torso)
-    base_z.append(torso)
-    world.append(base_x)
-    model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
-    return model, chain_from_model(model)
-
-
-def foot_positions(qpos: np.ndarray) -> np.ndarray:
-    """World positions of both foot sites, ``qpos (T, 7)`` [x, z, q1..q5] → ``(T, 2, 3)`` m.
-
-    Batched forward kinematics with pytorch-kinematics (float64) on the re-rooted tree of
-    :func:`_kinematic_chain`.
-    """
-    from bemlearn.robots.kinematics import frame_positions
-
-    model, chain = _kinematic_chain()
-    qpos = np.asarray(qpos, dtype=np.float64)
-    if qpos.ndim != 2 or qpos.shape[1] != model.nq:
-        raise ValueError(f"foot_positions: qpos must have shape (T, {model.nq}), got {qpos.shape}")
-    fk = frame_positions(chain, model, torch.from_numpy(qpos), _FOOT_SITES)
-    return np.stack([fk[n].numpy() for n in _FOOT_SITES], 1)
-
-
-def walk_metrics(result: WalkResult) -> dict:
-    """Steps, step length (m), speed (m/s), step time (s), swing clearance (m), torso and BEM statistics (rad).
-
-    Step lengths are the distances between successive stance feet at touchdown; the
-    clearance of a step is the swing foot's highest point above its sphere radius.
-    Torso statistics use the ticks after the first two steps (steady walking) when
-    there are more than two steps.
-    """
-    r = result
-    n = len(r.steps)
-    out: dict = {"steps": n, "fell": r.fell, "duration_s": float(len(r.t) / r.config.rate_hz)}
-    if len(r.t) == 0:
-        return out
-    model = _planar_model()
-    radius = float(model.geom_size[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "foot1"), 0])
-    feet = foot_positions(r.qpos)
-    touch = foot_positions(r.touchdown_qpos) if n else np.zeros((0, 2, 3))
-    bounds = np.r_[0, r.steps + 1]
-    lengths, clear = [], []
-    for i, k in enumerate(r.steps):
-        leg = r.stance[k]
-        lengths.append(float(touch[i, 2 - leg, 0] - touch[i, leg - 1, 0]))
-        clear.append(float(feet[bounds[i]:k + 1, 2 - leg, 2].max() - radius))
-    steady = slice(r.steps[1] + 1, None) if n > 2 else slice(None)
-    q1, que = r.qpos[steady, 2], r.qu_e[steady]
-    out.update(
-        step_length_mean=float(np.mean(lengths)) if lengths else float("nan"),
-        step_length_std=float(np.std(lengths)) if lengths else float("nan"),
-        step_time_mean=float(np.mean(np.diff(r.t[r.steps]))) if n > 1 else float("nan"),
-        clearance_min=float(np.min(clear)) if clear else float("nan"),
-        speed=float((r.qpos[-1, 0] - r.qpos[steady][0, 0]) / max(r.t[-1] - r.t[steady][0], 1e-9)),
-        torso_mean=float(q1.mean()), torso_min=float(q1.min()), torso_max=float(q1.max()),
-        torso_range=float(q1.max() - q1.min()),
-        qu_e_mean=float(que.mean()), qu_e_min=float(que.min()), qu_e_max=float(que.max()),
-        torque_max=float(np.abs(r.u).max()),
-    )
-    return out
-
-
-def walk_trajectories(result: WalkResult) -> tuple[Trajectory, Trajectory]:
-    """The run as a data trajectory (measured angles, torques) and its ground truth (true q, q̇, q̈).
-
-    Coordinates are the pinned model's q1..q5 *relative to the stance leg* (legs swapped
-    while the walker stands on leg 2); each step is one trial (continuous coordinates
-    within it), ``meta.extra["stance_leg"][trial]`` is the walker's stance leg, the last
-    trial failed iff the walk fell.  Steps shorter than the minimum trial length are
-    dropped and listed in ``meta.extra["dropped_steps"]`` (and logged).
-    """
-    r = result
-    trial = np.searchsorted(r.steps, np.arange(len(r.t)), side="left")  # tick k > steps[i] → trial i + 1
-    frame = lambda a, width: np.stack([stance_frame(np.r_[np.zeros(5 - width), row], leg)[5 - width:]  # noqa: E731
-                                       for row, leg in zip(a, r.stance)]) if len(a) else a
-    ids, counts = np.unique(trial, return_counts=True)
-    short = [int(i) for i, c in zip(ids, counts) if c < MIN_TRIAL_SAMPLES]
-    if short:
-        log.warning("walk_trajectories: dropping step(s) %s shorter than %d samples", short, MIN_TRIAL_SAMPLES)
-    keep = ~np.isin(trial, short)
-    last = int(trial[-1]) if len(trial) else 0
-    stance_of = {int(i): int(r.stance[np.flatnonzero(trial == i)[0]]) for i in ids if int(i) not in short}
-    meta = TrajectoryMeta(
-        robot="biped", joint_names=("q1", "q2", "q3", "q4", "q5"), unactuated="q1",
-        actuator_names=("hip1", "knee1", "hip2", "knee2"), sample_rate_hz=r.config.rate_hz,
-        trial_failed={i: (r.fell and i == last) for i in stance_of},
-        units={"t": "s", "q": "rad", "u": "N*m"},
-        extra={"source": "bemlearn.sim.walking", "coordinates": "pinned biped q1..q5, leg 1 = stance leg",
-               "stance_leg": {str(i): leg for i, leg in stance_of.items()}, "dropped_steps": short,
-               "metrics": {k: (v if not isinstance(v, float) or math.isfinite(v) else None)
-                           for k, v in r.metrics.items() if isinstance(v, (int, float, str, bool))},
-               "config": to_dict(r.config)},
-    )
-    t, tr = r.t[keep], trial[keep]
-    u = frame(r.u, 4)[keep]
-    data = Trajectory(t=t, trial=tr, q=frame(r.q_meas, 5)[keep], u=u, meta=meta)
-    truth = Trajectory(t=t, trial=tr, q=frame(r.qpos[:, 2:], 5)[keep], u=u, meta=meta,
-                       qd=frame(r.qvel[:, 2:], 5)[keep], qdd=frame(r.qacc[:, 2:], 5)[keep])
-    return data, truth
-
-
-def stance_per_sample(traj: Trajectory) -> np.ndarray:
-    """The walker's stance leg (1 or 2) of every sample ``(T,)`` of a :func:`walk_trajectories` file."""
-    try:
-        legs = {int(k): int(v) for k, v in traj.meta.extra["stance_leg"].items()}
-        return np.array([legs[int(i)] for i in traj.trial], dtype=np.int64)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(
-            f"stance_per_sample: meta.extra['stance_leg'] must map every trial id to 1 or 2 ({exc!r})"
-        ) from None
-
-
-def walking_data(truth: Trajectory, *, skip_after_impact: int = 3) -> tuple[np.ndarray, np.ndarray]:
-    """GP training pairs from walking ground truth: x = [q̈_a, q̇_a, q_a, q̈_1, q̇_1] ∈ R^14, y = q1 (eq. 11).
-
-    Args:
-        truth: a ground-truth trajectory of :func:`walk_trajectories` (stance-relative q).
-        skip_after_impact: samples dropped at the start of every step (the double-support
-            transient, where the pinned model does not hold).
-
-    Returns:
-        ``X (N, 14)`` [rad/s², rad/s, rad, rad/s², rad/s] and ``y (N,)`` rad.
-    """
-    if not truth.has_ground_truth:
-        raise ValueError("walking_data: the trajectory has no qd/qdd (pass the ground-truth file, *.truth.*)")
-    if truth.meta.joint_names != ("q1", "q2", "q3", "q4", "q5") or truth.meta.unactuated != "q1":
-        raise ValueError(f"walking_data: expected biped joints q1..q5 with q1 unactuated, got {truth.meta.joint_names}")
-    rows = np.concatenate([np.arange(s.rows.start + skip_after_impact, s.rows.stop) for s in truth.trial_slices()])
-    X = gp_inputs(truth.q[rows], truth.qd[rows], truth.qdd[rows], unactuated_index=0)
-    return X, truth.q[rows, 0].copy()
