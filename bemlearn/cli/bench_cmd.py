@@ -4,7 +4,8 @@
 * ``bench predict [CHECKPOINT]`` — predictor latency, throughput and GPyTorch parity (issue 5);
 * ``bench sim PREDICTOR`` — the learned BEM in the EIC loop, mismatch study, Lemma 1, speed (issue 6);
 * ``bench derivatives [CONFIG]`` — derivative estimators and their effect on the learned BEM (issue 3);
-* ``bench gpdm`` — GPDM fit time and recovery on synthetic gait data (issue 7).
+* ``bench gpdm`` — GPDM fit time and recovery on synthetic gait data (issue 7);
+* ``bench biped-bem [CONFIG]`` — learned torso BEM error over training subsets (issue 7).
 """
 
 from __future__ import annotations
@@ -61,6 +62,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     g = sub.add_parser("gpdm", help="GPDM fit time and recovery of c and χ on synthetic gait data")
     g.add_argument("--max-iter", type=int, default=500)
     g.set_defaults(func=_gpdm)
+    b = sub.add_parser("biped-bem", help="learned torso BEM vs model BEM on held-out walks, over training subsets",
+                       description="Fit the biped's torso-BEM GP (as `bemlearn run configs/biped.yaml` does) on "
+                       "several random training subsets of the same walks and score each on the held-out walks.")
+    b.add_argument("config", type=Path, nargs="?", default=Path("configs/biped.yaml"))
+    b.add_argument("--data", type=Path, default=None,
+                   help="data.npz of a biped run (default: collect the walks of the config, about 30 s)")
+    b.add_argument("--subsets", type=int, default=4, help="training subsets (dataset seeds seed … seed + k − 1)")
+    b.add_argument("--no-progress", action="store_true")
+    b.set_defaults(func=_biped_bem)
 
 
 def run_predict(args: argparse.Namespace) -> int:
@@ -133,4 +143,16 @@ def _gpdm(args: argparse.Namespace) -> int:
 
     result = run_gpdm_bench(config=dataclasses.replace(GPDMConfig(), max_iter=args.max_iter))
     print(json.dumps(result, indent=2, default=float))
+    return 0
+
+
+def _biped_bem(args: argparse.Namespace) -> int:
+    from bemlearn.bench.biped_bem_bench import format_biped_bem_bench, run_biped_bem_bench
+    from bemlearn.pipeline.biped import load_biped_config
+
+    if args.subsets < 1:
+        raise ValueError(f"--subsets: expected a positive integer, got {args.subsets}")
+    result = run_biped_bem_bench(load_biped_config(args.config), data=args.data, subsets=args.subsets,
+                                 progress=not args.no_progress)
+    print(format_biped_bem_bench(result))
     return 0

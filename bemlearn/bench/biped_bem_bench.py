@@ -1,0 +1,120 @@
+"""``bemlearn bench biped-bem``: learned torso BEM error over training subsets (Section IV-B).
+
+The learned torso BEM μ(x_0^e) (eq. 14) of the biped depends strongly on which walking
+samples the GP is trained on: the maximum-likelihood fit lands in one of two basins (see
+:mod:`bemlearn.pipeline.biped`).  A single run's RMSE is therefore one draw; this benchmark
+measures the spread.  For ``subsets`` dataset seeds it draws ``dataset.n_points`` training
+pairs of eq. (11) from the same walks, fits and exports the GP exactly as ``bemlearn run``
+does (:func:`~bemlearn.pipeline.biped.train_walking_gp`), and scores the exported
+``bem_mean`` against the model-based torso BEM (eq. 9) at the controller's queries x^d of
+the held-out walks (simulated once, :func:`~bemlearn.pipeline.biped.heldout_walks`).
+
+The walks are read from ``data`` (a ``data.npz`` written by ``bemlearn run
+configs/biped.yaml``, with its ``.truth.npz`` beside it when ``dataset.derivatives`` is
+``truth``), or collected from ``config.collect`` when ``data`` is ``None``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import statistics
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from tqdm.auto import tqdm
+
+__all__ = ["BipedBEMSubset", "BipedBEMBenchResult", "run_biped_bem_bench", "format_biped_bem_bench"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class BipedBEMSubset:
+    """One training subset: its seed, fit (loss in nats per point, seconds) and held-out RMSE per gait (rad)."""
+
+    seed: int
+    n_train: int
+    loss: float
+    seconds: float
+    rmse: dict[str, float]
+    rmse_single_support: dict[str, float]
+
+
+@dataclass(frozen=True)
+class BipedBEMBenchResult:
+    """Every subset of :func:`run_biped_bem_bench` and where the walks came from."""
+
+    source: str
+    derivatives: str
+    pool: int
+    subsets: list[BipedBEMSubset]
+
+
+def run_biped_bem_bench(config, *, data: str | Path | None = None, subsets: int = 4,
+                        progress: bool = True) -> BipedBEMBenchResult:
+    """Fit the torso-BEM GP on ``subsets`` random training subsets and score each (module docstring).
+
+    Args:
+        config: a :class:`~bemlearn.pipeline.biped.BipedConfig` (``collect``, ``dataset``,
+            ``train``, ``evaluate`` are used; subset i uses ``dataset.seed + i``).
+        data: walks to draw from (``data.npz``); ``None`` collects them from ``config.collect``.
+        subsets: number of training subsets (≥ 1).
+        progress: show progress bars.
+    """
+    from bemlearn.data import ground_truth_path, read_trajectory, write_trajectory
+    from bemlearn.pipeline.biped import (collect_walks, concat_trajectories, heldout_bem, heldout_walks,
+                                         train_walking_gp, walking_gp_data)
+    from bemlearn.sim.walking import walk_trajectories
+
+    if subsets < 1:
+        raise ValueError(f"subsets: expected a positive integer, got {subsets}")
+    with tempfile.TemporaryDirectory() as tmp:
+        if data is None:
+            walks = collect_walks(config, progress=progress)
+            measured, truth = (concat_trajectories(list(p)) for p in zip(*(walk_trajectories(w) for w in walks)))
+            data_path = write_trajectory(measured, Path(tmp) / "data.npz")
+            source = f"{len(walks)} walks collected from config.collect (seed {config.collect.seed})"
+        else:
+            data_path = Path(data)
+            if not data_path.is_file():
+                raise FileNotFoundError(f"--data: no such file {data_path} (expected the data.npz of a biped run)")
+            measured = read_trajectory(data_path)
+            gt = ground_truth_path(data_path)
+            truth = read_trajectory(gt) if gt.is_file() else None
+            source = str(data_path)
+        held = heldout_walks(config, progress=progress)
+        rows, pool = [], 0
+        for i in tqdm(range(subsets), desc="training subsets", disable=not progress):
+            dcfg = dataclasses.replace(config.dataset, seed=config.dataset.seed + i)
+            X, y, rep = walking_gp_data(measured, truth, dcfg)
+            pool = rep["pool"]
+            t0 = time.perf_counter()
+            fit = train_walking_gp(X, y, Path(tmp) / f"subset{i}", config=config.train, data_path=data_path,
+                                   progress=False)
+            seconds = time.perf_counter() - t0
+            h = heldout_bem(Path(tmp) / f"subset{i}" / "bem_predictor.pt", config, walks=held, progress=False)
+            rows.append(BipedBEMSubset(dcfg.seed, len(y), float(fit["fit"]["loss"]), seconds,
+                                       {g: v["rmse"] for g, v in h.items()},
+                                       {g: v["rmse_single_support"] for g, v in h.items()}))
+            log.info("subset %d: %s", dcfg.seed, {g: round(v["rmse"], 4) for g, v in h.items()})
+    return BipedBEMBenchResult(source, config.dataset.derivatives, pool, rows)
+
+
+def format_biped_bem_bench(result: BipedBEMBenchResult) -> str:
+    """A table of the subsets and min / median / max per gait, against the 0.02 rad target."""
+    gaits = list(result.subsets[0].rmse)
+    lines = [f"walks: {result.source}; derivatives: {result.derivatives}; pool {result.pool} samples", "",
+             "| dataset seed | N | loss (nats/pt) | fit + export (s) | " + " | ".join(f"RMSE {g} (rad)" for g in gaits) + " |",
+             "| --- | --- | --- | --- | " + " | ".join("---" for _ in gaits) + " |"]
+    for r in result.subsets:
+        lines.append(f"| {r.seed} | {r.n_train} | {r.loss:.4f} | {r.seconds:.1f} | "
+                     + " | ".join(f"{r.rmse[g]:.4f}" for g in gaits) + " |")
+    lines.append("")
+    for g in gaits:
+        v = [r.rmse[g] for r in result.subsets]
+        lines.append(f"{g}: RMSE min {min(v):.4f}, median {statistics.median(v):.4f}, max {max(v):.4f} rad "
+                     f"over {len(v)} subsets (target <= 0.02 rad: {'met' if max(v) <= 0.02 else 'missed'})")
+    return "\n".join(lines)

@@ -1,0 +1,133 @@
+"""The learned torso BEM of the biped: GP fit of eq. (11)–(12), export, held-out evaluation.
+
+Stages 3–4 of :mod:`bemlearn.pipeline.biped`: :func:`train_walking_gp` fits the GP and
+exports its predictor; :func:`heldout_walks` simulates walks with other seeds (model BEM in
+the loop), and :func:`bem_errors` / :func:`heldout_bem` score a learned μ(x_0^e) (eq. 14)
+against the model-based BEM (eq. 9) at the controller's queries.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from bemlearn._version import __version__
+from bemlearn.control.walking import WalkExcitation
+from bemlearn.fitting.gp_config import GPConfig
+from bemlearn.pipeline.biped_config import BipedConfig
+from bemlearn.sim.walking import WalkResult
+
+__all__ = ["train_walking_gp", "heldout_walks", "bem_errors", "heldout_bem"]
+
+
+def train_walking_gp(X: np.ndarray, y: np.ndarray, out_dir: str | Path, *, config: GPConfig, data_path: str | Path,
+                     extra: dict | None = None, progress: bool = True) -> dict:
+    """Fit the GP of eq. (11) on ``X (N, 14)``, ``y (N,)`` rad; write checkpoint, TensorBoard, predictor.
+
+    Writes ``out_dir/{checkpoint.pt, bem_predictor.pt, tb/, metrics.json}``; returns the metrics.
+    """
+    from torch.utils.tensorboard import SummaryWriter
+
+    from bemlearn.data import Normalization, gp_input_names
+    from bemlearn.export.checkpoint import write_checkpoint
+    from bemlearn.export.export_run import export_run
+    from bemlearn.fitting import build_gp, fit_gp, hyperparameter_metrics
+    from bemlearn.models import predictor_state
+    from bemlearn.pipeline.train import file_sha256
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    joints = ("q1", "q2", "q3", "q4", "q5")
+    names = gp_input_names(joints, "q1")
+    norm = Normalization.fit(torch.from_numpy(X), torch.from_numpy(y), names=names)
+    dtype = config.torch_dtype
+    xn, yn = norm.normalize_x(torch.from_numpy(X)).to(dtype), norm.normalize_y(torch.from_numpy(y)).to(dtype)
+    model, lik = build_gp(xn, yn, config=config)
+    writer = SummaryWriter(str(out / "tb"))
+
+    def callback(step: int, metrics: dict[str, float]) -> None:
+        for k, v in metrics.items():
+            tag = f"lengthscale/{names[int(k.split('_')[1])]}" if k.startswith("lengthscale_") else f"train/{k}"
+            writer.add_scalar(tag, v, step)
+
+    result = fit_gp(model, lik, xn, yn, config=config, callback=callback, progress=progress)
+    writer.close()
+    model.eval()
+    lik.eval()
+    state = predictor_state(model, lik, x_mean=norm.x_mean, x_std=norm.x_std, y_mean=norm.y_mean, y_std=norm.y_std,
+                            input_names=names, n_train=len(y))
+    hyp = hyperparameter_metrics(model, lik)
+    units = {n: "rad/s²" if n.startswith("qdd_") else "rad/s" if n.startswith("qd_") else "rad" for n in names}
+    model_state = {k: v.detach().cpu() for k, v in model.state_dict().items() if isinstance(v, torch.Tensor)}
+    if not any(k.startswith("likelihood.") for k in model_state):
+        model_state.update({f"likelihood.{k}": v.detach().cpu() for k, v in lik.state_dict().items()})
+    write_checkpoint(out, model_state=model_state, predictor_state=state, metadata={
+        "robot": "biped", "joint_names": list(joints), "actuated_names": list(joints[1:]), "unactuated_name": "q1",
+        "m": 4, "input_names": list(names), "units": units, "n_train": len(y),
+        "n_inducing": None if config.kind == "exact" else int(state.n_support),
+        "hyperparameters": hyp, "bemlearn_version": __version__, "data_sha256": file_sha256(data_path),
+        "extra": {"data_file": str(data_path), **(extra or {})}})
+    export_run(out, fmt="torchscript")
+    metrics = {"fit": {"loss": result.loss, "steps": result.steps, "seconds": result.seconds,
+                       "stop_reason": result.stop_reason},
+               "n_train": len(y), "noise_std_rad": float(state.y_std * state.noise.sqrt()),
+               "lengthscale_physical": {n: float(state.lengthscale[j] * state.x_std[j]) for j, n in enumerate(names)}}
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=float))
+    return metrics
+
+
+def _step_position(result) -> np.ndarray:
+    """Ticks since the last touchdown, ``(T,)`` (the first step counts from the start)."""
+    starts = np.r_[0, result.steps + 1]
+    k = np.arange(len(result.t))
+    return k - starts[np.searchsorted(starts, k, side="right") - 1]
+
+
+def heldout_walks(config: BipedConfig, *, progress: bool = True) -> dict[str, WalkResult]:
+    """The held-out walks of ``config.evaluate``: per gait, ``heldout_duration_s`` with the model
+    BEM in the loop, seed ``evaluate.seed + i``, no excitation."""
+    from bemlearn.sim.walking import simulate_walk
+
+    out = {}
+    for i, gait in enumerate(tqdm(config.evaluate.gaits, desc="held-out walks", disable=not progress)):
+        w = config.walk
+        cfg = dataclasses.replace(w, duration_s=config.evaluate.heldout_duration_s, max_steps=0, bem_source="model",
+                                  gait=dataclasses.replace(w.gait, kind=gait), seed=config.evaluate.seed + i,
+                                  initial_noise=config.collect.initial_noise, excitation=WalkExcitation())
+        out[gait] = simulate_walk(cfg, progress=False)
+    return out
+
+
+def bem_errors(bem, walks: dict[str, WalkResult], *, skip_after_impact: int) -> dict:
+    """Learned BEM ``bem(x (B, 12)) -> (B,)`` against the model-based BEM (eq. 9) at each walk's
+    controller queries x^d = [q̈_a^d, q̇_a^d, q_a^d]: per gait the RMSE and max error over all
+    ticks and the RMSE over single support (``skip_after_impact`` ticks after each touchdown
+    left out), rad."""
+    out = {}
+    for gait, r in walks.items():
+        e = np.asarray(bem(r.bem_x)).reshape(-1) - r.qu_e
+        ss = _step_position(r) >= skip_after_impact
+        out[gait] = {"rmse": float(np.sqrt(np.mean(e**2))), "max_abs": float(np.abs(e).max()),
+                     "rmse_single_support": float(np.sqrt(np.mean(e[ss] ** 2))), "ticks": int(len(e)),
+                     "steps": len(r.steps), "fell": bool(r.fell), "model_bem_std": float(r.qu_e.std())}
+    return out
+
+
+def heldout_bem(predictor_path: str | Path, config: BipedConfig, *, walks: dict[str, WalkResult] | None = None,
+                progress: bool = True) -> dict:
+    """Learned μ(x_0^e) (eq. 14) of the exported predictor vs the model-based BEM (eq. 9), held-out walks.
+
+    ``walks``: from :func:`heldout_walks` (simulated here if ``None``).  Returns
+    :func:`bem_errors` of the predictor's ``bem_mean``.
+    """
+    from bemlearn.control.bem_sources import PredictorBEM
+    from bemlearn.robots import load
+
+    pred = PredictorBEM(predictor_path, robot=load("biped"))
+    walks = heldout_walks(config, progress=progress) if walks is None else walks
+    return bem_errors(pred, walks, skip_after_impact=config.evaluate.skip_after_impact)

@@ -1,0 +1,119 @@
+"""Walking data of the biped pipeline: training walks → one trajectory → GP pairs of eq. (11).
+
+Stages 1–2 of :mod:`bemlearn.pipeline.biped`: :func:`collect_walks` simulates the training
+walks of ``collect:``, :func:`concat_trajectories` joins the walks' trajectories (one trial
+per step) and :func:`walking_gp_data` draws the training pairs x ∈ R^14, y = q1 of eq. (11).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from bemlearn.data.trajectory import Trajectory
+from bemlearn.pipeline.biped_config import BipedConfig, WalkDatasetConfig
+from bemlearn.sim.walking import WalkResult
+
+__all__ = ["collect_walks", "concat_trajectories", "walking_gp_data"]
+
+log = logging.getLogger(__name__)
+
+
+def collect_walks(config: BipedConfig, *, progress: bool = True) -> list[WalkResult]:
+    """The training walks of ``config.collect`` (:mod:`bemlearn.pipeline.biped`), as ``WalkResult`` s."""
+    from bemlearn.sim.walking import simulate_walk
+
+    c = config.collect
+    rng = np.random.default_rng(c.seed)
+    jobs = [(g, c.seed + i) for i, g in enumerate(g for g in c.gaits for _ in range(c.walks_per_gait))]
+    walks = []
+    for gait, seed in tqdm(jobs, desc="training walks", disable=not progress):
+        kp_u = float(rng.uniform(*c.kp_u))
+        g = config.walk.gait
+        g = dataclasses.replace(g, kind=gait, design=dataclasses.replace(g.design, step_length=float(rng.uniform(*c.step_length))))
+        cfg = dataclasses.replace(
+            config.walk, duration_s=c.duration_s, max_steps=0, gait=g, bem_source="model", predictor=None,
+            gains=dataclasses.replace(config.walk.gains, kp_u=kp_u, kd_u=2.0 * kp_u**0.5),
+            initial_noise=c.initial_noise, seed=seed, excitation=dataclasses.replace(c.excitation, seed=seed))
+        walks.append(simulate_walk(cfg, progress=False))
+    log.info("collected %d walks: %d steps, %d fell", len(walks), sum(len(w.steps) for w in walks),
+             sum(w.fell for w in walks))
+    return walks
+
+
+def concat_trajectories(parts: list[Trajectory]) -> Trajectory:
+    """One trajectory of several ``walk_trajectories`` outputs, trial ids renumbered consecutively.
+
+    ``meta.extra["stance_leg"]`` is merged, ``meta.extra["walks"]`` lists each walk's first trial id.
+    """
+    parts = [p for p in parts if p.n_samples]
+    if not parts:
+        raise ValueError("concat_trajectories: no samples in any walk")
+    arrays: dict[str, list] = {k: [] for k in ("t", "trial", "q", "u", "qd", "qdd")}
+    failed, legs, firsts, offset = {}, {}, [], 0
+    for p in parts:
+        ids = {int(i): offset + j for j, i in enumerate(p.trial_ids)}
+        firsts.append(offset)
+        for k in arrays:
+            v = getattr(p, k)
+            arrays[k].append(np.vectorize(ids.get)(v) if k == "trial" else v)
+        failed.update({ids[i]: f for i, f in p.meta.trial_failed.items() if i in ids})
+        legs.update({str(ids[int(i)]): s for i, s in p.meta.extra.get("stance_leg", {}).items() if int(i) in ids})
+        offset += len(ids)
+    extra = {"source": "bemlearn.pipeline.biped", "stance_leg": legs, "walks": firsts,
+             "coordinates": parts[0].meta.extra.get("coordinates")}
+    meta = dataclasses.replace(parts[0].meta, trial_failed=failed, extra=extra)
+    truth = parts[0].has_ground_truth
+    cat = {k: np.concatenate(v) for k, v in arrays.items() if truth or k not in ("qd", "qdd")}
+    return Trajectory(meta=meta, **cat)
+
+
+def walking_gp_data(data: Trajectory, truth: Trajectory | None, config: WalkDatasetConfig) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Training pairs of eq. (11) from walk trajectories (:mod:`bemlearn.pipeline.biped`, step 2).
+
+    Args:
+        data: the measured trajectory (quantized q), stance-relative q1..q5.
+        truth: its ground truth (used only with ``derivatives: truth``), or ``None``.
+        config: :class:`WalkDatasetConfig`.
+
+    Returns:
+        ``X (N, 14)`` [rad/s², rad/s, rad, rad/s², rad/s], ``y (N,)`` rad, and a report of counts.
+    """
+    from bemlearn.data import estimate_derivatives, gp_inputs, make_estimator
+
+    if data.meta.joint_names != ("q1", "q2", "q3", "q4", "q5") or data.meta.unactuated != "q1":
+        raise ValueError(f"walking_gp_data: expected biped joints q1..q5, q1 unactuated; got {data.meta.joint_names}")
+    est = make_estimator(config.derivative, config.derivative_options, where="dataset.derivative_options")
+    need = max(est.min_samples(data.meta.sample_rate_hz), config.skip_after_impact + config.skip_before_impact + 1)
+    keep = [s.trial_id for s in data.trial_slices() if s.n_samples >= need]
+    report = {"steps": len(data.trial_ids), "steps_too_short": len(data.trial_ids) - len(keep)}
+    if report["steps_too_short"]:
+        log.info("walking_gp_data: %d of %d steps shorter than %d samples left out", report["steps_too_short"],
+                 report["steps"], need)
+    data = data.select_trials(keep)
+    if config.derivatives == "truth":
+        if truth is None or not truth.has_ground_truth:
+            raise ValueError("dataset.derivatives = truth needs the ground-truth trajectory")
+        truth = truth.select_trials(keep)
+        q, qd, qdd = truth.q, truth.qd, truth.qdd
+    else:
+        q, (qd, qdd) = data.q, estimate_derivatives(data, est)
+    X = gp_inputs(q, qd, qdd, unactuated_index=0)
+    rows = np.concatenate([np.arange(s.rows.start + config.skip_after_impact, s.rows.stop - config.skip_before_impact)
+                           for s in data.trial_slices()])
+    inside = np.abs(q[rows, 0]) <= config.qu_window
+    report["outside_qu_window"] = int((~inside).sum())
+    rows = rows[inside]
+    report["pool"] = int(len(rows))
+    log.info("walking_gp_data: %d samples in the pool (%d with |q1| > %g rad left out)", len(rows),
+             report["outside_qu_window"], config.qu_window)
+    if len(rows) == 0:
+        raise ValueError("walking_gp_data: no samples left (steps too short for the skips, or |q1| above qu_window)")
+    rng = np.random.default_rng(config.seed)
+    if len(rows) > config.n_points:
+        rows = np.sort(rng.choice(rows, config.n_points, replace=False))
+    report["n_train"] = int(len(rows))
+    return X[rows], q[rows, 0].copy(), report

@@ -1,0 +1,68 @@
+"""``bemlearn bench biped-bem``: subsets, scores and errors (small walks, a few GP steps)."""
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bemlearn.bench.biped_bem_bench import format_biped_bem_bench, run_biped_bem_bench
+from bemlearn.cli import main
+from bemlearn.fitting import GPConfig
+from bemlearn.pipeline.biped import (BipedConfig, BipedEvaluateConfig, WalkCollectConfig, WalkDatasetConfig,
+                                     heldout_bem, heldout_walks)
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def small():
+    return BipedConfig(
+        collect=WalkCollectConfig(gaits=("default",), walks_per_gait=2, duration_s=1.5),
+        dataset=WalkDatasetConfig(derivatives="truth", n_points=60, skip_after_impact=5, skip_before_impact=3),
+        train=GPConfig(max_iter=5),
+        evaluate=BipedEvaluateConfig(gaits=("default",), heldout_duration_s=1.5),
+    )
+
+
+def test_subsets_are_scored_like_the_pipeline(small, tmp_path):
+    result = run_biped_bem_bench(small, subsets=2, progress=False)
+    assert [r.seed for r in result.subsets] == [0, 1] and result.derivatives == "truth"
+    assert all(r.n_train == 60 and np.isfinite(r.loss) and set(r.rmse) == {"default"} for r in result.subsets)
+    # different subsets, different fits
+    assert result.subsets[0].rmse["default"] != result.subsets[1].rmse["default"]
+    text = format_biped_bem_bench(result)
+    assert "| 0 | 60 |" in text and "default: RMSE min" in text and "target <= 0.02 rad" in text
+
+
+def test_heldout_walks_are_shared_bit_identically(small, tmp_path):
+    # heldout_bem with precomputed walks equals heldout_bem simulating them itself
+    from bemlearn.data import write_trajectory
+    from bemlearn.pipeline.biped import collect_walks, concat_trajectories, train_walking_gp, walking_gp_data
+    from bemlearn.sim.walking import walk_trajectories
+
+    walks = collect_walks(small, progress=False)
+    data, truth = (concat_trajectories(list(p)) for p in zip(*(walk_trajectories(w) for w in walks)))
+    path = write_trajectory(data, tmp_path / "data.npz")
+    X, y, _ = walking_gp_data(data, truth, small.dataset)
+    train_walking_gp(X, y, tmp_path / "gp", config=small.train, data_path=path, progress=False)
+    a = heldout_bem(tmp_path / "gp" / "bem_predictor.pt", small, progress=False)
+    b = heldout_bem(tmp_path / "gp" / "bem_predictor.pt", small, walks=heldout_walks(small, progress=False))
+    assert a == b
+
+
+def test_cli_errors(tmp_path, capsys):
+    assert main(["bench", "biped-bem", str(ROOT / "configs" / "biped.yaml"), "--subsets", "0"]) == 2
+    assert "--subsets: expected a positive integer, got 0" in capsys.readouterr().err
+    missing = tmp_path / "nope.npz"
+    assert main(["bench", "biped-bem", str(ROOT / "configs" / "biped.yaml"), "--data", str(missing), "--subsets", "1",
+                 "--no-progress"]) == 2
+    assert f"--data: no such file {missing}" in capsys.readouterr().err
+
+
+def test_config_dataclass_defaults_match_the_shipped_yaml():
+    from bemlearn.pipeline.biped import load_biped_config
+
+    shipped = load_biped_config(ROOT / "configs" / "biped.yaml")
+    assert dataclasses.asdict(BipedConfig().collect) == dataclasses.asdict(shipped.collect)
+    assert dataclasses.asdict(BipedConfig().dataset) == dataclasses.asdict(shipped.dataset)
