@@ -325,10 +325,14 @@ def run_predict_bench(
                 lat.update(_gpytorch_latency(gp, x1, repeats=gpytorch_repeats))
                 m_ref, s_ref = (torch.cat(t) for t in zip(*(gp(c) for c in xp.split(2000))))
                 m_ts, s_ts = ts.forward(xp)
+                m_ld = _extended_precision_mean(state, xp)
                 parity = {
                     "n": float(n_parity),
                     "mean_abs": float((m_ts - m_ref).abs().max()),
                     "std_rel": float(((s_ts - s_ref) / s_ref).abs().max()),
+                    "mean_abs_ours_vs_extended": float(np.abs(m_ts.numpy() - m_ld).max()),
+                    "mean_abs_gpytorch_vs_extended": float(np.abs(m_ref.numpy() - m_ld).max()),
+                    "cond_K": float(torch.linalg.cond(kernel_gram(state))),
                 }
             else:
                 with _threads(n_batch):
@@ -337,6 +341,26 @@ def run_predict_bench(
                     if predictor.bem.triangular:
                         batch_s["floor: v = L⁻¹k alone"] = _solve_floor(predictor, xb)
     return PredictBenchResult(model, threads, lat, batch, batch_s, n_batch, parity, (load_before, _loadavg()), notes)
+
+
+def _extended_precision_mean(state: PredictorState, x: torch.Tensor) -> np.ndarray:
+    """μ(x_0^e) = y_mean + y_std Σ_j α_j k_j (eq. 12, 14) of ``state``'s own α in NumPy ``longdouble``.
+
+    The reference for the mean parity: the rebuilt GPyTorch model re-solves K α' = K α, so
+    its mean carries an error of about cond(K)·ε·‖α‖ that neither side can remove.
+    """
+    ld = np.longdouble
+    n = x.shape[1]
+    xt = np.zeros((x.shape[0], state.dim), dtype=ld)
+    xt[:, :n] = x.numpy()
+    xt = (xt - state.x_mean.numpy().astype(ld)) / state.x_std.numpy().astype(ld) / state.lengthscale.numpy().astype(ld)
+    zs = state.Z.numpy().astype(ld) / state.lengthscale.numpy().astype(ld)
+    alpha = state.alpha.numpy().astype(ld)
+    out = np.empty(x.shape[0], dtype=ld)
+    for i in range(0, x.shape[0], 500):
+        d2 = ((xt[i : i + 500, None, :] - zs[None]) ** 2).sum(-1)
+        out[i : i + 500] = (ld(float(state.outputscale)) * np.exp(-0.5 * d2)) @ alpha
+    return ld(float(state.y_mean)) + ld(float(state.y_std)) * out
 
 
 class _Identity(torch.nn.Module):
@@ -408,6 +432,12 @@ def format_predict_bench(result: PredictBenchResult) -> str:
         lines.append(
             f"parity with GPyTorch on {int(result.parity['n'])} inputs: max |Δmean| = {result.parity['mean_abs']:.2e} rad "
             f"(target 1e-10), max rel |Δstd| = {result.parity['std_rel']:.2e} (target 1e-8)"
+        )
+        lines.append(
+            f"  mean against the same posterior in extended precision (NumPy longdouble, α of the model): "
+            f"TorchScript {result.parity['mean_abs_ours_vs_extended']:.2e} rad, GPyTorch "
+            f"{result.parity['mean_abs_gpytorch_vs_extended']:.2e} rad (it re-solves K α' = K α; cond K = "
+            f"{result.parity['cond_K']:.1e})"
         )
     lines += [f"note: {n}" for n in result.notes]
     return "\n".join(lines)
