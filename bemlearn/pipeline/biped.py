@@ -50,7 +50,11 @@ torso BEM misses the 0.02 rad target at the controller's queries x^d.  Findings:
   needs.  Over the same four training subsets (below) the 0.12 s window gives 0.079–0.096 /
   0.117–0.128 rad.
 * With both defaults the sensor-path GP gives 0.035–0.064 rad (default gait) and
-  0.062–0.101 rad (human gait) over four training subsets, against 0.103 / 0.116 before.
+  0.062–0.101 rad (human gait) over six training subsets (``bemlearn bench biped-bem``),
+  against 0.103 / 0.116 before.  Medians over three subsets of other settings were no
+  better: torso loop k_p,u 150–300 (0.059 / 0.078), torso excitation 0.05 rad (0.044 /
+  0.090), joint excitation 0.04 or 0.12 rad (0.070 / 0.123, 0.080 / 0.099), twice the walks
+  (0.051 / 0.079), N = 1800 points (0.070 / 0.115; N = 2500 on one subset 0.069 / 0.114).
 """
 
 from __future__ import annotations
