@@ -47,7 +47,7 @@ torso BEM misses the 0.02 rad target at the controller's queries x^d.  Findings:
   derivatives (the contact is not the pinned model's ideal pin).  Pointwise, the 0.2 s window
   is *less* accurate (q̈ off by ~70 % RMS against ~45 % on short test walks): the smoothing is
   linear, so smoothed q, q̇, q̈ stay close to a solution of Γ = 0, which is what eq. (11)
-  needs.  Over the same four training subsets (below) the 0.12 s window gives 0.079–0.096 /
+  needs.  Over training subsets 0–3 the 0.12 s window gives 0.079–0.096 /
   0.117–0.128 rad.
 * With both defaults the sensor-path GP gives 0.035–0.064 rad (default gait) and
   0.062–0.101 rad (human gait) over six training subsets (``bemlearn bench biped-bem``),
