@@ -40,7 +40,11 @@ torso BEM misses the 0.02 rad target at the controller's queries x^d.  Findings:
   default, two random, three low-noise, one with a 100-step hold) all ended in the first;
   holding the normalized q̈ lengthscales at 0.5 or 1 for 300 steps before freeing them
   reached the second (0.031 / 0.062 rad).  L-BFGS from the data-statistics start (the
-  shipped fit) lands in either, depending on the training subset.
+  shipped fit) lands in either, depending on the training subset.  A kernel shaped like
+  Γ, which is affine in q̈ (k = k_SE(z) + k_SE'(z)·q̈ᵀΛq̈', z = [q̇, q_a]), lowers the
+  noise-free-label floor to 0.0095 / 0.027 rad, but on the measured labels it too ended in the
+  posture basin (0.068 / 0.115 rad).  A Gamma(3, 6) lengthscale prior made it worse (median
+  0.065 / 0.107 rad over three subsets).
 * The q1-equivalent Γ residual (root of Γ = 0 minus the measured q1) with Savitzky–Golay q̈
   from 4096-count angles at 115 Hz: median 0.015 rad, rms 0.035 rad over 0.12 s; median
   0.010 rad, rms 0.019 rad over 0.2 s (now the default); median 0.009 rad with the true
