@@ -43,7 +43,8 @@ torso BEM misses the 0.02 rad target at the controller's queries x^d.  Findings:
   shipped fit) lands in either, depending on the training subset.  A kernel shaped like
   Γ, which is affine in q̈ (k = k_SE(z) + k_SE'(z)·q̈ᵀΛq̈', z = [q̇, q_a]), lowers the
   noise-free-label floor to 0.0095 / 0.027 rad, but on the measured labels it too ended in the
-  posture basin (0.068 / 0.115 rad).  A Gamma(3, 6) lengthscale prior made it worse (median
+  posture basin (0.068 / 0.115 rad on true derivatives; 0.060 / 0.135 rad on the sensor path
+  with its q̈ weights held for 300 Adam steps first).  A Gamma(3, 6) lengthscale prior made it worse (median
   0.065 / 0.107 rad over three subsets).
 * The q1-equivalent Γ residual (root of Γ = 0 minus the measured q1) with Savitzky–Golay q̈
   from 4096-count angles at 115 Hz: median 0.015 rad, rms 0.035 rad over 0.12 s; median
