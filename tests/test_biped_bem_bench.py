@@ -38,11 +38,10 @@ def test_subsets_are_scored_like_the_pipeline(small, tmp_path):
 def test_heldout_walks_are_shared_bit_identically(small, tmp_path):
     # heldout_bem with precomputed walks equals heldout_bem simulating them itself
     from bemlearn.data import write_trajectory
-    from bemlearn.pipeline.biped import collect_walks, concat_trajectories, train_walking_gp, walking_gp_data
-    from bemlearn.sim.walking import walk_trajectories
+    from bemlearn.pipeline.biped import collect_walks, train_walking_gp, walking_gp_data, walks_trajectories
 
     walks = collect_walks(small, progress=False)
-    data, truth = (concat_trajectories(list(p)) for p in zip(*(walk_trajectories(w) for w in walks)))
+    data, truth = walks_trajectories(walks)
     path = write_trajectory(data, tmp_path / "data.npz")
     X, y, _ = walking_gp_data(data, truth, small.dataset)
     train_walking_gp(X, y, tmp_path / "gp", config=small.train, data_path=path, progress=False)

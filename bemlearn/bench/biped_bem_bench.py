@@ -65,16 +65,15 @@ def run_biped_bem_bench(config, *, data: str | Path | None = None, subsets: int 
         progress: show progress bars.
     """
     from bemlearn.data import ground_truth_path, read_trajectory, write_trajectory
-    from bemlearn.pipeline.biped import (collect_walks, concat_trajectories, heldout_bem, heldout_walks,
-                                         train_walking_gp, walking_gp_data)
-    from bemlearn.sim.walking import walk_trajectories
+    from bemlearn.pipeline.biped import (collect_walks, heldout_bem, heldout_walks, train_walking_gp,
+                                         walking_gp_data, walks_trajectories)
 
     if subsets < 1:
         raise ValueError(f"subsets: expected a positive integer, got {subsets}")
     with tempfile.TemporaryDirectory() as tmp:
         if data is None:
             walks = collect_walks(config, progress=progress)
-            measured, truth = (concat_trajectories(list(p)) for p in zip(*(walk_trajectories(w) for w in walks)))
+            measured, truth = walks_trajectories(walks)
             data_path = write_trajectory(measured, Path(tmp) / "data.npz")
             source = f"{len(walks)} walks collected from config.collect (seed {config.collect.seed})"
         else:

@@ -394,7 +394,7 @@ def _gpytorch_latency(gp: Callable[[torch.Tensor], Any], x1: torch.Tensor, *, re
 
 def _batch_seconds(fn: Callable[[torch.Tensor], Any], xb: torch.Tensor) -> float:
     """Median wall time of 3 calls on the whole batch (after one small warm-up call)."""
-    fn(xb[:1000] if isinstance(xb, torch.Tensor) else xb)
+    fn(xb[:1000])
     runs = []
     for _ in range(3):
         t0 = time.perf_counter()

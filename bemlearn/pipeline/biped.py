@@ -75,10 +75,11 @@ from bemlearn.control.walking import WalkExcitation
 from bemlearn.pipeline.biped_bem import bem_errors, heldout_bem, heldout_walks, train_walking_gp
 from bemlearn.pipeline.biped_config import (BipedConfig, BipedEvaluateConfig, BipedGPDMConfig, WalkCollectConfig,
                                             WalkDatasetConfig, is_biped_config, load_biped_config)
-from bemlearn.pipeline.biped_data import collect_walks, concat_trajectories, walking_gp_data
+from bemlearn.pipeline.biped_data import collect_walks, concat_trajectories, walking_gp_data, walks_trajectories
 
 __all__ = ["WalkCollectConfig", "WalkDatasetConfig", "BipedEvaluateConfig", "BipedGPDMConfig", "BipedConfig",
-           "load_biped_config", "is_biped_config", "collect_walks", "concat_trajectories", "walking_gp_data",
+           "load_biped_config", "is_biped_config", "collect_walks", "concat_trajectories", "walks_trajectories",
+           "walking_gp_data",
            "train_walking_gp", "heldout_walks", "bem_errors", "heldout_bem", "run_biped_pipeline"]
 
 log = logging.getLogger(__name__)
@@ -96,7 +97,7 @@ def run_biped_pipeline(config: BipedConfig, out_dir: str | Path | None = None, *
     t0 = time.perf_counter()
     log.info("[1/6] training walks")
     walks = collect_walks(config, progress=progress)
-    data, truth = (concat_trajectories(list(p)) for p in zip(*(walk_trajectories(w) for w in walks)))
+    data, truth = walks_trajectories(walks)
     data_path = write_trajectory(data, out / "data.npz")
     write_trajectory(truth, ground_truth_path(data_path))
     info = {"walks": len(walks), "fell": int(sum(w.fell for w in walks)), "steps": int(sum(len(w.steps) for w in walks)),
@@ -111,7 +112,8 @@ def run_biped_pipeline(config: BipedConfig, out_dir: str | Path | None = None, *
         X, y, rep = walking_gp_data(data, truth, dcfg)
         fit = train_walking_gp(X, y, out / name, config=config.train, data_path=data_path, progress=progress,
                                extra={"dataset": rep, "derivatives": dcfg.derivatives})
-        learned[name] = {"derivatives": dcfg.derivatives, "dataset": rep, "fit": fit, "heldout": heldout_bem(out / name / "bem_predictor.pt", config, walks=walks_out)}
+        heldout = heldout_bem(out / name / "bem_predictor.pt", config, walks=walks_out)
+        learned[name] = {"derivatives": dcfg.derivatives, "dataset": rep, "fit": fit, "heldout": heldout}
     log.info("[3/6] walks with the exported predictor in the loop")
     predictor = out / "gp" / "bem_predictor.pt"
     loop = {}

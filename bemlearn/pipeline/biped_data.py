@@ -2,7 +2,7 @@
 
 Stages 1–2 of :mod:`bemlearn.pipeline.biped`: :func:`collect_walks` simulates the training
 walks of ``collect:``, :func:`concat_trajectories` joins the walks' trajectories (one trial
-per step) and :func:`walking_gp_data` draws the training pairs x ∈ R^14, y = q1 of eq. (11).
+per step; :func:`walks_trajectories` for a list of walks) and :func:`walking_gp_data` draws the training pairs x ∈ R^14, y = q1 of eq. (11).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from bemlearn.data.trajectory import Trajectory
 from bemlearn.pipeline.biped_config import BipedConfig, WalkDatasetConfig
 from bemlearn.sim.walking import WalkResult
 
-__all__ = ["collect_walks", "concat_trajectories", "walking_gp_data"]
+__all__ = ["collect_walks", "concat_trajectories", "walks_trajectories", "walking_gp_data"]
 
 log = logging.getLogger(__name__)
 
@@ -69,6 +69,15 @@ def concat_trajectories(parts: list[Trajectory]) -> Trajectory:
     truth = parts[0].has_ground_truth
     cat = {k: np.concatenate(v) for k, v in arrays.items() if truth or k not in ("qd", "qdd")}
     return Trajectory(meta=meta, **cat)
+
+
+def walks_trajectories(walks: list[WalkResult]) -> tuple[Trajectory, Trajectory]:
+    """``(measured, truth)``: the ``walk_trajectories`` of each walk, each side joined by
+    :func:`concat_trajectories`."""
+    from bemlearn.sim.walking import walk_trajectories
+
+    measured, truth = zip(*(walk_trajectories(w) for w in walks))
+    return concat_trajectories(list(measured)), concat_trajectories(list(truth))
 
 
 def walking_gp_data(data: Trajectory, truth: Trajectory | None, config: WalkDatasetConfig) -> tuple[np.ndarray, np.ndarray, dict]:
