@@ -233,3 +233,7 @@ def test_run_biped_pipeline_end_to_end(tmp_path):
     assert len(m["study"]["c_robot"]) == 5 and -1 <= m["study"]["robot"]["corr"] <= 1
     text = (out / "report.md").read_text()
     assert "## Learned torso BEM" in text and "| robot |" in text and "fig5_human_gait.png" in text
+    above = {g: h["rmse"] for g, h in m["learned"]["gp"]["heldout"].items() if h["rmse"] > 0.02}
+    assert ("**Above the 0.02 rad target:**" in text) == bool(above)
+    for g, v in above.items():
+        assert f"{g} ({v:.3f} rad, `gp`)" in text

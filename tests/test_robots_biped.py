@@ -74,3 +74,21 @@ def test_planar_walker_loads_with_paper_joint_names():
     total = sum(m.body_mass)
     p = BipedParameters()
     assert abs(total - (p.m_b + 2 * p.m_t + 2 * p.m_s)) < 1e-12
+
+
+def test_planar_walker_foot_radius():
+    """The feet are spheres of ``foot_radius`` at the shank ends (a near-point foot, as the
+    pinned model assumes); a non-positive radius is refused by name."""
+    from bemlearn.robots.biped import biped_planar_mjcf
+
+    for r in (0.002, 0.01):
+        m = mujoco.MjModel.from_xml_string(biped_planar_mjcf(foot_radius=r))
+        for name in ("foot1", "foot2"):
+            g = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, name)
+            assert m.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE and m.geom_size[g, 0] == pytest.approx(r, abs=1e-12)
+            site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, name)
+            np.testing.assert_allclose(m.geom_pos[g], m.site_pos[site], atol=1e-12)
+    shipped = mujoco.MjModel.from_xml_path(str(asset_path("biped_planar.xml")))
+    assert shipped.geom_size[mujoco.mj_name2id(shipped, mujoco.mjtObj.mjOBJ_GEOM, "foot1"), 0] == pytest.approx(0.002)
+    with pytest.raises(ValueError, match="foot_radius"):
+        biped_planar_mjcf(foot_radius=0.0)
