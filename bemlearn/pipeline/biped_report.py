@@ -305,8 +305,8 @@ def write_biped_report(out: str | Path, metrics: dict, config) -> Path:
                   "reference x^d (eq. 14), where q̈1 = q̇1 = 0 and q̈_a = q̈_a^d; walking data rarely visit that slice "
                   "(the torso loop drives |q̈1| to 10–500 rad/s²; the human gait's swing-knee reference is faster than "
                   "the tracked knee ever moves), so the GP extrapolates, and the torso row is ill-conditioned in q̈ "
-                  "(∂q1^e/∂q̈ ≈ 0.04 rad per rad/s²). Which of two likelihood basins the fit lands in (posture-only, "
-                  "or using the q̈ terms of Γ, eq. 5) depends on the training subset: one run is one draw. "
+                  "(∂q1^e/∂q̈ ≈ 0.04 rad per rad/s²). The result varies with the random training subset (one run is one "
+                  "draw), and the fitted likelihood does not rank the subsets' fits. "
                   "`bemlearn bench biped-bem` measures the spread over training subsets; the module docstring of "
                   "`bemlearn.pipeline.biped` has the findings.", ""]
     lines += [
