@@ -298,8 +298,8 @@ def write_biped_report(out: str | Path, metrics: dict, config) -> Path:
     lines += ["", "`gp` is the sensor path (derivatives estimated from the quantized angles) and gives the exported "
               "predictor used below; `gp_oracle` (if present) uses the simulator's true q, q̇, q̈, a diagnostic of "
               "how much the derivative estimation costs.", ""]
-    above = sorted({f"{gait} ({h['rmse']:.3f} rad, `{name}`)" for name, L in metrics["learned"].items()
-                    for gait, h in L["heldout"].items() if h["rmse"] > 0.02})
+    above = [f"{gait} ({h['rmse']:.3f} rad, `{name}`)" for name, L in metrics["learned"].items()
+             for gait, h in L["heldout"].items() if h["rmse"] > 0.02]
     if above:
         lines += [f"**Above the 0.02 rad target:** {', '.join(above)}. The controller queries the BEM at the "
                   "reference x^d (eq. 14), where q̈1 = q̇1 = 0 and q̈_a = q̈_a^d; walking data rarely visit that slice "
