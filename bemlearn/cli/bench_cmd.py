@@ -5,7 +5,8 @@
 * ``bench sim PREDICTOR`` — the learned BEM in the EIC loop, mismatch study, Lemma 1, speed (issue 6);
 * ``bench derivatives [CONFIG]`` — derivative estimators and their effect on the learned BEM (issue 3);
 * ``bench gpdm`` — GPDM fit time and recovery on synthetic gait data (issue 7);
-* ``bench biped-bem [CONFIG]`` — learned torso BEM error over training subsets (issue 7).
+* ``bench biped-bem [CONFIG]`` — learned torso BEM error over training subsets (issue 7);
+* ``bench walks [CONFIG]`` — seeded biped walks per gait and torso BEM source (issue 7).
 """
 
 from __future__ import annotations
@@ -71,6 +72,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument("--subsets", type=int, default=4, help="training subsets (dataset seeds seed … seed + k − 1)")
     b.add_argument("--no-progress", action="store_true")
     b.set_defaults(func=_biped_bem)
+    w = sub.add_parser("walks", help="seeded biped walks per gait and torso BEM source: steps reached, falls",
+                       description="Repeat the walk of the config's 'walk' section over seeds (initial-angle and "
+                       "encoder noise) on each gait, with the model-based torso BEM and/or an exported predictor "
+                       "in the loop, and count the walks that reach --steps steps.")
+    w.add_argument("config", type=Path, nargs="?", default=Path("configs/biped.yaml"))
+    w.add_argument("--predictor", type=Path, default=None, help="exported bem_predictor.pt to walk with")
+    w.add_argument("--no-model", action="store_true", help="only the predictor (needs --predictor)")
+    w.add_argument("--seeds", type=int, default=20, help="walks per gait and source (default 20)")
+    w.add_argument("--steps", type=int, default=30, help="steps asked of each walk (default 30)")
+    w.add_argument("--gaits", nargs="+", default=["default", "human"], choices=["default", "human"])
+    w.add_argument("--initial-noise", type=float, default=0.02, help="initial joint-angle noise std, rad (default 0.02)")
+    w.add_argument("--sensor-noise", type=float, default=0.001, help="encoder noise std, rad (default 0.001)")
+    w.add_argument("--no-progress", action="store_true")
+    w.set_defaults(func=_walks)
 
 
 def run_predict(args: argparse.Namespace) -> int:
@@ -155,4 +170,20 @@ def _biped_bem(args: argparse.Namespace) -> int:
     result = run_biped_bem_bench(load_biped_config(args.config), data=args.data, subsets=args.subsets,
                                  progress=not args.no_progress)
     print(format_biped_bem_bench(result))
+    return 0
+
+
+def _walks(args: argparse.Namespace) -> int:
+    from bemlearn.bench.walk_bench import format_walk_bench, run_walk_bench
+    from bemlearn.sim.walking import load_walk_config
+
+    if args.predictor is not None and not args.predictor.is_file():
+        raise FileNotFoundError(f"--predictor: no such file {args.predictor} (expected an exported bem_predictor.pt)")
+    if args.no_model and args.predictor is None:
+        raise ValueError("--no-model: needs --predictor (nothing else to walk with)")
+    rows = run_walk_bench(load_walk_config(args.config), seeds=args.seeds, steps=args.steps, gaits=tuple(args.gaits),
+                          predictor=None if args.predictor is None else str(args.predictor), model=not args.no_model,
+                          initial_noise=args.initial_noise, sensor_noise=args.sensor_noise,
+                          progress=not args.no_progress)
+    print(format_walk_bench(rows, steps=args.steps))
     return 0
