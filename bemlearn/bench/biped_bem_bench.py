@@ -4,8 +4,9 @@ The learned torso BEM μ(x_0^e) (eq. 14) of the biped depends strongly on which 
 samples the GP is trained on (it extrapolates to the BEM slice, and the fitted likelihood
 does not rank the fits; see :mod:`bemlearn.pipeline.biped`).  A single run's RMSE is
 therefore one draw; this benchmark measures the spread.  For ``subsets`` dataset seeds it
-draws ``dataset.n_points`` training pairs of eq. (11) from the same walks, fits and exports the GP exactly as ``bemlearn run``
-does (:func:`~bemlearn.pipeline.biped.train_walking_gp`), and scores the exported
+draws ``dataset.n_points`` training pairs of eq. (11) from the same walks, fits and
+exports the GP exactly as ``bemlearn run`` does
+(:func:`~bemlearn.pipeline.biped.train_walking_gp`), and scores the exported
 ``bem_mean`` against the model-based torso BEM (eq. 9) at the controller's queries x^d of
 the held-out walks (simulated once, :func:`~bemlearn.pipeline.biped.heldout_walks`).
 
