@@ -87,7 +87,9 @@ and 0.053 rad (human gait).  Findings:
   0.1–0.5 Hz, twice the walks, N = 1800 / 2500 points.  With the 2 mm feet: N = 2000
   points gave a median of 0.030 / 0.087 rad over three subsets (1200 points: 0.011 /
   0.051 on the same three); external-loop gains k_p = 300, k_d = 35 for the training
-  walks (closer tracking of the fast knee references) gave 0.050–0.10 / 0.090–0.22 rad.
+  walks (closer tracking of the fast knee references) gave 0.050–0.10 / 0.090–0.22 rad; a
+  gentler start of the human swing knee (first Bézier coefficients set for h′(0) = 2.5,
+  h″(0) = −20 instead of 5.2, −60) gave 0.023–0.037 / 0.053–0.098 rad.
 """
 
 from __future__ import annotations
