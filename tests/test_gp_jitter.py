@@ -22,6 +22,18 @@ def _near_singular(n_unique: int = 40, copies: int = 5) -> tuple[torch.Tensor, t
     return x, y
 
 
+def _near_singular_exact_gp():
+    """``(x, y, model, lik)``: an exact GP on :func:`_near_singular` data with noise 1e-15."""
+    x, y = _near_singular()
+    lik = gaussian_likelihood(min_noise=1e-16)
+    model = ExactBEMGP(x, y, lik)
+    set_hyperparameters(
+        model, lik, lengthscale=torch.full((5,), 0.7, dtype=F64),
+        outputscale=torch.tensor(1.0, dtype=F64), noise=torch.tensor(1e-15, dtype=F64),
+    )
+    return x, y, model, lik
+
+
 def test_robust_cholesky_adds_increasing_jitter(caplog: pytest.LogCaptureFixture) -> None:
     v = torch.tensor([[1.0, 2.0, 3.0]], dtype=F64)
     A = v.T @ v  # rank 1
@@ -41,13 +53,7 @@ def test_robust_cholesky_rejects_nan() -> None:
 
 
 def test_exact_gp_duplicated_inputs_tiny_noise(caplog: pytest.LogCaptureFixture) -> None:
-    x, y = _near_singular()
-    lik = gaussian_likelihood(min_noise=1e-16)
-    model = ExactBEMGP(x, y, lik)
-    set_hyperparameters(
-        model, lik, lengthscale=torch.full((5,), 0.7, dtype=F64),
-        outputscale=torch.tensor(1.0, dtype=F64), noise=torch.tensor(1e-15, dtype=F64),
-    )
+    x, y, model, lik = _near_singular_exact_gp()
     with caplog.at_level(logging.WARNING):
         mean, var = predict(model, lik, x[:40])
         state = predictor_state(
@@ -62,13 +68,7 @@ def test_exact_gp_duplicated_inputs_tiny_noise(caplog: pytest.LogCaptureFixture)
 
 
 def test_exact_fit_on_near_singular_data_stays_finite(caplog: pytest.LogCaptureFixture) -> None:
-    x, y = _near_singular()
-    lik = gaussian_likelihood(min_noise=1e-16)
-    model = ExactBEMGP(x, y, lik)
-    set_hyperparameters(
-        model, lik, lengthscale=torch.full((5,), 0.7, dtype=F64),
-        outputscale=torch.tensor(1.0, dtype=F64), noise=torch.tensor(1e-15, dtype=F64),
-    )
+    x, y, model, lik = _near_singular_exact_gp()
     with caplog.at_level(logging.WARNING):
         result = fit_exact(model, lik, max_iter=5)
     assert result.steps >= 1

@@ -22,6 +22,14 @@ from bemlearn.data.validation import MIN_TRIAL_SAMPLES, RATE_RTOL
 __all__ = ["add_parser", "format_summary"]
 
 
+def _add_validation_options(parser: argparse.ArgumentParser) -> None:
+    """``--min-trial-samples`` and ``--rate-rtol``: the validation limits of ``check`` and ``convert``."""
+    parser.add_argument("--min-trial-samples", type=int, default=MIN_TRIAL_SAMPLES, metavar="K",
+                        help=f"shortest accepted trial in samples (default {MIN_TRIAL_SAMPLES})")
+    parser.add_argument("--rate-rtol", type=float, default=RATE_RTOL, metavar="R",
+                        help=f"accepted relative deviation of time steps from 1/sample_rate (default {RATE_RTOL:g})")
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "data", help="check and convert trajectory files",
@@ -32,10 +40,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     check = sub.add_parser("check", help="validate a trajectory file and print a summary")
     check.add_argument("file", type=Path, help="trajectory file (.npz or .csv)")
     check.add_argument("--robot", metavar="NAME", help="also require the joint names of this registered robot")
-    check.add_argument("--min-trial-samples", type=int, default=MIN_TRIAL_SAMPLES, metavar="K",
-                       help=f"shortest accepted trial in samples (default {MIN_TRIAL_SAMPLES})")
-    check.add_argument("--rate-rtol", type=float, default=RATE_RTOL, metavar="R",
-                       help=f"accepted relative deviation of time steps from 1/sample_rate (default {RATE_RTOL:g})")
+    _add_validation_options(check)
     check.add_argument("--json", action="store_true", help="print the summary as JSON")
     check.set_defaults(func=run_check)
 
@@ -43,10 +48,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     convert.add_argument("input", type=Path, help="input trajectory file (.npz or .csv)")
     convert.add_argument("output", type=Path, help="output file; its suffix (.npz or .csv) picks the format")
     convert.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
-    convert.add_argument("--min-trial-samples", type=int, default=MIN_TRIAL_SAMPLES, metavar="K",
-                         help=f"shortest accepted trial in samples (default {MIN_TRIAL_SAMPLES})")
-    convert.add_argument("--rate-rtol", type=float, default=RATE_RTOL, metavar="R",
-                         help=f"accepted relative deviation of time steps from 1/sample_rate (default {RATE_RTOL:g})")
+    _add_validation_options(convert)
     convert.set_defaults(func=run_convert)
     return parser
 

@@ -20,12 +20,7 @@ def check_inputs(x: object, *, name: str, dim: int | None = None, dtype: torch.d
         TypeError: ``x`` is not a tensor or has the wrong dtype.
         ValueError: wrong shape, no rows, or non-finite entries (the first bad row is named).
     """
-    if not isinstance(x, torch.Tensor):
-        raise TypeError(f"{name}: expected a torch.Tensor of shape (N, d), got {type(x).__name__}")
-    if not x.is_floating_point():
-        raise TypeError(f"{name}: expected a floating-point tensor, got dtype {x.dtype}")
-    if dtype is not None and x.dtype != dtype:
-        raise TypeError(f"{name}: expected dtype {dtype}, got {x.dtype}")
+    _check_float_tensor(x, name, "(N, d)", dtype)
     if x.ndim != 2:
         raise ValueError(f"{name}: expected shape (N, d), got {tuple(x.shape)}")
     if x.shape[0] == 0:
@@ -49,16 +44,21 @@ def check_targets(y: object, *, name: str, n: int, dtype: torch.dtype | None = N
         TypeError: ``y`` is not a tensor or has the wrong dtype.
         ValueError: wrong shape or non-finite entries (the first bad row is named).
     """
-    if not isinstance(y, torch.Tensor):
-        raise TypeError(f"{name}: expected a torch.Tensor of shape ({n},), got {type(y).__name__}")
-    if not y.is_floating_point():
-        raise TypeError(f"{name}: expected a floating-point tensor, got dtype {y.dtype}")
-    if dtype is not None and y.dtype != dtype:
-        raise TypeError(f"{name}: expected dtype {dtype}, got {y.dtype}")
+    _check_float_tensor(y, name, f"({n},)", dtype)
     if tuple(y.shape) != (n,):
         raise ValueError(f"{name}: expected shape ({n},), got {tuple(y.shape)}")
     _check_finite(y, name)
     return y
+
+
+def _check_float_tensor(t: object, name: str, shape: str, dtype: torch.dtype | None) -> None:
+    """TypeError naming ``name`` unless ``t`` is a floating tensor (of ``dtype`` if given)."""
+    if not isinstance(t, torch.Tensor):
+        raise TypeError(f"{name}: expected a torch.Tensor of shape {shape}, got {type(t).__name__}")
+    if not t.is_floating_point():
+        raise TypeError(f"{name}: expected a floating-point tensor, got dtype {t.dtype}")
+    if dtype is not None and t.dtype != dtype:
+        raise TypeError(f"{name}: expected dtype {dtype}, got {t.dtype}")
 
 
 def _check_finite(t: torch.Tensor, name: str) -> None:
