@@ -24,9 +24,11 @@
 Code: ``biped_config`` (configs), ``biped_data`` (1–2), ``biped_bem`` (3–4), here (5), ``biped_report`` (6).
 
 Known limitation (measured, see the report and ``bemlearn bench biped-bem``): the learned
-torso BEM meets the 0.02 rad target on the default gait in the shipped run (0.010 rad) but
-not reliably: over six training subsets of the same walks the median is 0.024 rad (default)
-and 0.053 rad (human gait).  Findings:
+torso BEM misses the 0.02 rad target.  Over six training subsets of the same walks the
+median is 0.024 rad (default gait) and 0.053 rad (human gait) with MuJoCo 3.17, 0.026 /
+0.054 rad with MuJoCo 4.0.0; single runs range 0.010–0.044 rad on the default gait (the
+shipped run: 0.010 with 3.17, 0.044 with 4.0.0, whose walks differ slightly).  Findings
+(MuJoCo 3.17 unless said):
 
 * **The torso row is ill-conditioned in q̈.**  By the implicit function theorem on Γ1 = 0
   (eq. 5), ∂q1^e/∂q̈1 ≈ ∂q1^e/∂q̈2 ≈ 0.04 rad per rad/s² (median over training samples):
