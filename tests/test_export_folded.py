@@ -7,6 +7,7 @@ import torch
 
 from bemlearn.bench.predict_bench import synthetic_posterior
 from bemlearn.export import FoldedPosterior, VarianceFactor, kernel_gram, variance_factor
+from bemlearn.export.variance_factor import condition_number
 
 F64 = torch.float64
 
@@ -168,3 +169,43 @@ def test_variance_factor_requires_one_matrix():
 def test_n_inputs_out_of_range(posterior):
     with pytest.raises(ValueError, match="n_inputs: expected 1..5, got 6"):
         FoldedPosterior(posterior, variance_factor(posterior), n_inputs=6)
+
+
+def _ill_conditioned_exact(noise: float = 1e-12, lengthscale: float = 8.0):
+    """An exact posterior on nearly noise-free data with a long lengthscale (κ(K) ~ 10¹³),
+    its S inverted by LU (``torch.linalg.inv``) instead of the Cholesky route: a legitimate
+    S that differs from L⁻ᵀL⁻¹ by rounding of order κ·ε."""
+    state, _ = synthetic_posterior(n_train=200, m=1, seed=3, noise=noise)
+    state = dataclasses.replace(state, lengthscale=torch.full_like(state.lengthscale, lengthscale))
+    return dataclasses.replace(state, S=torch.linalg.inv(kernel_gram(state)))
+
+
+def test_ill_conditioned_exact_state_is_accepted_within_the_rounding_bound(caplog):
+    state = _ill_conditioned_exact()
+    K = kernel_gram(state)
+    L = torch.linalg.cholesky(K)
+    rel = float(torch.linalg.matrix_norm(torch.cholesky_inverse(L) - state.S) / torch.linalg.matrix_norm(state.S))
+    kappa = condition_number(K)
+    assert rel > 1e-6, "precondition: the S of this state must fail the plain exact_rtol check"
+    assert rel < kappa * torch.finfo(F64).eps
+    with caplog.at_level("WARNING", logger="bemlearn.export.variance_factor"):
+        factor = variance_factor(state)
+    assert "ill-conditioned" in caplog.text and f"{kappa:.3g}" in caplog.text
+    # the factor is the Cholesky one of the rebuilt K: kᵀK⁻¹k against an iteratively refined solve
+    g = torch.Generator().manual_seed(1)
+    z = torch.randn(50, state.dim, generator=g, dtype=F64)
+    k = state.outputscale * torch.exp(-0.5 * torch.cdist(z / state.lengthscale, state.Z / state.lengthscale) ** 2)
+    v = torch.cholesky_solve(k.T, L)
+    for _ in range(3):
+        v = v + torch.cholesky_solve(k.T - K @ v, L)
+    ref = (k.T * v).sum(0)
+    assert float((factor.quadratic_form(k) - ref).abs().max()) <= 1e-6 * float(state.outputscale)
+
+
+def test_exact_state_with_a_foreign_S_is_rejected_even_when_ill_conditioned():
+    """S of another lengthscale (1 % off) differs far beyond κ·ε: still an error, naming κ."""
+    state = _ill_conditioned_exact()
+    other = dataclasses.replace(state, lengthscale=state.lengthscale * 1.01)
+    wrong = dataclasses.replace(state, S=torch.linalg.inv(kernel_gram(other)))
+    with pytest.raises(ValueError, match=r"is not \(K_ZZ \+ σ_0² I\)⁻¹ .* above the rounding bound κ\(K\)·ε = .*\(κ = "):
+        variance_factor(wrong)

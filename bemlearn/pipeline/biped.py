@@ -92,6 +92,31 @@ shipped run: 0.010 with 3.17, 0.044 with 4.0.0, whose walks differ slightly).  F
   walks (closer tracking of the fast knee references) gave 0.050–0.10 / 0.090–0.22 rad; a
   gentler start of the human swing knee (first Bézier coefficients set for h′(0) = 2.5,
   h″(0) = −20 instead of 5.2, −60) gave 0.023–0.037 / 0.053–0.098 rad.
+* **What the labels' residual is made of (2 mm feet).**  Γ1 of eq. (5) at the true q, q̇, q̈
+  of a training step splits exactly into the pinned-model projection of the contact
+  forces and the inertial moment of the stance foot's acceleration (checked to rounding
+  on 12 walks; with the foot welded by an ideal pin Γ1 is zero to 4·10⁻⁵ N·m).  In the
+  training pool the foot term dominates (median 0.11 N·m, ≈ 0.005 rad of q1): MuJoCo's
+  soft pyramidal friction lets the stance foot creep and roll (horizontal acceleration
+  0.05 m/s² median, 0.35 at the 99th percentile); 1.2 % of the pool ticks have a
+  swing-foot scuff (the contact term's 99th percentile is 0.74 N·m).  Making the contact more
+  rigid removes most of it but does not help the learned BEM, because the error is
+  extrapolation, not label noise: elliptic cones with impratio 10 cut the median label
+  residual from 0.0056 to 0.0012 rad, yet six subsets gave 0.025–0.093 / 0.094–0.78 rad
+  (single support 0.014–0.037 / 0.036–0.056); adding solref 5 ms gave, over four subsets,
+  0.028–0.062 / 0.042–0.107 rad with the 16/12 skips and 0.039–0.049 / 0.088–0.108 rad
+  with 6/6 (and 12 of 40 training walks fell).  Smaller feet (1 mm, 0.5 mm; three
+  subsets) gave 0.023–0.039 / 0.055–0.12 and 0.025–0.077 / 0.051–0.14 rad.
+* **Averaging does not remove it.**  The mean of the six subset GPs' μ(x_0^e) gives 0.022 /
+  0.042 rad (median of the six: 0.024 / 0.042): the error is a shared bias, not the
+  variance between draws.  A kernel affine in q̈ (k_SE(z) + k_SE(z)·q̈ᵀWq̈', z the rates
+  and positions) gave 0.026–0.043 / 0.050–0.084 rad over three subsets (0.074 / 0.12
+  with true derivatives, one subset).
+* **Where the human gait's bias comes from.**  In the first 4 ticks of a human step the
+  swing-hip reference accelerates at ~120 rad/s² (median): setting its rate and
+  acceleration to zero moves the model BEM by 0.20 rad rms but the learned μ by 0.06 rad.
+  In the training pool the swing hip's |q̈| is 17 rad/s² (median) and 105 (99th
+  percentile): those queries lie beyond the data, and the GP has not learned the slope.
 """
 
 from __future__ import annotations
