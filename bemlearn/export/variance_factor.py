@@ -114,7 +114,8 @@ def variance_factor(state: PredictorState, *, exact_rtol: float = 1e-6, psd_rtol
             log.warning(
                 "exact posterior: K_ZZ + σ_0² I is ill-conditioned (κ = %.3g, noise σ_0² = %.3g); S agrees with "
                 "its rebuilt inverse to %.3g, within the rounding bound κ·ε = %.3g but above exact_rtol = %g. "
-                "Predictive variances near the training inputs carry relative errors of that order.",
+                "Variances come from the Cholesky factor of the rebuilt K; at this κ, those close to the noise "
+                "floor σ_0² are not accurate.",
                 kappa, float(state.noise), rel, rounding, exact_rtol,
             )
         log.debug("exact variance factor: ‖L⁻ᵀL⁻¹ − S‖/‖S‖ = %.3g", rel)
