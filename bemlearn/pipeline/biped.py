@@ -117,6 +117,12 @@ shipped run: 0.010 with 3.17, 0.044 with 4.0.0, whose walks differ slightly).  F
   acceleration to zero moves the model BEM by 0.20 rad rms but the learned μ by 0.06 rad.
   In the training pool the swing hip's |q̈| is 17 rad/s² (median) and 105 (99th
   percentile): those queries lie beyond the data, and the GP has not learned the slope.
+* **Faster joint excitation** (``collect.excitation.joint_frequency_hz`` 0.5–3 Hz instead of
+  0.1–2, 0.08 rad) widens the q̈_a of the training walks: default gait 0.009–0.026 rad
+  (median 0.016) over four subsets, but the human gait stays at 0.045–0.060 rad, and 29 of
+  the 40 training walks fell (kept up to the fall).  At 1–3 Hz, 0.05 rad: 0.030–0.044 /
+  0.10–0.36 rad.  Not adopted: it does not move the human gait.  Skipping 8/12 ticks
+  instead of 16/12 (six subsets): 0.029–0.050 / 0.030–0.17 rad (medians 0.036 / 0.053).
 """
 
 from __future__ import annotations
