@@ -128,8 +128,8 @@ unless said):
   0.055–0.14 rad (median 0.077; the shipped setting gives 0.024 / 0.062 on the same
   seeds), 19–21 of 40 walks fell.  At 0.5–3 Hz, 0.05 rad: 0.026–0.048 / 0.064–0.10 rad; at
   1–3 Hz, 0.05 rad: 0.030–0.044 / 0.10–0.36 rad.  Not adopted: the default gait gains
-  what the human gait loses.  Skipping 8/12 ticks
-  instead of 16/12 (six subsets): 0.029–0.050 / 0.030–0.17 rad (medians 0.036 / 0.053).
+  what the human gait loses.  Skipping 8/12 ticks instead of 16/12 (six subsets):
+  0.029–0.050 / 0.030–0.17 rad (medians 0.036 / 0.053).
 """
 
 from __future__ import annotations
