@@ -207,5 +207,6 @@ def test_exact_state_with_a_foreign_S_is_rejected_even_when_ill_conditioned():
     state = _ill_conditioned_exact()
     other = dataclasses.replace(state, lengthscale=state.lengthscale * 1.01)
     wrong = dataclasses.replace(state, S=torch.linalg.inv(kernel_gram(other)))
-    with pytest.raises(ValueError, match=r"is not \(K_ZZ \+ σ_0² I\)⁻¹ .* above the rounding bound κ\(K\)·ε = .*\(κ = "):
+    expected = r"is not \(K_ZZ \+ σ_0² I\)⁻¹ .* above the rounding bound κ\(K\)·ε = .*\(κ = "
+    with pytest.raises(ValueError, match=expected):
         variance_factor(wrong)
