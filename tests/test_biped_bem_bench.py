@@ -35,6 +35,20 @@ def test_subsets_are_scored_like_the_pipeline(small, tmp_path):
     assert "| 0 | 60 |" in text and "default: RMSE min" in text and "target <= 0.02 rad" in text
 
 
+def test_collect_seeds_refit_on_each_set_of_walks(small):
+    one = run_biped_bem_bench(small, subsets=1, progress=False)  # config.collect.seed = 0
+    both = run_biped_bem_bench(small, subsets=1, collect_seeds=[0, 7], progress=False)
+    assert [r.collect_seed for r in both.subsets] == [0, 7] and len(both.pool) == 2
+    # the seed-0 walks are the config's own: the same fit, bit for bit
+    assert both.subsets[0].rmse == one.subsets[0].rmse and both.pool[0] == one.pool[0]
+    assert both.subsets[1].rmse["default"] != both.subsets[0].rmse["default"]
+    assert "seed 0" in both.source and "seed 7" in both.source
+    text = format_biped_bem_bench(both)
+    assert "| walks seed | dataset seed |" in text and "| 7 | 0 | 60 |" in text
+    assert "over 2 fits (2 sets of walks × 1 subsets)" in text and "median per walks seed: 0: " in text
+    assert "walks seed" not in format_biped_bem_bench(one)
+
+
 def test_heldout_walks_are_shared_bit_identically(small, tmp_path):
     # heldout_bem with precomputed walks equals heldout_bem simulating them itself
     from bemlearn.data import write_trajectory
@@ -57,6 +71,12 @@ def test_cli_errors(tmp_path, capsys):
     assert main(["bench", "biped-bem", str(ROOT / "configs" / "biped.yaml"), "--data", str(missing), "--subsets", "1",
                  "--no-progress"]) == 2
     assert f"--data: no such file {missing}" in capsys.readouterr().err
+    assert main(["bench", "biped-bem", str(ROOT / "configs" / "biped.yaml"), "--data", str(missing),
+                 "--collect-seeds", "0", "1", "--no-progress"]) == 2
+    assert "--collect-seeds and --data: give one" in capsys.readouterr().err
+    assert main(["bench", "biped-bem", str(ROOT / "configs" / "biped.yaml"), "--collect-seeds", "3", "3",
+                 "--no-progress"]) == 2
+    assert "--collect-seeds: expected distinct integers, got [3, 3]" in capsys.readouterr().err
 
 
 def test_config_dataclass_defaults_match_the_shipped_yaml():

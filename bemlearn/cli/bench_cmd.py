@@ -5,7 +5,8 @@
 * ``bench sim PREDICTOR`` — the learned BEM in the EIC loop, mismatch study, Lemma 1, speed (issue 6);
 * ``bench derivatives [CONFIG]`` — derivative estimators and their effect on the learned BEM (issue 3);
 * ``bench gpdm`` — GPDM fit time and recovery on synthetic gait data (issue 7);
-* ``bench biped-bem [CONFIG]`` — learned torso BEM error over training subsets (issue 7);
+* ``bench biped-bem [CONFIG] [--data D | --collect-seeds S …]`` — learned torso BEM error over training
+  subsets and training walks (issue 7);
 * ``bench walks [CONFIG]`` — seeded biped walks per gait and torso BEM source (issue 7).
 """
 
@@ -70,6 +71,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument("--data", type=Path, default=None,
                    help="data.npz of a biped run (default: collect the walks of the config, about 30 s)")
     b.add_argument("--subsets", type=int, default=4, help="training subsets (dataset seeds seed … seed + k − 1)")
+    b.add_argument("--collect-seeds", type=int, nargs="+", default=None, metavar="SEED",
+                   help="collect the training walks once per seed (collect.seed) and fit the subsets on each: "
+                   "the spread over training walks too (about 40 s of walks per seed)")
     b.add_argument("--no-progress", action="store_true")
     b.set_defaults(func=_biped_bem)
     w = sub.add_parser("walks", help="seeded biped walks per gait and torso BEM source: steps reached, falls",
@@ -168,7 +172,7 @@ def _biped_bem(args: argparse.Namespace) -> int:
     if args.subsets < 1:
         raise ValueError(f"--subsets: expected a positive integer, got {args.subsets}")
     result = run_biped_bem_bench(load_biped_config(args.config), data=args.data, subsets=args.subsets,
-                                 progress=not args.no_progress)
+                                 collect_seeds=args.collect_seeds, progress=not args.no_progress)
     print(format_biped_bem_bench(result))
     return 0
 

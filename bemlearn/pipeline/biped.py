@@ -29,9 +29,11 @@ median is 0.024 rad (default gait) and 0.053 rad (human gait) with MuJoCo 3.17, 
 0.054 rad with MuJoCo 4.0.0; single runs range 0.010–0.044 rad on the default gait (the
 shipped run: 0.010 with 3.17, 0.044 with 4.0.0, whose walks differ slightly).  The shipped
 training walks (``collect.seed: 0``) are a favourable draw: with collection seeds 0, 100
-and 200 and four subsets each, the range is 0.010–0.068 rad (median 0.024) on the
-default gait and 0.043–0.28 rad (median 0.062) on the human gait.  Findings (MuJoCo 3.17
-unless said):
+and 200 and four subsets each (``bemlearn bench biped-bem --collect-seeds 0 100 200
+--subsets 4``), the range is 0.010–0.096 rad (median 0.024; per seed 0.016 / 0.051 /
+0.019) on the default gait and 0.044–0.28 rad (median 0.062) on the human gait.  The fits
+are sensitive even to rounding: with one thread instead of two, some of these rows moved
+by up to 0.03 rad.  Findings (MuJoCo 3.17 unless said):
 
 * **The torso row is ill-conditioned in q̈.**  By the implicit function theorem on Γ1 = 0
   (eq. 5), ∂q1^e/∂q̈1 ≈ ∂q1^e/∂q̈2 ≈ 0.04 rad per rad/s² (median over training samples):
