@@ -76,7 +76,10 @@ def test_cli_errors(tmp_path, capsys):
     assert "--collect-seeds and --data: give one" in capsys.readouterr().err
     assert main(["bench", "biped-bem", str(ROOT / "configs" / "biped.yaml"), "--collect-seeds", "3", "3",
                  "--no-progress"]) == 2
-    assert "--collect-seeds: expected distinct integers, got [3, 3]" in capsys.readouterr().err
+    assert "--collect-seeds: expected distinct non-negative integers, got [3, 3]" in capsys.readouterr().err
+    assert main(["bench", "biped-bem", str(ROOT / "configs" / "biped.yaml"), "--collect-seeds", "0", "-1",
+                 "--no-progress"]) == 2
+    assert "--collect-seeds: expected distinct non-negative integers, got [0, -1]" in capsys.readouterr().err
 
 
 def test_config_dataclass_defaults_match_the_shipped_yaml():

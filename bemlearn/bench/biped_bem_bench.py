@@ -86,8 +86,8 @@ def run_biped_bem_bench(config, *, data: str | Path | None = None, subsets: int 
         collect_seeds = [int(s) for s in collect_seeds]
         if data is not None:
             raise ValueError("--collect-seeds and --data: give one (the training walks are either collected or read)")
-        if not collect_seeds or len(set(collect_seeds)) != len(collect_seeds):
-            raise ValueError(f"--collect-seeds: expected distinct integers, got {collect_seeds}")
+        if not collect_seeds or len(set(collect_seeds)) != len(collect_seeds) or min(collect_seeds) < 0:
+            raise ValueError(f"--collect-seeds: expected distinct non-negative integers, got {collect_seeds}")
     with tempfile.TemporaryDirectory() as tmp:
         if data is None:
             draws = collect_seeds if collect_seeds is not None else [config.collect.seed]
