@@ -5,7 +5,7 @@
 SRC is either the raw file ``gaitanalysis/octave/2d_inverse_dynamics/test/rawdata.txt`` or
 the PyPI source distribution ``GaitAnalysisToolKit-0.2.0.tar.gz`` that contains it
 (``pip download --no-deps gaitanalysistoolkit==0.2.0``).  The conversion itself is
-:func:`bemlearn.data.human_gait.convert_raw` (angle definitions in its module docstring);
+:func:`bemlearn.apps.biped.human_gait.convert_raw` (angle definitions in its module docstring);
 the output is deterministic, so re-running reproduces the shipped file byte for byte.
 """
 
@@ -18,7 +18,7 @@ import sys
 import tarfile
 from pathlib import Path
 
-from bemlearn.data.human_gait import HUMAN_GAIT_CSV, convert_raw, format_csv
+from bemlearn.apps.biped.human_gait import HUMAN_GAIT_CSV, convert_raw, format_csv
 
 #: Path of the raw file inside the package source tree.
 MEMBER = "gaitanalysis/octave/2d_inverse_dynamics/test/rawdata.txt"
@@ -53,7 +53,7 @@ def convert(source: Path, *, max_gap: int = 5) -> str:
     table = convert_raw(raw.decode("utf-8"), source=str(source), max_gap=max_gap)
     provenance = (
         f"source: GaitAnalysisToolKit 0.2.0 (Apache-2.0), {MEMBER}, sha256 {digest}; "
-        "right side, 100 Hz; angles in the robot convention (bemlearn.data.human_gait); "
+        "right side, 100 Hz; angles in the robot convention (bemlearn.apps.biped.human_gait); "
         "made by scripts/convert_human_gait.py"
     )
     return format_csv(table, provenance=provenance)

@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bemlearn.bench.biped_bem_bench import format_biped_bem_bench, run_biped_bem_bench
+from bemlearn.apps.biped.bem_bench import format_biped_bem_bench, run_biped_bem_bench
 from bemlearn.cli import main
 from bemlearn.fitting import GPConfig
-from bemlearn.pipeline.biped import (BipedConfig, BipedEvaluateConfig, WalkCollectConfig, WalkDatasetConfig,
+from bemlearn.apps.biped.pipeline import (BipedConfig, BipedEvaluateConfig, WalkCollectConfig, WalkDatasetConfig,
                                      heldout_bem, heldout_walks)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -52,7 +52,7 @@ def test_collect_seeds_refit_on_each_set_of_walks(small):
 def test_heldout_walks_are_shared_bit_identically(small, tmp_path):
     # heldout_bem with precomputed walks equals heldout_bem simulating them itself
     from bemlearn.data import write_trajectory
-    from bemlearn.pipeline.biped import collect_walks, train_walking_gp, walking_gp_data, walks_trajectories
+    from bemlearn.apps.biped.pipeline import collect_walks, train_walking_gp, walking_gp_data, walks_trajectories
 
     walks = collect_walks(small, progress=False)
     data, truth = walks_trajectories(walks)
@@ -83,7 +83,7 @@ def test_cli_errors(tmp_path, capsys):
 
 
 def test_config_dataclass_defaults_match_the_shipped_yaml():
-    from bemlearn.pipeline.biped import load_biped_config
+    from bemlearn.apps.biped.pipeline import load_biped_config
 
     shipped = load_biped_config(ROOT / "configs" / "biped.yaml")
     assert dataclasses.asdict(BipedConfig().collect) == dataclasses.asdict(shipped.collect)

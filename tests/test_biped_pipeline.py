@@ -11,13 +11,13 @@ import pytest
 import torch
 
 from bemlearn.config import ConfigError
-from bemlearn.control.gait import GaitConfig, build_gait
-from bemlearn.control.walking import WalkExcitation, WalkingController
+from bemlearn.apps.biped.gait import GaitConfig, build_gait
+from bemlearn.apps.biped.controller import WalkExcitation, WalkingController
 from bemlearn.data import gp_inputs, make_estimator, write_trajectory
-from bemlearn.data.human_gait import HumanGaitConfig, human_step_profile, load_human_gait
+from bemlearn.apps.biped.human_gait import HumanGaitConfig, human_step_profile, load_human_gait
 from bemlearn.fitting import GPConfig
 from bemlearn.fitting.gpdm_fit import GPDMConfig
-from bemlearn.pipeline.biped import (
+from bemlearn.apps.biped.pipeline import (
     BipedConfig,
     WalkDatasetConfig,
     concat_trajectories,
@@ -28,9 +28,9 @@ from bemlearn.pipeline.biped import (
     train_walking_gp,
     walking_gp_data,
 )
-from bemlearn.pipeline.biped_report import _binned, _chis, fit_gpdm_logged, human_gait_sequences
+from bemlearn.apps.biped.report import _binned, _chis, fit_gpdm_logged, human_gait_sequences
 from bemlearn.robots import load
-from bemlearn.sim.walking import WalkConfig, simulate_walk, stance_per_sample, walk_trajectories
+from bemlearn.apps.biped.walker import WalkConfig, simulate_walk, stance_per_sample, walk_trajectories
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -124,7 +124,7 @@ def test_gp_data_rows_and_columns(walks):
     assert np.isin(y2, y).all()
     # estimated derivatives from the quantized angles: close to the truth in mid-step
     # (a 0.12 s window; the shipped 0.2 s one trades pointwise accuracy, 18-24 % here, for
-    # a smaller Γ residual and a better learned BEM: see bemlearn.pipeline.biped)
+    # a smaller Γ residual and a better learned BEM: see bemlearn.apps.biped.pipeline)
     short = dataclasses.replace(cfg, derivatives="estimated", derivative_options={"window_s": 0.12, "polyorder": 3})
     Xe, _, _ = walking_gp_data(data, truth, short)
     X, _, _ = walking_gp_data(data, truth, dataclasses.replace(short, derivatives="truth"))   # same steps kept

@@ -10,7 +10,7 @@ import torch
 
 from bemlearn.control.bem_sources import ModelBEM, PredictorBEM, make_bem_source
 from bemlearn.data.sensors import SensorConfig
-from bemlearn.robots import AnalyticFuruta
+from bemlearn.apps.furuta.model import AnalyticFuruta
 from bemlearn.robots.reference import ConstantAcceleration
 from bemlearn.sim.closed_loop import SimulateConfig, simulate
 

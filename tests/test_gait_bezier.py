@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from bemlearn.control.gait import (
+from bemlearn.apps.biped.gait import (
     LEG_SWAP,
     BezierGait,
     GaitConfig,
@@ -17,7 +17,8 @@ from bemlearn.control.gait import (
     leg_ik,
     stance_frame,
 )
-from bemlearn.robots import BipedParameters, load
+from bemlearn.apps.biped.model import BipedParameters
+from bemlearn.robots import load
 
 P = BipedParameters()
 KW = dict(L_t=P.L_t, L_s=P.L_s)

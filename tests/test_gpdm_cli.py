@@ -9,8 +9,8 @@ import numpy as np
 
 from bemlearn.cli.main import main
 from bemlearn.data import read_ground_truth, read_trajectory, write_trajectory
-from bemlearn.data.human_gait import HUMAN_GAIT_CSV
-from bemlearn.sim.walking import WalkConfig, simulate_walk, walk_trajectories
+from bemlearn.apps.biped.human_gait import HUMAN_GAIT_CSV
+from bemlearn.apps.biped.walker import WalkConfig, simulate_walk, walk_trajectories
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "biped.yaml"
@@ -70,7 +70,7 @@ def test_run_dispatches_biped_configs(tmp_path, capsys):
     assert main(["run", str(CONFIG), "--device", "cuda", "--out", str(tmp_path)]) == 2
     assert "the biped pipeline trains on the CPU" in capsys.readouterr().err
     bad = tmp_path / "bad.yaml"
-    bad.write_text("robot: biped\nwalk: {duration: 3}\n")
+    bad.write_text("application: biped\nrobot: biped\nwalk: {duration: 3}\n")
     assert main(["run", str(bad), "--out", str(tmp_path / "run")]) == 2
     assert "unknown key(s) ['duration']" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bemlearn.data.human_gait import (
+from bemlearn.apps.biped.human_gait import (
     HUMAN_GAIT_CSV,
     JointRangeMap,
     convert_raw,

@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 import torch
 
-from bemlearn.robots import BipedParameters, asset_path, load
+from bemlearn.apps.biped.assets import PLANAR_XML
+from bemlearn.apps.biped.model import BipedParameters
+from bemlearn.robots import load
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +69,7 @@ def test_straight_legs_geometry(biped):
 
 
 def test_planar_walker_loads_with_paper_joint_names():
-    m = mujoco.MjModel.from_xml_path(str(asset_path("biped_planar.xml")))
+    m = mujoco.MjModel.from_xml_path(str(PLANAR_XML))
     names = [m.joint(i).name for i in range(m.njnt)]
     assert names == ["x", "z", "q1", "q2", "q3", "q4", "q5"]
     assert m.nu == 4
@@ -79,7 +81,7 @@ def test_planar_walker_loads_with_paper_joint_names():
 def test_planar_walker_foot_radius():
     """The feet are spheres of ``foot_radius`` at the shank ends (a near-point foot, as the
     pinned model assumes); a non-positive radius is refused by name."""
-    from bemlearn.robots.biped import biped_planar_mjcf
+    from bemlearn.apps.biped.model import biped_planar_mjcf
 
     for r in (0.002, 0.01):
         m = mujoco.MjModel.from_xml_string(biped_planar_mjcf(foot_radius=r))
@@ -88,7 +90,7 @@ def test_planar_walker_foot_radius():
             assert m.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE and m.geom_size[g, 0] == pytest.approx(r, abs=1e-12)
             site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, name)
             np.testing.assert_allclose(m.geom_pos[g], m.site_pos[site], atol=1e-12)
-    shipped = mujoco.MjModel.from_xml_path(str(asset_path("biped_planar.xml")))
+    shipped = mujoco.MjModel.from_xml_path(str(PLANAR_XML))
     assert shipped.geom_size[mujoco.mj_name2id(shipped, mujoco.mjtObj.mjOBJ_GEOM, "foot1"), 0] == pytest.approx(0.002)
     with pytest.raises(ValueError, match="foot_radius"):
         biped_planar_mjcf(foot_radius=0.0)

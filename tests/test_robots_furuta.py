@@ -8,8 +8,10 @@ import mujoco
 import pytest
 import torch
 
-from bemlearn.robots import AnalyticFuruta, FurutaParameters, asset_path, load, torque_to_voltage, voltage_to_torque
-from bemlearn.robots.write_assets import GENERATED_ASSETS
+from bemlearn.apps.biped import assets as biped_assets
+from bemlearn.apps.furuta import assets as furuta_assets
+from bemlearn.apps.furuta.model import AnalyticFuruta, FurutaParameters, torque_to_voltage, voltage_to_torque
+from bemlearn.robots import load
 
 
 @pytest.fixture(scope="module")
@@ -108,6 +110,9 @@ def test_motor_acts_on_arm_only(mj):
     assert mj.unactuated_name == "alpha" and mj.actuated_names == ("theta",)
 
 
-@pytest.mark.parametrize("name", sorted(GENERATED_ASSETS))
-def test_shipped_assets_equal_generators(name):
-    assert asset_path(name).read_text() == GENERATED_ASSETS[name]()
+@pytest.mark.parametrize("app", [furuta_assets, biped_assets], ids=["furuta", "biped"])
+def test_shipped_assets_equal_generators(app):
+    generated = app.generated_assets()
+    assert generated
+    for name, text in generated.items():
+        assert (app.ASSETS / name).read_text() == text, name

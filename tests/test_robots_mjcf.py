@@ -8,7 +8,8 @@ import mujoco
 import pytest
 import torch
 
-from bemlearn.robots import RobotModelError, asset_path, load
+from bemlearn.apps.biped.assets import PLANAR_XML
+from bemlearn.robots import RobotModelError, load
 from tests.test_robots_contract import CARTPOLE
 
 M, MP, L, J = 1.3, 0.2, 0.25, 0.004  # cart mass, pole mass, pole COM distance, pole inertia (see CARTPOLE)
@@ -98,14 +99,14 @@ def test_unknown_name_and_missing_file(tmp_path):
 
 def test_planar_walker_is_not_a_balance_robot():
     with pytest.raises(RobotModelError, match="exactly one unactuated"):
-        load(asset_path("biped_planar.xml"))
+        load(PLANAR_XML)
 
 
 def test_kinematics_of_bodies_with_several_joints_and_offset_pivots():
     """The planar walker's torso has x, z slides and a hinge; a user model puts a hinge off the body origin."""
     from bemlearn.robots.kinematics import chain_from_model, frame_positions
 
-    models = [mujoco.MjModel.from_xml_path(str(asset_path("biped_planar.xml"))), mujoco.MjModel.from_xml_string(
+    models = [mujoco.MjModel.from_xml_path(str(PLANAR_XML)), mujoco.MjModel.from_xml_string(
         '<mujoco><worldbody><body name="b" pos="0.1 0 0.2"><joint name="s" type="slide" axis="1 0 0" pos="0.3 0 0"/>'
         '<joint name="h" type="hinge" axis="0 1 0" pos="0 0 0.4"/><geom size="0.1"/><site name="tip" pos="0.2 0 -0.5"/>'
         '</body></worldbody></mujoco>')]

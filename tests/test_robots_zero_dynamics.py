@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from bemlearn.robots import AnalyticFuruta, load
+from bemlearn.apps.furuta.model import AnalyticFuruta
+from bemlearn.robots import load
 from bemlearn.robots.reference import CompositeSinusoid
 from bemlearn.robots.zero_dynamics import finite_zero_dynamics, lemma1, periodic_zero_dynamics, spectral_derivative
 

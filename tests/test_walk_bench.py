@@ -4,9 +4,9 @@ from pathlib import Path
 
 import pytest
 
-from bemlearn.bench.walk_bench import WalkBenchRow, format_walk_bench, run_walk_bench
+from bemlearn.apps.biped.walk_bench import WalkBenchRow, format_walk_bench, run_walk_bench
 from bemlearn.cli import main
-from bemlearn.sim.walking import WalkConfig, simulate_walk
+from bemlearn.apps.biped.walker import WalkConfig, simulate_walk
 
 ROOT = Path(__file__).resolve().parents[1]
 

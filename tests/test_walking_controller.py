@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from bemlearn.control.bem_sources import ModelBEM, ZeroBEM
-from bemlearn.control.gait import GaitConfig, build_gait, stance_frame
-from bemlearn.control.walking import WalkingController, WalkingGains
+from bemlearn.apps.biped.gait import GaitConfig, build_gait, stance_frame
+from bemlearn.apps.biped.controller import WalkingController, WalkingGains
 from bemlearn.robots import load
 
 

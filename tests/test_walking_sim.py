@@ -11,11 +11,12 @@ import pytest
 import torch
 
 from bemlearn.config import ConfigError
-from bemlearn.control.gait import GaitConfig
+from bemlearn.apps.biped.gait import GaitConfig
 from bemlearn.data import ground_truth_path, read_ground_truth, read_trajectory, write_trajectory
 from bemlearn.data.sensors import SensorConfig
-from bemlearn.robots import asset_path, load
-from bemlearn.sim.walking import (
+from bemlearn.apps.biped.assets import PLANAR_XML
+from bemlearn.robots import load
+from bemlearn.apps.biped.walker import (
     WalkConfig,
     foot_positions,
     load_walk_config,
@@ -35,7 +36,7 @@ def walk4():
 
 
 def test_pytorch_kinematics_feet_match_mujoco_sites():
-    model = mujoco.MjModel.from_xml_path(str(asset_path("biped_planar.xml")))
+    model = mujoco.MjModel.from_xml_path(str(PLANAR_XML))
     data = mujoco.MjData(model)
     rng = np.random.default_rng(0)
     qpos = np.c_[rng.uniform(-1, 1, (16, 2)), rng.uniform(-0.8, 0.8, (16, 5))]
@@ -61,7 +62,7 @@ def test_short_walk_with_model_bem(walk4):
 
 def test_step_lengths_agree_with_mujoco_contacts(walk4):
     """The pytorch-kinematics step length equals the touchdown x of MuJoCo's foot sites."""
-    model = mujoco.MjModel.from_xml_path(str(asset_path("biped_planar.xml")))
+    model = mujoco.MjModel.from_xml_path(str(PLANAR_XML))
     data = mujoco.MjData(model)
     sid = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, n) for n in ("foot1", "foot2")]
     lengths = []

@@ -13,6 +13,7 @@ import logging
 import sys
 
 from bemlearn._version import __version__
+from bemlearn.applications import applications
 from bemlearn.config import ConfigError
 
 __all__ = ["main", "build_parser"]
@@ -27,8 +28,6 @@ SUBCOMMANDS: tuple[str, ...] = (
     "bemlearn.cli.data_cmd",
     "bemlearn.cli.export_cmd",
     "bemlearn.cli.bench_cmd",
-    "bemlearn.cli.walk_cmd",
-    "bemlearn.cli.gpdm_cmd",
 )
 
 
@@ -43,6 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in SUBCOMMANDS:
         importlib.import_module(name).add_parser(sub)
+    for app in applications().values():  # robot applications add their own commands
+        if app.add_cli is not None:
+            app.add_cli(sub)
     return parser
 
 

@@ -18,11 +18,14 @@ def add_parser(sub) -> None:
     bem.add_argument("--qad", type=float, nargs="+", required=True, help="actuated rates, rad/s")
     bem.add_argument("--qadd", type=float, nargs="+", required=True, help="actuated accelerations, rad/s²")
     bem.set_defaults(func=_bem)
-    var = rs.add_parser("furuta-variants", help="BEM of the rigid-body Furuta vs the paper's printed rows over (θ̇, θ̈)")
-    var.set_defaults(func=_variants)
     lem = rs.add_parser("lemma1", help="Lemma 1 on the Furuta: ΔΓ vs Ḣ_u and max |q_u^d − q_u^e| for composite sinusoids")
     lem.add_argument("robot", nargs="?", default="furuta")
     lem.set_defaults(func=_lemma1)
+    from bemlearn.applications import applications
+
+    for app in applications().values():
+        if app.add_robot_commands is not None:
+            app.add_robot_commands(rs)
 
 
 def _info(args) -> int:
@@ -48,27 +51,6 @@ def _bem(args) -> int:
         print(f"no BEM in [{r.qu_range[0]:.4f}, {r.qu_range[1]:.4f}] for these inputs")
         return 1
     print(f"q_u^e = {float(res.qu[0]):.12f} rad  (|Γ_0| = {float(res.residual[0]):.2e} N·m)")
-    return 0
-
-
-def _variants(args) -> int:
-    import torch
-
-    from bemlearn.robots import AnalyticFuruta
-
-    rigid, paper = AnalyticFuruta(variant="rigid"), AnalyticFuruta(variant="paper")
-    rates = [0.0, 2.0, 5.0, 10.0]
-    accs = [5.0, 10.0, 20.0, 30.0]
-    print("max |α_rigid − α_paper| (rad) of the BEM; rows θ̇ (rad/s), columns θ̈ (rad/s²)")
-    print("θ̇ \\ θ̈  " + "".join(f"{a:>10g}" for a in accs))
-    for w in rates:
-        row = []
-        for a in accs:
-            x = torch.tensor([[0.0]], dtype=torch.float64)
-            d = rigid.bem(x, torch.tensor([[w]], dtype=torch.float64), torch.tensor([[a]], dtype=torch.float64)).qu - paper.bem(
-                x, torch.tensor([[w]], dtype=torch.float64), torch.tensor([[a]], dtype=torch.float64)).qu
-            row.append(abs(float(d[0])))
-        print(f"{w:>7g}  " + "".join(f"{v:>10.2e}" for v in row))
     return 0
 
 

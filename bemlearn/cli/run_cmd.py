@@ -35,14 +35,17 @@ def add_parser(sub) -> None:
 
 
 def _run(args) -> int:
-    from bemlearn.pipeline.biped import is_biped_config, load_biped_config, run_biped_pipeline
+    from bemlearn.applications import get_application
+    from bemlearn.config import load_yaml
     from bemlearn.pipeline.config import load_pipeline_config
     from bemlearn.pipeline.run import run_pipeline
 
-    if is_biped_config(args.config):  # Section IV-B: walking data, learned torso BEM, GPDM (Fig. 4-5)
-        if args.device not in (None, "cpu"):
-            raise ValueError(f"--device {args.device}: the biped pipeline trains on the CPU (set train.device in the config)")
-        out = run_biped_pipeline(load_biped_config(args.config), args.out, progress=not args.no_progress)
+    app_name = load_yaml(args.config).get("application")
+    if app_name is not None:  # a config of an application (e.g. the biped's): it runs its own stages
+        app = get_application(str(app_name))
+        if app.run is None:
+            raise ValueError(f"{args.config}: application {app_name!r} has no pipeline of its own; remove the 'application' key")
+        out = app.run(args.config, args.out, device=args.device, progress=not args.no_progress)
         print((out / "report.md").read_text())
         print(f"\nrun folder: {out}")
         return 0

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bemlearn.robots.furuta import FurutaParameters
+from bemlearn.apps.furuta.model import FurutaParameters
 
 __all__ = ["ActuatorModel", "DirectTorque", "FurutaMotor"]
 

@@ -1,59 +1,124 @@
-"""Robots by name or by MJCF path: :func:`load`.
+"""Robots by registry name or by MJCF path: :func:`load`, :func:`resolve_robot`.
 
-Shipped robots (``ROBOTS``):
+The core registers no robot itself.  Names come from applications
+(:mod:`bemlearn.applications`: bemlearn's own Furuta application registers ``furuta``,
+``furuta-analytic`` and ``furuta-paper``, its biped application ``biped``) or from
+:func:`register_robot`.  Any MJCF file of this class loads by path with no registration.
 
-* ``furuta`` — the Quanser rotary pendulum, MuJoCo model (``assets/furuta.xml``).
-* ``furuta-analytic`` — its exact closed-form rigid-body model (:class:`AnalyticFuruta`).
-* ``furuta-paper`` — the rows printed in the paper's Section IV-A (Quanser approximation).
-* ``biped`` — the 5-link planar biped, stance foot pinned (``assets/biped_pinned.xml``).
-
-The floating planar walker (``assets/biped_planar.xml``) is a simulation model, not a
-:class:`Robot` (its torso has three unactuated coordinates); see :func:`asset_path`.
+A run records the robot it used as a :class:`RobotRef` (the MJCF path, its sha256 and the
+registry name if any), so that later commands load exactly that model.
 """
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
-from bemlearn.robots.furuta import AnalyticFuruta
 from bemlearn.robots.mujoco_robot import MujocoRobot
 from bemlearn.robots.robot import Robot
 
-__all__ = ["ROBOTS", "load", "asset_path", "ASSETS"]
+__all__ = ["ROBOTS", "RobotRef", "load", "register_robot", "registered_robots", "resolve_robot"]
 
-ASSETS = Path(__file__).parent / "assets"
-
-
-def asset_path(filename: str) -> Path:
-    """Path of a shipped MJCF asset, e.g. ``asset_path("biped_planar.xml")``."""
-    path = ASSETS / filename
-    if not path.is_file():
-        known = sorted(p.name for p in ASSETS.glob("*.xml"))
-        raise FileNotFoundError(f"asset {filename!r} not found; shipped assets: {known}")
-    return path
+#: Directly registered robots (name → factory); see :func:`registered_robots` for all.
+ROBOTS: dict[str, Callable[[], Robot]] = {}
 
 
-ROBOTS: dict[str, Callable[[], Robot]] = {
-    "furuta": lambda: MujocoRobot.from_xml(asset_path("furuta.xml"), name="furuta"),
-    "furuta-analytic": lambda: AnalyticFuruta(variant="rigid"),
-    "furuta-paper": lambda: AnalyticFuruta(variant="paper"),
-    "biped": lambda: MujocoRobot.from_xml(asset_path("biped_pinned.xml"), name="biped"),
-}
+def register_robot(name: str, factory: Callable[[], Robot]) -> None:
+    """Register ``factory`` under ``name`` (an application or a user script)."""
+    ROBOTS[name] = factory
+
+
+def registered_robots() -> dict[str, Callable[[], Robot]]:
+    """Every registered robot: :data:`ROBOTS` plus those of the installed applications."""
+    from bemlearn.applications import applications
+
+    out: dict[str, Callable[[], Robot]] = {}
+    for app in applications().values():
+        out.update(app.robots)
+    out.update(ROBOTS)
+    return out
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class RobotRef:
+    """The robot a run used: MJCF path and sha256, and the registry name it was given by (if any).
+
+    Attributes:
+        name: the robot's name (registry name, or the model name of an MJCF given by path).
+        mjcf: absolute path of the MJCF file, or ``None`` for a robot with no MJCF (analytic).
+        sha256: sha256 of the MJCF file's bytes (``None`` without a file).
+        registry: the registry name the config used, or ``None`` when the config gave a path.
+    """
+
+    name: str
+    mjcf: str | None
+    sha256: str | None
+    registry: str | None
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "mjcf": self.mjcf, "sha256": self.sha256, "registry": self.registry}
+
+    @classmethod
+    def from_dict(cls, data: dict, *, where: str = "robot") -> "RobotRef":
+        if not isinstance(data, dict) or "mjcf" not in data:
+            raise ValueError(f"{where}: expected a mapping with keys name, mjcf, sha256, registry; got {data!r}")
+        return cls(str(data.get("name") or "robot"), data.get("mjcf"), data.get("sha256"), data.get("registry"))
+
+    def load(self, *, check: bool = True) -> Robot:
+        """Load the recorded robot; with ``check`` the MJCF must still have the recorded sha256."""
+        if self.mjcf is None:
+            if self.registry is None:
+                raise ValueError(f"robot {self.name!r}: the run recorded neither an MJCF file nor a registry name")
+            return load(self.registry)
+        path = Path(self.mjcf)
+        if not path.is_file():
+            raise FileNotFoundError(f"robot {self.name!r}: the run's MJCF {path} no longer exists")
+        if check and self.sha256 and _sha256(path) != self.sha256:
+            raise ValueError(
+                f"robot {self.name!r}: {path} changed since the run (sha256 {_sha256(path)[:12]}… ≠ recorded "
+                f"{self.sha256[:12]}…); the run's results belong to the old file"
+            )
+        return MujocoRobot.from_xml(path, name=self.name)
+
+
+def resolve_robot(name_or_path: str | Path) -> tuple[Robot, RobotRef]:
+    """Load a robot by registry name or MJCF path and return it with its :class:`RobotRef`.
+
+    A path always means that file, even when its stem equals a registry name (a user's own
+    ``furuta.xml`` is never mistaken for the shipped Furuta).
+    """
+    key = str(name_or_path)
+    path = Path(key)
+    if path.suffix.lower() == ".xml" or path.exists() or "/" in key:
+        if not path.is_file():
+            raise FileNotFoundError(f"robot: MJCF file {path} not found")
+        robot = MujocoRobot.from_xml(path)
+        return robot, RobotRef(robot.name, str(path.resolve()), _sha256(path), None)
+    known = registered_robots()
+    if key not in known:
+        raise ValueError(f"unknown robot {key!r}; registered robots are {sorted(known)}, or give the path of an MJCF (.xml) file")
+    robot = known[key]()
+    src = getattr(robot, "source", None)
+    mjcf = Path(src) if isinstance(robot, MujocoRobot) and src and Path(src).is_file() else None
+    return robot, RobotRef(key, str(mjcf.resolve()) if mjcf else None, _sha256(mjcf) if mjcf else None, key)
 
 
 def load(name_or_path: str | Path) -> Robot:
-    """A shipped robot by name (see ``ROBOTS``) or any MJCF file of this class by path.
+    """A registered robot by name or any MJCF file of this class by path.
 
     Raises:
-        ValueError: an unknown name (the message lists the valid names) or a model that is
+        ValueError: an unknown name (the message lists the registered names) or a model that is
             not an underactuated balance robot (exactly one unactuated hinge/slide).
         FileNotFoundError: a path that does not exist.
     """
-    key = str(name_or_path)
-    if key in ROBOTS:
-        return ROBOTS[key]()
-    path = Path(key)
-    if path.suffix.lower() == ".xml" or path.exists():
-        return MujocoRobot.from_xml(path)
-    raise ValueError(f"unknown robot {key!r}; shipped robots are {sorted(ROBOTS)}, or give the path of an MJCF (.xml) file")
+    return resolve_robot(name_or_path)[0]

@@ -114,7 +114,8 @@ class SimResult:
 
 def nominal_robot(robot_name: str, nominal: NominalConfig):
     """The controller's model: the true model, or for the Furuta a mis-parametrized analytic one."""
-    from bemlearn.robots import AnalyticFuruta, FurutaParameters, load
+    from bemlearn.apps.furuta.model import AnalyticFuruta, FurutaParameters
+    from bemlearn.robots import load
 
     if robot_name in ("furuta", "furuta-analytic"):
         p = FurutaParameters()

@@ -1,7 +1,7 @@
 """Walking metrics of a simulated biped run: steps, step length, speed, clearance, torso and BEM statistics.
 
 The feet are located by batched forward kinematics of the logged states
-(:func:`bemlearn.sim.walk_kinematics.foot_positions`).
+(:func:`bemlearn.apps.biped.walk_kinematics.foot_positions`).
 """
 
 from __future__ import annotations
@@ -11,10 +11,10 @@ from typing import TYPE_CHECKING
 import mujoco
 import numpy as np
 
-from bemlearn.sim.walk_kinematics import _planar_model, foot_positions
+from bemlearn.apps.biped.walk_kinematics import _planar_model, foot_positions
 
 if TYPE_CHECKING:
-    from bemlearn.sim.walking import WalkResult
+    from bemlearn.apps.biped.walker import WalkResult
 
 __all__ = ["walk_metrics"]
 

@@ -3,7 +3,7 @@
 The walker's MuJoCo model (``assets/biped_planar.xml``) carries three joints (x, z, q1) on
 its torso; :func:`_kinematic_chain` re-roots it as a one-joint-per-body tree so that
 :func:`foot_positions` can locate both foot sites for a whole log of states at once
-(used by :func:`bemlearn.sim.walk_metrics.walk_metrics` for step lengths and clearance).
+(used by :func:`bemlearn.apps.biped.walk_metrics.walk_metrics` for step lengths and clearance).
 """
 
 from __future__ import annotations
@@ -21,10 +21,10 @@ _FOOT_SITES = ("foot1", "foot2")
 
 
 def _planar_model() -> mujoco.MjModel:
-    """The floating planar walker (``assets/biped_planar.xml``), as simulated by :mod:`bemlearn.sim.walking`."""
-    from bemlearn.robots import asset_path
+    """The floating planar walker (``assets/biped_planar.xml``), as simulated by :mod:`bemlearn.apps.biped.walker`."""
+    from bemlearn.apps.biped.assets import PLANAR_XML
 
-    return mujoco.MjModel.from_xml_path(str(asset_path("biped_planar.xml")))
+    return mujoco.MjModel.from_xml_path(str(PLANAR_XML))
 
 
 @functools.lru_cache(maxsize=1)
@@ -35,10 +35,10 @@ def _kinematic_chain():
     the walker's torso carries three (x, z, q1), so they are split into nested bodies with
     the same joint order and a negligible inertia (kinematics only).
     """
-    from bemlearn.robots import asset_path
+    from bemlearn.apps.biped.assets import PLANAR_XML
     from bemlearn.robots.kinematics import chain_from_model
 
-    root = ET.fromstring(asset_path("biped_planar.xml").read_text())
+    root = ET.fromstring(PLANAR_XML.read_text())
     world = root.find("worldbody")
     torso = world.find("body[@name='torso']")
     joints = {j.get("name"): j for j in torso.findall("joint")}

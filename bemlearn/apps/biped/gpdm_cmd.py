@@ -32,11 +32,11 @@ def _sequences(args, cfg) -> tuple[list, str]:
     """Joint sequences ``(T_i, n)`` rad and a description of where they came from."""
     import dataclasses
 
-    from bemlearn.pipeline.biped_report import human_gait_sequences
+    from bemlearn.apps.biped.report import human_gait_sequences
 
     g = cfg.gpdm
     if args.data is None:
-        from bemlearn.sim.walking import simulate_walk, walk_trajectories
+        from bemlearn.apps.biped.walker import simulate_walk, walk_trajectories
 
         walk = cfg.walk
         traj = walk_trajectories(simulate_walk(walk, progress=not args.no_progress))[0]
@@ -60,8 +60,8 @@ def _sequences(args, cfg) -> tuple[list, str]:
 def run(args) -> int:
     import dataclasses
 
-    from bemlearn.pipeline.biped import load_biped_config
-    from bemlearn.pipeline.biped_report import fit_gpdm_logged
+    from bemlearn.apps.biped.pipeline import load_biped_config
+    from bemlearn.apps.biped.report import fit_gpdm_logged
 
     cfg = load_biped_config(args.config)
     fit = cfg.gpdm.fit if args.max_iter is None else dataclasses.replace(cfg.gpdm.fit, max_iter=args.max_iter)

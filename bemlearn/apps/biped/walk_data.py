@@ -15,13 +15,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from bemlearn.config import to_dict
-from bemlearn.control.gait import stance_frame
+from bemlearn.apps.biped.gait import stance_frame
 from bemlearn.data.features import gp_inputs
 from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
 from bemlearn.data.validation import MIN_TRIAL_SAMPLES
 
 if TYPE_CHECKING:
-    from bemlearn.sim.walking import WalkResult
+    from bemlearn.apps.biped.walker import WalkResult
 
 __all__ = ["walk_trajectories", "stance_per_sample", "walking_data"]
 
@@ -53,7 +53,7 @@ def walk_trajectories(result: WalkResult) -> tuple[Trajectory, Trajectory]:
         actuator_names=("hip1", "knee1", "hip2", "knee2"), sample_rate_hz=r.config.rate_hz,
         trial_failed={i: (r.fell and i == last) for i in stance_of},
         units={"t": "s", "q": "rad", "u": "N*m"},
-        extra={"source": "bemlearn.sim.walking", "coordinates": "pinned biped q1..q5, leg 1 = stance leg",
+        extra={"source": "bemlearn.apps.biped.walker", "coordinates": "pinned biped q1..q5, leg 1 = stance leg",
                "stance_leg": {str(i): leg for i, leg in stance_of.items()}, "dropped_steps": short,
                "metrics": {k: (v if not isinstance(v, float) or math.isfinite(v) else None)
                            for k, v in r.metrics.items() if isinstance(v, (int, float, str, bool))},

@@ -1,7 +1,7 @@
 """Walking controller: gait tracking with the torso balanced by an EIC internal loop (eq. 3, 8, 9).
 
 Each control tick (115 Hz in the paper) works in the stance-relative coordinates of the
-pinned model (:func:`bemlearn.control.gait.stance_frame`: leg 1 = stance, legs swapped
+pinned model (:func:`bemlearn.apps.biped.gait.stance_frame`: leg 1 = stance, legs swapped
 when the walker stands on leg 2), with D, h = C q̇ + G − τ_p of the *nominal* pinned
 model (``terms(q, q̇)``; single support, stance foot fixed):
 
@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bemlearn.control.gait import BezierGait, stance_frame
+from bemlearn.apps.biped.gait import BezierGait, stance_frame
 from bemlearn.robots.reference import CompositeSinusoid
 
 __all__ = ["WalkingGains", "WalkExcitation", "WalkingController"]

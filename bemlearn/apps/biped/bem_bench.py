@@ -2,20 +2,20 @@
 
 The learned torso BEM μ(x_0^e) (eq. 14) of the biped depends strongly on which walking
 samples the GP is trained on (it extrapolates to the BEM slice, and the fitted likelihood
-does not rank the fits; see :mod:`bemlearn.pipeline.biped`).  A single run's RMSE is
+does not rank the fits; see :mod:`bemlearn.apps.biped.pipeline`).  A single run's RMSE is
 therefore one draw; this benchmark measures the spread.  For ``subsets`` dataset seeds it
 draws ``dataset.n_points`` training pairs of eq. (11) from the same walks, fits and
 exports the GP exactly as ``bemlearn run`` does
-(:func:`~bemlearn.pipeline.biped.train_walking_gp`), and scores the exported
+(:func:`~bemlearn.apps.biped.pipeline.train_walking_gp`), and scores the exported
 ``bem_mean`` against the model-based torso BEM (eq. 9) at the controller's queries x^d of
-the held-out walks (simulated once, :func:`~bemlearn.pipeline.biped.heldout_walks`).
+the held-out walks (simulated once, :func:`~bemlearn.apps.biped.pipeline.heldout_walks`).
 
 The walks are read from ``data`` (a ``data.npz`` written by ``bemlearn run
 configs/biped.yaml``, with its ``.truth.npz`` beside it when ``dataset.derivatives`` is
 ``truth``), or collected from ``config.collect`` when ``data`` is ``None``.  The training
 walks are themselves a random draw: ``collect_seeds`` collects them once per seed (each
 ``collect.seed``, about 40 s) and fits the subsets on each, so the spread covers both draws
-(the shipped ``collect.seed: 0`` is a favourable one, see :mod:`bemlearn.pipeline.biped`).
+(the shipped ``collect.seed: 0`` is a favourable one, see :mod:`bemlearn.apps.biped.pipeline`).
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ def run_biped_bem_bench(config, *, data: str | Path | None = None, subsets: int 
     """Fit the torso-BEM GP on ``subsets`` random training subsets and score each (module docstring).
 
     Args:
-        config: a :class:`~bemlearn.pipeline.biped.BipedConfig` (``collect``, ``dataset``,
+        config: a :class:`~bemlearn.apps.biped.pipeline.BipedConfig` (``collect``, ``dataset``,
             ``train``, ``evaluate`` are used; subset i uses ``dataset.seed + i``).
         data: walks to draw from (``data.npz``); ``None`` collects them from ``config.collect``.
         subsets: number of training subsets (≥ 1) per set of walks.
@@ -77,7 +77,7 @@ def run_biped_bem_bench(config, *, data: str | Path | None = None, subsets: int 
         progress: show progress bars.
     """
     from bemlearn.data import ground_truth_path, read_trajectory, write_trajectory
-    from bemlearn.pipeline.biped import (collect_walks, heldout_bem, heldout_walks, train_walking_gp,
+    from bemlearn.apps.biped.pipeline import (collect_walks, heldout_bem, heldout_walks, train_walking_gp,
                                          walking_gp_data, walks_trajectories)
 
     if subsets < 1:

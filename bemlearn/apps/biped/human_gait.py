@@ -4,7 +4,7 @@ Source: the sagittal right-side marker and force-plate recording shipped with
 GaitAnalysisToolKit 0.2.0 (``gaitanalysis/octave/2d_inverse_dynamics/test/rawdata.txt``,
 Apache-2.0, see ``data/human_gait/README.md``): 3 s at 100 Hz, X forward, Y up (m), force
 plate FP2 under the right foot (N).  :func:`convert_raw` turns it into joint angles with
-the robot's sign conventions (:mod:`bemlearn.robots.biped`, rotations about +y, a link's
+the robot's sign conventions (:mod:`bemlearn.apps.biped.model`, rotations about +y, a link's
 pitch φ taken so that +φ tips an upward link's far end towards +x):
 
     trunk  q_1 = atan2(x_SHO − x_GTRO, y_SHO − y_GTRO)            (shoulder–trochanter vs vertical)
@@ -52,7 +52,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: The shipped converted dataset (present in a source checkout).
-HUMAN_GAIT_CSV = Path(__file__).resolve().parents[2] / "data" / "human_gait" / "human_gait_right.csv"
+HUMAN_GAIT_CSV = Path(__file__).resolve().parents[3] / "data" / "human_gait" / "human_gait_right.csv"
 #: Marker / force columns read from the raw file.
 RAW_COLUMNS = ("RSHO.PosX", "RSHO.PosY", "RGTRO.PosX", "RGTRO.PosY", "RLEK.PosX", "RLEK.PosY",
                "RLM.PosX", "RLM.PosY", "FP2.ForY")

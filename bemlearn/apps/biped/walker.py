@@ -2,7 +2,7 @@
 
 The plant is the floating planar walker (``assets/biped_planar.xml``: torso slides in x, z
 and pitches q1, point feet with contact).  The controller
-(:class:`~bemlearn.control.walking.WalkingController`) runs at ``rate_hz`` (115 Hz) with
+(:class:`~bemlearn.apps.biped.controller.WalkingController`) runs at ``rate_hz`` (115 Hz) with
 the torque held over ``1/(rate · timestep)`` physics steps, and sees quantized angles and
 a filtered velocity estimate (:mod:`bemlearn.data.sensors`), never the base position.
 
@@ -12,10 +12,10 @@ swap roles.  A run ends at ``duration_s``, after ``max_steps`` steps, or with a 
 below ``fall_hip_height``, |q1| above ``fall_torso``, or no step for ``max_step_time``).
 
 Afterwards the feet are located by batched pytorch-kinematics forward kinematics of the
-logged states (:func:`foot_positions`, :mod:`bemlearn.sim.walk_kinematics`), giving step
-lengths and swing-foot clearance (:func:`walk_metrics`, :mod:`bemlearn.sim.walk_metrics`).
+logged states (:func:`foot_positions`, :mod:`bemlearn.apps.biped.walk_kinematics`), giving step
+lengths and swing-foot clearance (:func:`walk_metrics`, :mod:`bemlearn.apps.biped.walk_metrics`).
 :func:`walk_trajectories`, :func:`stance_per_sample` and :func:`walking_data`
-(:mod:`bemlearn.sim.walk_data`) turn the logged run into trajectory files and GP inputs
+(:mod:`bemlearn.apps.biped.walk_data`) turn the logged run into trajectory files and GP inputs
 x ∈ R^14 (eq. 11, n = 5); all are re-exported here.
 """
 
@@ -31,12 +31,12 @@ from tqdm.auto import tqdm
 
 from bemlearn.config import ConfigError, from_dict, load_yaml
 from bemlearn.control.bem_sources import make_bem_source
-from bemlearn.control.gait import GaitConfig, build_gait
-from bemlearn.control.walking import WalkExcitation, WalkingController, WalkingGains
+from bemlearn.apps.biped.gait import GaitConfig, build_gait
+from bemlearn.apps.biped.controller import WalkExcitation, WalkingController, WalkingGains
 from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
-from bemlearn.sim.walk_data import stance_per_sample, walk_trajectories, walking_data
-from bemlearn.sim.walk_kinematics import _FOOT_SITES, _planar_model, foot_positions
-from bemlearn.sim.walk_metrics import walk_metrics
+from bemlearn.apps.biped.walk_data import stance_per_sample, walk_trajectories, walking_data
+from bemlearn.apps.biped.walk_kinematics import _FOOT_SITES, _planar_model, foot_positions
+from bemlearn.apps.biped.walk_metrics import walk_metrics
 
 __all__ = ["WalkConfig", "WalkResult", "load_walk_config", "simulate_walk", "foot_positions", "walk_metrics",
            "walk_trajectories", "stance_per_sample", "walking_data"]
@@ -96,6 +96,8 @@ def load_walk_config(path) -> WalkConfig:
     Other top-level sections are left to their own parsers; ``robot``, when present, must be ``biped``.
     """
     data = load_yaml(path)
+    if data.get("application", "biped") != "biped":
+        raise ConfigError(f"{path}: application: the walking simulation needs 'biped', got {data['application']!r}")
     if data.get("robot", "biped") != "biped":
         raise ConfigError(f"{path}: robot: the walking simulation needs 'biped', got {data['robot']!r}")
     return from_dict(WalkConfig, data.get("walk"), where=f"{path}:walk")

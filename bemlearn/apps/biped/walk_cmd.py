@@ -31,7 +31,7 @@ def run(args) -> int:
     import dataclasses
 
     from bemlearn.data import ground_truth_path, write_trajectory
-    from bemlearn.sim.walking import load_walk_config, simulate_walk, walk_trajectories
+    from bemlearn.apps.biped.walker import load_walk_config, simulate_walk, walk_trajectories
 
     cfg = load_walk_config(args.config)
     source = args.source or ("predictor" if args.predictor else cfg.bem_source)

@@ -40,7 +40,7 @@ def run_walk_bench(walk, *, seeds: int = 20, steps: int = 30, gaits: tuple[str, 
     """Walk ``seeds`` seeded walks per gait and per BEM source (module docstring).
 
     Args:
-        walk: a :class:`~bemlearn.sim.walking.WalkConfig` (gait design, gains, sensor, rate).
+        walk: a :class:`~bemlearn.apps.biped.walker.WalkConfig` (gait design, gains, sensor, rate).
         seeds: walks per gait and source (seeds 0 … seeds − 1).
         steps: steps each walk is asked for (``max_steps``); it has ``2 s`` per step to take them.
         gaits: gait kinds (``default``, ``human``).
@@ -50,7 +50,7 @@ def run_walk_bench(walk, *, seeds: int = 20, steps: int = 30, gaits: tuple[str, 
         sensor_noise: std of the Gaussian encoder noise, rad.
         progress: show a progress bar.
     """
-    from bemlearn.sim.walking import simulate_walk
+    from bemlearn.apps.biped.walker import simulate_walk
 
     if seeds < 1 or steps < 1:
         raise ValueError(f"seeds and steps: expected positive integers, got seeds={seeds}, steps={steps}")

@@ -1,6 +1,6 @@
 """The learned torso BEM of the biped: GP fit of eq. (11)–(12), export, held-out evaluation.
 
-Stages 3–4 of :mod:`bemlearn.pipeline.biped`: :func:`train_walking_gp` fits the GP and
+Stages 3–4 of :mod:`bemlearn.apps.biped.pipeline`: :func:`train_walking_gp` fits the GP and
 exports its predictor; :func:`heldout_walks` simulates walks with other seeds (model BEM in
 the loop), and :func:`bem_errors` / :func:`heldout_bem` score a learned μ(x_0^e) (eq. 14)
 against the model-based BEM (eq. 9) at the controller's queries.
@@ -17,10 +17,10 @@ import torch
 from tqdm.auto import tqdm
 
 from bemlearn._version import __version__
-from bemlearn.control.walking import WalkExcitation
+from bemlearn.apps.biped.controller import WalkExcitation
 from bemlearn.fitting.gp_config import GPConfig
-from bemlearn.pipeline.biped_config import BipedConfig
-from bemlearn.sim.walking import WalkResult
+from bemlearn.apps.biped.config import BipedConfig
+from bemlearn.apps.biped.walker import WalkResult
 
 __all__ = ["train_walking_gp", "heldout_walks", "bem_errors", "heldout_bem"]
 
@@ -91,7 +91,7 @@ def _step_position(result) -> np.ndarray:
 def heldout_walks(config: BipedConfig, *, progress: bool = True) -> dict[str, WalkResult]:
     """The held-out walks of ``config.evaluate``: per gait, ``heldout_duration_s`` with the model
     BEM in the loop, seed ``evaluate.seed + i``, no excitation."""
-    from bemlearn.sim.walking import simulate_walk
+    from bemlearn.apps.biped.walker import simulate_walk
 
     out = {}
     for i, gait in enumerate(tqdm(config.evaluate.gaits, desc="held-out walks", disable=not progress)):

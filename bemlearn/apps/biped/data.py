@@ -1,6 +1,6 @@
 """Walking data of the biped pipeline: training walks → one trajectory → GP pairs of eq. (11).
 
-Stages 1–2 of :mod:`bemlearn.pipeline.biped`: :func:`collect_walks` simulates the training
+Stages 1–2 of :mod:`bemlearn.apps.biped.pipeline`: :func:`collect_walks` simulates the training
 walks of ``collect:``, :func:`concat_trajectories` joins the walks' trajectories (one trial
 per step; :func:`walks_trajectories` for a list of walks) and :func:`walking_gp_data` draws the training pairs x ∈ R^14, y = q1 of eq. (11).
 """
@@ -14,8 +14,8 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from bemlearn.data.trajectory import Trajectory
-from bemlearn.pipeline.biped_config import BipedConfig, WalkDatasetConfig
-from bemlearn.sim.walking import WalkResult
+from bemlearn.apps.biped.config import BipedConfig, WalkDatasetConfig
+from bemlearn.apps.biped.walker import WalkResult
 
 __all__ = ["collect_walks", "concat_trajectories", "walks_trajectories", "walking_gp_data"]
 
@@ -23,8 +23,8 @@ log = logging.getLogger(__name__)
 
 
 def collect_walks(config: BipedConfig, *, progress: bool = True) -> list[WalkResult]:
-    """The training walks of ``config.collect`` (:mod:`bemlearn.pipeline.biped`), as ``WalkResult`` s."""
-    from bemlearn.sim.walking import simulate_walk
+    """The training walks of ``config.collect`` (:mod:`bemlearn.apps.biped.pipeline`), as ``WalkResult`` s."""
+    from bemlearn.apps.biped.walker import simulate_walk
 
     c = config.collect
     rng = np.random.default_rng(c.seed)
@@ -63,7 +63,7 @@ def concat_trajectories(parts: list[Trajectory]) -> Trajectory:
         failed.update({ids[i]: f for i, f in p.meta.trial_failed.items() if i in ids})
         legs.update({str(ids[int(i)]): s for i, s in p.meta.extra.get("stance_leg", {}).items() if int(i) in ids})
         offset += len(ids)
-    extra = {"source": "bemlearn.pipeline.biped", "stance_leg": legs, "walks": firsts,
+    extra = {"source": "bemlearn.apps.biped.pipeline", "stance_leg": legs, "walks": firsts,
              "coordinates": parts[0].meta.extra.get("coordinates")}
     meta = dataclasses.replace(parts[0].meta, trial_failed=failed, extra=extra)
     truth = parts[0].has_ground_truth
@@ -74,14 +74,14 @@ def concat_trajectories(parts: list[Trajectory]) -> Trajectory:
 def walks_trajectories(walks: list[WalkResult]) -> tuple[Trajectory, Trajectory]:
     """``(measured, truth)``: the ``walk_trajectories`` of each walk, each side joined by
     :func:`concat_trajectories`."""
-    from bemlearn.sim.walking import walk_trajectories
+    from bemlearn.apps.biped.walker import walk_trajectories
 
     measured, truth = zip(*(walk_trajectories(w) for w in walks))
     return concat_trajectories(list(measured)), concat_trajectories(list(truth))
 
 
 def walking_gp_data(data: Trajectory, truth: Trajectory | None, config: WalkDatasetConfig) -> tuple[np.ndarray, np.ndarray, dict]:
-    """Training pairs of eq. (11) from walk trajectories (:mod:`bemlearn.pipeline.biped`, step 2).
+    """Training pairs of eq. (11) from walk trajectories (:mod:`bemlearn.apps.biped.pipeline`, step 2).
 
     Args:
         data: the measured trajectory (quantized q), stance-relative q1..q5.

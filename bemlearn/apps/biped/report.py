@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bemlearn.data.human_gait import HumanGaitConfig, human_step_profile, load_human_gait
+from bemlearn.apps.biped.human_gait import HumanGaitConfig, human_step_profile, load_human_gait
 from bemlearn.fitting.gpdm_fit import GPDMConfig
 
 __all__ = ["fit_gpdm_logged", "human_gait_sequences", "latent_study", "write_biped_report", "PAPER_C_ROBOT", "PAPER_C_HUMAN"]
@@ -86,8 +86,8 @@ def human_gait_sequences(config: HumanGaitConfig = HumanGaitConfig()) -> tuple[l
 
     Every right heel strike t_h and t_h + T/2 (T the mean cycle) starts a step of T/2 at the
     recording's samples; the other leg is the right one shifted by T/2 (the half-cycle
-    assumption of :mod:`bemlearn.data.human_gait`), hips and knees go through the linear map
-    of :func:`~bemlearn.data.human_gait.human_step_profile`, the trunk is kept.
+    assumption of :mod:`bemlearn.apps.biped.human_gait`), hips and knees go through the linear map
+    of :func:`~bemlearn.apps.biped.human_gait.human_step_profile`, the trunk is kept.
 
     Returns:
         ``(sequences, phases)``: ``(T_i, 5)`` arrays and their step phases ``(T_i,)`` in [0, 1).
@@ -117,7 +117,7 @@ def human_gait_sequences(config: HumanGaitConfig = HumanGaitConfig()) -> tuple[l
 
 def _stance_q(result) -> np.ndarray:
     """Measured q of a walk in stance-relative order, ``(T, 5)`` rad."""
-    from bemlearn.control.gait import stance_frame
+    from bemlearn.apps.biped.gait import stance_frame
 
     return np.stack([stance_frame(q, leg) for q, leg in zip(result.q_meas, result.stance)]) if len(result.t) else result.q_meas
 
@@ -275,7 +275,7 @@ def _vec(c) -> str:
 
 
 def write_biped_report(out: str | Path, metrics: dict, config) -> Path:
-    """Write ``out/report.md`` from :func:`~bemlearn.pipeline.biped.run_biped_pipeline`'s metrics; returns its path."""
+    """Write ``out/report.md`` from :func:`~bemlearn.apps.biped.pipeline.run_biped_pipeline`'s metrics; returns its path."""
     out = Path(out)
     d, st = metrics["data"], metrics["study"]
     ev = config.evaluate
@@ -308,7 +308,7 @@ def write_biped_report(out: str | Path, metrics: dict, config) -> Path:
                   "(∂q1^e/∂q̈ ≈ 0.04 rad per rad/s²). The result varies with the random training subset (one run is one "
                   "draw), and the fitted likelihood does not rank the subsets' fits. "
                   "`bemlearn bench biped-bem` measures the spread over training subsets; the module docstring of "
-                  "`bemlearn.pipeline.biped` has the findings.", ""]
+                  "`bemlearn.apps.biped.pipeline` has the findings.", ""]
     lines += [
               "## Walking with the exported predictor's `bem_mean` in the loop",
               "", "| gait | steps | fell | speed (m/s) | torso range (rad) | in-loop learned vs model BEM RMSE (rad) |",

@@ -1,7 +1,7 @@
 """Configuration of the biped pipeline: the sections of ``configs/biped.yaml`` and their loader.
 
-:class:`BipedConfig` holds the walker (:class:`~bemlearn.sim.walking.WalkConfig`) and one
-strict dataclass per stage of :mod:`bemlearn.pipeline.biped` (``collect``, ``dataset``,
+:class:`BipedConfig` holds the walker (:class:`~bemlearn.apps.biped.walker.WalkConfig`) and one
+strict dataclass per stage of :mod:`bemlearn.apps.biped.pipeline` (``collect``, ``dataset``,
 ``train``, ``evaluate``, ``gpdm``); :func:`load_biped_config` parses a file,
 :func:`is_biped_config` tells a biped config from the other robots' pipeline configs.
 """
@@ -13,11 +13,11 @@ from pathlib import Path
 from typing import Any, Literal
 
 from bemlearn.config import from_dict, load_yaml
-from bemlearn.control.walking import WalkExcitation
-from bemlearn.data.human_gait import HumanGaitConfig
+from bemlearn.apps.biped.controller import WalkExcitation
+from bemlearn.apps.biped.human_gait import HumanGaitConfig
 from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.fitting.gpdm_fit import GPDMConfig
-from bemlearn.sim.walking import WalkConfig
+from bemlearn.apps.biped.walker import WalkConfig
 
 __all__ = ["WalkCollectConfig", "WalkDatasetConfig", "BipedEvaluateConfig", "BipedGPDMConfig", "BipedConfig",
            "load_biped_config", "is_biped_config"]
@@ -141,6 +141,7 @@ class BipedGPDMConfig:
 class BipedConfig:
     """A biped config file (``configs/biped.yaml``): the walker and the pipeline stages."""
 
+    application: str = "biped"
     robot: str = "biped"
     walk: WalkConfig = field(default_factory=WalkConfig)
     collect: WalkCollectConfig = field(default_factory=WalkCollectConfig)
@@ -150,6 +151,8 @@ class BipedConfig:
     gpdm: BipedGPDMConfig = field(default_factory=BipedGPDMConfig)
 
     def __post_init__(self) -> None:
+        if self.application != "biped":
+            raise ValueError(f"application: a biped config needs 'biped', got {self.application!r}")
         if self.robot != "biped":
             raise ValueError(f"robot: a biped config needs 'biped', got {self.robot!r}")
         n = len(self.collect.gaits) * self.collect.walks_per_gait
@@ -159,8 +162,8 @@ class BipedConfig:
 
 
 def is_biped_config(path: str | Path) -> bool:
-    """Whether the YAML file at ``path`` names ``robot: biped``."""
-    return load_yaml(path).get("robot") == "biped"
+    """Whether the YAML file at ``path`` names ``application: biped``."""
+    return load_yaml(path).get("application") == "biped"
 
 
 def load_biped_config(path: str | Path) -> BipedConfig:

@@ -4,7 +4,7 @@
 
 1. **collect** — training walks in MuJoCo (:func:`collect_walks`): both gaits, seeded
    step lengths, torso gains and initial perturbations, the excitation of
-   :class:`~bemlearn.control.walking.WalkExcitation` on; falls are kept.  The walker's
+   :class:`~bemlearn.apps.biped.controller.WalkExcitation` on; falls are kept.  The walker's
    sensor model gives quantized angles at the control rate (115 Hz) → ``data.npz``
    (stance-relative q1..q5, one trial per step) and its ground truth ``data.truth.npz``.
 2. **dataset** (:func:`walking_gp_data`) — q̇, q̈ estimated per step from the quantized
@@ -19,7 +19,7 @@
 5. **loop** — walks with the exported predictor's ``bem_mean`` in the loop, both gaits.
 6. **GPDM** (eq. 16–17) on the robot's steps and on the human gait; χ = c·(q − q̄),
    χ̂ = c·([q_a, μ(x_0^e)] − q̄); Fig. 4 / Fig. 5 equivalents and ``report.md``
-   (:mod:`bemlearn.pipeline.biped_report`).
+   (:mod:`bemlearn.apps.biped.report`).
 
 Code: ``biped_config`` (configs), ``biped_data`` (1–2), ``biped_bem`` (3–4), here (5), ``biped_report`` (6).
 
@@ -143,11 +143,11 @@ import time
 from pathlib import Path
 
 from bemlearn.config import save_yaml
-from bemlearn.control.walking import WalkExcitation
-from bemlearn.pipeline.biped_bem import bem_errors, heldout_bem, heldout_walks, train_walking_gp
-from bemlearn.pipeline.biped_config import (BipedConfig, BipedEvaluateConfig, BipedGPDMConfig, WalkCollectConfig,
+from bemlearn.apps.biped.controller import WalkExcitation
+from bemlearn.apps.biped.bem import bem_errors, heldout_bem, heldout_walks, train_walking_gp
+from bemlearn.apps.biped.config import (BipedConfig, BipedEvaluateConfig, BipedGPDMConfig, WalkCollectConfig,
                                             WalkDatasetConfig, is_biped_config, load_biped_config)
-from bemlearn.pipeline.biped_data import collect_walks, concat_trajectories, walking_gp_data, walks_trajectories
+from bemlearn.apps.biped.data import collect_walks, concat_trajectories, walking_gp_data, walks_trajectories
 
 __all__ = ["WalkCollectConfig", "WalkDatasetConfig", "BipedEvaluateConfig", "BipedGPDMConfig", "BipedConfig",
            "load_biped_config", "is_biped_config", "collect_walks", "concat_trajectories", "walks_trajectories",
@@ -160,8 +160,8 @@ log = logging.getLogger(__name__)
 def run_biped_pipeline(config: BipedConfig, out_dir: str | Path | None = None, *, progress: bool = True) -> Path:
     """Run every stage (module docstring) into ``out_dir`` (default ``runs/biped-<timestamp>``); returns it."""
     from bemlearn.data import ground_truth_path, write_trajectory
-    from bemlearn.pipeline.biped_report import fit_gpdm_logged, human_gait_sequences, latent_study, write_biped_report
-    from bemlearn.sim.walking import simulate_walk, walk_trajectories
+    from bemlearn.apps.biped.report import fit_gpdm_logged, human_gait_sequences, latent_study, write_biped_report
+    from bemlearn.apps.biped.walker import simulate_walk, walk_trajectories
 
     out = Path(out_dir) if out_dir else Path("runs") / time.strftime("biped-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)

@@ -1,6 +1,6 @@
 """Periodic biped gaits as virtual constraints q_a = h(ϑ) on a phase variable (Section III-C).
 
-Coordinates are those of the pinned model (:mod:`bemlearn.robots.biped`) *relative to the
+Coordinates are those of the pinned model (:mod:`bemlearn.apps.biped.model`) *relative to the
 stance leg*: q = [q1, q2, q3, q4, q5] = [torso, stance hip, stance knee, swing hip, swing
 knee] (rad).  When the walker's leg 2 is in stance its joints are swapped
 (:data:`LEG_SWAP`, :func:`stance_frame`); at each impact the legs exchange roles, so one
@@ -21,7 +21,7 @@ hip–foot line), which increases monotonically as the body vaults over the stan
 
 Two gaits are built here (:func:`build_gait`): an engineered one from a Cartesian design
 (:class:`GaitDesign`: hip path over the stance foot and a swing-foot arc, converted by the
-leg's inverse kinematics) and the human-derived one (:mod:`bemlearn.data.human_gait`,
+leg's inverse kinematics) and the human-derived one (:mod:`bemlearn.apps.biped.human_gait`,
 linearly mapped into the robot's joint ranges, its swing-foot path raised to a clearance
 arc because the robot has point feet — a documented adaptation beyond the paper's linear map).
 """
@@ -34,8 +34,8 @@ from typing import Literal
 
 import numpy as np
 
-from bemlearn.data.human_gait import HumanGaitConfig, human_step_profile
-from bemlearn.robots.biped import BipedParameters
+from bemlearn.apps.biped.human_gait import HumanGaitConfig, human_step_profile
+from bemlearn.apps.biped.model import BipedParameters
 
 __all__ = [
     "LEG_SWAP",
@@ -83,7 +83,7 @@ class BezierGait:
         phase_weights: c, ``(5,)``, ϑ = cᵀ q on stance-relative q.
         theta_start, theta_end: ϑ⁺ and ϑ⁻, rad.
         torso: the torso angle q1 the gait was designed with, rad (hip references are
-            applied relative to the world through it, see :mod:`bemlearn.control.walking`).
+            applied relative to the world through it, see :mod:`bemlearn.apps.biped.controller`).
         name: a label.
     """
 
@@ -240,7 +240,7 @@ class GaitConfig:
     """Which gait to walk (``walk.gait`` section).
 
     Attributes:
-        kind: ``"default"`` (:class:`GaitDesign`) or ``"human"`` (:mod:`bemlearn.data.human_gait`).
+        kind: ``"default"`` (:class:`GaitDesign`) or ``"human"`` (:mod:`bemlearn.apps.biped.human_gait`).
         degree: Bézier degree M.
         phase_weights: c of ϑ = cᵀq (stance-relative q1..q5).
         samples: posture samples the Bézier polynomials are fitted to.
