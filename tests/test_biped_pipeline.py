@@ -28,7 +28,7 @@ from bemlearn.apps.biped.pipeline import (
     train_walking_gp,
     walking_gp_data,
 )
-from bemlearn.apps.biped.report import _binned, _chis, fit_gpdm_logged, human_gait_sequences
+from bemlearn.apps.biped.gpdm_study import _binned, _chis, fit_gpdm_logged, human_gait_sequences
 from bemlearn.robots import load
 from bemlearn.apps.biped.walker import WalkConfig, simulate_walk, stance_per_sample, walk_trajectories
 

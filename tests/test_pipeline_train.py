@@ -12,7 +12,8 @@ import yaml
 from bemlearn.cli.main import main
 from bemlearn.data.collect import CollectConfig, collect
 from bemlearn.data.trajectory_io import write_trajectory
-from bemlearn.models.learned_bem import LearnedBEM, srinivas_kappa
+from bemlearn.export import load_learned_bem
+from bemlearn.models.learned_bem import srinivas_kappa
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.train import train_run
 
@@ -22,7 +23,7 @@ def small(tmp_path_factory):
     root = tmp_path_factory.mktemp("train")
     data, _ = collect("furuta", CollectConfig(n_trials=6, duration_s=6.0, workers=1, seed=1), progress=False)
     path = write_trajectory(data, root / "data.npz")
-    cfg = PipelineConfig()
+    cfg = PipelineConfig(robot="furuta")
     cfg = dataclasses.replace(cfg, dataset=dataclasses.replace(cfg.dataset, n_points=150), train=dataclasses.replace(cfg.train, max_iter=30))
     out = root / "run"
     metrics = train_run(cfg, path, out, progress=False)
@@ -48,7 +49,7 @@ def test_run_folder_contents(small):
 
 def test_learned_bem_api_matches_frozen_posterior(small):
     _, _, out, _ = small
-    learned = LearnedBEM.from_checkpoint(out)
+    learned = load_learned_bem(out)
     qa = torch.tensor([[0.1], [-0.2]], dtype=torch.float64)
     qad = torch.tensor([[0.5], [1.0]], dtype=torch.float64)
     qadd = torch.tensor([[3.0], [-6.0]], dtype=torch.float64)
@@ -69,7 +70,7 @@ def test_learned_bem_api_matches_frozen_posterior(small):
 
 def test_interrupt_leaves_usable_checkpoint_and_resume_continues(small, tmp_path, monkeypatch):
     cfg, path, _, _ = small
-    import bemlearn.pipeline.train as tr
+    import bemlearn.pipeline.gp_stage as tr
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt

@@ -19,7 +19,8 @@ from bemlearn.bench.train_bench import peak_rss_mib
 from bemlearn.data import build_datasets, read_trajectory
 from bemlearn.fitting import train_gp
 from bemlearn.models import predictor_state
-from bemlearn.pipeline.evaluation import evaluate_bem, ground_truth_robot, held_out_references
+from bemlearn.pipeline.evaluation import evaluate_bem, held_out_references
+from bemlearn.robots import load
 
 __all__ = ["bench_bem_training"]
 
@@ -35,7 +36,7 @@ def _fit_and_eval(ds, gp_cfg, config, *, threads: int) -> dict:
     finally:
         torch.set_num_threads(previous)
     st = predictor_state(model, lik, x_mean=tr.x_mean, x_std=tr.x_std, y_mean=tr.y_mean, y_std=tr.y_std, input_names=tr.input_names, n_train=len(tr))
-    robot = ground_truth_robot(config.robot)
+    robot = load(config.robot)
     ev = evaluate_bem(st, robot, held_out_references(config.evaluate, robot.m), duration_s=config.evaluate.duration_s, rate_hz=config.evaluate.rate_hz)
     ev.pop("curves")
     return {"kind": gp_cfg.kind, "n_train": len(tr), "threads": threads, "seconds": seconds, "steps": res.steps,

@@ -89,7 +89,8 @@ def run_derivatives_bench(config, data_path: str | Path, *, with_gp: bool = True
         if with_gp:
             from bemlearn.fitting import train_gp
             from bemlearn.models import predictor_state
-            from bemlearn.pipeline.evaluation import EvaluationConfig, evaluate_bem, ground_truth_robot, held_out_references
+            from bemlearn.pipeline.evaluation import evaluate_bem, held_out_references
+            from bemlearn.robots import load
 
             dcfg = dataclasses.replace(config.dataset, derivative=name, derivative_options=options)
             ds = build_datasets(data, dcfg)
@@ -97,8 +98,8 @@ def run_derivatives_bench(config, data_path: str | Path, *, with_gp: bool = True
             t0 = time.perf_counter()
             model, lik, _ = train_gp(tr.x_normalized, tr.y_normalized, config=config.train)
             st = predictor_state(model, lik, x_mean=tr.x_mean, x_std=tr.x_std, y_mean=tr.y_mean, y_std=tr.y_std, input_names=tr.input_names, n_train=len(tr))
-            ecfg = EvaluationConfig()
-            robot = ground_truth_robot(config.robot)
+            ecfg = config.evaluate
+            robot = load(config.robot)
             ev = evaluate_bem(st, robot, held_out_references(ecfg, robot.m), duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
             row.update({
                 "bem_rmse": ev["rmse"], "bem_max": ev["max_abs"], "bem_coverage_latent": ev["coverage_2sigma_latent"],

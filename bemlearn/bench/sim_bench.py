@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from bemlearn.control.bem_sources import PredictorBEM
-from bemlearn.pipeline.evaluation import EvaluationConfig, ground_truth_robot, held_out_references
+from bemlearn.pipeline.evaluation import EvaluationConfig, held_out_references
 from bemlearn.pipeline.lemma import learned_lemma1
 from bemlearn.sim.closed_loop import NominalConfig, ReferenceConfig, SimulateConfig, nominal_robot, simulate
 
@@ -103,7 +103,9 @@ def _bem_rmse(fn, truth_robot, refs) -> float:
 def _mismatch(pred: PredictorBEM, base: SimulateConfig, ref: ReferenceConfig, progress) -> list[dict]:
     from bemlearn.control.bem_sources import ModelBEM
 
-    truth = ground_truth_robot("furuta")
+    from bemlearn.robots import load
+
+    truth = load("furuta")  # TODO(lead): the run's robot
     ecfg = EvaluationConfig()
     refs = held_out_references(ecfg, 1)
     rows = []

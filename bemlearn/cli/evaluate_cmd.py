@@ -12,12 +12,15 @@ def add_parser(sub) -> None:
     p = sub.add_parser(
         "evaluate",
         help="compare a trained run's learned BEM with the model-based BEM on held-out references",
-        description="Evaluate μ(x₀ᵉ) (eq. 14) against the model-based BEM (eq. 9) of the true robot on random "
-        "composite-sinusoid q_a^d(t): RMSE, max error, fraction inside ±2σ; writes RUN_DIR/evaluation.json and plots.",
+        description="Evaluate μ(x₀ᵉ) (eq. 14) against the model-based BEM (eq. 9) of the robot the run recorded "
+        "(its MJCF path and sha256; a changed file is an error) on the run's held-out references (the resolved "
+        "config's 'evaluate' section): RMSE, max error, fraction inside ±2σ; writes RUN_DIR/evaluation.json and "
+        "evaluation.png.",
     )
     p.add_argument("run_dir", type=Path)
-    p.add_argument("--references", type=int, default=5, help="number of held-out references (default 5)")
-    p.add_argument("--seed", type=int, default=12345, help="seed of the references")
+    p.add_argument("--references", type=int, help="number of held-out references (default: the run's evaluate.n_references)")
+    p.add_argument("--seed", type=int, help="seed of the references (default: the run's evaluate.seed)")
+    p.add_argument("--model", help="compare with this robot instead (registry name or MJCF path), e.g. for a model-free run")
     p.set_defaults(func=run)
 
 
@@ -29,27 +32,36 @@ def run(args) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from bemlearn.config import from_dict, load_yaml
     from bemlearn.export.checkpoint import load_checkpoint
-    from bemlearn.pipeline.evaluation import EvaluationConfig, evaluate_bem, ground_truth_robot, held_out_references
+    from bemlearn.pipeline.evaluation import EvaluationConfig, evaluate_bem, held_out_references, run_truth_robot
 
     ck = load_checkpoint(args.run_dir)
-    robot = ground_truth_robot(ck.metadata.robot)
-    ecfg = dataclasses.replace(EvaluationConfig(), n_references=args.references, seed=args.seed)
+    out = ck.path.parent
+    robot, ref = run_truth_robot(out, model=args.model)
+    cfg_path = out / "config.yaml"
+    ecfg = EvaluationConfig()
+    if cfg_path.is_file():
+        ecfg = from_dict(EvaluationConfig, load_yaml(cfg_path).get("evaluate"), where=f"{cfg_path}:evaluate")
+    overrides = {k: v for k, v in (("n_references", args.references), ("seed", args.seed)) if v is not None}
+    ecfg = dataclasses.replace(ecfg, **overrides)
     refs = held_out_references(ecfg, robot.m)
     ev = evaluate_bem(ck.predictor_state, robot, refs, duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
+    ev["robot"] = ref
     c = ev.pop("curves")
-    out = args.run_dir if args.run_dir.is_dir() else args.run_dir.parent
+    unit = ck.metadata.units.get(f"qd_{ck.metadata.unactuated_name}", "rad/s").removesuffix("/s")
     fig, ax = plt.subplots(figsize=(9, 3.5))
     ax.plot(c["t"], c["model"], "k", lw=1.2, label="model-based BEM (eq. 9)")
     ax.plot(c["t"], c["mean"], "C1--", lw=1.2, label="learned BEM (eq. 14)")
     ax.fill_between(c["t"], c["mean"] - 2 * c["std"], c["mean"] + 2 * c["std"], color="C1", alpha=0.25, label="±2σ (latent)")
     ax.set_xlabel("t (s)")
-    ax.set_ylabel(f"{ck.metadata.unactuated_name} (rad)")
+    ax.set_ylabel(f"{ck.metadata.unactuated_name} ({unit})")
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(out / "evaluation.png", dpi=110)
     (out / "evaluation.json").write_text(json.dumps(ev, indent=2))
-    print(f"{'reference':<10}{'RMSE (rad)':>12}{'max (rad)':>12}")
+    print(f"robot: {ref['name']} ({ref['mjcf'] or ref['registry']})")
+    print(f"{'reference':<10}{f'RMSE ({unit})':>12}{f'max ({unit})':>12}")
     for i, r in enumerate(ev["per_reference"]):
         print(f"{i:<10}{r['rmse']:>12.5f}{r['max_abs']:>12.5f}")
     print(f"{'all':<10}{ev['rmse']:>12.5f}{ev['max_abs']:>12.5f}")

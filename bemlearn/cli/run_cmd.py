@@ -14,7 +14,7 @@ def add_parser(sub) -> None:
         description="Collect excitation data in MuJoCo, train the BEM GP, export the TorchScript predictor, run the EIC "
         "closed loop with the learned, model-based and zero BEM, and write RUN_DIR/report.md.",
     )
-    p.add_argument("config", type=Path, help="pipeline YAML, e.g. configs/furuta.yaml")
+    p.add_argument("config", type=Path, help="pipeline YAML; `robot: path/to/robot.xml` alone is enough")
     p.add_argument("--out", type=Path, help="run folder (default runs/<robot>-<timestamp>)")
     p.add_argument("--device", choices=["cpu", "cuda"], help="GP training device (default: the config's train.device)")
     p.add_argument("--no-progress", action="store_true")

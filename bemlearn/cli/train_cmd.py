@@ -31,18 +31,25 @@ def run(args) -> int:
     from bemlearn.pipeline.train import train_run
 
     cfg = load_pipeline_config(args.config)
-    data = args.data or Path("data") / f"{cfg.robot}_excitation.npz"
+    data = args.data or (Path(cfg.data) if cfg.data else None)
+    if data is None:
+        raise ValueError(f"--data: no trajectory file given and {args.config} has no 'data:' key "
+                         f"(collect one with `bemlearn collect {args.config} --out FILE`)")
     if not data.is_file():
         raise FileNotFoundError(f"--data: trajectory file {data} not found (collect one with `bemlearn collect {args.config} --out {data}`)")
     out = args.out or Path("runs") / time.strftime("train-%Y%m%d-%H%M%S")
     if args.resume and not (out / "checkpoint.pt").is_file():
         raise FileNotFoundError(f"--resume: no checkpoint in {out}")
     m = train_run(cfg, data, out, device=args.device, resume=args.resume, progress=not args.no_progress, threads=args.threads)
-    b = m["bem_heldout"]
+    unit = m["output_unit"]
     print(f"run folder: {out}")
     print(f"fit: {m['fit'].get('stop_reason')} in {m['fit'].get('seconds', float('nan')):.1f} s on {m['n_train']} points")
     if "val_rmse" in m:
-        print(f"validation: RMSE {m['val_rmse']:.5f} rad, mean predictive log-likelihood {m['val_mean_log_likelihood']:.3f}")
-    print(f"held-out BEM vs model: RMSE {b['rmse']:.5f} rad, max {b['max_abs']:.5f} rad, "
-          f"inside ±2σ: {100 * b['coverage_2sigma_latent']:.1f}% (latent), {100 * b['coverage_2sigma_predictive']:.1f}% (predictive)")
+        print(f"validation: RMSE {m['val_rmse']:.5f} {unit}, mean predictive log-likelihood {m['val_mean_log_likelihood']:.3f}")
+    b = m.get("bem_heldout")
+    if b is None:
+        print("no model to compare with (a model-free run): see the data-only evaluation in metrics.json")
+    else:
+        print(f"held-out BEM vs model ({m['robot']['name']}): RMSE {b['rmse']:.5f} {unit}, max {b['max_abs']:.5f} {unit}, "
+              f"inside ±2σ: {100 * b['coverage_2sigma_latent']:.1f}% (latent), {100 * b['coverage_2sigma_predictive']:.1f}% (predictive)")
     return 0

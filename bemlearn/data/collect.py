@@ -113,7 +113,7 @@ def _robot_and_model(robot_name: str):
 
     robot = load(robot_name)
     if not isinstance(robot, MujocoRobot):
-        raise ValueError(f"collect: robot {robot_name!r} has no MuJoCo model to simulate; use an MJCF robot (e.g. 'furuta')")
+        raise ValueError(f"collect: robot {robot_name!r} has no MuJoCo model to simulate; give an MJCF robot (a registry name or a path to an .xml file)")
     return robot
 
 

@@ -11,6 +11,7 @@ from bemlearn.export.checkpoint import (
     CHECKPOINT_NAME,
     Checkpoint,
     load_checkpoint,
+    load_learned_bem,
     write_checkpoint,
 )
 from bemlearn.export.export_run import ExportFormat, export_run
@@ -37,6 +38,7 @@ __all__ = [
     "export_run",
     "kernel_gram",
     "load_checkpoint",
+    "load_learned_bem",
     "load_pt2_predictor",
     "load_torchscript",
     "reference_posterior",

@@ -24,9 +24,10 @@ import torch
 
 from bemlearn.config import ConfigError
 from bemlearn.export.metadata import PredictorMetadata, artifact_metadata
+from bemlearn.models.learned_bem import LearnedBEM
 from bemlearn.models.predictor_state import GPKind, PredictorState
 
-__all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_NAME", "Checkpoint", "load_checkpoint", "write_checkpoint"]
+__all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_NAME", "Checkpoint", "load_checkpoint", "load_learned_bem", "write_checkpoint"]
 
 log = logging.getLogger(__name__)
 
@@ -184,3 +185,10 @@ def write_checkpoint(
     load_checkpoint(path)
     log.info("wrote checkpoint %s (%s GP)", path, predictor_state.kind)
     return path
+
+
+def load_learned_bem(run_dir_or_file: str | os.PathLike[str]) -> LearnedBEM:
+    """The :class:`~bemlearn.models.LearnedBEM` (eq. 12–15) of ``RUN_DIR`` or ``RUN_DIR/checkpoint.pt``."""
+    ck = load_checkpoint(run_dir_or_file)
+    md = ck.metadata
+    return LearnedBEM(ck.predictor_state, robot=md.robot, actuated_names=md.actuated_names, unactuated_name=md.unactuated_name)

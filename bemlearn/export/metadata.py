@@ -207,6 +207,9 @@ def artifact_metadata(meta: PredictorMetadata, state: PredictorState) -> dict[st
         raise ValueError(f"metadata.n_train = {meta.n_train} but PredictorState.n_train = {state.n_train}")
     n = 3 * meta.m
     noise_std = float(state.y_std) * math.sqrt(max(float(state.noise), 0.0))
+    # the output q_u is in its joint's unit: the unit of the q̇_u column without "/s" (rad or m)
+    rate_unit = meta.units.get(f"qd_{meta.unactuated_name}", "rad/s")
+    out_unit = rate_unit[: -len("/s")] if rate_unit.endswith("/s") else "rad"
     doc = {
         "format": ARTIFACT_FORMAT,
         "robot": meta.robot,
@@ -216,7 +219,7 @@ def artifact_metadata(meta: PredictorMetadata, state: PredictorState) -> dict[st
         "m": meta.m,
         "inputs": list(meta.input_names[:n]),
         "full_inputs": list(meta.input_names),
-        "units": {name: meta.units[name] for name in meta.input_names} | {"mean": "rad", "std": "rad"},
+        "units": {name: meta.units[name] for name in meta.input_names} | {"mean": out_unit, "std": out_unit},
         "outputs": {
             "forward": ["mean", "std"],
             "bem_mean": ["mean"],

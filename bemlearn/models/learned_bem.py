@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import torch
 
@@ -62,15 +61,6 @@ class LearnedBEM:
         self.m = len(self.actuated_names)
         if state.dim != 3 * self.m + 2:
             raise ValueError(f"LearnedBEM: the posterior has d = {state.dim} inputs, expected 3m + 2 = {3 * self.m + 2}")
-
-    @classmethod
-    def from_checkpoint(cls, path: str | Path) -> "LearnedBEM":
-        """Load ``RUN_DIR`` or ``RUN_DIR/checkpoint.pt``."""
-        from bemlearn.export.checkpoint import load_checkpoint
-
-        ck = load_checkpoint(path)
-        md = ck.metadata
-        return cls(ck.predictor_state, robot=md.robot, actuated_names=md.actuated_names, unactuated_name=md.unactuated_name)
 
     def predict(self, x: torch.Tensor) -> BEMPrediction:
         """The full learned map f of eq. (11): ``x (B, 3m + 2)`` = [q̈_a, q̇_a, q_a, q̈_u, q̇_u] → q_u."""

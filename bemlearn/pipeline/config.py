@@ -2,7 +2,9 @@
 
 .. code-block:: yaml
 
-    robot: furuta          # registry name or MJCF path
+    robot: furuta          # registry name or MJCF path (or leave it out and give data:)
+    data: FILE             # train on this trajectory file instead of collecting (model-free without robot:)
+    model: path/to/robot.xml  # model-free runs only: an MJCF to compare the learned BEM with
     collect: {...}         # bemlearn.data.collect.CollectConfig
     dataset: {...}         # bemlearn.data.dataset.DatasetConfig
     train: {...}           # bemlearn.fitting.GPConfig
@@ -32,12 +34,22 @@ __all__ = ["PipelineConfig", "load_pipeline_config"]
 class PipelineConfig:
     """All stages' options (module docstring)."""
 
-    robot: str = "furuta"
+    robot: str | None = None
+    data: str | None = None
+    model: str | None = None
     collect: CollectConfig = field(default_factory=CollectConfig)
     dataset: DatasetConfig = field(default_factory=DatasetConfig)
     train: GPConfig = field(default_factory=GPConfig)
     evaluate: EvaluationConfig = field(default_factory=EvaluationConfig)
     simulate: SimulateConfig = field(default_factory=SimulateConfig)
+
+    def __post_init__(self) -> None:
+        if self.robot is None and self.data is None:
+            raise ValueError("the config names neither 'robot:' (a registry name or an MJCF path) nor 'data:' "
+                             "(a trajectory file); a config needs at least one of them")
+        if self.model is not None and self.robot is not None:
+            raise ValueError("'model:' is for model-free runs (data: without robot:); with 'robot:' the robot's own "
+                             "model is the ground truth")
 
 
 def load_pipeline_config(path: str | Path) -> PipelineConfig:

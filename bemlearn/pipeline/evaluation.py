@@ -17,7 +17,7 @@ import torch
 from bemlearn.models.predictor_state import PredictorState
 from bemlearn.robots.reference import CompositeSinusoid
 
-__all__ = ["EvaluationConfig", "held_out_references", "evaluate_bem", "ground_truth_robot"]
+__all__ = ["EvaluationConfig", "held_out_references", "evaluate_bem", "run_truth_robot"]
 
 
 @dataclass(frozen=True)
@@ -60,12 +60,32 @@ def held_out_references(config: EvaluationConfig, m: int) -> list[CompositeSinus
     return refs
 
 
-def ground_truth_robot(name: str):
-    """The robot whose model-based BEM is the reference (the analytic Furuta for ``furuta``:
-    identical to the MuJoCo model to 1e-8 rad, and much faster)."""
-    from bemlearn.robots import load
+def run_truth_robot(run_dir, *, model=None):
+    """The robot whose model-based BEM (eq. 9) is a run's ground truth, read from the run, never guessed.
 
-    return load("furuta-analytic" if name == "furuta" else name)
+    The run's checkpoint records the robot as a :class:`~bemlearn.robots.RobotRef` (MJCF path and
+    sha256); the file must still hold the same model.  ``model`` (a registry name or MJCF path)
+    compares a model-free run with a model.  Returns ``(robot, ref_dict)``.
+
+    Raises:
+        ValueError: the run records no robot (a model-free run without ``model``), or the MJCF changed.
+    """
+    from bemlearn.export.checkpoint import load_checkpoint
+    from bemlearn.robots import RobotRef, resolve_robot
+
+    ck = load_checkpoint(run_dir)
+    if model is not None:
+        robot, ref = resolve_robot(model)
+        return robot, ref.to_dict()
+    rec = ck.metadata.extra.get("robot_ref")
+    if rec is None:
+        raise ValueError(f"{ck.path}: the run records no robot (made by bemlearn < 0.2); pass the model to compare "
+                         "with explicitly (--model NAME|PATH)")
+    ref = RobotRef.from_dict(rec, where=f"{ck.path}: robot_ref")
+    if ref.mjcf is None and ref.registry is None:
+        raise ValueError(f"{ck.path}: a model-free run (trained on data alone); there is no model to compare with "
+                         "unless you give one (--model NAME|PATH)")
+    return ref.load(), ref.to_dict()
 
 
 def evaluate_bem(state: PredictorState, robot, references: list[CompositeSinusoid], *, duration_s: float = 20.0, rate_hz: float = 100.0) -> dict:

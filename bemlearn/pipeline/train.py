@@ -20,19 +20,16 @@ import hashlib
 import json
 import logging
 import math
-import time
 from pathlib import Path
 
 import torch
 
-from bemlearn._version import __version__
 from bemlearn.config import save_yaml
 from bemlearn.data import build_datasets, read_trajectory
-from bemlearn.export.checkpoint import load_checkpoint, write_checkpoint
-from bemlearn.fitting import build_gp, fit_gp, hyperparameter_metrics
-from bemlearn.models import predict, predictor_state
+from bemlearn.models import predict
 from bemlearn.pipeline.config import PipelineConfig
-from bemlearn.pipeline.evaluation import evaluate_bem, ground_truth_robot, held_out_references
+from bemlearn.pipeline.evaluation import evaluate_bem, held_out_references
+from bemlearn.units import column_units
 
 __all__ = ["train_run", "file_sha256"]
 
@@ -82,6 +79,11 @@ def train_run(
 
 
 def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, progress) -> dict:
+    from torch.utils.tensorboard import SummaryWriter
+
+    from bemlearn.pipeline.gp_stage import fit_bem_gp
+    from bemlearn.pipeline.robot_source import data_joint_kinds, run_robot
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     gp_cfg = config.train
@@ -91,75 +93,29 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         _resolve_device(gp_cfg.device)
     config = dataclasses.replace(config, train=gp_cfg)
     save_yaml(config, out / "config.yaml")
-    traj = read_trajectory(data_path, robot=config.robot)
+    robot, ref, truth_robot = run_robot(config)
+    traj = read_trajectory(data_path, robot=robot.name if robot is not None and ref.registry else None)
     ds = build_datasets(traj, config.dataset, progress=progress)
     train, val = ds.train, ds.val
     log.info("dataset: %d training points, %d validation points; %s", len(train), len(val), ds.report)
-    dtype = gp_cfg.torch_dtype
-    x, y = train.x_normalized.to(dtype), train.y_normalized.to(dtype)
-    model, lik = build_gp(x, y, config=gp_cfg)
-    if resume:
-        ck = load_checkpoint(out)
-        model.load_state_dict(ck.model_state, strict=False)
-        lik.load_state_dict({k[len("likelihood."):]: v for k, v in ck.model_state.items() if k.startswith("likelihood.")})
-        log.info("resumed from %s", ck.path)
-
-    from torch.utils.tensorboard import SummaryWriter
-
-    writer = SummaryWriter(str(out / "tb"))
     names = train.input_names
-
-    def callback(step: int, metrics: dict[str, float]) -> None:
-        for k, v in metrics.items():
-            tag = f"lengthscale/{names[int(k.split('_')[1])]}" if k.startswith("lengthscale_") else f"train/{k}"
-            writer.add_scalar(tag, v, step)
-
-    interrupted = False
-    t0 = time.perf_counter()
-    try:
-        result = fit_gp(model, lik, x, y, config=gp_cfg, callback=callback, progress=progress)
-        fit_summary = {"loss": result.loss, "steps": result.steps, "seconds": result.seconds, "stop_reason": result.stop_reason}
-    except KeyboardInterrupt:
-        interrupted = True
-        fit_summary = {"stop_reason": "interrupted", "seconds": time.perf_counter() - t0}
-        log.warning("interrupted: writing a checkpoint of the current hyperparameters")
-    model.eval()
-    lik.eval()
-    state = predictor_state(
-        model, lik, x_mean=train.x_mean, x_std=train.x_std, y_mean=train.y_mean, y_std=train.y_std,
-        input_names=names, n_train=len(train),
-    )
-    hyp = hyperparameter_metrics(model, lik)
-    phys_ls = {n: float(state.lengthscale[j] * state.x_std[j]) for j, n in enumerate(names)}
     meta = traj.meta
-    units = {}
-    for n in names:
-        units[n] = "rad/s²" if n.startswith("qdd_") else "rad/s" if n.startswith("qd_") else "rad"
-    model_state = dict(model.state_dict())
-    if not any(k.startswith("likelihood.") for k in model_state):  # likelihood not a submodule (sgpr/svgp)
-        model_state.update({f"likelihood.{k}": v for k, v in lik.state_dict().items()})
-    model_state = {k: v.detach().cpu() for k, v in model_state.items() if isinstance(v, torch.Tensor)}
-    write_checkpoint(
-        out,
-        model_state=model_state,
-        predictor_state=state,
-        metadata={
-            "robot": meta.robot,
-            "joint_names": list(meta.joint_names),
-            "actuated_names": list(meta.actuated_names),
-            "unactuated_name": meta.unactuated,
-            "m": len(meta.actuated_names),
-            "input_names": list(names),
-            "units": units,
-            "n_train": len(train),
-            "n_inducing": None if gp_cfg.kind == "exact" else int(state.n_support),
-            "hyperparameters": {**hyp, "lengthscale_physical": phys_ls},
-            "bemlearn_version": __version__,
-            "data_sha256": file_sha256(data_path),
-            "extra": {"interrupted": interrupted, "data_file": str(data_path), "dataset_report": ds.report},
-        },
+    kinds = robot.coordinate_kinds if robot is not None else data_joint_kinds(meta)
+    units = column_units(names, dict(zip(meta.joint_names, kinds)))
+    writer = SummaryWriter(str(out / "tb"))
+    stage = fit_bem_gp(
+        train.x, train.y, out, normalization=train.normalization, input_names=names, units=units, config=gp_cfg,
+        robot=ref.to_dict(), joint_names=meta.joint_names, unactuated_name=meta.unactuated,
+        data_sha256=file_sha256(data_path), extra={"data_file": str(data_path), "dataset_report": ds.report},
+        writer=writer, resume=resume, progress=progress,
     )
-    metrics: dict = {"fit": fit_summary, "hyperparameters": hyp, "lengthscale_physical": phys_ls, "n_train": len(train), "n_val": len(val), "dataset": ds.report, "interrupted": interrupted}
+    state, model, lik = stage.state, stage.model, stage.likelihood
+    interrupted = stage.interrupted
+    metrics: dict = {"robot": ref.to_dict(), "fit": stage.fit, "hyperparameters": stage.hyperparameters,
+                     "lengthscale_physical": stage.lengthscale_physical, "units": units,
+                     "output_unit": units[f"qd_{meta.unactuated}"].removesuffix("/s"), "n_train": len(train),
+                     "n_val": len(val), "dataset": ds.report, "interrupted": interrupted}
+    dtype = gp_cfg.torch_dtype
     if len(val):
         mean, var = predict(model, lik, val.x_normalized.to(device=gp_cfg.device, dtype=dtype), noisy=True)
         mean = mean.cpu().to(torch.float64) * train.y_std + train.y_mean
@@ -167,21 +123,19 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         err = mean - val.y
         metrics["val_rmse"] = float(err.pow(2).mean().sqrt())
         metrics["val_mean_log_likelihood"] = float((-0.5 * (err**2 / var_pred + var_pred.log() + math.log(2 * math.pi))).mean())
+        metrics["val_inside_2sigma_predictive"] = float((err.abs() <= 2 * var_pred.sqrt()).to(torch.float64).mean())
         writer.add_scalar("val/rmse", metrics["val_rmse"], 0)
         writer.add_scalar("val/mean_log_likelihood", metrics["val_mean_log_likelihood"], 0)
-    # held-out learned BEM vs model-based BEM (eq. 14 vs 9)
-    from bemlearn.pipeline.evaluation import EvaluationConfig
-
-    ecfg = EvaluationConfig()
-    robot = ground_truth_robot(config.robot)
-    ev = evaluate_bem(state, robot, held_out_references(ecfg, robot.m), duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
-    curves = ev.pop("curves")
-    metrics["bem_heldout"] = ev
-    for k in ("rmse", "max_abs", "coverage_2sigma_latent", "coverage_2sigma_predictive"):
-        writer.add_scalar(f"bem/{k}", ev[k], 0)
-    fig = _bem_figure(curves, meta.unactuated)
-    writer.add_figure("bem/learned_vs_model", fig, 0)
-    fig.savefig(out / "bem_validation.png", dpi=110)
+    if truth_robot is not None:  # held-out learned BEM vs model-based BEM (eq. 14 vs 9)
+        ecfg = config.evaluate
+        ev = evaluate_bem(state, truth_robot, held_out_references(ecfg, truth_robot.m), duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
+        curves = ev.pop("curves")
+        metrics["bem_heldout"] = ev
+        for k in ("rmse", "max_abs", "coverage_2sigma_latent", "coverage_2sigma_predictive"):
+            writer.add_scalar(f"bem/{k}", ev[k], 0)
+        fig = _bem_figure(curves, meta.unactuated, units[f"qd_{meta.unactuated}"].removesuffix("/s"))
+        writer.add_figure("bem/learned_vs_model", fig, 0)
+        fig.savefig(out / "bem_validation.png", dpi=110)
     writer.close()
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=float))
     if interrupted:
@@ -189,7 +143,7 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     return metrics
 
 
-def _bem_figure(curves: dict, qu_name: str):
+def _bem_figure(curves: dict, qu_name: str, unit: str = "rad"):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -200,12 +154,12 @@ def _bem_figure(curves: dict, qu_name: str):
     ax[0].plot(t, model, "k", lw=1.2, label="model-based BEM (eq. 9)")
     ax[0].plot(t, mean, "C1--", lw=1.2, label="learned BEM μ(x₀ᵉ) (eq. 14)")
     ax[0].fill_between(t, mean - 2 * std, mean + 2 * std, color="C1", alpha=0.25, label="±2σ")
-    ax[0].set_ylabel(f"{qu_name} (rad)")
+    ax[0].set_ylabel(f"{qu_name} ({unit})")
     ax[0].legend(fontsize=8)
     ax[0].set_title("held-out composite-sinusoid reference")
     ax[1].plot(t, mean - model, "C3", lw=1)
     ax[1].fill_between(t, -2 * std, 2 * std, color="C1", alpha=0.2)
-    ax[1].set_ylabel("error (rad)")
+    ax[1].set_ylabel(f"error ({unit})")
     ax[1].set_xlabel("t (s)")
     fig.tight_layout()
     return fig

@@ -54,8 +54,9 @@ def solve_bem(
     """Find, per batch element, the root of ``fun`` in ``[lo, hi]`` nearest ``nominal``.
 
     Args:
-        fun: maps candidate roots ``(B, K)`` to residuals ``(B, K)`` (row b uses the
-            b-th problem's parameters).
+        fun: maps candidate roots ``(R, K)`` to residuals ``(R, K)``; with a keyword argument
+            ``rows`` (``(R,)`` int64) row r uses the ``rows[r]``-th problem's parameters, so only
+            unresolved problems are evaluated; without it ``R = B`` and row b is problem b.
         batch: B.
         lo, hi: admissible range, ``lo < hi``.
         nominal: preferred value; among bracketed roots the one nearest it is returned.
@@ -68,71 +69,95 @@ def solve_bem(
         raise ValueError(f"solve_bem: need lo < hi, got lo={lo}, hi={hi}")
     if n_grid < 3:
         raise ValueError(f"solve_bem: n_grid must be ≥ 3, got {n_grid}")
-    grid = torch.linspace(lo, hi, n_grid, dtype=torch.float64).expand(batch, n_grid).contiguous()
-    f = fun(grid)
-    # candidate cells: sign change between node k and k+1 (or an exact zero at node k)
-    fl, fr = f[:, :-1], f[:, 1:]
-    change = (torch.sign(fl) * torch.sign(fr) < 0) | (fl == 0)
-    xl, xr = grid[:, :-1], grid[:, 1:]
-    dist = torch.where(nominal < xl, xl - nominal, torch.where(nominal > xr, nominal - xr, torch.zeros_like(xl)))
-    dist = torch.where(change, dist, torch.full_like(dist, float("inf")))
-    k = dist.argmin(dim=1)
-    valid = torch.isfinite(dist.gather(1, k[:, None])[:, 0])
-    # exact zero on the last node is not covered by the cells above
-    last_zero = f[:, -1] == 0
-    rows = torch.arange(batch)
-    a = xl[rows, k].clone()
-    b = xr[rows, k].clone()
-    fa = fl[rows, k].clone()
-    fb = fr[rows, k].clone()
+    import inspect
+
+    takes_rows = "rows" in inspect.signature(fun).parameters
+
+    def call(x: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
+        """``fun`` on the problems ``rows`` only (all problems when ``fun`` takes no ``rows``)."""
+        if takes_rows:
+            return fun(x, rows=rows)
+        full = torch.zeros(batch, x.shape[1], dtype=torch.float64)
+        full[rows] = x
+        return fun(full)[rows]
+
+    nodes = torch.linspace(lo, hi, n_grid, dtype=torch.float64)
+    all_rows = torch.arange(batch)
+    a = torch.full((batch,), float("nan"), dtype=torch.float64)
+    b, fa, fb = a.clone(), a.clone(), a.clone()
+    valid = torch.zeros(batch, dtype=torch.bool)
+    last_zero = torch.zeros(batch, dtype=torch.bool)
+    # bracket: first a window of nodes around the nominal value (BEMs lie near it), then the whole
+    # grid for the problems whose nearest root may lie outside the window.  A sign-change cell in a
+    # window is the nearest one of the whole grid when it is no farther than the window's edges.
+    k0 = int(torch.clamp(torch.searchsorted(nodes, torch.tensor(nominal, dtype=torch.float64)), 0, n_grid - 1))
+    pending = all_rows
+    for half in (4, n_grid):
+        i0, i1 = max(0, k0 - half), min(n_grid - 1, k0 + half)
+        if i1 - i0 < 1 or pending.numel() == 0:
+            continue
+        grid = nodes[i0 : i1 + 1].expand(pending.numel(), i1 - i0 + 1).contiguous()
+        f = call(grid, pending)
+        fl, fr = f[:, :-1], f[:, 1:]
+        change = (torch.sign(fl) * torch.sign(fr) < 0) | (fl == 0)
+        xl, xr = grid[:, :-1], grid[:, 1:]
+        dist = torch.where(nominal < xl, xl - nominal, torch.where(nominal > xr, nominal - xr, torch.zeros_like(xl)))
+        dist = torch.where(change, dist, torch.full_like(dist, float("inf")))
+        k = dist.argmin(dim=1)
+        r = torch.arange(pending.numel())
+        d = dist[r, k]
+        whole = i0 == 0 and i1 == n_grid - 1
+        edge = min(nominal - float(nodes[i0]) if i0 > 0 else float("inf"), float(nodes[i1]) - nominal if i1 < n_grid - 1 else float("inf"))
+        found = torch.isfinite(d) & ((d <= edge) | whole)
+        rows = pending[found]
+        a[rows], b[rows], fa[rows], fb[rows] = xl[r, k][found], xr[r, k][found], fl[r, k][found], fr[r, k][found]
+        valid[rows] = True
+        if whole:  # exact zero on the last node is not covered by the cells above
+            last_zero[pending] = f[:, -1] == 0
+        pending = pending[~found]
     exact = valid & (fa == 0)
-    # Chandrupatla iteration on the bracket [a, b]
+    # Chandrupatla iteration on the bracket [a, b], on the problems still active only
     c, fc = a.clone(), fa.clone()
     t = torch.full((batch,), 0.5, dtype=torch.float64)
     active = valid & ~exact
     root = torch.where(exact, a, torch.full_like(a, float("nan")))
     froot = torch.where(exact, fa, torch.full_like(a, float("nan")))
     it = 0
-    # initialise so that (a, fa) is the newest point and [a, b] brackets
     while bool(active.any()) and it < max_iter:
         it += 1
-        xt = a + t * (b - a)
-        ft = fun(xt[:, None])[:, 0]
-        same = torch.sign(ft) == torch.sign(fa)
-        c_new = torch.where(same, a, b)
-        fc_new = torch.where(same, fa, fb)
-        b_new = torch.where(same, b, a)
-        fb_new = torch.where(same, fb, fa)
-        upd = active
-        c, fc = torch.where(upd, c_new, c), torch.where(upd, fc_new, fc)
-        b, fb = torch.where(upd, b_new, b), torch.where(upd, fb_new, fb)
-        a, fa = torch.where(upd, xt, a), torch.where(upd, ft, fa)
-        use_a = fa.abs() < fb.abs()
-        xm = torch.where(use_a, a, b)
-        fm = torch.where(use_a, fa, fb)
+        idx = active.nonzero()[:, 0]
+        A, B_, C, FA, FB, FC, T = a[idx], b[idx], c[idx], fa[idx], fb[idx], fc[idx], t[idx]
+        xt = A + T * (B_ - A)
+        ft = call(xt[:, None], idx)[:, 0]
+        same = torch.sign(ft) == torch.sign(FA)
+        C, FC = torch.where(same, A, B_), torch.where(same, FA, FB)
+        B_, FB = torch.where(same, B_, A), torch.where(same, FB, FA)
+        A, FA = xt, ft
+        use_a = FA.abs() < FB.abs()
+        xm = torch.where(use_a, A, B_)
+        fm = torch.where(use_a, FA, FB)
         tol = 2 * _EPS * xm.abs() + xtol
-        width = (b - c).abs()
+        width = (B_ - C).abs()
         tl = tol / torch.where(width > 0, width, torch.ones_like(width))
-        done = active & ((tl > 0.5) | (fm == 0) | (width == 0))
-        root = torch.where(done, xm, root)
-        froot = torch.where(done, fm, froot)
-        active = active & ~done
+        done = (tl > 0.5) | (fm == 0) | (width == 0)
         # next t: inverse quadratic interpolation when safe, else bisection
-        with torch.no_grad():
-            xi = (a - b) / (c - b)
-            phi = (fa - fb) / (fc - fb)
-            iqi = (phi**2 < xi) & ((1 - phi) ** 2 < 1 - xi)
-            t_iqi = fa / (fb - fa) * fc / (fb - fc) + (c - a) / (b - a) * fa / (fc - fa) * fb / (fc - fb)
-            t = torch.where(iqi, t_iqi, torch.full_like(t, 0.5))
-            t = torch.minimum(torch.maximum(t, tl), 1 - tl)
-            t = torch.where(torch.isfinite(t), t, torch.full_like(t, 0.5))
+        xi = (A - B_) / (C - B_)
+        phi = (FA - FB) / (FC - FB)
+        iqi = (phi**2 < xi) & ((1 - phi) ** 2 < 1 - xi)
+        t_iqi = FA / (FB - FA) * FC / (FB - FC) + (C - A) / (B_ - A) * FA / (FC - FA) * FB / (FC - FB)
+        T = torch.where(iqi, t_iqi, torch.full_like(T, 0.5))
+        T = torch.minimum(torch.maximum(T, tl), 1 - tl)
+        T = torch.where(torch.isfinite(T), T, torch.full_like(T, 0.5))
+        a[idx], b[idx], c[idx], fa[idx], fb[idx], fc[idx], t[idx] = A, B_, C, FA, FB, FC, T
+        root[idx[done]], froot[idx[done]] = xm[done], fm[done]
+        active[idx[done]] = False
     if bool(active.any()):  # iteration cap: take the best point so far
         use_a = fa.abs() < fb.abs()
         root = torch.where(active, torch.where(use_a, a, b), root)
         froot = torch.where(active, torch.where(use_a, fa, fb), froot)
     # a last-node exact zero is a root only if nothing else was found
     use_last = last_zero & ~valid
-    root = torch.where(use_last, grid[:, -1], root)
+    root = torch.where(use_last, nodes[-1].expand(batch), root)
     froot = torch.where(use_last, torch.zeros_like(froot), froot)
     valid = valid | use_last
     residual = froot.abs()

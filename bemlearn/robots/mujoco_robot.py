@@ -149,11 +149,22 @@ class MujocoRobot(Robot):
         else:
             half = math.pi / 2 if self.joint_kinds[self.unactuated_index] == "hinge" or not np.allclose(T, np.eye(n)) else 1.0
             self.qu_range = (self.qu_nominal - half, self.qu_nominal + half)
+        if np.allclose(T, np.eye(n)):
+            self._coordinate_kinds = self.joint_kinds
+        elif len(set(self.joint_kinds)) == 1:  # a linear map of like joints keeps their kind
+            self._coordinate_kinds = (self.joint_kinds[0],) * n
+        else:
+            raise RobotModelError(f"{where}: 'bemlearn_coordinates' mixes hinge and slide joints; their units would not be defined")
         if model.neq:
             log.warning("%s: equality constraints are ignored by the robot dynamics", where)
         self._M = np.zeros((model.nv, model.nv))
         self._vec = np.zeros(model.nv)
         self._chain = None
+
+    @property
+    def coordinate_kinds(self) -> tuple[str, ...]:
+        """``"hinge"`` or ``"slide"`` per coordinate (the MJCF joints' kinds; see :mod:`bemlearn.units`)."""
+        return self._coordinate_kinds
 
     @classmethod
     def from_xml(cls, path: str | Path, *, name: str | None = None) -> "MujocoRobot":
@@ -238,7 +249,17 @@ class MujocoRobot(Robot):
     def inverse_dynamics(self, q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor) -> torch.Tensor:
         """D q̈ + C q̇ + G − τ_p in one RNE pass per state (same value as the base class)."""
         q, qd, qdd = self._states(q, qd, qdd, func="inverse_dynamics")
-        return self._from_joint_force(self._rne(q, qd, qdd)) - self.passive(q, qd)
+        qj, qdj, qddj = self._to_joint(q), self._to_joint(qd), self._to_joint(qdd)
+        out = np.empty((q.shape[0], self.n))
+        m, d, dadr, vec = self.model, self.data, self._dadr, self._vec
+        for b in range(q.shape[0]):  # one state load per row: RNE with q̈, minus the passive forces
+            self._load_state(qj[b], qdj[b])
+            mujoco.mj_comVel(m, d)
+            mujoco.mj_passive(m, d)
+            d.qacc[dadr] = qddj[b]
+            mujoco.mj_rne(m, d, 1, vec)
+            out[b] = vec[dadr] - d.qfrc_passive[dadr]
+        return self._from_joint_force(out)
 
     # ---- single-state numpy fast path (control loops) ------------------------------------
     def terms(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -85,6 +85,11 @@ class Robot(abc.ABC):
     def unactuated_name(self) -> str:
         return self.joint_names[self.unactuated_index]
 
+    @property
+    def coordinate_kinds(self) -> tuple[str, ...]:
+        """``"hinge"`` or ``"slide"`` per coordinate: its units are rad or m (:mod:`bemlearn.units`)."""
+        return ("hinge",) * self.n
+
     def split(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``q (B, n)`` → ``(q_a (B, m), q_u (B,))``."""
         return q[:, list(self.actuated_index)], q[:, self.unactuated_index]
@@ -173,10 +178,10 @@ class Robot(abc.ABC):
         lo, hi = qu_range if qu_range is not None else self.qu_range
         B = qa.shape[0]
 
-        def fun(qu_grid: torch.Tensor) -> torch.Tensor:  # (B, K) -> (B, K)
-            K = qu_grid.shape[1]
-            rep = lambda t: t.repeat_interleave(K, dim=0)  # noqa: E731
-            return self.gamma0(qu_grid.reshape(-1), rep(qa), rep(qad), rep(qadd)).reshape(B, K)
+        def fun(qu_grid: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:  # (R, K) -> (R, K)
+            R, K = qu_grid.shape
+            rep = lambda t: t[rows].repeat_interleave(K, dim=0)  # noqa: E731
+            return self.gamma0(qu_grid.reshape(-1), rep(qa), rep(qad), rep(qadd)).reshape(R, K)
 
         result = solve_bem(fun, B, lo=lo, hi=hi, nominal=self.qu_nominal, n_grid=n_grid)
         if on_missing == "raise" and not bool(result.valid.all()):

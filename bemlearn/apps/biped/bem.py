@@ -16,7 +16,6 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from bemlearn._version import __version__
 from bemlearn.apps.biped.controller import WalkExcitation
 from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.apps.biped.config import BipedConfig
@@ -27,56 +26,38 @@ __all__ = ["train_walking_gp", "heldout_walks", "bem_errors", "heldout_bem"]
 
 def train_walking_gp(X: np.ndarray, y: np.ndarray, out_dir: str | Path, *, config: GPConfig, data_path: str | Path,
                      extra: dict | None = None, progress: bool = True) -> dict:
-    """Fit the GP of eq. (11) on ``X (N, 14)``, ``y (N,)`` rad; write checkpoint, TensorBoard, predictor.
+    """Fit the GP of eq. (11) on ``X (N, 14)``, ``y (N,)`` rad with the core's shared stages
+    (:func:`~bemlearn.pipeline.gp_stage.fit_bem_gp`, :func:`~bemlearn.export.export_run`).
 
     Writes ``out_dir/{checkpoint.pt, bem_predictor.pt, tb/, metrics.json}``; returns the metrics.
     """
     from torch.utils.tensorboard import SummaryWriter
 
     from bemlearn.data import Normalization, gp_input_names
-    from bemlearn.export.checkpoint import write_checkpoint
     from bemlearn.export.export_run import export_run
-    from bemlearn.fitting import build_gp, fit_gp, hyperparameter_metrics
-    from bemlearn.models import predictor_state
+    from bemlearn.pipeline.gp_stage import fit_bem_gp
     from bemlearn.pipeline.train import file_sha256
+    from bemlearn.robots import resolve_robot
+    from bemlearn.units import column_units
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    joints = ("q1", "q2", "q3", "q4", "q5")
-    names = gp_input_names(joints, "q1")
-    norm = Normalization.fit(torch.from_numpy(X), torch.from_numpy(y), names=names)
-    dtype = config.torch_dtype
-    xn, yn = norm.normalize_x(torch.from_numpy(X)).to(dtype), norm.normalize_y(torch.from_numpy(y)).to(dtype)
-    model, lik = build_gp(xn, yn, config=config)
+    robot, ref = resolve_robot("biped")
+    joints, qu = robot.joint_names, robot.unactuated_name
+    names = gp_input_names(joints, qu)
+    x, yt = torch.from_numpy(X), torch.from_numpy(y)
     writer = SummaryWriter(str(out / "tb"))
-
-    def callback(step: int, metrics: dict[str, float]) -> None:
-        for k, v in metrics.items():
-            tag = f"lengthscale/{names[int(k.split('_')[1])]}" if k.startswith("lengthscale_") else f"train/{k}"
-            writer.add_scalar(tag, v, step)
-
-    result = fit_gp(model, lik, xn, yn, config=config, callback=callback, progress=progress)
+    stage = fit_bem_gp(x, yt, out, normalization=Normalization.fit(x, yt, names=names), input_names=names,
+                       units=column_units(names, dict(zip(joints, robot.coordinate_kinds))), config=config,
+                       robot=ref.to_dict(), joint_names=joints, unactuated_name=qu, data_sha256=file_sha256(data_path),
+                       extra={"data_file": str(data_path), **(extra or {})}, writer=writer, progress=progress)
     writer.close()
-    model.eval()
-    lik.eval()
-    state = predictor_state(model, lik, x_mean=norm.x_mean, x_std=norm.x_std, y_mean=norm.y_mean, y_std=norm.y_std,
-                            input_names=names, n_train=len(y))
-    hyp = hyperparameter_metrics(model, lik)
-    units = {n: "rad/s²" if n.startswith("qdd_") else "rad/s" if n.startswith("qd_") else "rad" for n in names}
-    model_state = {k: v.detach().cpu() for k, v in model.state_dict().items() if isinstance(v, torch.Tensor)}
-    if not any(k.startswith("likelihood.") for k in model_state):
-        model_state.update({f"likelihood.{k}": v.detach().cpu() for k, v in lik.state_dict().items()})
-    write_checkpoint(out, model_state=model_state, predictor_state=state, metadata={
-        "robot": "biped", "joint_names": list(joints), "actuated_names": list(joints[1:]), "unactuated_name": "q1",
-        "m": 4, "input_names": list(names), "units": units, "n_train": len(y),
-        "n_inducing": None if config.kind == "exact" else int(state.n_support),
-        "hyperparameters": hyp, "bemlearn_version": __version__, "data_sha256": file_sha256(data_path),
-        "extra": {"data_file": str(data_path), **(extra or {})}})
+    if stage.interrupted:
+        raise KeyboardInterrupt
     export_run(out, fmt="torchscript")
-    metrics = {"fit": {"loss": result.loss, "steps": result.steps, "seconds": result.seconds,
-                       "stop_reason": result.stop_reason},
-               "n_train": len(y), "noise_std_rad": float(state.y_std * state.noise.sqrt()),
-               "lengthscale_physical": {n: float(state.lengthscale[j] * state.x_std[j]) for j, n in enumerate(names)}}
+    state = stage.state
+    metrics = {"fit": stage.fit, "n_train": len(y), "noise_std_rad": float(state.y_std * state.noise.sqrt()),
+               "lengthscale_physical": stage.lengthscale_physical}
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=float))
     return metrics
 

@@ -32,7 +32,7 @@ def _sequences(args, cfg) -> tuple[list, str]:
     """Joint sequences ``(T_i, n)`` rad and a description of where they came from."""
     import dataclasses
 
-    from bemlearn.apps.biped.report import human_gait_sequences
+    from bemlearn.apps.biped.gpdm_study import human_gait_sequences
 
     g = cfg.gpdm
     if args.data is None:
@@ -61,7 +61,7 @@ def run(args) -> int:
     import dataclasses
 
     from bemlearn.apps.biped.pipeline import load_biped_config
-    from bemlearn.apps.biped.report import fit_gpdm_logged
+    from bemlearn.apps.biped.gpdm_study import fit_gpdm_logged
 
     cfg = load_biped_config(args.config)
     fit = cfg.gpdm.fit if args.max_iter is None else dataclasses.replace(cfg.gpdm.fit, max_iter=args.max_iter)

@@ -1,0 +1,159 @@
+"""The train → checkpoint stage shared by every caller: fit the GP of eq. (11) and freeze it.
+
+    q_u = f(x) + ε,  x = [q̈_a, q̇_a, q_a, q̈_u, q̇_u],  f ~ GP(0, k),  ε ~ N(0, σ_0²)      (11)
+
+:func:`fit_bem_gp` takes the training points in physical units with their normalization,
+builds and fits the configured GP (exact, sgpr, svgp), logs the fit to TensorBoard, freezes
+the posterior (:class:`~bemlearn.models.PredictorState`) and writes ``checkpoint.pt``.
+The generic pipeline (:func:`bemlearn.pipeline.train.train_run`) and the applications (e.g.
+the biped's torso BEM) both call it; exporting the predictor is the next shared stage,
+:func:`bemlearn.export.export_run`.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from bemlearn._version import __version__
+from bemlearn.data.normalization import Normalization
+from bemlearn.export.checkpoint import load_checkpoint, write_checkpoint
+from bemlearn.fitting import build_gp, fit_gp, hyperparameter_metrics
+from bemlearn.fitting.gp_config import GPConfig
+from bemlearn.models import predictor_state
+from bemlearn.models.predictor_state import PredictorState
+
+__all__ = ["GPStageResult", "fit_bem_gp"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class GPStageResult:
+    """What :func:`fit_bem_gp` produced.
+
+    Attributes:
+        state: the frozen float64 posterior (eq. 12 in normalized coordinates + the normalization).
+        model, likelihood: the fitted GPyTorch modules (eval mode), for further evaluation.
+        fit: ``loss``, ``steps``, ``seconds``, ``stop_reason`` of the fit.
+        hyperparameters: :func:`~bemlearn.fitting.hyperparameter_metrics` (normalized units).
+        lengthscale_physical: per input column, the lengthscale in the column's own unit.
+        interrupted: the fit was stopped by Ctrl-C (the checkpoint holds the parameters reached).
+        checkpoint: the file written.
+    """
+
+    state: PredictorState
+    model: Any
+    likelihood: Any
+    fit: dict[str, Any]
+    hyperparameters: dict[str, float]
+    lengthscale_physical: dict[str, float]
+    interrupted: bool
+    checkpoint: Path
+
+
+def fit_bem_gp(
+    x: torch.Tensor,
+    y: torch.Tensor,
+    out_dir: str | Path,
+    *,
+    normalization: Normalization,
+    input_names: Sequence[str],
+    units: Mapping[str, str],
+    config: GPConfig,
+    robot: Mapping[str, Any],
+    joint_names: Sequence[str],
+    unactuated_name: str,
+    data_sha256: str,
+    extra: Mapping[str, Any] | None = None,
+    writer=None,
+    resume: bool = False,
+    progress: bool = True,
+) -> GPStageResult:
+    """Fit the GP of eq. (11) on ``(x, y)`` and write ``out_dir/checkpoint.pt``.
+
+    Args:
+        x: ``(N, 3n − 1)`` float64 inputs in physical units (columns ``input_names``: q̈ in
+            rad/s² or m/s², q̇ in rad/s or m/s, q in rad or m, by joint kind).
+        y: ``(N,)`` float64 q_u, in its joint's unit.
+        normalization: the training split's normalization (applied here).
+        input_names, units: the columns and their units (``{column: unit}``).
+        config: the GP options (kind, optimizer, device, dtype).
+        robot: the robot the data came from, as recorded by the run (``RobotRef.to_dict()``,
+            or ``{"name": ..., "mjcf": None, ...}`` for a model-free run).
+        joint_names, unactuated_name: the coordinates, in the robot's order.
+        data_sha256: sha256 of the data file (provenance in the checkpoint).
+        extra: more provenance for the checkpoint's metadata.
+        writer: a TensorBoard ``SummaryWriter`` (loss, noise, outputscale, lengthscale/<input>).
+        resume: start from the hyperparameters of the checkpoint already in ``out_dir``.
+
+    Ctrl-C during the fit keeps the parameters reached, writes the checkpoint (marked
+    ``interrupted``) and returns with ``interrupted=True``; the caller decides what to do next.
+    """
+    out = Path(out_dir)
+    names = tuple(input_names)
+    dtype = config.torch_dtype
+    xn, yn = normalization.normalize_x(x).to(dtype), normalization.normalize_y(y).to(dtype)
+    model, lik = build_gp(xn, yn, config=config)
+    if resume:
+        ck = load_checkpoint(out)
+        model.load_state_dict(ck.model_state, strict=False)
+        lik.load_state_dict({k[len("likelihood."):]: v for k, v in ck.model_state.items() if k.startswith("likelihood.")})
+        log.info("resumed from %s", ck.path)
+
+    def callback(step: int, metrics: dict[str, float]) -> None:
+        if writer is None:
+            return
+        for k, v in metrics.items():
+            tag = f"lengthscale/{names[int(k.split('_')[1])]}" if k.startswith("lengthscale_") else f"train/{k}"
+            writer.add_scalar(tag, v, step)
+
+    interrupted = False
+    t0 = time.perf_counter()
+    try:
+        result = fit_gp(model, lik, xn, yn, config=config, callback=callback, progress=progress)
+        fit = {"loss": result.loss, "steps": result.steps, "seconds": result.seconds, "stop_reason": result.stop_reason}
+    except KeyboardInterrupt:
+        interrupted = True
+        fit = {"stop_reason": "interrupted", "seconds": time.perf_counter() - t0}
+        log.warning("interrupted: writing a checkpoint of the current hyperparameters")
+    model.eval()
+    lik.eval()
+    state = predictor_state(
+        model, lik, x_mean=normalization.x_mean, x_std=normalization.x_std, y_mean=normalization.y_mean,
+        y_std=normalization.y_std, input_names=names, n_train=int(y.shape[0]),
+    )
+    hyp = hyperparameter_metrics(model, lik)
+    phys_ls = {n: float(state.lengthscale[j] * state.x_std[j]) for j, n in enumerate(names)}
+    model_state = dict(model.state_dict())
+    if not any(k.startswith("likelihood.") for k in model_state):  # likelihood not a submodule (sgpr/svgp)
+        model_state.update({f"likelihood.{k}": v for k, v in lik.state_dict().items()})
+    model_state = {k: v.detach().cpu() for k, v in model_state.items() if isinstance(v, torch.Tensor)}
+    actuated = [j for j in joint_names if j != unactuated_name]
+    path = write_checkpoint(
+        out,
+        model_state=model_state,
+        predictor_state=state,
+        metadata={
+            "robot": str(robot.get("name") or "robot"),
+            "joint_names": list(joint_names),
+            "actuated_names": actuated,
+            "unactuated_name": unactuated_name,
+            "m": len(actuated),
+            "input_names": list(names),
+            "units": {n: units[n] for n in names},
+            "n_train": int(y.shape[0]),
+            "n_inducing": None if config.kind == "exact" else int(state.n_support),
+            "hyperparameters": {**hyp, "lengthscale_physical": phys_ls},
+            "bemlearn_version": __version__,
+            "data_sha256": data_sha256,
+            "extra": {"interrupted": interrupted, "robot_ref": dict(robot), **dict(extra or {})},
+        },
+    )
+    return GPStageResult(state, model, lik, fit, hyp, phys_ls, interrupted, path)

@@ -1,0 +1,39 @@
+"""Which robot a run is about: the config's ``robot:`` (registry name or MJCF path), or none.
+
+A run with ``robot:`` records it as a :class:`~bemlearn.robots.RobotRef` (MJCF path and
+sha256, registry name if any); its model-based BEM (eq. 9) is the ground truth of the
+evaluation.  A model-free run (``data:`` and no ``robot:``) learns from the data alone: the
+joints and the unactuated joint come from the data file, nothing is compared with a model
+unless the config names one under ``model:`` (an MJCF used for the comparison only).
+"""
+
+from __future__ import annotations
+
+from bemlearn.data.trajectory import TrajectoryMeta
+from bemlearn.robots import RobotRef, resolve_robot
+
+__all__ = ["run_robot", "data_joint_kinds"]
+
+
+def run_robot(config):
+    """``(robot, ref, truth_robot)`` of a pipeline config.
+
+    ``robot`` is the robot that collects/simulates (``None`` for a model-free run), ``ref``
+    what the run records, ``truth_robot`` the model whose BEM the learned one is compared
+    with (the robot itself, the ``model:`` of a model-free run, or ``None``).
+    """
+    if config.robot is not None:
+        robot, ref = resolve_robot(config.robot)
+        return robot, ref, robot
+    truth = resolve_robot(config.model)[0] if config.model else None
+    return None, RobotRef(name="data", mjcf=None, sha256=None, registry=None), truth
+
+
+def data_joint_kinds(meta: TrajectoryMeta) -> tuple[str, ...]:
+    """Per joint of a trajectory, ``"hinge"`` or ``"slide"`` as the file records it (hinge if it does not)."""
+    kinds = getattr(meta, "joint_kinds", None) or meta.extra.get("joint_kinds")
+    if kinds is None:
+        return ("hinge",) * len(meta.joint_names)
+    if isinstance(kinds, dict):
+        return tuple(kinds.get(j, "hinge") for j in meta.joint_names)
+    return tuple(kinds)
