@@ -21,6 +21,7 @@ __all__ = ["main", "build_parser"]
 #: Subcommand modules, in the order they appear in ``bemlearn --help``.
 SUBCOMMANDS: tuple[str, ...] = (
     "bemlearn.cli.robot_cmd",
+    "bemlearn.cli.config_cmd",
     "bemlearn.cli.collect_cmd",
     "bemlearn.cli.train_cmd",
     "bemlearn.cli.evaluate_cmd",

@@ -37,7 +37,7 @@ def add_parser(sub) -> None:
 def _run(args) -> int:
     from bemlearn.applications import get_application
     from bemlearn.config import load_yaml
-    from bemlearn.pipeline.config import load_pipeline_config
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
     from bemlearn.pipeline.run import run_pipeline
 
     app_name = load_yaml(args.config).get("application")
@@ -49,18 +49,18 @@ def _run(args) -> int:
         print((out / "report.md").read_text())
         print(f"\nrun folder: {out}")
         return 0
-    cfg = load_pipeline_config(args.config)
-    out = run_pipeline(cfg, args.out, device=args.device, progress=not args.no_progress)
+    resolved = resolve_pipeline_config(args.config)
+    out = run_pipeline(resolved, args.out, device=args.device, progress=not args.no_progress)
     print((out / "report.md").read_text())
     print(f"\nrun folder: {out}")
     return 0
 
 
 def _simulate(args) -> int:
-    from bemlearn.pipeline.config import load_pipeline_config
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
     from bemlearn.pipeline.simulate import simulate_stage
 
-    cfg = load_pipeline_config(args.config)
+    cfg = resolve_pipeline_config(args.config).config
     sources = tuple(args.source or [cfg.simulate.bem_source])
     res = simulate_stage(cfg, args.out, predictor=args.predictor, sources=sources, progress=not args.no_progress, gif=args.gif)
     print(f"{'source':<10}{'fell':>6}{'duration s':>12}{'RMSE rad':>10}{'max|V|':>8}{'×real time':>12}")

@@ -20,7 +20,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from bemlearn.config import from_dict, load_yaml
 from bemlearn.data.collect import CollectConfig
 from bemlearn.data.dataset import DatasetConfig
 from bemlearn.fitting.gp_config import GPConfig
@@ -32,7 +31,15 @@ __all__ = ["PipelineConfig", "load_pipeline_config"]
 
 @dataclass(frozen=True)
 class PipelineConfig:
-    """All stages' options (module docstring)."""
+    """All stages' options: one YAML file with a section per stage.
+
+    Attributes:
+        robot: the robot: a registry name (``bemlearn robot list``) or the path of an MJCF file of this
+            class (hinge/slide joints, exactly one no actuator drives). A path always means that file.
+        data: a trajectory file to train on instead of collecting. Without ``robot`` the run is model-free.
+        model: model-free runs only: a registry name or MJCF path whose model-based BEM the learned one
+            is compared with (nothing is compared without it).
+    """
 
     robot: str | None = None
     data: str | None = None
@@ -53,5 +60,8 @@ class PipelineConfig:
 
 
 def load_pipeline_config(path: str | Path) -> PipelineConfig:
-    """Parse a pipeline YAML file strictly (unknown keys and bad types are errors naming the key)."""
-    return from_dict(PipelineConfig, load_yaml(path), where=str(path))
+    """Parse a pipeline YAML file strictly (unknown keys and bad types are errors naming the key) and
+    fill in the values derived from the robot's model (:func:`~bemlearn.pipeline.resolve.resolve_pipeline_config`)."""
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
+
+    return resolve_pipeline_config(path).config

@@ -1,4 +1,4 @@
-"""The Markdown report of a full run (``report.md`` in the run folder)."""
+"""The Markdown report of a run (``report.md``): only what the run computed, in its robot's units."""
 
 from __future__ import annotations
 
@@ -8,49 +8,74 @@ __all__ = ["write_report"]
 
 
 def _f(v, spec=".4f"):
-    return format(v, spec) if isinstance(v, (int, float)) else str(v)
+    return format(v, spec) if isinstance(v, (int, float)) and not isinstance(v, bool) else "—" if v is None else str(v)
 
 
-def write_report(out: str | Path, *, robot: str, data: dict, train: dict, export: list[Path], sim: dict) -> Path:
-    """Write ``out/report.md`` from the stages' metrics; returns its path."""
+def _pct(v) -> str:
+    return f"{100 * v:.1f}%" if isinstance(v, (int, float)) else "—"
+
+
+def write_report(out: str | Path, *, config, resolved, data: dict, train: dict, export: list[Path], sim: dict) -> Path:
+    """Write ``out/report.md`` from the stages' metrics; returns its path.
+
+    Args:
+        config: the resolved :class:`~bemlearn.pipeline.config.PipelineConfig`.
+        resolved: its :class:`~bemlearn.pipeline.resolve.ResolvedConfig` (origins of the values).
+        data, train, sim: the metrics of the data, training and closed-loop stages.
+        export: the predictor files written.
+    """
     out = Path(out)
-    b = train["bem_heldout"]
-    lines = [
-        f"# bemlearn run: {robot}",
-        "",
-        "## Data (excitation, Section IV-A)",
-        f"{data['trials']} trials ({data['failed']} fell, kept up to the fall), {data['samples']} samples at {data['rate_hz']:g} Hz, "
-        "quantized encoder angles; derivatives estimated from the angles only.",
-        "",
-        "## Learned BEM (eq. 11–14)",
-        f"GP `{train['hyperparameters'] and 'trained'}` on {train['n_train']} points: fit {train['fit'].get('stop_reason')} in {_f(train['fit'].get('seconds', float('nan')), '.1f')} s.",
-        "",
-        "| held-out composite sinusoids | value |",
-        "| --- | --- |",
-        f"| RMSE vs model-based BEM (rad) | {_f(b['rmse'], '.5f')} |",
-        f"| max error (rad) | {_f(b['max_abs'], '.5f')} |",
-        f"| inside ±2σ, latent std | {100 * b['coverage_2sigma_latent']:.1f}% |",
-        f"| inside ±2σ, predictive std (eq. 12 with k* = σ_f² + σ_0²) | {100 * b['coverage_2sigma_predictive']:.1f}% |",
-        "",
-        "![learned vs model BEM](bem_validation.png)",
-        "",
-        "## Exported predictor",
-        *[f"- `{p.name}`" for p in export],
-        "",
-        "## Closed loop (EIC, eq. 3 and 8) in MuJoCo",
-        "",
-        "| BEM source | fell | duration (s) | tracking RMSE (rad) | max \\|α\\| (rad) | max \\|V\\| | real-time factor |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
-    ]
-    for src, m in sim.items():
-        lines.append(f"| {src} | {m['fell']} | {_f(m['duration_s'], '.1f')} | {_f(m['tracking_rmse'])} | {_f(m['qu_max'], '.3f')} | {_f(m['u_max'], '.2f')} | {_f(m['real_time_factor'], '.1f')} |")
-    if "predictor" in sim and "lemma1" in sim["predictor"]:
-        L = sim["predictor"]["lemma1"]
-        lines += ["", f"Lemma 1 along the reference: model-based max |ΔΓ − Ḣ_u − b_u q̇_u^e| = {L['model_gap']:.1e} N·m; "
-                  f"learned ΔΓ vs Ḣ_u correlation r = {L['r_learned_vs_hdot']:.4f} (vs the model's ΔΓ: {L['r_learned_vs_model_delta_gamma']:.4f})."]
-    lines += [""]
-    for src in sim:
-        lines += [f"### BEM source: {src}", "", f"![fig2 {src}](simulate/fig2_{src}.png)", ""]
+    unit = train.get("output_unit", "rad")
+    robot = train.get("robot", {})
+    qu = train.get("unactuated")
+    title = robot.get("registry") or robot.get("name") or "data"
+    lines = [f"# bemlearn run: {title}", ""]
+    if robot.get("mjcf"):
+        lines += [f"Robot: `{robot['mjcf']}` (sha256 `{robot['sha256'][:16]}…`)" + (f", registry name `{robot['registry']}`" if robot.get("registry") else "") + ".", ""]
+    elif config.robot is None:
+        lines += ["Model-free run: the BEM is learned from the data file alone; "
+                  + (f"it is compared with the model `{config.model}` only because the config names it." if config.model else "nothing is compared with a model."), ""]
+    derived = sorted({k.split(".")[0] + "." + k.split(".")[1] for k, o in resolved.origins.items() if o == "derived" and k.count(".") >= 1})
+    if derived:
+        lines += ["Values derived from the model (not given in the config; `config_resolved.json` and "
+                  "`bemlearn config show` list each with how it was derived): " + ", ".join(f"`{k}`" for k in derived) + ".", ""]
+    src = "collected in MuJoCo (excitation, Section IV-A)" if data["collected"] else f"read from `{data['file']}`"
+    lines += ["## Data", f"{data['trials']} trials ({data['failed']} fell, kept up to the fall), {data['samples']} samples at "
+              f"{data['rate_hz']:g} Hz, {src}; derivatives estimated from the positions only.", ""]
+    fit = train.get("fit", {})
+    lines += ["## Learned BEM (eq. 11–14)",
+              f"{config.train.kind} GP on {train['n_train']} points: fit {fit.get('stop_reason')} in {_f(fit.get('seconds'), '.1f')} s"
+              + (" (interrupted)" if train.get("interrupted") else "") + ".", ""]
+    if "val_rmse" in train:
+        lines += [f"Held-out trials (validation split, {train['n_val']} points): q_u from f(x) RMSE {_f(train['val_rmse'], '.5f')} {unit}, "
+                  f"inside the predictive ±2σ {_pct(train.get('val_inside_2sigma_predictive'))}.", ""]
+    b = train.get("bem_heldout")
+    if b is not None:
+        lines += ["| held-out references: learned vs model-based BEM | value |", "| --- | --- |",
+                  f"| RMSE ({unit}) | {_f(b['rmse'], '.5f')} |",
+                  f"| max error ({unit}) | {_f(b['max_abs'], '.5f')} |",
+                  f"| points without a model BEM in range (excluded) | {b['no_model_root']} |",
+                  f"| inside ±2σ, latent std | {_pct(b['coverage_2sigma_latent'])} |",
+                  f"| inside ±2σ, predictive std (eq. 12 with k* = σ_f² + σ_0²) | {_pct(b['coverage_2sigma_predictive'])} |",
+                  "", "![learned vs model BEM](bem_validation.png)", ""]
+    lines += ["## Exported predictor", *[f"- `{p.name}`" for p in export], ""]
+    if sim:
+        qa_unit = "/".join(sorted({v for k, v in train.get("units", {}).items() if k.startswith("q_")})) or "rad"
+        lines += ["## Closed loop (EIC, eq. 3 and 8) in MuJoCo", "",
+                  f"| BEM source | outcome | duration (s) | tracking RMSE of q_a ({qa_unit}) | max \\|{qu or 'q_u'}\\| ({unit}) | "
+                  f"max \\|u\\| ({data.get('input_units', 'actuator units')}) | BEM values held | real-time factor |",
+                  "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+        for name, m in sim.items():
+            outcome = "fell" if m["fell"] else "diverged (q_a left the reference)" if m.get("diverged") else "stayed up"
+            lines.append(f"| {name} | {outcome} | {_f(m['duration_s'], '.1f')} | {_f(m['tracking_rmse'])} | {_f(m['qu_max'], '.3f')} | "
+                         f"{_f(m['u_max'], '.2f')} | {m.get('bem_rejected', 0)} | {_f(m['real_time_factor'], '.1f')} |")
+        if "predictor" in sim and "lemma1" in sim["predictor"]:
+            L = sim["predictor"]["lemma1"]
+            lines += ["", f"Lemma 1 along the reference: model-based max |ΔΓ − Ḣ_u − b_u q̇_u^e| = {L['model_gap']:.1e}; "
+                      f"learned ΔΓ vs Ḣ_u correlation r = {L['r_learned_vs_hdot']:.4f} (vs the model's ΔΓ: {L['r_learned_vs_model_delta_gamma']:.4f})."]
+        lines += [""]
+        for name in sim:
+            lines += [f"### BEM source: {name}", "", f"![fig2 {name}](simulate/fig2_{name}.png)", ""]
     path = out / "report.md"
     path.write_text("\n".join(lines))
     return path

@@ -1,44 +1,88 @@
-"""The main job: collect → train → export → simulate → report, in one run folder."""
+"""The main job: collect → train → export → evaluate → closed loop → report, in one run folder.
+
+With ``robot:`` (a registry name or any MJCF path) the run collects excitation data in MuJoCo,
+unless ``data:`` names a trajectory file to train on instead; the learned BEM is compared with
+the robot's model-based BEM and flown in the EIC loop.  Without ``robot:`` (``data:`` only) the
+run is model-free: train → export → data-only evaluation → report, and nothing is compared with
+a model unless ``model:`` names one.
+
+The run folder holds ``config.yaml`` (the resolved config), ``config_resolved.json`` (every
+value with its origin), ``data.npz`` (+ ``data.truth.npz``) when collected, the training run
+(``checkpoint.pt``, ``metrics.json``, ``tb/``), the predictors, ``simulate/`` and ``report.md``.
+``metrics.json`` gains ``closed_loop.<source>.{fell, tracking_rmse, ...}`` per BEM source.
+"""
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from pathlib import Path
 
 from bemlearn.config import save_yaml
 from bemlearn.pipeline.config import PipelineConfig
+from bemlearn.pipeline.resolve import ResolvedConfig, resolve_pipeline_config
 
-__all__ = ["run_pipeline"]
+__all__ = ["run_pipeline", "default_run_dir"]
 
 log = logging.getLogger(__name__)
 
 
-def run_pipeline(config: PipelineConfig, out_dir: str | Path | None = None, *, device: str | None = None, progress: bool = True) -> Path:
-    """Run every stage of ``config`` into ``out_dir`` (default ``runs/<robot>-<timestamp>``); returns the folder."""
+def default_run_dir(config: PipelineConfig) -> Path:
+    """``runs/<robot or data stem>-<timestamp>`` (a new folder)."""
+    stem = Path(config.robot).stem if config.robot else Path(config.data or "data").stem
+    return Path("runs") / time.strftime(f"{stem}-%Y%m%d-%H%M%S")
+
+
+def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | None = None, *,
+                 device: str | None = None, progress: bool = True) -> Path:
+    """Run every stage of ``config`` into ``out_dir`` (default :func:`default_run_dir`); returns the folder."""
     from bemlearn.data.collect import collect
-    from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
+    from bemlearn.data.trajectory_io import ground_truth_path, read_trajectory, write_trajectory
     from bemlearn.export.export_run import export_run
     from bemlearn.pipeline.report import write_report
     from bemlearn.pipeline.simulate import simulate_stage
     from bemlearn.pipeline.train import train_run
 
-    out = Path(out_dir) if out_dir else Path("runs") / time.strftime(f"{config.robot}-%Y%m%d-%H%M%S")
+    resolved = config if isinstance(config, ResolvedConfig) else resolve_pipeline_config(_as_dict(config))
+    cfg = resolved.config
+    out = Path(out_dir) if out_dir else default_run_dir(cfg)
     out.mkdir(parents=True, exist_ok=True)
-    save_yaml(config, out / "config.yaml")
+    save_yaml(cfg, out / "config.yaml")
+    (out / "config_resolved.json").write_text(json.dumps(resolved.to_json_dict(), indent=2, ensure_ascii=False))
     t0 = time.perf_counter()
-    log.info("[1/5] collecting excitation data")
-    data, truth = collect(config.robot, config.collect, progress=progress)
-    data_path = write_trajectory(data, out / "data.npz")
-    write_trajectory(truth, ground_truth_path(data_path))
-    data_info = {"trials": len(data.meta.trial_failed), "failed": sum(data.meta.trial_failed.values()), "samples": data.n_samples, "rate_hz": data.meta.sample_rate_hz}
-    log.info("[2/5] training the BEM GP")
-    train = train_run(config, data_path, out, device=device, progress=progress)
-    log.info("[3/5] exporting the predictor")
+    stages = 5 if cfg.robot else 3
+    if cfg.data is None:
+        log.info("[1/%d] collecting excitation data", stages)
+        data, truth = collect(cfg.robot, cfg.collect, progress=progress)
+        data_path = write_trajectory(data, out / "data.npz")
+        write_trajectory(truth, ground_truth_path(data_path))
+    else:
+        data_path = Path(cfg.data)
+        data = read_trajectory(data_path)
+        log.info("[1/%d] training data: %s", stages, data_path)
+    data_info = {"file": str(data_path), "collected": cfg.data is None, "trials": len(data.meta.trial_failed),
+                 "failed": sum(data.meta.trial_failed.values()), "samples": data.n_samples,
+                 "rate_hz": data.meta.sample_rate_hz, "input_units": data.meta.units.get("u", "actuator units")}
+    log.info("[2/%d] training the BEM GP", stages)
+    train = train_run(cfg, data_path, out, device=device, progress=progress)
+    log.info("[3/%d] exporting the predictor", stages)
     files = export_run(out, fmt="both")
-    log.info("[4/5] closed-loop simulation")
-    sim = simulate_stage(config, out, predictor=out / "bem_predictor.pt", progress=progress)
-    log.info("[5/5] report")
-    report = write_report(out, robot=config.robot, data=data_info, train=train, export=files, sim=sim)
+    sim: dict = {}
+    if cfg.robot:
+        log.info("[4/%d] closed-loop simulation", stages)
+        sim = simulate_stage(cfg, out, predictor=out / "bem_predictor.pt", progress=progress)
+        train["closed_loop"] = {src: {k: m[k] for k in ("fell", "tracking_rmse", "tracking_max", "qu_max", "u_max", "duration_s") if k in m}
+                                for src, m in sim.items()}
+        (out / "metrics.json").write_text(json.dumps(train, indent=2, default=float))
+    log.info("[%d/%d] report", stages, stages)
+    report = write_report(out, config=cfg, resolved=resolved, data=data_info, train=train, export=files, sim=sim)
     log.info("done in %.0f s: %s", time.perf_counter() - t0, report)
     return out
+
+
+def _as_dict(config: PipelineConfig) -> dict:
+    """A parsed config as the mapping it came from (its values then count as given)."""
+    from bemlearn.config import to_dict
+
+    return to_dict(config)

@@ -43,6 +43,10 @@ def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: st
         cfg = dataclasses.replace(scfg, bem_source=src, predictor=str(predictor) if predictor else None)
         res = simulate(config.robot, cfg, progress=progress)
         m = dict(res.metrics)
+        # a run that stayed up but whose actuated coordinates left the reference (e.g. the zero BEM's
+        # drifting arm: for m = 1 the external loop acts only through the BEM) has diverged
+        span = float(np.abs(res.qa_ref).max()) if len(res.qa_ref) else 0.0
+        m["diverged"] = bool(not res.fell and span > 0 and np.isfinite(m["tracking_max"]) and m["tracking_max"] > 2 * span)
         # model-based BEM of the nominal robot at the loop's BEM inputs (eq. 9), for comparison
         x = torch.from_numpy(res.bem_x)
         mm = nominal.m

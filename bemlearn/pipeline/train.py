@@ -26,6 +26,7 @@ import torch
 
 from bemlearn.config import save_yaml
 from bemlearn.data import build_datasets, read_trajectory
+from bemlearn.data.validation import check_robot
 from bemlearn.models import predict
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.evaluation import evaluate_bem, held_out_references
@@ -94,7 +95,11 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     config = dataclasses.replace(config, train=gp_cfg)
     save_yaml(config, out / "config.yaml")
     robot, ref, truth_robot = run_robot(config)
-    traj = read_trajectory(data_path, robot=robot.name if robot is not None and ref.registry else None)
+    traj = read_trajectory(data_path)
+    if robot is not None:  # the file's joints must be the robot's (its robot label matters only for registry names)
+        check_robot(traj.meta, robot if ref.registry else _Named(robot, traj.meta.robot), source=str(data_path))
+    else:
+        ref = dataclasses.replace(ref, name=traj.meta.robot or ref.name)
     ds = build_datasets(traj, config.dataset, progress=progress)
     train, val = ds.train, ds.val
     log.info("dataset: %d training points, %d validation points; %s", len(train), len(val), ds.report)
@@ -113,6 +118,7 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     interrupted = stage.interrupted
     metrics: dict = {"robot": ref.to_dict(), "fit": stage.fit, "hyperparameters": stage.hyperparameters,
                      "lengthscale_physical": stage.lengthscale_physical, "units": units,
+                     "unactuated": meta.unactuated, "actuated": list(meta.actuated_names),
                      "output_unit": units[f"qd_{meta.unactuated}"].removesuffix("/s"), "n_train": len(train),
                      "n_val": len(val), "dataset": ds.report, "interrupted": interrupted}
     dtype = gp_cfg.torch_dtype
@@ -141,6 +147,13 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     if interrupted:
         raise KeyboardInterrupt
     return metrics
+
+
+class _Named:
+    """``robot`` under another name (an MJCF given by path is matched by its joints, not its label)."""
+
+    def __init__(self, robot, name: str) -> None:
+        self.name, self.joint_names, self.unactuated_name = name, robot.joint_names, robot.unactuated_name
 
 
 def _bem_figure(curves: dict, qu_name: str, unit: str = "rad"):

@@ -1,0 +1,127 @@
+"""``docs/config.md``: every key of a pipeline config, generated from the config dataclasses.
+
+Each section's dataclass documents its keys in its docstring (``Attributes:``); this module
+walks :class:`~bemlearn.pipeline.config.PipelineConfig` and writes one table row per key with
+its type, default, whether the robot's model derives it, and its description.  A test checks
+that ``docs/config.md`` equals the output, so the page cannot fall behind the code.
+
+Run ``python -m bemlearn.pipeline.config_doc > docs/config.md`` after changing a config class.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import re
+import typing
+
+from bemlearn.pipeline.config import PipelineConfig
+
+__all__ = ["config_markdown", "attribute_docs", "DERIVED_KEYS"]
+
+#: Keys whose value, when not given, is derived from the robot's model
+#: (:mod:`bemlearn.pipeline.derived_defaults`); set by that module.
+DERIVED_KEYS: dict[str, str] = {}
+
+_INTRO = """# Pipeline configuration
+
+A pipeline config is one YAML file with a section per stage. Every key is checked: an unknown or
+misspelt key, or a value of the wrong type, is an error that names the file and the key path.
+The smallest config names only the robot:
+
+```yaml
+robot: path/to/my_robot.xml     # or a registry name: furuta, biped, ...
+```
+
+Everything else is either **derived from the robot's model** when the config does not give it
+(marked *derived* below; how each is derived is printed by `bemlearn config show CONFIG`) or a
+plain **default**. An explicit key always wins. Each run saves the resolved config as
+`config.yaml` and every value with its origin (given / derived / default) as
+`config_resolved.json`.
+
+A model-free config names a trajectory file instead of a robot (`data: FILE`, see
+docs/log-import.md); `model:` then optionally names an MJCF to compare the learned BEM with.
+
+Units follow the joint: rad, rad/s, rad/s² for hinges; m, m/s, m/s² for slides.
+
+This page is generated from the config classes (`python -m bemlearn.pipeline.config_doc`).
+"""
+
+
+def attribute_docs(cls) -> dict[str, str]:
+    """``{field: description}`` from the ``Attributes:`` section of a dataclass docstring."""
+    doc = inspect.getdoc(cls) or ""
+    m = re.search(r"^Attributes:\s*$(.*?)(?=^\S|\Z)", doc, flags=re.M | re.S)
+    if not m:
+        return {}
+    out: dict[str, str] = {}
+    current: list[str] = []
+    text: list[str] = []
+    for line in m.group(1).splitlines():
+        if not line.strip():
+            continue
+        head = re.match(r"^    ([A-Za-z_][\w, ]*):\s*(.*)$", line)
+        if head and all(re.fullmatch(r"[A-Za-z_]\w*", n.strip()) for n in head.group(1).split(",")):
+            for name in current:
+                out[name] = " ".join(text).strip()
+            current = [n.strip() for n in head.group(1).split(",")]
+            text = [head.group(2)]
+        else:
+            text.append(line.strip())
+    for name in current:
+        out[name] = " ".join(text).strip()
+    return out
+
+
+def _type_name(tp) -> str:
+    s = str(tp).replace("typing.", "").replace("<class '", "").replace("'>", "")
+    return re.sub(r"\bbemlearn\.[\w.]+\.", "", s)
+
+
+def _default(f: dataclasses.Field) -> str:
+    if f.default is not dataclasses.MISSING:
+        v = f.default
+    elif f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
+        v = f.default_factory()  # type: ignore[misc]
+        if dataclasses.is_dataclass(v):
+            return "(section)"
+    else:
+        return "required"
+    return "`null`" if v is None else f"`{list(v) if isinstance(v, tuple) else v}`"
+
+
+def _rows(cls, prefix: str, rows: list[str], sections: list[tuple[str, type]]) -> None:
+    hints = typing.get_type_hints(cls)
+    docs = attribute_docs(cls)
+    for f in dataclasses.fields(cls):
+        key = f"{prefix}{f.name}"
+        tp = hints[f.name]
+        if dataclasses.is_dataclass(tp):
+            sections.append((key, tp))
+            continue
+        derived = "derived" if key in DERIVED_KEYS else ""
+        desc = docs.get(f.name, "").replace("|", "\\|")
+        rows.append(f"| `{key}` | {_type_name(tp).replace('|', 'or')} | {_default(f)} | {derived} | {desc} |")
+
+
+def config_markdown() -> str:
+    """The whole ``docs/config.md`` page."""
+    from bemlearn.pipeline import derived_defaults  # noqa: F401  (fills DERIVED_KEYS)
+
+    out = [_INTRO]
+    pending: list[tuple[str, type]] = [("", PipelineConfig)]
+    while pending:
+        prefix, cls = pending.pop(0)
+        rows: list[str] = []
+        subs: list[tuple[str, type]] = []
+        _rows(cls, f"{prefix}." if prefix else "", rows, subs)
+        title = prefix or "top level"
+        summary = (inspect.getdoc(cls) or "").splitlines()[0]
+        out += [f"## `{title}` — {cls.__name__}", "", summary, "", "| key | type | default | when not given | description |",
+                "| --- | --- | --- | --- | --- |", *rows, ""]
+        pending = subs + pending
+    return "\n".join(out)
+
+
+if __name__ == "__main__":
+    print(config_markdown(), end="")

@@ -1,0 +1,132 @@
+"""Resolve a pipeline config: what the user gave, what the model derives, what is a default.
+
+A config may hold only ``robot: path/to/robot.xml``.  Every value it does not give is either
+*derived* from the robot's model (control rate, physics step, excitation gains and amplitudes,
+evaluation references, EIC gains; :mod:`bemlearn.pipeline.derived_defaults`) or a plain *default* of its
+component's dataclass.  Explicit keys always win.  :func:`resolve_pipeline_config` returns the
+strict, typed :class:`~bemlearn.pipeline.config.PipelineConfig` together with the origin of
+every value (``given`` / ``derived`` / ``default``) and, for derived values, how they were
+derived; ``bemlearn config show CONFIG`` prints it, and each run saves it next to the config.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bemlearn.config import ConfigError, from_dict, load_yaml, to_dict
+from bemlearn.pipeline.config import PipelineConfig
+
+__all__ = ["ResolvedConfig", "resolve_pipeline_config", "format_resolved", "flatten"]
+
+Origin = str  # "given" | "derived" | "default"
+
+
+@dataclass(frozen=True)
+class ResolvedConfig:
+    """A pipeline config with the origin of every value.
+
+    Attributes:
+        config: the parsed, strict config (every derived value filled in).
+        origins: dotted key (``collect.rate_hz``) → ``"given"``, ``"derived"`` or ``"default"``.
+        notes: dotted key → one line on how a derived value was obtained.
+        source: where the config came from (file path or ``"<dict>"``).
+    """
+
+    config: PipelineConfig
+    origins: dict[str, Origin]
+    notes: dict[str, str]
+    source: str
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """``{key: {"value", "origin", "note"}}`` for every leaf value (saved with each run)."""
+        flat = flatten(to_dict(self.config))
+        return {k: {"value": v, "origin": self.origins.get(k, "default"), **({"note": self.notes[k]} if k in self.notes else {})}
+                for k, v in flat.items()}
+
+
+def flatten(data: Any, prefix: str = "") -> dict[str, Any]:
+    """Nested mappings → ``{"a.b.c": leaf}`` (lists are leaves)."""
+    if isinstance(data, Mapping):
+        out: dict[str, Any] = {}
+        for k, v in data.items():
+            out.update(flatten(v, f"{prefix}{k}."))
+        if not data and prefix:
+            out[prefix[:-1]] = {}
+        return out
+    return {prefix[:-1]: data}
+
+
+def _set(raw: dict, dotted: str, value: Any) -> None:
+    head, _, rest = dotted.partition(".")
+    if not rest:
+        raw[head] = value
+        return
+    child = raw.get(head)
+    if child is None:
+        child = raw[head] = {}
+    if not isinstance(child, dict):
+        raise ConfigError(f"{head}: expected a mapping, got {child!r}")
+    _set(child, rest, value)
+
+
+def _has(raw: Mapping, dotted: str) -> bool:
+    head, _, rest = dotted.partition(".")
+    if head not in raw:
+        return False
+    return True if not rest else isinstance(raw[head], Mapping) and _has(raw[head], rest)
+
+
+def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: bool = True) -> ResolvedConfig:
+    """Parse ``config`` (a YAML path or a mapping) strictly and fill in what the robot's model derives.
+
+    Raises:
+        ConfigError: unknown keys, wrong types, or a config naming neither ``robot:`` nor ``data:``.
+    """
+    if isinstance(config, Mapping):
+        raw, source = copy.deepcopy(dict(config)), "<dict>"
+    else:
+        raw, source = load_yaml(config), str(config)
+    if not raw:
+        raise ConfigError(f"{source}: the config is empty; it must at least name the robot "
+                          "('robot: path/to/robot.xml' or a registry name) or the data ('data: FILE')")
+    given = set(flatten(raw))
+    parsed = from_dict(PipelineConfig, raw, where=source)  # strict check of what was given
+    notes: dict[str, str] = {}
+    if derive and parsed.robot is not None:
+        from bemlearn.pipeline.derived_defaults import derive_pipeline_values
+        from bemlearn.robots import load
+
+        robot = load(parsed.robot)
+        for key, (value, note) in derive_pipeline_values(robot, parsed).items():
+            if not _has(raw, key):
+                _set(raw, key, value)
+                notes[key] = note
+        parsed = from_dict(PipelineConfig, raw, where=source)
+    origins: dict[str, Origin] = {}
+    for key in flatten(to_dict(parsed)):
+        if key in given or any(key.startswith(g + ".") for g in given):
+            origins[key] = "given"
+        elif key in notes or any(key.startswith(n + ".") for n in notes):
+            origins[key] = "derived"
+        else:
+            origins[key] = "default"
+    return ResolvedConfig(parsed, origins, {k: v for k, v in notes.items()}, source)
+
+
+def format_resolved(resolved: ResolvedConfig) -> str:
+    """The resolved config as a table: key, value, origin, and how a derived value was derived."""
+    rows = resolved.to_json_dict()
+    width = max(len(k) for k in rows)
+    lines = [f"# {resolved.source}: every value with its origin (given / derived from the model / default)"]
+    for key, r in rows.items():
+        value = json.dumps(r["value"], ensure_ascii=False) if not isinstance(r["value"], str) else r["value"]
+        if len(value) > 60:
+            value = value[:57] + "..."
+        note = f"  # {r['note']}" if "note" in r else ""
+        lines.append(f"{key:<{width}}  {value:<40}  {r['origin']:<8}{note}")
+    return "\n".join(lines)
