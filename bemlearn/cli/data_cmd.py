@@ -17,7 +17,7 @@ from typing import Any
 
 from bemlearn.data.quantization import counts_per_revolution
 from bemlearn.data.trajectory_io import SUFFIXES, read_trajectory, write_trajectory
-from bemlearn.data.validation import MIN_TRIAL_SAMPLES, RATE_RTOL
+from bemlearn.data.validation import JITTER_RTOL, MIN_TRIAL_SAMPLES, RATE_RTOL
 
 __all__ = ["add_parser", "format_summary"]
 
@@ -27,7 +27,11 @@ def _add_validation_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-trial-samples", type=int, default=MIN_TRIAL_SAMPLES, metavar="K",
                         help=f"shortest accepted trial in samples (default {MIN_TRIAL_SAMPLES})")
     parser.add_argument("--rate-rtol", type=float, default=RATE_RTOL, metavar="R",
-                        help=f"accepted relative deviation of time steps from 1/sample_rate (default {RATE_RTOL:g})")
+                        help="accepted relative deviation of each trial's median time step from 1/sample_rate "
+                        f"(default {RATE_RTOL:g})")
+    parser.add_argument("--jitter-rtol", type=float, default=JITTER_RTOL, metavar="J",
+                        help="accepted relative deviation of every single time step from 1/sample_rate "
+                        f"(timestamp jitter; default {JITTER_RTOL:g})")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -88,7 +92,7 @@ def _ids(ids: list[int], limit: int = 20) -> str:
 
 def run_check(args: argparse.Namespace) -> int:
     traj = read_trajectory(args.file, robot=args.robot, min_trial_samples=args.min_trial_samples,
-                           rate_rtol=args.rate_rtol)
+                           rate_rtol=args.rate_rtol, jitter_rtol=args.jitter_rtol)
     summary = traj.summary()
     if args.json:
         print(json.dumps({"file": str(args.file), **summary}, indent=2))
@@ -107,7 +111,8 @@ def run_convert(args: argparse.Namespace) -> int:
         raise ValueError(f"{args.output}: already exists (use --force to overwrite)")
     if args.output.resolve() == args.input.resolve():
         raise ValueError(f"{args.output}: output is the input file")
-    traj = read_trajectory(args.input, min_trial_samples=args.min_trial_samples, rate_rtol=args.rate_rtol)
-    write_trajectory(traj, args.output, min_trial_samples=args.min_trial_samples, rate_rtol=args.rate_rtol)
+    limits = {"min_trial_samples": args.min_trial_samples, "rate_rtol": args.rate_rtol, "jitter_rtol": args.jitter_rtol}
+    traj = read_trajectory(args.input, **limits)
+    write_trajectory(traj, args.output, **limits)
     print(f"wrote {args.output} ({traj.n_samples} samples, {len(traj.meta.trial_failed)} trials)")
     return 0
