@@ -1,11 +1,13 @@
-"""``bemlearn data``: check and convert trajectory files.
+"""``bemlearn data``: check, convert and import trajectory files.
 
     bemlearn data check FILE [--robot NAME] [--min-trial-samples K] [--rate-rtol R] [--json]
     bemlearn data convert IN OUT [--force]
+    bemlearn data import RAW... --map MAP.yaml --out FILE [--force]
 
 ``check`` validates FILE (NPZ or CSV) and prints a summary; on a bad file it exits with
 status 2 and an error naming the file, column and row.  ``convert`` rewrites a file in the
-format given by OUT's suffix, losslessly (floats as ``%.17g`` in CSV).
+format given by OUT's suffix, losslessly (floats as ``%.17g`` in CSV).  ``import`` turns a
+logger's CSV files into one trajectory file by a column map (``docs/log-import.md``).
 """
 
 from __future__ import annotations
@@ -54,6 +56,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     convert.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
     _add_validation_options(convert)
     convert.set_defaults(func=run_convert)
+
+    imp = sub.add_parser("import", help="import a logger's CSV files by a column map (docs/log-import.md)")
+    imp.add_argument("raw", type=Path, nargs="+", metavar="RAW", help="the logger's CSV files, in trial order")
+    imp.add_argument("--map", type=Path, required=True, metavar="MAP.yaml", help="the column map")
+    imp.add_argument("--out", type=Path, required=True, metavar="FILE", help="output trajectory file (.npz or .csv)")
+    imp.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+    imp.set_defaults(func=run_import)
     return parser
 
 
@@ -115,4 +124,25 @@ def run_convert(args: argparse.Namespace) -> int:
     traj = read_trajectory(args.input, **limits)
     write_trajectory(traj, args.output, **limits)
     print(f"wrote {args.output} ({traj.n_samples} samples, {len(traj.meta.trial_failed)} trials)")
+    return 0
+
+
+def run_import(args: argparse.Namespace) -> int:
+    from bemlearn.data.import_map import load_import_map
+    from bemlearn.data.log_import import import_logs
+
+    if args.out.suffix.lower() not in SUFFIXES:
+        raise ValueError(f"{args.out}: unsupported output suffix {args.out.suffix!r}; expected one of {list(SUFFIXES)}")
+    if args.out.exists() and not args.force:
+        raise ValueError(f"{args.out}: already exists (use --force to overwrite)")
+    if any(args.out.resolve() == p.resolve() for p in args.raw):
+        raise ValueError(f"{args.out}: output is one of the input files")
+    imap = load_import_map(args.map)
+    traj = import_logs(args.raw, imap)
+    write_trajectory(traj, args.out)
+    info = traj.meta.extra["import"]
+    print(f"wrote {args.out} ({traj.n_samples} samples, {len(traj.meta.trial_failed)} trials at "
+          f"{traj.meta.sample_rate_hz:g} Hz; {info['filled_samples']} dropped samples interpolated, "
+          f"{info['split_gaps']} trials split at gaps, {info['dropped_pieces']} short pieces dropped)")
+    print(format_summary(args.out, traj.summary()))
     return 0
