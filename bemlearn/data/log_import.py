@@ -153,7 +153,7 @@ def _check_finite(table: LogTable, cols: Sequence[str]) -> None:
     for c in cols:
         bad = np.flatnonzero(~np.isfinite(table.columns[c]))
         if len(bad):
-            raise TrajectoryFormatError(f"{table.where(c, int(bad[0]))}: non-finite value {table.columns[c][bad[0]]!r}")
+            raise TrajectoryFormatError(f"{table.where(c, int(bad[0]))}: non-finite value {float(table.columns[c][bad[0]])!r}")
 
 
 def _trial_blocks(table: LogTable, imap: ImportMap) -> list[tuple[int, int, int | None]]:

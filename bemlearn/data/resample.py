@@ -84,7 +84,7 @@ def place_on_grid(
     if len(back):
         i = int(back[0]) + 1
         raise TrajectoryFormatError(
-            f"{where(i)}: time {t[i]!r} s does not increase (previous {t[i - 1]!r} s)"
+            f"{where(i)}: time {float(t[i])!r} s does not increase (previous {float(t[i - 1])!r} s)"
         )
     rel = t - t[0]
     t0 = t[0] + float(np.median(rel - np.round(rel * rate_hz) * h))
@@ -95,7 +95,7 @@ def place_on_grid(
     if len(bad):
         i = int(bad[0])
         raise TrajectoryFormatError(
-            f"{where(i)}: time {t[i]!r} s is {jitter[i] * h * 1e6:+.1f} µs off the {rate_hz:g} Hz grid "
+            f"{where(i)}: time {float(t[i])!r} s is {jitter[i] * h * 1e6:+.1f} µs off the {rate_hz:g} Hz grid "
             f"(more than max_jitter = {max_jitter:g} of a {h * 1e3:g} ms step)"
         )
     dk = np.diff(k)
@@ -103,14 +103,14 @@ def place_on_grid(
     if len(dup):
         i = int(dup[0]) + 1
         raise TrajectoryFormatError(
-            f"{where(i)}: time {t[i]!r} s falls on the same {rate_hz:g} Hz grid point as the previous "
-            f"sample ({t[i - 1]!r} s): a step shorter than {(1 - 2 * max_jitter) * h * 1e3:g} ms"
+            f"{where(i)}: time {float(t[i])!r} s falls on the same {rate_hz:g} Hz grid point as the previous "
+            f"sample ({float(t[i - 1])!r} s): a step shorter than {(1 - 2 * max_jitter) * h * 1e3:g} ms"
         )
     long_gaps = np.flatnonzero(dk - 1 > max_fill)
     if len(long_gaps) and on_gap == "error":
         i = int(long_gaps[0]) + 1
         raise TrajectoryFormatError(
-            f"{where(i)}: {int(dk[i - 1]) - 1} missing samples before time {t[i]!r} s (gap of "
+            f"{where(i)}: {int(dk[i - 1]) - 1} missing samples before time {float(t[i])!r} s (gap of "
             f"{steps[i - 1] * 1e3:g} ms; at most max_fill = {max_fill} are interpolated)"
         )
     bounds = np.concatenate([[0], long_gaps + 1, [len(t)]])
