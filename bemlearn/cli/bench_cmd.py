@@ -7,7 +7,8 @@
 * ``bench gpdm`` — GPDM fit time and recovery on synthetic gait data (issue 7);
 * ``bench biped-bem [CONFIG] [--data D | --collect-seeds S …]`` — learned torso BEM error over training
   subsets and training walks (issue 7);
-* ``bench walks [CONFIG]`` — seeded biped walks per gait and torso BEM source (issue 7).
+* ``bench walks [CONFIG]`` — seeded biped walks per gait and torso BEM source (issue 7);
+* ``bench import [--rows N] [--accuracy]`` — logger CSV import speed and the model-free path's accuracy (issue 14).
 """
 
 from __future__ import annotations
@@ -90,6 +91,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     w.add_argument("--sensor-noise", type=float, default=0.001, help="encoder noise std, rad (default 0.001)")
     w.add_argument("--no-progress", action="store_true")
     w.set_defaults(func=_walks)
+    im = sub.add_parser("import", help="logger CSV import speed (10⁶ rows) and, with --accuracy, the model-free "
+                        "path's learned BEM vs the simulator file's (issue 14)")
+    im.add_argument("--data", type=Path, default=Path("data/furuta_excitation.npz"),
+                    help="simulator data written as logger CSVs (default: the shipped Furuta file)")
+    im.add_argument("--rows", type=int, default=1_000_000, help="rows imported in the speed case (default 10⁶)")
+    im.add_argument("--files", type=int, default=10, help="files the rows are spread over (default 10)")
+    im.add_argument("--repeats", type=int, default=5, help="timed imports; the median is reported (default 5)")
+    im.add_argument("--accuracy", action="store_true", help="also fit the GP on the imported and the original file")
+    im.add_argument("--config", type=Path, default=Path("configs/furuta.yaml"), help="dataset and train sections")
+    im.add_argument("--figures", type=Path, default=None, help="folder for the BEM slice figures")
+    im.set_defaults(func=_import)
 
 
 def run_predict(args: argparse.Namespace) -> int:
@@ -190,4 +202,25 @@ def _walks(args: argparse.Namespace) -> int:
                           initial_noise=args.initial_noise, sensor_noise=args.sensor_noise,
                           progress=not args.no_progress)
     print(format_walk_bench(rows, steps=args.steps))
+    return 0
+
+
+def _import(args: argparse.Namespace) -> int:
+    import json
+    import os
+
+    from bemlearn.bench.import_bench import bench_import_speed, bench_model_free_accuracy
+    from bemlearn.data import read_trajectory
+
+    for name in ("rows", "files", "repeats"):
+        if getattr(args, name) < 1:
+            raise ValueError(f"--{name}: expected a positive integer, got {getattr(args, name)}")
+    source = read_trajectory(args.data)
+    result = {"load_average_1min": os.getloadavg()[0],
+              "speed": bench_import_speed(source, rows=args.rows, trials=args.files, repeats=args.repeats)}
+    if args.accuracy:
+        from bemlearn.pipeline.config import load_pipeline_config
+
+        result["accuracy"] = bench_model_free_accuracy(source, load_pipeline_config(args.config), figure_dir=args.figures)
+    print(json.dumps(result, indent=2, default=float))
     return 0
