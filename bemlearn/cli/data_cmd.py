@@ -80,11 +80,16 @@ def format_summary(path: Path | str, s: dict[str, Any]) -> str:
         + (f"{lengths[0]}/{lengths[1]:g}/{lengths[2]})" if lengths else "-)"),
         f"sample rate:  {s['sample_rate_hz']:g} Hz",
         f"ground truth: {'yes (qd, qdd)' if s['ground_truth'] else 'no'}",
-        "angle ranges (rad):",
     ]
+    kinds = s.get("joint_kinds", {})
+    if s.get("channels"):
+        lines.append(f"channels:     {', '.join(s['channels'])}")
+    slides = any(k == "slide" for k in kinds.values())
+    lines.append("ranges (rad for hinges, m for slides):" if slides else "angle ranges (rad):")
     for joint, rng in s["angle_ranges_rad"].items():
-        lines.append(f"  {joint:<12} [{rng[0]:+.6g}, {rng[1]:+.6g}]" if rng else f"  {joint:<12} -")
-    lines.append("quantization step (rad):")
+        unit = " m" if kinds.get(joint) == "slide" else ""
+        lines.append(f"  {joint:<12} [{rng[0]:+.6g}, {rng[1]:+.6g}]{unit}" if rng else f"  {joint:<12} -")
+    lines.append("quantization step (rad, m for slides):" if slides else "quantization step (rad):")
     for joint, step in s["quantization_step_rad"].items():
         if step is None:
             lines.append(f"  {joint:<12} none detected")
