@@ -284,3 +284,18 @@ def test_write_is_temp_file_then_replace(rig, tmp_path, monkeypatch):
     monkeypatch.setattr(trajectory_io.os, "replace", lambda a, b: (seen.append((Path(a).name, Path(b).name)), real(a, b)))
     main_write(dataclasses.replace(rig), tmp_path / "x.npz")
     assert len(seen) == 1 and seen[0][1] == "x.npz" and seen[0][0].startswith(".x.npz.tmp")
+
+
+@pytest.mark.slow
+def test_docs_python_api_snippet_runs(rig, tmp_path, monkeypatch):
+    """The API example of docs/log-import.md, run as written on an imported rig file."""
+    import re
+
+    text = (Path(__file__).parents[1] / "docs" / "log-import.md").read_text()
+    snippet = re.findall(r"```python\n(.*?)```", text, re.S)[0]
+    paths = write_rig_logs(rig, tmp_path / "logs", RigLogStyle(counts_per_rev=2048))
+    traj = import_logs(paths, from_dict(ImportMap, rig_log_map(rig)))
+    main_write(traj, tmp_path / "rig.npz")
+    monkeypatch.chdir(tmp_path)
+    exec(compile(snippet.replace("DatasetConfig()", "DatasetConfig(n_points=150)"), "log-import.md", "exec"), {})
+    assert (tmp_path / "bem_slices.png").stat().st_size > 10_000
