@@ -52,7 +52,9 @@ def test_import_recovers_the_simulated_trajectory(rig, tmp_path, style):
     # times on the exact nominal grid, each trial starting within the jitter of 0
     for s in got.trial_slices():
         t = got.t[s.rows]
-        np.testing.assert_allclose(np.diff(t), 1 / 400.0, rtol=0, atol=1e-12)
+        steps = np.diff(t)
+        np.testing.assert_allclose(steps, steps[0], rtol=1e-12, atol=0)  # uniform
+        assert steps[0] == pytest.approx(1 / 400.0, rel=1e-5)  # the stamps' fitted step (20 µs jitter)
         assert abs(t[0]) < 1e-4
     # samples the logger wrote: equal up to the printing round-off; dropped ones: within one step
     info = got.meta.extra["import"]
@@ -159,7 +161,18 @@ def test_jitter_is_absorbed_and_drops_are_filled_linearly(tmp_path):
     assert got.meta.sample_rate_hz == 500.0 and got.n_samples == 400
     assert got.meta.extra["import"]["filled_samples"] == 3
     np.testing.assert_allclose(got.q[:, 0], 0.001 * np.arange(400), atol=1e-9)  # linear: exact
-    np.testing.assert_allclose(got.t - got.t[0], np.arange(400) / 500.0, atol=1e-12)
+    np.testing.assert_allclose(got.t - got.t[0], np.arange(400) / 500.0, atol=1e-5)  # fitted grid, 20 µs jitter
+
+
+def test_clock_drift_does_not_accumulate(tmp_path):
+    """A 100 ppm clock drift moves the 30 000th stamp by 6 ms (3 steps) from the nominal grid."""
+    t_ms = np.arange(30_000) * 2.0 * (1 + 100e-6)
+    got = import_logs([logger_file(tmp_path, t_ms)], simple_map(rate_hz=500.0))
+    assert got.n_samples == 30_000 and got.meta.extra["import"]["filled_samples"] == 0
+    assert np.diff(got.t)[0] == pytest.approx(2e-3 * (1 + 100e-6), rel=1e-9)
+    fast = np.arange(200) * 2.0 * 1.02  # 2 % off: the map's rate is wrong
+    with pytest.raises(TrajectoryFormatError, match=r"row 0 \(line 3\): the time stamps advance by 2\.04 ms per sample, not the 2 ms of 500 Hz"):
+        import_logs([logger_file(tmp_path, fast)], simple_map(rate_hz=500.0))
 
 
 def test_long_gap_splits_or_fails(tmp_path):
@@ -180,7 +193,7 @@ def test_time_errors_name_file_column_row(tmp_path):
         import_logs([logger_file(tmp_path, t_ms)], simple_map())
     t_ms = np.arange(100) * 2.0
     t_ms[60] += 0.7  # 700 µs off a 2 ms grid: beyond max_jitter = 0.25
-    with pytest.raises(TrajectoryFormatError, match=r"row 60 \(line 63\): time 0\.1207 s is \+700\.0 µs off the 500 Hz grid"):
+    with pytest.raises(TrajectoryFormatError, match=r"row 60 \(line 63\): time 0\.1207 s is \+69\d\.\d µs off the 500 Hz grid"):
         import_logs([logger_file(tmp_path, t_ms)], simple_map(rate_hz=500.0))
 
 
