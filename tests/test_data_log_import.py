@@ -312,3 +312,13 @@ def test_docs_python_api_snippet_runs(rig, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     exec(compile(snippet.replace("DatasetConfig()", "DatasetConfig(n_points=150)"), "log-import.md", "exec"), {})
     assert (tmp_path / "bem_slices.png").stat().st_size > 10_000
+
+
+def test_byte_order_mark_crlf_and_semicolons(tmp_path):
+    lines = ["t;theta;alpha;u"] + [f"{i * 0.002:.4f};{0.01 * i:.4f};{0.1 * math.sin(i / 9):.4f};{i / 10:.2f}" for i in range(50)]
+    path = tmp_path / "win.csv"
+    path.write_bytes(b"\xef\xbb\xbf" + "\r\n".join(lines).encode() + b"\r\n")
+    mapping = {**_plain(simple_map()), "delimiter": ";", "time": {"column": "t", "unit": "s"}}
+    got = import_logs([path], from_dict(ImportMap, mapping))
+    assert got.n_samples == 50 and got.meta.sample_rate_hz == 500.0
+    np.testing.assert_allclose(got.q[:, 1], [float(f"{0.1 * math.sin(i / 9):.4f}") for i in range(50)], rtol=0, atol=0)

@@ -59,6 +59,7 @@ class LogTable:
 
 
 def _split(line: str, delimiter: str) -> list[str]:
+    line = line.lstrip("\ufeff")  # a byte-order mark some tools write before the header
     return [f.strip().strip('"').strip("'").strip() for f in line.rstrip("\r\n").split(delimiter)]
 
 
