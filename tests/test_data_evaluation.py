@@ -12,7 +12,12 @@ import torch
 from bemlearn.data import BEMDataset, Normalization, TrajectoryMeta
 from bemlearn.models import LearnedBEM
 from bemlearn.models.predictor_state import PredictorState
-from bemlearn.pipeline.data_evaluation import SliceSpec, bem_slice_figure, bem_slices, heldout_prediction
+from bemlearn.pipeline.data_evaluation import (
+    SliceSpec,
+    bem_slice_figure,
+    bem_slices,
+    heldout_prediction,
+)
 
 NAMES = ("qdd_theta", "qd_theta", "q_theta", "qdd_alpha", "qd_alpha")
 META = TrajectoryMeta(robot="rig", joint_names=("theta", "alpha"), unactuated="alpha", actuator_names=("motor",),

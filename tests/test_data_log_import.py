@@ -12,7 +12,12 @@ import yaml
 
 from bemlearn.cli.main import main
 from bemlearn.config import ConfigError, from_dict
-from bemlearn.data import TrajectoryFormatError, counts_per_revolution, detect_quantization_step, read_trajectory
+from bemlearn.data import (
+    TrajectoryFormatError,
+    counts_per_revolution,
+    detect_quantization_step,
+    read_trajectory,
+)
 from bemlearn.data.collect import CollectConfig, collect
 from bemlearn.data.import_map import ImportMap, load_import_map
 from bemlearn.data.log_import import import_logs
@@ -108,7 +113,7 @@ def main_write(traj, path):
 def test_slide_joints_are_metres(tmp_path):
     t = np.arange(200) / 100.0
     rows = ["time_us,cart_mm,pole_deg,force"] + [
-        f"{int(round(ti * 1e6))},{500 * math.sin(ti):.3f},{10 * math.cos(ti):.4f},{ti:.3f}" for ti in t
+        f"{round(ti * 1e6)},{500 * math.sin(ti):.3f},{10 * math.cos(ti):.4f},{ti:.3f}" for ti in t
     ]
     (tmp_path / "cp.csv").write_text("\n".join(rows) + "\n")
     mapping = {
@@ -305,12 +310,13 @@ def test_docs_python_api_snippet_runs(rig, tmp_path, monkeypatch):
     import re
 
     text = (Path(__file__).parents[1] / "docs" / "log-import.md").read_text()
-    snippet = re.findall(r"```python\n(.*?)```", text, re.S)[0]
+    snippet = re.findall(r"```python\n(.*?)```", text, re.DOTALL)[0]
     paths = write_rig_logs(rig, tmp_path / "logs", RigLogStyle(counts_per_rev=2048))
     traj = import_logs(paths, from_dict(ImportMap, rig_log_map(rig)))
     main_write(traj, tmp_path / "rig.npz")
     monkeypatch.chdir(tmp_path)
-    exec(compile(snippet.replace("DatasetConfig()", "DatasetConfig(n_points=150)"), "log-import.md", "exec"), {})
+    code = compile(snippet.replace("DatasetConfig()", "DatasetConfig(n_points=150)"), "log-import.md", "exec")
+    exec(code, {})  # noqa: S102 - the documented example, run as written
     assert (tmp_path / "bem_slices.png").stat().st_size > 10_000
 
 

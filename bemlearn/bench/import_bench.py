@@ -89,18 +89,30 @@ def fit_predictor(traj: Trajectory, dataset_config, gp_config):
     return state, ds
 
 
-def bench_model_free_accuracy(source: Trajectory, config, *, style: RigLogStyle = RigLogStyle(), figure_dir: Path | None = None) -> dict[str, Any]:
+def bench_model_free_accuracy(
+    source: Trajectory, config, *, style: RigLogStyle | None = None, figure_dir: Path | None = None
+) -> dict[str, Any]:
     """Fit on the simulator's file and on its logger-written, re-imported copy; score both (module docstring).
 
     Args:
         source: the simulator's data file (e.g. ``data/furuta_excitation.npz``).
         config: a :class:`~bemlearn.pipeline.config.PipelineConfig` (its ``dataset`` and ``train``).
-        style: how the logs are written.
+        style: how the logs are written (default :class:`RigLogStyle`).
         figure_dir: where to write the slice figures (``bem_slices_<which>.png``).
     """
-    from bemlearn.pipeline.data_evaluation import bem_slice_figure, bem_slices, heldout_prediction
-    from bemlearn.pipeline.evaluation import EvaluationConfig, evaluate_bem, ground_truth_robot, held_out_references
+    from bemlearn.pipeline.data_evaluation import (
+        bem_slice_figure,
+        bem_slices,
+        heldout_prediction,
+    )
+    from bemlearn.pipeline.evaluation import (
+        EvaluationConfig,
+        evaluate_bem,
+        ground_truth_robot,
+        held_out_references,
+    )
 
+    style = style or RigLogStyle()
     robot = ground_truth_robot("furuta")
     ecfg = EvaluationConfig()
     with tempfile.TemporaryDirectory() as tmp:

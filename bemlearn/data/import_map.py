@@ -25,7 +25,7 @@ from typing import Literal
 
 from bemlearn.config import ConfigError, from_dict, load_yaml
 
-__all__ = ["TimeMap", "JointMap", "InputMap", "TrialsByColumn", "ImportMap", "load_import_map", "TIME_UNITS"]
+__all__ = ["TIME_UNITS", "ImportMap", "InputMap", "JointMap", "TimeMap", "TrialsByColumn", "load_import_map"]
 
 #: Seconds per unit of the time column.
 TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6}

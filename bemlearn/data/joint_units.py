@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-__all__ = ["JOINT_KINDS", "joint_unit", "q_unit_label", "gp_input_units"]
+__all__ = ["JOINT_KINDS", "gp_input_units", "joint_unit", "q_unit_label"]
 
 #: Valid joint kinds and their (q, q̇, q̈) units.
 JOINT_KINDS: dict[str, tuple[str, str, str]] = {

@@ -30,7 +30,7 @@ from bemlearn.data.resample import GridSegment, place_on_grid
 from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, TrajectoryMeta
 from bemlearn.data.validation import MIN_TRIAL_SAMPLES
 
-__all__ = ["LogTable", "read_log_table", "import_logs"]
+__all__ = ["LogTable", "import_logs", "read_log_table"]
 
 logger = logging.getLogger(__name__)
 
@@ -274,7 +274,7 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
                 filled_total += int(seg.filled.sum())
                 trials_info.append({
                     "trial": tid, "file": str(table.path), "first_row": a + seg.first_row,
-                    "episode": episode, "samples": int(len(seg.t)), "filled_samples": int(seg.filled.sum()),
+                    "episode": episode, "samples": len(seg.t), "filled_samples": int(seg.filled.sum()),
                 })
     if not trials_info:
         raise TrajectoryFormatError(f"{tables[0].path}: no trial with at least {min_trial_samples} samples")

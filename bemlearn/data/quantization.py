@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-__all__ = ["detect_quantization_step", "counts_per_revolution", "snap_to_grid"]
+__all__ = ["counts_per_revolution", "detect_quantization_step", "snap_to_grid"]
 
 
 def _fit_grid(levels: np.ndarray, step0: float) -> tuple[float, float, np.ndarray, np.ndarray]:

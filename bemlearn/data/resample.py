@@ -23,6 +23,7 @@ Time must increase strictly; a step ≤ 0 is an error naming the row.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -133,7 +134,7 @@ def place_on_grid(
         )
     bounds = np.concatenate([[0], long_gaps + 1, [len(t)]])
     segments = []
-    for first, stop in zip(bounds[:-1], bounds[1:]):
+    for first, stop in itertools.pairwise(bounds):
         ks = k[first:stop]
         grid = np.arange(ks[0], ks[-1] + 1)
         present = np.zeros(len(grid), dtype=bool)

@@ -26,7 +26,7 @@ import numpy as np
 
 from bemlearn.data.trajectory import Trajectory
 
-__all__ = ["RigLogStyle", "write_rig_logs", "rig_log_map"]
+__all__ = ["RigLogStyle", "rig_log_map", "write_rig_logs"]
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ from bemlearn.data.joint_units import joint_unit
 from bemlearn.models.learned_bem import LearnedBEM
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["heldout_prediction", "SliceSpec", "bem_slices", "bem_slice_figure"]
+__all__ = ["SliceSpec", "bem_slice_figure", "bem_slices", "heldout_prediction"]
 
 
 def _state(model: PredictorState | LearnedBEM) -> PredictorState:
@@ -92,7 +92,7 @@ def heldout_prediction(model: PredictorState | LearnedBEM, heldout: BEMDataset, 
         "rmse": float(np.sqrt(np.mean(err**2))),
         "max_abs": float(np.abs(err).max()),
         "coverage": float(inside.mean()),
-        "n_points": int(len(y)),
+        "n_points": len(y),
         "kappa": kappa,
         "unit": joint_unit(meta.kind_of(meta.unactuated)),
         "per_trial": per,
@@ -175,7 +175,7 @@ def bem_slices(model: PredictorState | LearnedBEM, train: BEMDataset, spec: Slic
                 "units": {"qdd": joint_unit(kind, 2), "qd": joint_unit(kind, 1), "q": joint_unit(kind, 0),
                           "qu": joint_unit(meta.kind_of(meta.unactuated), 0)},
             })
-    cat = lambda parts: float(np.concatenate(parts).mean()) if parts else float("nan")  # noqa: E731
+    cat = lambda parts: float(np.concatenate(parts).mean()) if parts else float("nan")
     return {
         "slices": slices,
         "summary": {"std_pred_mean_covered": cat(inside_std), "std_pred_mean_extrapolated": cat(outside_std),
