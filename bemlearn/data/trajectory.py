@@ -273,7 +273,8 @@ class Trajectory:
             raise TrajectoryFormatError(f"Trajectory.trial: expected shape (T,), got {trial.shape}")
         object.__setattr__(self, "trial", trial.astype(np.int64, copy=False))
         n = self.meta.n_joints
-        if self.channels is None:
+        no_channels = not self.meta.channel_names and (self.channels is None or np.shape(self.channels)[-1:] == (0,))
+        if self.channels is None or no_channels:  # an empty block follows T (dataclasses.replace with new rows)
             object.__setattr__(self, "channels", np.zeros((len(trial), len(self.meta.channel_names))))
         shapes = {"t": None, "q": n, "u": n - 1, "qd": n, "qdd": n, "channels": len(self.meta.channel_names)}
         for name, width in shapes.items():
