@@ -1,9 +1,6 @@
 """Importing a logger's CSV files into a trajectory (``bemlearn data import``), by an :class:`ImportMap`.
 
-Each file is a header line (after optional ``#`` comment lines) and one row per sample.
-The columns named by the map are read with NumPy's C parser (``np.loadtxt`` with
-``usecols``: about 0.5 s per 10⁶ rows × 9 columns here); only when that fails is the file
-scanned row by row to name the first bad cell.  Joints are converted to rad / m
+Each file is read by :func:`~bemlearn.data.log_table.read_log_table`.  Joints are converted to rad / m
 (:class:`~bemlearn.data.import_map.JointMap`), trials are cut (per file or by an episode
 column), each trial is placed on its nominal time grid (:mod:`bemlearn.data.resample`), and
 kept columns become the trajectory's extra channels.  Samples the logger dropped
@@ -16,7 +13,6 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -25,136 +21,15 @@ from bemlearn._version import __version__
 from bemlearn.config import to_dict
 from bemlearn.data.import_map import TIME_UNITS, ImportMap
 from bemlearn.data.joint_units import q_unit_label
+from bemlearn.data.log_table import LogTable, check_finite, read_log_table
 from bemlearn.data.quantization import detect_quantization_step, snap_to_grid
 from bemlearn.data.resample import GridSegment, place_on_grid
 from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, TrajectoryMeta
 from bemlearn.data.validation import MIN_TRIAL_SAMPLES
 
-__all__ = ["LogTable", "import_logs", "read_log_table"]
+__all__ = ["import_logs"]
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class LogTable:
-    """The mapped columns of one logger file.
-
-    Attributes:
-        path: the file.
-        columns: column name → (R,) float64 raw values (as written, before unit conversion).
-        header_line: 1-based file line of the header.
-    """
-
-    path: Path
-    columns: dict[str, np.ndarray]
-    header_line: int
-
-    @property
-    def n_rows(self) -> int:
-        return len(next(iter(self.columns.values()))) if self.columns else 0
-
-    def where(self, column: str, row: int) -> str:
-        """``"<file>: column '<c>', row <r> (line <l>)"`` for error messages."""
-        return f"{self.path}: column {column!r}, row {row} (line {_data_lines(self.path, self.header_line)[row]})"
-
-
-def _split(line: str, delimiter: str) -> list[str]:
-    line = line.lstrip("\ufeff")  # a byte-order mark some tools write before the header
-    return [f.strip().strip('"').strip("'").strip() for f in line.rstrip("\r\n").split(delimiter)]
-
-
-def _is_skipped(line: str, comment: str) -> bool:
-    s = line.strip()
-    return not s or (bool(comment) and s.startswith(comment))
-
-
-def _data_lines(path: Path, header_line: int, comment: str = "#") -> np.ndarray:
-    """1-based file line of each data row (blank and comment lines are not rows)."""
-    lines = []
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        for n, line in enumerate(fh, start=1):
-            if n > header_line and not _is_skipped(line, comment):
-                lines.append(n)
-    return np.asarray(lines, dtype=np.int64)
-
-
-def _header(path: Path, imap: ImportMap) -> tuple[list[str], int]:
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        for n, line in enumerate(fh, start=1):
-            if not _is_skipped(line, imap.comment):
-                return _split(line, imap.delimiter), n
-    raise TrajectoryFormatError(f"{path}: no header line (the file is empty or holds only comments)")
-
-
-def read_log_table(path: str | Path, imap: ImportMap) -> LogTable:
-    """Read the columns ``imap`` names from one logger file (module docstring).
-
-    Raises:
-        FileNotFoundError: no such file.
-        TrajectoryFormatError: a missing or duplicated column, a non-numeric or missing cell,
-            naming the file, the column (and its map key) and the row / line.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: log file not found")
-    header, header_line = _header(path, imap)
-    wanted = imap.columns()
-    index: dict[str, int] = {}
-    for col, key in wanted.items():
-        hits = [i for i, h in enumerate(header) if h == col]
-        if not hits:
-            raise TrajectoryFormatError(
-                f"{path}: line {header_line}: column {col!r} (map key {key}) is not in the header {header}"
-            )
-        if len(hits) > 1:
-            raise TrajectoryFormatError(f"{path}: line {header_line}: column {col!r} (map key {key}) appears {len(hits)} times")
-        index[col] = hits[0]
-    names = list(index)
-    usecols = [index[c] for c in names]
-    try:
-        table = np.loadtxt(
-            path, delimiter=imap.delimiter, comments=imap.comment or None, skiprows=header_line,
-            usecols=usecols, ndmin=2, dtype=np.float64, encoding="utf-8",
-        )
-    except ValueError:
-        _scan_for_bad_cell(path, imap, header, header_line, names, usecols)
-        raise  # pragma: no cover - the scan raises
-    if table.shape[0] == 0:
-        raise TrajectoryFormatError(f"{path}: no data rows after the header (line {header_line})")
-    columns = {c: np.ascontiguousarray(table[:, j]) for j, c in enumerate(names)}
-    return LogTable(path=path, columns=columns, header_line=header_line)
-
-
-def _scan_for_bad_cell(
-    path: Path, imap: ImportMap, header: list[str], header_line: int, names: list[str], usecols: list[int]
-) -> None:
-    row = 0
-    need = max(usecols) + 1
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        for n, line in enumerate(fh, start=1):
-            if n <= header_line or _is_skipped(line, imap.comment):
-                continue
-            fields = _split(line, imap.delimiter)
-            if len(fields) < need:
-                raise TrajectoryFormatError(
-                    f"{path}: row {row} (line {n}): {len(fields)} fields, the header has {len(header)} "
-                    f"(column {header[len(fields)]!r} is missing)"
-                )
-            for c, i in zip(names, usecols):
-                try:
-                    float(fields[i])
-                except ValueError:
-                    what = "an empty cell" if not fields[i] else f"{fields[i]!r} is not a number"
-                    raise TrajectoryFormatError(f"{path}: column {c!r}, row {row} (line {n}): {what}") from None
-            row += 1
-    raise TrajectoryFormatError(f"{path}: could not parse the data rows")  # pragma: no cover
-
-
-def _check_finite(table: LogTable, cols: Sequence[str]) -> None:
-    for c in cols:
-        bad = np.flatnonzero(~np.isfinite(table.columns[c]))
-        if len(bad):
-            raise TrajectoryFormatError(f"{table.where(c, int(bad[0]))}: non-finite value {float(table.columns[c][bad[0]])!r}")
 
 
 def _trial_blocks(table: LogTable, imap: ImportMap) -> list[tuple[int, int, int | None]]:
@@ -237,7 +112,7 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
     tables = [read_log_table(p, imap) for p in paths]
     value_cols = [j.column for j in imap.joints] + [u.column for u in imap.inputs] + list(imap.keep)
     for table in tables:
-        _check_finite(table, value_cols + ([imap.time.column] if imap.time.column else []))
+        check_finite(table, value_cols + ([imap.time.column] if imap.time.column else []))
     rate = _sample_rate(tables, imap)
     scales = [j.sign * j.kind_and_scale()[1] for j in imap.joints]
     offsets = [j.offset for j in imap.joints] + [0.0] * (len(imap.inputs) + len(imap.keep))
