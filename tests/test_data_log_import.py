@@ -328,3 +328,11 @@ def test_byte_order_mark_crlf_and_semicolons(tmp_path):
     got = import_logs([path], from_dict(ImportMap, mapping))
     assert got.n_samples == 50 and got.meta.sample_rate_hz == 500.0
     np.testing.assert_allclose(got.q[:, 1], [float(f"{0.1 * math.sin(i / 9):.4f}") for i in range(50)], rtol=0, atol=0)
+
+
+def test_bench_import_speed_counts_rows(rig, capsys):
+    from bemlearn.bench.import_bench import bench_import_speed
+
+    r = bench_import_speed(rig, rows=3000, trials=3, repeats=2)
+    assert r["rows_written"] == 3000 and r["rows_imported"] == 3000 and len(r["seconds_all"]) == 2
+    assert 0 < r["filled_samples"] < 30
