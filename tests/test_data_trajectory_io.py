@@ -248,6 +248,17 @@ def test_empty_file_rejected(tmp_path):
         read_trajectory(write_lines(path, [lines[0], "# meta: " + json.dumps(meta), lines[2]]))
 
 
+def test_timestamp_jitter_accepted_and_median_rate_checked():
+    traj = make_trajectory((300, 200))
+    rng = np.random.default_rng(5)
+    jittered = traj.t + rng.normal(scale=0.008 * traj.meta.dt, size=traj.t.shape)  # 20 µs at 400 Hz
+    validate(dataclasses.replace(traj, t=jittered))
+    slow = dataclasses.replace(traj, t=traj.t * 1.02)  # every step 2 % long: the rate is wrong, not jittered
+    with pytest.raises(TrajectoryFormatError, match=r"median time step .* of trial 0 is inconsistent with sample_rate_hz"):
+        validate(slow)
+    validate(slow, rate_rtol=0.03)
+
+
 def test_time_may_restart_between_trials():
     traj = make_trajectory((30, 30))
     assert traj.t[30] < traj.t[29]
@@ -257,14 +268,17 @@ def test_time_may_restart_between_trials():
 def test_inconsistent_sample_rate_named(tmp_path):
     traj = make_trajectory((30, 30))
     t = traj.t.copy()
-    t[45:] += 0.01 * traj.meta.dt  # one step 1 % too long
-    with pytest.raises(TrajectoryFormatError, match=r"column 't', row 45: time step .* inconsistent with sample_rate_hz = 400\.0"):
+    t[45:] += 0.15 * traj.meta.dt  # one step 15 % too long: beyond the 10 % jitter tolerance
+    with pytest.raises(TrajectoryFormatError, match=r"column 't', row 45: time step .* inconsistent with sample_rate_hz = 400\.0 .*jitter"):
         validate(dataclasses.replace(traj, t=t))
-    validate(dataclasses.replace(traj, t=t), rate_rtol=0.02)  # tolerance is an option
+    validate(dataclasses.replace(traj, t=t), jitter_rtol=0.2)  # tolerance is an option
+    dropped = np.concatenate([traj.t[:40], traj.t[41:]])  # one dropped sample: a step of 2 Δt
+    with pytest.raises(TrajectoryFormatError, match=r"row 40: time step 0\.005.*data import"):
+        validate(dataclasses.replace(traj.select_rows(np.arange(59)), t=dropped))
     wrong_rate = dataclasses.replace(traj, meta=dataclasses.replace(traj.meta, sample_rate_hz=500.0))
     path = tmp_path / "r.npz"
     np.savez(path, meta=np.array(wrong_rate.meta.to_json()), t=traj.t, trial=traj.trial, q=traj.q, u=traj.u)
-    with pytest.raises(TrajectoryFormatError, match=r"r\.npz: column 't', row 1: time step"):
+    with pytest.raises(TrajectoryFormatError, match=r"r\.npz: column 't', row 0: median time step 0\.0025\d* s of trial 0 is inconsistent"):
         read_trajectory(path)
 
 

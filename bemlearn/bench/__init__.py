@@ -3,12 +3,15 @@
 from bemlearn.bench.bem_train_bench import bench_bem_training
 from bemlearn.bench.derivatives_bench import run_derivatives_bench
 from bemlearn.bench.gpdm_bench import run_gpdm_bench
+from bemlearn.bench.import_bench import bench_import_speed, bench_model_free_accuracy
 from bemlearn.bench.predict_bench import format_predict_bench, run_predict_bench
 from bemlearn.bench.sim_bench import format_sim_bench, run_sim_bench
 from bemlearn.bench.train_bench import bench_train
 
 __all__ = [
     "bench_bem_training",
+    "bench_import_speed",
+    "bench_model_free_accuracy",
     "bench_train",
     "format_predict_bench",
     "format_sim_bench",

@@ -6,6 +6,7 @@
 * ``bench derivatives [CONFIG]`` — derivative estimators and their effect on the learned BEM (issue 3);
 * ``bench gpdm`` — GPDM fit time and recovery on synthetic gait data (issue 7);
 * the installed applications' benches (e.g. the biped's ``bench biped-bem`` and ``bench walks``).
+* ``bench import [--rows N] [--accuracy]`` — logger CSV import speed and the model-free path's accuracy (issue 14).
 """
 
 from __future__ import annotations
@@ -67,6 +68,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     for app in applications().values():
         if app.add_bench is not None:
             app.add_bench(sub)
+    im = sub.add_parser("import", help="logger CSV import speed (10⁶ rows) and, with --accuracy, the model-free "
+                        "path's learned BEM vs the simulator file's (issue 14)")
+    im.add_argument("--data", type=Path, required=True,
+                    help="a simulator trajectory file, written out as logger CSVs (e.g. the shipped data/*.npz)")
+    im.add_argument("--rows", type=int, default=1_000_000, help="rows imported in the speed case (default 10⁶)")
+    im.add_argument("--files", type=int, default=10, help="files the rows are spread over (default 10)")
+    im.add_argument("--repeats", type=int, default=5, help="timed imports; the median is reported (default 5)")
+    im.add_argument("--accuracy", action="store_true", help="also fit the GP on the imported and the original file")
+    im.add_argument("--config", type=Path, default=None, help="pipeline YAML (robot, dataset and train sections); needed with --accuracy")
+    im.add_argument("--figures", type=Path, default=None, help="folder for the BEM slice figures")
+    im.set_defaults(func=_import)
 
 
 def run_predict(args: argparse.Namespace) -> int:
@@ -138,5 +150,29 @@ def _gpdm(args: argparse.Namespace) -> int:
     from bemlearn.fitting.gpdm_fit import GPDMConfig
 
     result = run_gpdm_bench(config=dataclasses.replace(GPDMConfig(), max_iter=args.max_iter))
+    print(json.dumps(result, indent=2, default=float))
+    return 0
+
+
+def _import(args: argparse.Namespace) -> int:
+    import json
+    import os
+
+    from bemlearn.bench.import_bench import bench_import_speed, bench_model_free_accuracy
+    from bemlearn.data import read_trajectory
+
+    for name in ("rows", "files", "repeats"):
+        if getattr(args, name) < 1:
+            raise ValueError(f"--{name}: expected a positive integer, got {getattr(args, name)}")
+    source = read_trajectory(args.data)
+    result = {"load_average_1min": os.getloadavg()[0],
+              "speed": bench_import_speed(source, rows=args.rows, trials=args.files, repeats=args.repeats)}
+    if args.accuracy:
+        from bemlearn.pipeline.config import load_pipeline_config
+
+        if args.config is None:
+            raise ValueError("--accuracy: needs --config (the robot whose model BEM is the reference, and the dataset/train sections)")
+
+        result["accuracy"] = bench_model_free_accuracy(source, load_pipeline_config(args.config), figure_dir=args.figures)
     print(json.dumps(result, indent=2, default=float))
     return 0

@@ -1,11 +1,13 @@
-"""``bemlearn data``: check and convert trajectory files.
+"""``bemlearn data``: check, convert and import trajectory files.
 
     bemlearn data check FILE [--robot NAME] [--min-trial-samples K] [--rate-rtol R] [--json]
     bemlearn data convert IN OUT [--force]
+    bemlearn data import RAW... --map MAP.yaml --out FILE [--force]
 
 ``check`` validates FILE (NPZ or CSV) and prints a summary; on a bad file it exits with
 status 2 and an error naming the file, column and row.  ``convert`` rewrites a file in the
-format given by OUT's suffix, losslessly (floats as ``%.17g`` in CSV).
+format given by OUT's suffix, losslessly (floats as ``%.17g`` in CSV).  ``import`` turns a
+logger's CSV files into one trajectory file by a column map (``docs/log-import.md``).
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from typing import Any
 
 from bemlearn.data.quantization import counts_per_revolution
 from bemlearn.data.trajectory_io import SUFFIXES, read_trajectory, write_trajectory
-from bemlearn.data.validation import MIN_TRIAL_SAMPLES, RATE_RTOL
+from bemlearn.data.validation import JITTER_RTOL, MIN_TRIAL_SAMPLES, RATE_RTOL
 
 __all__ = ["add_parser", "format_summary"]
 
@@ -27,7 +29,11 @@ def _add_validation_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-trial-samples", type=int, default=MIN_TRIAL_SAMPLES, metavar="K",
                         help=f"shortest accepted trial in samples (default {MIN_TRIAL_SAMPLES})")
     parser.add_argument("--rate-rtol", type=float, default=RATE_RTOL, metavar="R",
-                        help=f"accepted relative deviation of time steps from 1/sample_rate (default {RATE_RTOL:g})")
+                        help="accepted relative deviation of each trial's median time step from 1/sample_rate "
+                        f"(default {RATE_RTOL:g})")
+    parser.add_argument("--jitter-rtol", type=float, default=JITTER_RTOL, metavar="J",
+                        help="accepted relative deviation of every single time step from 1/sample_rate "
+                        f"(timestamp jitter; default {JITTER_RTOL:g})")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -50,6 +56,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     convert.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
     _add_validation_options(convert)
     convert.set_defaults(func=run_convert)
+
+    imp = sub.add_parser("import", help="import a logger's CSV files by a column map (docs/log-import.md)")
+    imp.add_argument("raw", type=Path, nargs="+", metavar="RAW", help="the logger's CSV files, in trial order")
+    imp.add_argument("--map", type=Path, required=True, metavar="MAP.yaml", help="the column map")
+    imp.add_argument("--out", type=Path, required=True, metavar="FILE", help="output trajectory file (.npz or .csv)")
+    imp.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+    imp.set_defaults(func=run_import)
     return parser
 
 
@@ -67,11 +80,16 @@ def format_summary(path: Path | str, s: dict[str, Any]) -> str:
         + (f"{lengths[0]}/{lengths[1]:g}/{lengths[2]})" if lengths else "-)"),
         f"sample rate:  {s['sample_rate_hz']:g} Hz",
         f"ground truth: {'yes (qd, qdd)' if s['ground_truth'] else 'no'}",
-        "angle ranges (rad):",
     ]
+    kinds = s.get("joint_kinds", {})
+    if s.get("channels"):
+        lines.append(f"channels:     {', '.join(s['channels'])}")
+    slides = any(k == "slide" for k in kinds.values())
+    lines.append("ranges (rad for hinges, m for slides):" if slides else "angle ranges (rad):")
     for joint, rng in s["angle_ranges_rad"].items():
-        lines.append(f"  {joint:<12} [{rng[0]:+.6g}, {rng[1]:+.6g}]" if rng else f"  {joint:<12} -")
-    lines.append("quantization step (rad):")
+        unit = " m" if kinds.get(joint) == "slide" else ""
+        lines.append(f"  {joint:<12} [{rng[0]:+.6g}, {rng[1]:+.6g}]{unit}" if rng else f"  {joint:<12} -")
+    lines.append("quantization step (rad, m for slides):" if slides else "quantization step (rad):")
     for joint, step in s["quantization_step_rad"].items():
         if step is None:
             lines.append(f"  {joint:<12} none detected")
@@ -88,7 +106,7 @@ def _ids(ids: list[int], limit: int = 20) -> str:
 
 def run_check(args: argparse.Namespace) -> int:
     traj = read_trajectory(args.file, robot=args.robot, min_trial_samples=args.min_trial_samples,
-                           rate_rtol=args.rate_rtol)
+                           rate_rtol=args.rate_rtol, jitter_rtol=args.jitter_rtol)
     summary = traj.summary()
     if args.json:
         print(json.dumps({"file": str(args.file), **summary}, indent=2))
@@ -107,7 +125,29 @@ def run_convert(args: argparse.Namespace) -> int:
         raise ValueError(f"{args.output}: already exists (use --force to overwrite)")
     if args.output.resolve() == args.input.resolve():
         raise ValueError(f"{args.output}: output is the input file")
-    traj = read_trajectory(args.input, min_trial_samples=args.min_trial_samples, rate_rtol=args.rate_rtol)
-    write_trajectory(traj, args.output, min_trial_samples=args.min_trial_samples, rate_rtol=args.rate_rtol)
+    limits = {"min_trial_samples": args.min_trial_samples, "rate_rtol": args.rate_rtol, "jitter_rtol": args.jitter_rtol}
+    traj = read_trajectory(args.input, **limits)
+    write_trajectory(traj, args.output, **limits)
     print(f"wrote {args.output} ({traj.n_samples} samples, {len(traj.meta.trial_failed)} trials)")
+    return 0
+
+
+def run_import(args: argparse.Namespace) -> int:
+    from bemlearn.data.import_map import load_import_map
+    from bemlearn.data.log_import import import_logs
+
+    if args.out.suffix.lower() not in SUFFIXES:
+        raise ValueError(f"{args.out}: unsupported output suffix {args.out.suffix!r}; expected one of {list(SUFFIXES)}")
+    if args.out.exists() and not args.force:
+        raise ValueError(f"{args.out}: already exists (use --force to overwrite)")
+    if any(args.out.resolve() == p.resolve() for p in args.raw):
+        raise ValueError(f"{args.out}: output is one of the input files")
+    imap = load_import_map(args.map)
+    traj = import_logs(args.raw, imap)
+    write_trajectory(traj, args.out)
+    info = traj.meta.extra["import"]
+    print(f"wrote {args.out} ({traj.n_samples} samples, {len(traj.meta.trial_failed)} trials at "
+          f"{traj.meta.sample_rate_hz:g} Hz; {info['filled_samples']} dropped samples interpolated, "
+          f"{info['split_gaps']} trials split at gaps, {info['dropped_pieces']} short pieces dropped)")
+    print(format_summary(args.out, traj.summary()))
     return 0

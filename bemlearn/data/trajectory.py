@@ -6,7 +6,9 @@ m = n − 1 actuated joints q_a (eq. 1, 2):
     t (T,) s,  trial (T,) int64,  q (T, n) rad (robot joint order),  u (T, n − 1) inputs,
 
 optionally with the simulator's true q̇ (T, n) rad/s and q̈ (T, n) rad/s² (a ground-truth
-file).  Samples of one trial are contiguous and time increases within a trial at the
+file) and extra logged channels (T, k) carried along (``meta.channel_names``).  Units
+follow the joint (``meta.joint_kinds``): a hinge in rad, a slide in m
+(:mod:`bemlearn.data.joint_units`).  Samples of one trial are contiguous and time increases within a trial at the
 nominal sample rate.  The on-disk format (NPZ and CSV) is described in
 ``docs/trajectory-format.md`` and implemented in :mod:`bemlearn.data.trajectory_io`;
 the checks in :mod:`bemlearn.data.validation`.
@@ -23,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from bemlearn.data.joint_units import JOINT_KINDS
 from bemlearn.data.quantization import detect_quantization_step
 
 __all__ = ["TrajectoryMeta", "Trajectory", "TrialSlice", "TrajectoryFormatError", "DEFAULT_UNITS"]
@@ -48,6 +51,9 @@ class TrajectoryMeta:
         units: unit of each array, e.g. ``{"t": "s", "q": "rad", "u": "V"}``.
         trial_failed: per trial id, whether the trial fell / failed (every trial id present).
         extra: free-form JSON-serializable provenance (seed, config, ...).
+        joint_kinds: ``"hinge"`` or ``"slide"`` per joint (default: all hinges); q of a
+            hinge is in rad, of a slide in m.
+        channel_names: names of the extra logged channels (columns of ``Trajectory.channels``).
     """
 
     robot: str
@@ -58,6 +64,8 @@ class TrajectoryMeta:
     trial_failed: dict[int, bool]
     units: dict[str, str] = field(default_factory=lambda: dict(DEFAULT_UNITS))
     extra: dict[str, Any] = field(default_factory=dict)
+    joint_kinds: tuple[str, ...] = ()
+    channel_names: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "joint_names", tuple(self.joint_names))
@@ -65,6 +73,9 @@ class TrajectoryMeta:
         object.__setattr__(self, "trial_failed", {int(k): bool(v) for k, v in self.trial_failed.items()})
         object.__setattr__(self, "units", dict(self.units))
         object.__setattr__(self, "extra", dict(self.extra))
+        kinds = tuple(self.joint_kinds) or ("hinge",) * len(self.joint_names)
+        object.__setattr__(self, "joint_kinds", kinds)
+        object.__setattr__(self, "channel_names", tuple(self.channel_names))
         n = len(self.joint_names)
         if n < 2:
             raise TrajectoryFormatError(f"meta.joint_names: expected at least 2 joints, got {list(self.joint_names)}")
@@ -84,6 +95,17 @@ class TrajectoryMeta:
                 raise TrajectoryFormatError(
                     f"meta: joint/actuator name {name!r} must be non-empty, without ',' ':' or surrounding spaces"
                 )
+        if len(kinds) != n or any(k not in JOINT_KINDS for k in kinds):
+            raise TrajectoryFormatError(
+                f"meta.joint_kinds: expected {n} entries from {sorted(JOINT_KINDS)}, got {list(kinds)}"
+            )
+        for name in self.channel_names:
+            if not isinstance(name, str) or not name or "," in name or name != name.strip():
+                raise TrajectoryFormatError(
+                    f"meta.channel_names: channel name {name!r} must be a non-empty string without ',' or surrounding spaces"
+                )
+        if len(set(self.channel_names)) != len(self.channel_names):
+            raise TrajectoryFormatError(f"meta.channel_names: duplicate names in {list(self.channel_names)}")
         rate = self.sample_rate_hz
         if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not math.isfinite(rate) or rate <= 0:
             raise TrajectoryFormatError(f"meta.sample_rate_hz: expected a positive number, got {rate!r}")
@@ -113,8 +135,21 @@ class TrajectoryMeta:
         """Nominal sample period, s."""
         return 1.0 / self.sample_rate_hz
 
+    def kind_of(self, joint: str) -> str:
+        """``"hinge"`` or ``"slide"``."""
+        return self.joint_kinds[self.joint_names.index(joint)]
+
     def to_json_dict(self) -> dict[str, Any]:
-        """The JSON form stored in files (trial ids become string keys)."""
+        """The JSON form stored in files (trial ids become string keys).
+
+        ``joint_kinds`` is written only when some joint is a slide, ``channel_names`` only
+        when there are channels, so files without either keep their v1 form.
+        """
+        optional: dict[str, Any] = {}
+        if any(k != "hinge" for k in self.joint_kinds):
+            optional["joint_kinds"] = list(self.joint_kinds)
+        if self.channel_names:
+            optional["channel_names"] = list(self.channel_names)
         return {
             "robot": self.robot,
             "joint_names": list(self.joint_names),
@@ -124,6 +159,7 @@ class TrajectoryMeta:
             "units": dict(self.units),
             "trial_failed": {str(k): v for k, v in sorted(self.trial_failed.items())},
             "extra": dict(self.extra),
+            **optional,
         }
 
     def to_json(self) -> str:
@@ -140,7 +176,7 @@ class TrajectoryMeta:
         if not isinstance(data, Mapping):
             raise TrajectoryFormatError(f"{source}: metadata must be a JSON object, got {type(data).__name__}")
         required = ("robot", "joint_names", "unactuated", "actuator_names", "sample_rate_hz", "trial_failed")
-        optional = ("units", "extra")
+        optional = ("units", "extra", "joint_kinds", "channel_names")
         missing = [k for k in required if k not in data]
         unknown = sorted(set(data) - set(required) - set(optional))
         if missing:
@@ -151,15 +187,15 @@ class TrajectoryMeta:
             )
         expect = {
             "robot": str, "joint_names": list, "unactuated": str, "actuator_names": list,
-            "trial_failed": dict, "units": dict, "extra": dict,
+            "trial_failed": dict, "units": dict, "extra": dict, "joint_kinds": list, "channel_names": list,
         }
         for key, typ in expect.items():
             if key in data and not isinstance(data[key], typ):
                 raise TrajectoryFormatError(
                     f"{source}: metadata key {key!r} must be a JSON {typ.__name__}, got {data[key]!r}"
                 )
-        for key in ("joint_names", "actuator_names"):
-            if not all(isinstance(s, str) for s in data[key]):
+        for key in ("joint_names", "actuator_names", "joint_kinds", "channel_names"):
+            if key in data and not all(isinstance(s, str) for s in data[key]):
                 raise TrajectoryFormatError(f"{source}: metadata key {key!r} must list strings, got {data[key]!r}")
         failed: dict[int, bool] = {}
         for k, v in data["trial_failed"].items():
@@ -182,6 +218,8 @@ class TrajectoryMeta:
                 trial_failed=failed,
                 units=dict(data.get("units", DEFAULT_UNITS)),
                 extra=dict(data.get("extra", {})),
+                joint_kinds=tuple(data.get("joint_kinds", ())),
+                channel_names=tuple(data.get("channel_names", ())),
             )
         except TrajectoryFormatError as exc:
             raise TrajectoryFormatError(f"{source}: {exc}") from None
@@ -212,6 +250,8 @@ class Trajectory:
         meta: what the columns mean, sample rate, per-trial outcome.
         qd: optional (T, n) float64 true joint velocities, rad/s (ground-truth files).
         qdd: optional (T, n) float64 true joint accelerations, rad/s² (ground-truth files).
+        channels: (T, k) float64 extra logged channels, columns ``meta.channel_names``
+            (``None`` → an empty (T, 0) block when there are no channels).
 
     Construction checks only shapes and dtypes; :func:`bemlearn.data.validate` checks values.
     """
@@ -223,6 +263,7 @@ class Trajectory:
     meta: TrajectoryMeta
     qd: np.ndarray | None = None
     qdd: np.ndarray | None = None
+    channels: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         trial = np.asarray(self.trial)
@@ -232,7 +273,10 @@ class Trajectory:
             raise TrajectoryFormatError(f"Trajectory.trial: expected shape (T,), got {trial.shape}")
         object.__setattr__(self, "trial", trial.astype(np.int64, copy=False))
         n = self.meta.n_joints
-        shapes = {"t": None, "q": n, "u": n - 1, "qd": n, "qdd": n}
+        no_channels = not self.meta.channel_names and (self.channels is None or np.shape(self.channels)[-1:] == (0,))
+        if self.channels is None or no_channels:  # an empty block follows T (dataclasses.replace with new rows)
+            object.__setattr__(self, "channels", np.zeros((len(trial), len(self.meta.channel_names))))
+        shapes = {"t": None, "q": n, "u": n - 1, "qd": n, "qdd": n, "channels": len(self.meta.channel_names)}
         for name, width in shapes.items():
             arr = getattr(self, name)
             if arr is None:
@@ -245,8 +289,10 @@ class Trajectory:
             arr = arr.astype(np.float64, copy=False)
             expected = (len(trial),) if width is None else (len(trial), width)
             if arr.shape != expected:
+                k = len(self.meta.channel_names)
                 raise TrajectoryFormatError(
-                    f"Trajectory.{name}: expected shape {expected} (T = len(trial), n = {n} joints), got {arr.shape}"
+                    f"Trajectory.{name}: expected shape {expected} (T = len(trial), n = {n} joints, "
+                    f"k = {k} channels), got {arr.shape}"
                 )
             object.__setattr__(self, name, arr)
         if (self.qd is None) != (self.qdd is None):
@@ -263,6 +309,12 @@ class Trajectory:
     @property
     def has_ground_truth(self) -> bool:
         return self.qd is not None
+
+    def channel(self, name: str) -> np.ndarray:
+        """(T,) float64 samples of the extra channel ``name`` (``meta.channel_names``)."""
+        if name not in self.meta.channel_names:
+            raise KeyError(f"no channel {name!r}; the trajectory has {list(self.meta.channel_names)}")
+        return self.channels[:, self.meta.channel_names.index(name)]
 
     def trial_slices(self) -> list[TrialSlice]:
         """Contiguous row blocks, one per trial, in file order (a trial split in two blocks gives two entries)."""
@@ -286,7 +338,7 @@ class Trajectory:
 
     def select_rows(self, rows: np.ndarray) -> Trajectory:
         """A new trajectory with rows ``rows`` (bool mask or index array); ``trial_failed`` keeps present trials."""
-        keys = ("t", "trial", "q", "u", "qd", "qdd")
+        keys = ("t", "trial", "q", "u", "qd", "qdd", "channels")
         pick = {k: (None if getattr(self, k) is None else getattr(self, k)[rows]) for k in keys}
         present = set(np.unique(pick["trial"]).tolist())
         failed = {k: v for k, v in self.meta.trial_failed.items() if k in present}
@@ -325,4 +377,6 @@ class Trajectory:
             "angle_ranges_rad": ranges,
             "quantization_step_rad": steps,
             "ground_truth": self.has_ground_truth,
+            "joint_kinds": dict(zip(self.meta.joint_names, self.meta.joint_kinds)),
+            "channels": list(self.meta.channel_names),
         }

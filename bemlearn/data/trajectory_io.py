@@ -1,8 +1,9 @@
 """Reading and writing trajectory files (NPZ and CSV, format in ``docs/trajectory-format.md``).
 
 The suffix chooses the format: ``.npz`` (arrays ``meta``, ``t``, ``trial``, ``q``, ``u``
-and, in ground-truth files, ``qd``, ``qdd``) or ``.csv`` (two ``#`` metadata lines, a
-header ``t,trial,q:<joint>...,u:<actuator>...[,qd:<joint>...,qdd:<joint>...]``, one row
+and, in ground-truth files, ``qd``, ``qdd``; ``channels`` when the file carries extra
+logged channels) or ``.csv`` (two ``#`` metadata lines, a header
+``t,trial,q:<joint>...,u:<actuator>...[,qd:<joint>...,qdd:<joint>...][,x:<channel>...]``, one row
 per sample, floats written with ``%.17g`` so CSV ↔ NPZ is lossless).  Every read is
 validated (:func:`bemlearn.data.validation.validate`); nothing is dropped or repaired.
 """
@@ -19,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, TrajectoryMeta
-from bemlearn.data.validation import MIN_TRIAL_SAMPLES, RATE_RTOL, RobotLike, column_names, validate
+from bemlearn.data.validation import JITTER_RTOL, MIN_TRIAL_SAMPLES, RATE_RTOL, RobotLike, column_names, validate
 
 __all__ = ["read_trajectory", "read_ground_truth", "write_trajectory", "ground_truth_path", "CSV_MAGIC", "SUFFIXES"]
 
@@ -31,7 +32,7 @@ _CSV_META_PREFIX = "# meta: "
 #: Supported file suffixes.
 SUFFIXES = (".npz", ".csv")
 _NPZ_REQUIRED = ("meta", "t", "trial", "q", "u")
-_NPZ_OPTIONAL = ("qd", "qdd")
+_NPZ_OPTIONAL = ("qd", "qdd", "channels")
 
 
 def _suffix(path: Path) -> str:
@@ -63,6 +64,7 @@ def read_trajectory(
     robot: str | RobotLike | None = None,
     min_trial_samples: int = MIN_TRIAL_SAMPLES,
     rate_rtol: float = RATE_RTOL,
+    jitter_rtol: float = JITTER_RTOL,
 ) -> Trajectory:
     """Read and validate a trajectory file (``.npz`` or ``.csv``).
 
@@ -70,10 +72,12 @@ def read_trajectory(
         path: the file.
         robot: a registry name (``bemlearn.robots.load``) or robot object to match joint names against.
         min_trial_samples: shortest accepted trial, samples.
-        rate_rtol: accepted relative deviation of each time step from 1 / sample_rate_hz.
+        rate_rtol: accepted relative deviation of each trial's median time step from 1 / sample_rate_hz.
+        jitter_rtol: accepted relative deviation of every single time step from 1 / sample_rate_hz.
 
     Returns:
-        The trajectory (with ``qd``/``qdd`` when the file holds ground truth).
+        The trajectory (with ``qd``/``qdd`` when the file holds ground truth, and the
+        extra channels of ``meta.channel_names``).
 
     Raises:
         FileNotFoundError: no such file.
@@ -90,7 +94,7 @@ def read_trajectory(
         traj, first_line = _read_csv(path)
     validate(
         traj, source=str(path), min_trial_samples=min_trial_samples, rate_rtol=rate_rtol,
-        robot=_resolve_robot(robot), first_line=first_line,
+        robot=_resolve_robot(robot), first_line=first_line, jitter_rtol=jitter_rtol,
     )
     logger.debug("read %s: %d samples, %d trials", path, traj.n_samples, len(traj.meta.trial_failed))
     return traj
@@ -106,18 +110,26 @@ def read_ground_truth(path: str | Path, **kwargs: Any) -> Trajectory:
 
 
 def write_trajectory(
-    traj: Trajectory, path: str | Path, *, min_trial_samples: int = MIN_TRIAL_SAMPLES, rate_rtol: float = RATE_RTOL
+    traj: Trajectory,
+    path: str | Path,
+    *,
+    min_trial_samples: int = MIN_TRIAL_SAMPLES,
+    rate_rtol: float = RATE_RTOL,
+    jitter_rtol: float = JITTER_RTOL,
 ) -> Path:
     """Validate ``traj`` and write it to ``path`` (format from the suffix; replaces an existing file).
 
-    Ground truth (``qd``, ``qdd``) is written when present.
+    Ground truth (``qd``, ``qdd``) and extra channels are written when present.  The file is
+    written to a temporary name next to ``path`` and moved into place (``os.replace``).
 
     Returns:
         ``path`` as a :class:`~pathlib.Path`.
     """
     path = Path(path)
     suffix = _suffix(path)
-    validate(traj, source=f"write {path}", min_trial_samples=min_trial_samples, rate_rtol=rate_rtol)
+    validate(
+        traj, source=f"write {path}", min_trial_samples=min_trial_samples, rate_rtol=rate_rtol, jitter_rtol=jitter_rtol
+    )
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     try:
         if suffix == ".npz":
@@ -142,6 +154,8 @@ def _write_npz(traj: Trajectory, path: Path) -> None:
     }
     if traj.has_ground_truth:
         arrays["qd"], arrays["qdd"] = traj.qd, traj.qdd
+    if traj.meta.channel_names:
+        arrays["channels"] = traj.channels
     with open(path, "wb") as fh:
         np.savez_compressed(fh, **arrays)
 
@@ -169,11 +183,19 @@ def _read_npz(path: Path) -> Trajectory:
         )
     meta = _parse_meta(str(raw.reshape(())), path)
     n = meta.n_joints
-    names = {"q": meta.joint_names, "qd": meta.joint_names, "qdd": meta.joint_names, "u": meta.actuator_names}
+    if ("channels" in arrays) != bool(meta.channel_names):
+        raise TrajectoryFormatError(
+            f"{path}: meta.channel_names lists {list(meta.channel_names)} but the array 'channels' is "
+            f"{'present' if 'channels' in arrays else 'missing'}"
+        )
+    names = {
+        "q": meta.joint_names, "qd": meta.joint_names, "qdd": meta.joint_names, "u": meta.actuator_names,
+        "channels": meta.channel_names,
+    }
     if arrays["t"].ndim != 1:
         raise TrajectoryFormatError(f"{path}: array 't' must be 1-D (T,), got shape {arrays['t'].shape}")
     T = arrays["t"].shape[0]
-    for key in ("t", "trial", "q", "u", "qd", "qdd"):
+    for key in ("t", "trial", "q", "u", "qd", "qdd", "channels"):
         if key not in arrays:
             continue
         arr = arrays[key]
@@ -188,13 +210,14 @@ def _read_npz(path: Path) -> Trajectory:
         else:
             want = (T, len(names[key]))
         if arr.shape != want:
-            cols = "" if key in ("t", "trial") else f" (columns {[f'{key}:{j}' for j in names[key]]})"
+            prefix = "x" if key == "channels" else key
+            cols = "" if key in ("t", "trial") else f" (columns {[f'{prefix}:{j}' for j in names[key]]})"
             raise TrajectoryFormatError(
                 f"{path}: array {key!r} has shape {arr.shape}, expected {want}{cols} for {n} joints"
             )
     return Trajectory(
         t=arrays["t"], trial=arrays["trial"], q=arrays["q"], u=arrays["u"], meta=meta,
-        qd=arrays.get("qd"), qdd=arrays.get("qdd"),
+        qd=arrays.get("qd"), qdd=arrays.get("qdd"), channels=arrays.get("channels"),
     )
 
 
@@ -214,6 +237,7 @@ def _write_csv(traj: Trajectory, path: Path) -> None:
     blocks = [traj.t[:, None], traj.trial[:, None].astype(np.float64), traj.q, traj.u]
     if traj.has_ground_truth:
         blocks += [traj.qd, traj.qdd]
+    blocks.append(traj.channels)
     table = np.concatenate(blocks, axis=1) if traj.n_samples else np.zeros((0, len(cols)))
     if traj.n_samples and np.abs(traj.trial).max() >= 2**53:
         raise ValueError(f"{path}: trial ids must be below 2**53 in magnitude to be written as CSV")
@@ -238,7 +262,7 @@ def _read_csv(path: Path) -> tuple[Trajectory, int]:
     if len(lines) < 3:
         raise TrajectoryFormatError(f"{path}: line 3: missing the header row")
     header = [h.strip() for h in lines[2].split(",")]
-    gt = any(h.startswith(("qd:", "qdd:")) for h in header)
+    gt = any(h.startswith(("qd:", "qdd:")) for h in header)  # x:<channel> columns come from meta.channel_names
     expected = column_names(meta, ground_truth=gt)
     missing = [c for c in expected if c not in header]
     unknown = [c for c in header if c not in expected]
@@ -263,9 +287,9 @@ def _read_csv(path: Path) -> tuple[Trajectory, int]:
             f"got {body[i].split(',')[1]!r}"
         )
     n, m = meta.n_joints, meta.n_joints - 1
-    kw: dict[str, Any] = {}
+    kw: dict[str, Any] = {"channels": table[:, table.shape[1] - len(meta.channel_names):]}
     if gt:
-        kw = {"qd": table[:, 2 + n + m: 2 + 2 * n + m], "qdd": table[:, 2 + 2 * n + m:]}
+        kw.update(qd=table[:, 2 + n + m: 2 + 2 * n + m], qdd=table[:, 2 + 2 * n + m: 2 + 3 * n + m])
     traj = Trajectory(
         t=table[:, 0], trial=trial_col.astype(np.int64), q=table[:, 2:2 + n], u=table[:, 2 + n:2 + n + m],
         meta=meta, **kw,

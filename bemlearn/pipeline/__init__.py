@@ -1,6 +1,7 @@
 """Orchestration of the stages: configs, training runs, evaluation, closed-loop runs, reports."""
 
 from bemlearn.pipeline.config import PipelineConfig, load_pipeline_config
+from bemlearn.pipeline.data_evaluation import SliceSpec, bem_slice_figure, bem_slices, heldout_prediction
 from bemlearn.pipeline.evaluation import EvaluationConfig, evaluate_bem, held_out_references
 from bemlearn.pipeline.lemma import learned_lemma1
 from bemlearn.pipeline.run import run_pipeline
@@ -8,6 +9,10 @@ from bemlearn.pipeline.train import train_run
 
 __all__ = [
     "EvaluationConfig",
+    "SliceSpec",
+    "bem_slice_figure",
+    "bem_slices",
+    "heldout_prediction",
     "PipelineConfig",
     "evaluate_bem",
     "held_out_references",

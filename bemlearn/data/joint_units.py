@@ -1,0 +1,49 @@
+"""Units that follow the joint: a hinge's coordinate is an angle, a slide's a length.
+
+    hinge:  q rad,  q̇ rad/s,  q̈ rad/s²
+    slide:  q m,    q̇ m/s,    q̈ m/s²
+
+A trajectory records each joint's kind in ``meta.joint_kinds`` (default: every joint a
+hinge), so the units of every derived quantity (GP inputs, plots, reports) follow the joint.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+__all__ = ["JOINT_KINDS", "gp_input_units", "joint_unit", "q_unit_label"]
+
+#: Valid joint kinds and their (q, q̇, q̈) units.
+JOINT_KINDS: dict[str, tuple[str, str, str]] = {
+    "hinge": ("rad", "rad/s", "rad/s^2"),
+    "slide": ("m", "m/s", "m/s^2"),
+}
+
+
+def joint_unit(kind: str, order: int = 0) -> str:
+    """Unit of the ``order``-th time derivative (0, 1, 2) of a ``kind`` joint's coordinate."""
+    if kind not in JOINT_KINDS:
+        raise ValueError(f"joint kind {kind!r}: expected one of {sorted(JOINT_KINDS)}")
+    if order not in (0, 1, 2):
+        raise ValueError(f"derivative order {order!r}: expected 0, 1 or 2")
+    return JOINT_KINDS[kind][order]
+
+
+def q_unit_label(kinds: Sequence[str], order: int = 0) -> str:
+    """The ``meta.units`` entry of q (order 0), qd (1) or qdd (2): one unit if all joints share it,
+    else the per-joint units joined by ``|`` in joint order (e.g. ``"m|rad"`` for a cart-pole)."""
+    units = [joint_unit(k, order) for k in kinds]
+    return units[0] if len(set(units)) == 1 else "|".join(units)
+
+
+def gp_input_units(input_names: Sequence[str], joint_names: Sequence[str], kinds: Sequence[str]) -> dict[str, str]:
+    """Unit of each GP input column (``qdd_<j>``, ``qd_<j>``, ``q_<j>``, eq. 11) from its joint's kind."""
+    kind_of = dict(zip(joint_names, kinds))
+    out = {}
+    for name in input_names:
+        prefix, _, joint = name.partition("_")
+        order = {"q": 0, "qd": 1, "qdd": 2}.get(prefix)
+        if order is None or joint not in kind_of:
+            raise ValueError(f"GP input {name!r}: expected qdd_<joint>, qd_<joint> or q_<joint> of {list(joint_names)}")
+        out[name] = joint_unit(kind_of[joint], order)
+    return out

@@ -1,0 +1,225 @@
+"""Data-only evaluation of a learned BEM: no robot model, only held-out trials and the data's coverage.
+
+(a) Held-out prediction of q_u from f(x) (eq. 11): on points x_i = [q̈_a, q̇_a, q_a, q̈_u, q̇_u]
+of trials the fit never saw, the RMSE of μ(x_i) − q_u,i and the fraction of q_u,i inside
+μ ± 2σ_pred, σ_pred² = σ²(x_i) + σ_0² (latent variance of eq. 12 plus the noise of eq. 11),
+per trial and overall.
+
+(b) The learned BEM on slices (eq. 14): μ(x_0^e) and μ ± 2σ_pred against q̈_a of one actuated
+joint, x_0^e = [q̈_a, q̇_a, q_a, 0, 0], at a few (q̇_a, q_a) taken from the training data's
+quantiles (other actuated joints at their medians).  For each slice the training points
+*near* it — within ``radius`` kernel lengthscales ℓ_c (physical units, ℓ_c · x_std,c) of the
+slice in every held coordinate c (q̇_a, q_a of all actuated joints, q̈_u, q̇_u), the distance
+the GP's correlation reaches — give the covered q̈_a range [2.5 %, 97.5 %] quantiles;
+outside it the BEM is an extrapolation (shaded in the figure).
+
+Units follow the joint kind (hinge: rad, rad/s, rad/s²; slide: m, m/s, m/s²).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from bemlearn.data.dataset_types import BEMDataset
+from bemlearn.data.joint_units import joint_unit
+from bemlearn.models.learned_bem import LearnedBEM
+from bemlearn.models.predictor_state import PredictorState
+
+__all__ = ["SliceSpec", "bem_slice_figure", "bem_slices", "heldout_prediction"]
+
+
+def _state(model: PredictorState | LearnedBEM) -> PredictorState:
+    return model.state if isinstance(model, LearnedBEM) else model
+
+
+def _predict(state: PredictorState, x: torch.Tensor, chunk: int = 4096) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """μ (B,), latent σ (B,), predictive σ (B,) in physical units for physical inputs x (B, d)."""
+    x = torch.as_tensor(x, dtype=torch.float64)
+    st = state.to(dtype=torch.float64)
+    means, stds = [], []
+    for part in x.split(chunk):
+        m, s = st.predict_reference(part)
+        means.append(m)
+        stds.append(s)
+    mean, lat = torch.cat(means).numpy(), torch.cat(stds).numpy()
+    noise_var = float(st.y_std**2 * st.noise)
+    return mean, lat, np.sqrt(lat**2 + noise_var)
+
+
+def _check_names(state: PredictorState, dataset: BEMDataset) -> None:
+    if tuple(state.input_names) != tuple(dataset.input_names):
+        raise ValueError(
+            f"the predictor's inputs {list(state.input_names)} differ from the dataset's {list(dataset.input_names)}"
+        )
+
+
+def heldout_prediction(model: PredictorState | LearnedBEM, heldout: BEMDataset, *, kappa: float = 2.0) -> dict[str, Any]:
+    """(a) of the module docstring: q_u predicted from f(x) on held-out points.
+
+    Args:
+        model: the fitted GP (frozen posterior or learned BEM).
+        heldout: points of trials not used for fitting (e.g. ``build_datasets(...).val``):
+            x (N, d) physical units, y (N,) q_u in rad (or m).
+        kappa: half-width of the band in σ_pred (2 → ±2σ).
+
+    Returns:
+        ``{"rmse", "max_abs", "coverage", "n_points", "kappa", "unit", "per_trial": {id: {"rmse",
+        "coverage", "n_points"}}}``; coverage is the fraction of q_u inside μ ± κ σ_pred.
+    """
+    state = _state(model)
+    _check_names(state, heldout)
+    if len(heldout) == 0:
+        raise ValueError("heldout_prediction: the held-out dataset is empty (val_fraction = 0?)")
+    mean, _, pred = _predict(state, heldout.x)
+    y = heldout.y.numpy()
+    err = mean - y
+    inside = np.abs(err) <= kappa * pred
+    trial = heldout.trial.numpy()
+    per = {}
+    for tid in np.unique(trial):
+        sel = trial == tid
+        per[int(tid)] = {
+            "rmse": float(np.sqrt(np.mean(err[sel] ** 2))), "coverage": float(inside[sel].mean()),
+            "n_points": int(sel.sum()),
+        }
+    meta = heldout.meta
+    return {
+        "rmse": float(np.sqrt(np.mean(err**2))),
+        "max_abs": float(np.abs(err).max()),
+        "coverage": float(inside.mean()),
+        "n_points": len(y),
+        "kappa": kappa,
+        "unit": joint_unit(meta.kind_of(meta.unactuated)),
+        "per_trial": per,
+    }
+
+
+@dataclass(frozen=True)
+class SliceSpec:
+    """Where the BEM slices are cut (quantiles of the training points).
+
+    Attributes:
+        velocity_quantiles: q̇_a levels (with q_a at its median).
+        angle_quantiles: q_a levels (with q̇_a at its median); the median pair is not repeated.
+        radius: "near the slice" = within this many kernel lengthscales in every held coordinate.
+        n_grid: points along q̈_a.
+        extend: the q̈_a axis spans the training points' [0.5 %, 99.5 %] range widened by this
+            fraction on each side.
+    """
+
+    velocity_quantiles: tuple[float, ...] = (0.1, 0.5, 0.9)
+    angle_quantiles: tuple[float, ...] = (0.1, 0.9)
+    radius: float = 1.0
+    n_grid: int = 201
+    extend: float = 0.5
+
+
+def bem_slices(model: PredictorState | LearnedBEM, train: BEMDataset, spec: SliceSpec = SliceSpec()) -> dict[str, Any]:
+    """(b) of the module docstring: the learned BEM along q̈_a on slices, with the data's coverage.
+
+    Args:
+        model: the fitted GP.
+        train: the training points (their quantiles place the slices; their spread is the coverage).
+        spec: slice levels, neighbourhood radius and grid.
+
+    Returns:
+        ``{"slices": [...], "summary": {...}}``; each slice holds ``joint``, ``qd``, ``q`` (the held
+        values of that joint), ``grid`` (n_grid,) q̈_a, ``mean``, ``std_latent``, ``std_pred``
+        (n_grid,), ``covered`` [lo, hi] (or ``None`` when no training point is near), ``n_near``,
+        ``units`` {"qdd", "qd", "q", "qu"}; ``summary`` has the mean predictive σ inside and
+        outside the covered ranges.
+    """
+    state = _state(model)
+    _check_names(state, train)
+    meta = train.meta
+    act = list(meta.actuated_names)
+    m = len(act)
+    x = train.x.numpy()
+    reach = (state.lengthscale * state.x_std).to(torch.float64).numpy()  # physical lengthscales
+    med = np.median(x, axis=0)
+    slices = []
+    inside_std, outside_std = [], []
+    for j, joint in enumerate(act):
+        kind = meta.kind_of(joint)
+        qdd_col, qd_col, q_col = j, m + j, 2 * m + j
+        levels = [(float(np.quantile(x[:, qd_col], p)), float(med[q_col])) for p in spec.velocity_quantiles]
+        levels += [(float(med[qd_col]), float(np.quantile(x[:, q_col], p))) for p in spec.angle_quantiles]
+        lo, hi = np.quantile(x[:, qdd_col], [0.005, 0.995])
+        width = hi - lo
+        grid = np.linspace(lo - spec.extend * width, hi + spec.extend * width, spec.n_grid)
+        for qd_level, q_level in levels:
+            base = med.copy()
+            base[qd_col], base[q_col] = qd_level, q_level
+            base[3 * m:] = 0.0  # x_0^e: q̈_u = q̇_u = 0 (eq. 14)
+            query = np.tile(base, (spec.n_grid, 1))
+            query[:, qdd_col] = grid
+            mean, lat, pred = _predict(state, torch.from_numpy(query))
+            held = [c for c in range(x.shape[1]) if c != qdd_col]
+            near = np.all(np.abs(x[:, held] - base[held]) <= spec.radius * reach[held], axis=1)
+            covered = None
+            if near.sum() >= 5:
+                covered = [float(v) for v in np.quantile(x[near, qdd_col], [0.025, 0.975])]
+                cov = (grid >= covered[0]) & (grid <= covered[1])
+                inside_std.append(pred[cov])
+                outside_std.append(pred[~cov])
+            else:
+                outside_std.append(pred)
+            slices.append({
+                "joint": joint, "qd": qd_level, "q": q_level, "grid": grid, "mean": mean, "std_latent": lat,
+                "std_pred": pred, "covered": covered, "n_near": int(near.sum()),
+                "units": {"qdd": joint_unit(kind, 2), "qd": joint_unit(kind, 1), "q": joint_unit(kind, 0),
+                          "qu": joint_unit(meta.kind_of(meta.unactuated), 0)},
+            })
+    cat = lambda parts: float(np.concatenate(parts).mean()) if parts else float("nan")
+    return {
+        "slices": slices,
+        "summary": {"std_pred_mean_covered": cat(inside_std), "std_pred_mean_extrapolated": cat(outside_std),
+                    "n_slices": len(slices), "radius": spec.radius},
+    }
+
+
+def bem_slice_figure(result: dict[str, Any], path: str | Path | None = None, *, unactuated: str = "q_u"):
+    """Plot :func:`bem_slices`' result: one panel per slice, μ with its ±2σ_pred band, the covered
+    q̈_a range unshaded and the extrapolated rest shaded grey.  Saved to ``path`` when given.
+
+    Returns:
+        the matplotlib figure.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sl = result["slices"]
+    cols = min(3, len(sl))
+    rows = -(-len(sl) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.0 * rows), squeeze=False, sharey=True)
+    for ax, s in zip(axes.flat, sl):
+        u = {k: v.replace("^2", "²") for k, v in s["units"].items()}
+        g, mu, sd = s["grid"], s["mean"], s["std_pred"]
+        ax.fill_between(g, mu - 2 * sd, mu + 2 * sd, color="C0", alpha=0.25, label="μ ± 2σ (predictive)")
+        ax.plot(g, mu, "C0", lw=1.3, label="learned BEM μ (eq. 14)")
+        if s["covered"] is None:
+            ax.axvspan(g[0], g[-1], color="0.6", alpha=0.25, label="no training data near")
+        else:
+            lo, hi = s["covered"]
+            ax.axvspan(g[0], lo, color="0.6", alpha=0.25, label="extrapolation")
+            ax.axvspan(hi, g[-1], color="0.6", alpha=0.25)
+        j = s["joint"]
+        ax.set_title(f"q̇_{j} = {s['qd']:+.3g} {u['qd']}, q_{j} = {s['q']:+.3g} {u['q']}  ({s['n_near']} points near)",
+                     fontsize=8)
+        ax.set_xlabel(f"q̈_{j} ({u['qdd']})")
+        ax.set_ylabel(f"{unactuated} ({u['qu']})")
+    for ax in list(axes.flat)[len(sl):]:
+        ax.axis("off")
+    axes.flat[0].legend(fontsize=7)
+    fig.suptitle("learned BEM on slices (data only; grey: outside the training data)", fontsize=10)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig
