@@ -20,7 +20,7 @@ import numpy as np
 from bemlearn._version import __version__
 from bemlearn.config import to_dict
 from bemlearn.data.import_map import TIME_UNITS, ImportMap
-from bemlearn.data.joint_units import q_unit_label
+from bemlearn.units import q_unit_label
 from bemlearn.data.log_table import LogTable, check_finite, read_log_table
 from bemlearn.data.quantization import detect_quantization_step, snap_to_grid
 from bemlearn.data.resample import GridSegment, place_on_grid

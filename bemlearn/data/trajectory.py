@@ -8,7 +8,7 @@ m = n − 1 actuated joints q_a (eq. 1, 2):
 optionally with the simulator's true q̇ (T, n) rad/s and q̈ (T, n) rad/s² (a ground-truth
 file) and extra logged channels (T, k) carried along (``meta.channel_names``).  Units
 follow the joint (``meta.joint_kinds``): a hinge in rad, a slide in m
-(:mod:`bemlearn.data.joint_units`).  Samples of one trial are contiguous and time increases within a trial at the
+(:mod:`bemlearn.units`).  Samples of one trial are contiguous and time increases within a trial at the
 nominal sample rate.  The on-disk format (NPZ and CSV) is described in
 ``docs/trajectory-format.md`` and implemented in :mod:`bemlearn.data.trajectory_io`;
 the checks in :mod:`bemlearn.data.validation`.
@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from bemlearn.data.joint_units import JOINT_KINDS
+from bemlearn.units import JOINT_KINDS
 from bemlearn.data.quantization import detect_quantization_step
 
 __all__ = ["TrajectoryMeta", "Trajectory", "TrialSlice", "TrajectoryFormatError", "DEFAULT_UNITS"]

@@ -13,7 +13,7 @@ and the row (0-based sample index; for CSV files also the file line):
   such logs with ``bemlearn data import``);
 - every trial at least ``min_trial_samples`` long;
 - units: t in s, q in rad for hinges and m for slides (``meta.joint_kinds``; qd, qdd per
-  second and per second² when present), as labelled by :func:`~bemlearn.data.joint_units.q_unit_label`;
+  second and per second² when present), as labelled by :func:`~bemlearn.units.q_unit_label`;
 - optionally, joint names, unactuated joint and robot name equal to a robot's.
 """
 
@@ -23,7 +23,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from bemlearn.data.joint_units import q_unit_label
+from bemlearn.units import q_unit_label
 from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, TrajectoryMeta
 
 __all__ = [

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from bemlearn.data.dataset_types import BEMDataset
-from bemlearn.data.joint_units import joint_unit
+from bemlearn.units import joint_unit
 from bemlearn.models.learned_bem import LearnedBEM
 from bemlearn.models.predictor_state import PredictorState
 

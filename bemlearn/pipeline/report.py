@@ -29,7 +29,7 @@ def write_report(out: str | Path, *, config, resolved, data: dict, train: dict, 
     robot = train.get("robot", {})
     qu = train.get("unactuated")
     title = robot.get("registry") or robot.get("name") or "data"
-    lines = [f"# bemlearn run: {title}", ""]
+    lines = [f"# bemlearn run: {title}" + (" (model-free)" if config.robot is None else ""), ""]
     if robot.get("mjcf"):
         lines += [f"Robot: `{robot['mjcf']}` (sha256 `{robot['sha256'][:16]}…`)" + (f", registry name `{robot['registry']}`" if robot.get("registry") else "") + ".", ""]
     elif config.robot is None:
@@ -46,12 +46,24 @@ def write_report(out: str | Path, *, config, resolved, data: dict, train: dict, 
     lines += ["## Learned BEM (eq. 11–14)",
               f"{config.train.kind} GP on {train['n_train']} points: fit {fit.get('stop_reason')} in {_f(fit.get('seconds'), '.1f')} s"
               + (" (interrupted)" if train.get("interrupted") else "") + ".", ""]
-    if "val_rmse" in train:
-        lines += [f"Held-out trials (validation split, {train['n_val']} points): q_u from f(x) RMSE {_f(train['val_rmse'], '.5f')} {unit}, "
-                  f"inside the predictive ±2σ {_pct(train.get('val_inside_2sigma_predictive'))}.", ""]
+    h = train.get("data_heldout")
+    if h is not None:
+        lines += ["### From the data alone (no model)", "",
+                  f"Held-out trials ({len(h['per_trial'])} trials, {h['n_points']} samples the fit never saw): q_u predicted "
+                  f"from f(x) (eq. 11) with RMSE {_f(h['rmse'], '.5f')} {unit} (max {_f(h['max_abs'], '.4f')} {unit}); "
+                  f"{_pct(h['coverage'])} of the samples lie inside the predictive ±2σ.", "",
+                  "| held-out trial | RMSE (" + unit + ") | inside ±2σ | samples |", "| --- | --- | --- | --- |",
+                  *[f"| {t} | {_f(r['rmse'], '.5f')} | {_pct(r['coverage'])} | {r['n_points']} |" for t, r in h["per_trial"].items()], ""]
+    sl = train.get("bem_slices")
+    if sl is not None:
+        sm = sl["summary"]
+        lines += [f"The learned BEM μ(x₀ᵉ) ± 2σ on {sm['n_slices']} slices through the data (grey: beyond the q̈_a the "
+                  f"training data cover near the slice, i.e. extrapolation). Mean predictive σ where covered "
+                  f"{_f(sm['std_pred_mean_covered'], '.4f')} {unit}, where extrapolated {_f(sm['std_pred_mean_extrapolated'], '.4f')} {unit}.",
+                  "", "![BEM slices](bem_slices.png)", ""]
     b = train.get("bem_heldout")
     if b is not None:
-        lines += ["| held-out references: learned vs model-based BEM | value |", "| --- | --- |",
+        lines += ["### Against the model-based BEM (eq. 9)", "", "| held-out references: learned vs model-based BEM | value |", "| --- | --- |",
                   f"| RMSE ({unit}) | {_f(b['rmse'], '.5f')} |",
                   f"| max error ({unit}) | {_f(b['max_abs'], '.5f')} |",
                   f"| points without a model BEM in range (excluded) | {b['no_model_root']} |",

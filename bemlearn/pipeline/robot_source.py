@@ -30,10 +30,5 @@ def run_robot(config):
 
 
 def data_joint_kinds(meta: TrajectoryMeta) -> tuple[str, ...]:
-    """Per joint of a trajectory, ``"hinge"`` or ``"slide"`` as the file records it (hinge if it does not)."""
-    kinds = getattr(meta, "joint_kinds", None) or meta.extra.get("joint_kinds")
-    if kinds is None:
-        return ("hinge",) * len(meta.joint_names)
-    if isinstance(kinds, dict):
-        return tuple(kinds.get(j, "hinge") for j in meta.joint_names)
-    return tuple(kinds)
+    """Per joint of a trajectory, ``"hinge"`` or ``"slide"`` as the file records it (``meta.joint_kinds``)."""
+    return tuple(meta.joint_kinds)

@@ -30,7 +30,7 @@ from bemlearn.data.validation import check_robot
 from bemlearn.models import predict
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.evaluation import evaluate_bem, held_out_references
-from bemlearn.units import column_units
+from bemlearn.units import gp_input_units
 
 __all__ = ["train_run", "file_sha256"]
 
@@ -106,7 +106,7 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     names = train.input_names
     meta = traj.meta
     kinds = robot.coordinate_kinds if robot is not None else data_joint_kinds(meta)
-    units = column_units(names, dict(zip(meta.joint_names, kinds)))
+    units = gp_input_units(names, meta.joint_names, kinds)
     writer = SummaryWriter(str(out / "tb"))
     stage = fit_bem_gp(
         train.x, train.y, out, normalization=train.normalization, input_names=names, units=units, config=gp_cfg,
@@ -132,6 +132,19 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         metrics["val_inside_2sigma_predictive"] = float((err.abs() <= 2 * var_pred.sqrt()).to(torch.float64).mean())
         writer.add_scalar("val/rmse", metrics["val_rmse"], 0)
         writer.add_scalar("val/mean_log_likelihood", metrics["val_mean_log_likelihood"], 0)
+    # data-only evaluation (no model): held-out trials' q_u from f(x), and the BEM on slices with the
+    # region the data cover marked, so that extrapolation is visible
+    from bemlearn.pipeline.data_evaluation import bem_slice_figure, bem_slices, heldout_prediction
+
+    if len(val):
+        held = heldout_prediction(state, val)
+        metrics["data_heldout"] = {k: v for k, v in held.items() if k != "per_trial"}
+        metrics["data_heldout"]["per_trial"] = {str(k): v for k, v in held["per_trial"].items()}
+    slices = bem_slices(state, train)
+    metrics["bem_slices"] = {"summary": slices["summary"],
+                             "slices": [{k: v for k, v in sl.items() if not hasattr(v, "shape")} for sl in slices["slices"]]}
+    fig = bem_slice_figure(slices, out / "bem_slices.png", unactuated=meta.unactuated)
+    writer.add_figure("bem/slices", fig, 0)
     if truth_robot is not None:  # held-out learned BEM vs model-based BEM (eq. 14 vs 9)
         ecfg = config.evaluate
         ev = evaluate_bem(state, truth_robot, held_out_references(ecfg, truth_robot.m), duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)

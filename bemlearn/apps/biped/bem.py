@@ -38,7 +38,7 @@ def train_walking_gp(X: np.ndarray, y: np.ndarray, out_dir: str | Path, *, confi
     from bemlearn.pipeline.gp_stage import fit_bem_gp
     from bemlearn.pipeline.train import file_sha256
     from bemlearn.robots import resolve_robot
-    from bemlearn.units import column_units
+    from bemlearn.units import gp_input_units
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -48,7 +48,7 @@ def train_walking_gp(X: np.ndarray, y: np.ndarray, out_dir: str | Path, *, confi
     x, yt = torch.from_numpy(X), torch.from_numpy(y)
     writer = SummaryWriter(str(out / "tb"))
     stage = fit_bem_gp(x, yt, out, normalization=Normalization.fit(x, yt, names=names), input_names=names,
-                       units=column_units(names, dict(zip(joints, robot.coordinate_kinds))), config=config,
+                       units=gp_input_units(names, joints, robot.coordinate_kinds), config=config,
                        robot=ref.to_dict(), joint_names=joints, unactuated_name=qu, data_sha256=file_sha256(data_path),
                        extra={"data_file": str(data_path), **(extra or {})}, writer=writer, progress=progress)
     writer.close()
