@@ -108,7 +108,7 @@ def _mismatch(pred: PredictorBEM, base: SimulateConfig, ref: ReferenceConfig, pr
     refs = held_out_references(ecfg, 1)
     rows = []
     for ms, ls in ((1.0, 1.0), (0.8, 1.0), (1.2, 1.0), (1.0, 0.8), (1.0, 1.2), (0.8, 0.8), (1.2, 1.2)):
-        nom = NominalConfig(mass_scale=ms, length_scale=ls)
+        nom = NominalConfig(mass_scale=ms, length_scale=ls, bodies=("pendulum",))  # m_p, J_p, L_p, L_r
         wrong = ModelBEM(nominal_robot("furuta", nom))
         row = {"mass_scale": ms, "length_scale": ls,
                "bem_rmse_model": _bem_rmse(wrong, truth, refs), "bem_rmse_learned": _bem_rmse(pred, truth, refs)}

@@ -63,6 +63,7 @@ class CollectConfig:
         seed: master seed.
         workers: processes (0 = one per core, 1 = in-process).
         sensor: the encoder and velocity-filter model.
+        physics_timestep: physics step override, s (None: the model file's timestep).
     """
 
     n_trials: int = 40
@@ -80,6 +81,7 @@ class CollectConfig:
     seed: int = 0
     workers: int = 0
     sensor: SensorConfig = field(default_factory=SensorConfig)
+    physics_timestep: float | None = None
 
     def __post_init__(self) -> None:
         if self.n_trials < 1:
@@ -121,7 +123,7 @@ def simulate_trial(robot, config: CollectConfig, trial_id: int, seed_seq: np.ran
     """Run one excitation trial (module docstring) and return its logged and true signals."""
     rng = np.random.default_rng(seed_seq)
     model, n, m = robot.model, robot.n, robot.m
-    plant = SensedPlant(robot, rate_hz=config.rate_hz, sensor=config.sensor, rng=rng, where="collect")
+    plant = SensedPlant(robot, rate_hz=config.rate_hz, sensor=config.sensor, rng=rng, where="collect", timestep=config.physics_timestep)
     dt = plant.dt
     K = np.asarray(config.gains, dtype=np.float64)
     if K.size != m * 2 * n:
@@ -147,7 +149,7 @@ def simulate_trial(robot, config: CollectConfig, trial_id: int, seed_seq: np.ran
     for tick in range(n_ticks):
         t = tick * dt
         q_true = plant.true_q()
-        if abs(q_true[iu] - robot.qu_nominal) > config.fall_window:
+        if not abs(q_true[iu] - robot.qu_nominal) <= config.fall_window:  # also catches NaN
             failed, k = True, tick
             break
         y, v = plant.measure(q_true)
@@ -159,6 +161,9 @@ def simulate_trial(robot, config: CollectConfig, trial_id: int, seed_seq: np.ran
             qd_ref[j] = np.sum(A * w * np.cos(w * t + ph))
         u = K @ np.concatenate([y - q_ref, v - qd_ref])
         u = np.where(limited, np.clip(u, lo, hi), u)
+        if not np.all(np.isfinite(u)):  # diverged state: never hand MuJoCo a non-finite ctrl
+            failed, k = True, tick
+            break
         qd, qdd = plant.apply(u)
         rec["q_meas"][tick], rec["u"][tick], rec["q"][tick], rec["qd"][tick], rec["qdd"][tick] = y, u, q_true, qd, qdd
     t = np.arange(k) * dt
