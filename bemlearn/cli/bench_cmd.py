@@ -7,7 +7,9 @@
 * ``bench gpdm`` — GPDM fit time and recovery on synthetic gait data (issue 7);
 * ``bench biped-bem [CONFIG] [--data D | --collect-seeds S …]`` — learned torso BEM error over training
   subsets and training walks (issue 7);
-* ``bench walks [CONFIG]`` — seeded biped walks per gait and torso BEM source (issue 7).
+* ``bench walks [CONFIG]`` — seeded biped walks per gait and torso BEM source (issue 7);
+* ``bench robots [MJCF …]`` — collect → train → export → held-out BEM → closed loop on MJCF
+  robots with model-derived values only (issue 13).
 """
 
 from __future__ import annotations
@@ -90,6 +92,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     w.add_argument("--sensor-noise", type=float, default=0.001, help="encoder noise std, rad (default 0.001)")
     w.add_argument("--no-progress", action="store_true")
     w.set_defaults(func=_walks)
+    rb = sub.add_parser("robots", help="the whole chain on MJCF robots with derived values only (issue 13)")
+    rb.add_argument("robots", nargs="*", help="MJCF files (default: the test robots and the shipped Furuta file)")
+    rb.add_argument("--out", type=Path, default=Path("runs/bench-robots"), help="folder of the per-robot runs")
+    rb.add_argument("--trials", type=int, default=24, help="excitation trials per robot (default 24)")
+    rb.add_argument("--duration", type=float, default=20.0, help="seconds per excitation trial (default 20)")
+    rb.add_argument("--sim-duration", type=float, default=30.0, help="closed-loop seconds per BEM source (default 30)")
+    rb.add_argument("--workers", type=int, default=1, help="collect processes (default 1)")
+    rb.set_defaults(func=_robots)
 
 
 def run_predict(args: argparse.Namespace) -> int:
@@ -190,4 +200,19 @@ def _walks(args: argparse.Namespace) -> int:
                           initial_noise=args.initial_noise, sensor_noise=args.sensor_noise,
                           progress=not args.no_progress)
     print(format_walk_bench(rows, steps=args.steps))
+    return 0
+
+
+def _robots(args: argparse.Namespace) -> int:
+    import os
+
+    from bemlearn.bench.robots_bench import TEST_ROBOTS, format_robots_bench, robot_chain
+
+    rows = []
+    for path in args.robots or TEST_ROBOTS:
+        out = args.out / Path(path).stem
+        rows.append(robot_chain(path, out, n_trials=args.trials, duration_s=args.duration, sim_duration_s=args.sim_duration,
+                                workers=args.workers, progress=print))
+    print(f"load average {os.getloadavg()[0]:.2f}")
+    print(format_robots_bench(rows))
     return 0
