@@ -195,7 +195,25 @@ def test_bem_slopes_cartpole_closed_form():
     assert abs(s[2, 0] - 1 / 9.81) < 1e-6 and abs(s[0, 0]) < 1e-9
 
 
-@pytest.mark.parametrize("name", TEST_ROBOTS)
+def test_eic_linearisation_explains_which_robots_balance():
+    """Derived EIC gains: the linearised loop is stable for the Furuta, cart-poles and reaction wheel,
+    unstable for the acrobot (its BEM moves with the elbow angle, s_p = −0.26)."""
+    from bemlearn.control.eic_linear import eic_linear_abscissa, eic_linear_matrix
+
+    for name in ("furuta", "cartpole", "cartpole_coarse", "reaction_wheel", "acrobot"):
+        robot = _robot(name)
+        g = derive.eic_gains(robot, derive.control_rate(robot).value).value
+        ab = eic_linear_abscissa(robot, g)
+        assert (ab > 0) == (name == "acrobot"), (name, ab)
+    # the matrix reproduces the closed-form loop of a cart-pole-like robot with s_p = 0:
+    # q_u dynamics alone are q̈_u = −k_d,u q̇_u − k_p,u (q_u − s_a v_ext)
+    robot = _robot("cartpole")
+    g = derive.eic_gains(robot, derive.control_rate(robot).value).value
+    A = eic_linear_matrix(robot, g)
+    assert abs(A[2, 0] + g.kp_u) < 1e-9 and abs(A[2, 2] + g.kd_u) < 1e-9
+
+
+@pytest.mark.parametrize("name", ["cartpole", "cartpole_coarse", "reaction_wheel"])  # acrobot: see the test above
 def test_short_closed_loop_model_bem_stays_up(name):
     from bemlearn.config import from_dict
     from bemlearn.sim.closed_loop import ReferenceConfig, SimulateConfig, simulate

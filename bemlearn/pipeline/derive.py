@@ -263,6 +263,13 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None) -> Deri
     g = EICGains(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u, deriv_step=h)
     note = (f"ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/7, critically damped; "
             f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × ctrlrange")
+    if robot.m == 1:
+        from bemlearn.control.eic_linear import eic_linear_abscissa
+
+        ab = eic_linear_abscissa(robot, g)
+        note += f"; linearised EIC loop max Re λ = {ab:.3g} 1/s"
+        if ab >= 0:
+            log.warning("%s: the EIC with the derived gains is unstable in its linearisation at upright (max Re λ = %.3g 1/s)", robot.name, ab)
     return Derived(g, note)
 
 
