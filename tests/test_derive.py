@@ -48,7 +48,7 @@ def test_lqr_stabilises_discrete_linearisation(name):
 def test_lqr_tick_map_matches_mujoco_steps():
     """(A_N, B_N) against finite differences of N real physics steps (independent of mjd_transitionFD)."""
     robot = _robot("cartpole")
-    A, B, N, h = linearize(robot, rate_hz=250.0)
+    A, B, N, _ = linearize(robot, rate_hz=250.0)
     m, d = robot.model, mujoco.MjData(robot.model)
 
     def tick(x, u):
