@@ -99,6 +99,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     rb.add_argument("--duration", type=float, default=20.0, help="seconds per excitation trial (default 20)")
     rb.add_argument("--sim-duration", type=float, default=30.0, help="closed-loop seconds per BEM source (default 30)")
     rb.add_argument("--workers", type=int, default=1, help="collect processes (default 1)")
+    rb.add_argument("--seed", type=int, default=0, help="collect seed (default 0)")
     rb.set_defaults(func=_robots)
 
 
@@ -212,7 +213,7 @@ def _robots(args: argparse.Namespace) -> int:
     for path in args.robots or TEST_ROBOTS:
         out = args.out / Path(path).stem
         rows.append(robot_chain(path, out, n_trials=args.trials, duration_s=args.duration, sim_duration_s=args.sim_duration,
-                                workers=args.workers, progress=print))
+                                workers=args.workers, seed=args.seed, progress=print))
     print(f"load average {os.getloadavg()[0]:.2f}")
     print(format_robots_bench(rows))
     return 0
