@@ -229,3 +229,15 @@ def test_short_closed_loop_model_bem_stays_up(name):
     assert not m["fell"] and m["bem_rejected"] == 0 and m["command_rejected"] == 0
     assert m["qu_max"] < D["simulate.fall_window"].value / 2
     torch.set_num_threads(torch.get_num_threads())
+
+
+@pytest.mark.slow
+def test_zero_config_chain_cartpole(tmp_path):
+    """Issue 13's targets on the cart-pole with derived values only (about a minute)."""
+    from bemlearn.bench.robots_bench import robot_chain
+
+    row = robot_chain(str(ROBOTS / "cartpole.xml"), tmp_path, n_trials=12, duration_s=20.0, sim_duration_s=10.0)
+    assert row["bem"]["rmse"] <= 0.01 and row["bem"]["max_abs"] <= 0.04
+    assert row["bem"]["bem_peak"] >= 0.19  # the held-out references reach the design bound
+    assert not row["closed_loop"]["predictor"]["fell"] and not row["closed_loop"]["model"]["fell"]
+    assert row["closed_loop"]["predictor"]["bem_rejected"] == 0
