@@ -241,3 +241,32 @@ def test_zero_config_chain_cartpole(tmp_path):
     assert row["bem"]["bem_peak"] >= 0.19  # the held-out references reach the design bound
     assert not row["closed_loop"]["predictor"]["fell"] and not row["closed_loop"]["model"]["fell"]
     assert row["closed_loop"]["predictor"]["bem_rejected"] == 0
+
+
+def test_lqr_in_mapped_coordinates():
+    """A model with q = T q_joint: the tick map is S A_j S⁻¹, S B_j (S = diag(T, T)) and the
+    gains in coordinates stabilise it; the actuator inverse still yields the requested force."""
+    xml = (ROBOTS / "acrobot.xml").read_text().replace(
+        "</actuator>",
+        '</actuator>\n  <custom>\n    <numeric name="bemlearn_coordinates" data="1 1 0 1"/>\n'
+        '    <text name="bemlearn_coordinate_names" data="lower_abs elbow"/>\n  </custom>',
+    )
+    mapped = MujocoRobot.from_xml_string(xml, name="acrobot_abs")
+    plain = _robot("acrobot")
+    assert mapped.unactuated_name == "lower_abs"
+    A, B, _, _ = linearize(mapped, rate_hz=250.0)
+    Aj, Bj, _, _ = linearize(plain, rate_hz=250.0)
+    T = np.array([[1.0, 1.0], [0.0, 1.0]])
+    S = np.block([[T, np.zeros((2, 2))], [np.zeros((2, 2)), T]])
+    np.testing.assert_allclose(A, S @ Aj @ np.linalg.inv(S), atol=1e-9)
+    np.testing.assert_allclose(B, S @ Bj, atol=1e-12)
+    res = discrete_lqr(mapped, rate_hz=250.0)
+    assert np.max(np.abs(np.linalg.eigvals(res.A + res.B @ res.K))) < 1.0
+    inv = MujocoActuatorInverse(mapped)
+    q, qd = np.array([0.1, 0.05]), np.array([0.2, -0.3])
+    u = inv.command(np.array([0.5]), q, qd)
+    d = mujoco.MjData(mapped.model)
+    d.qpos[:], d.qvel[:], d.ctrl[:] = np.linalg.solve(T, q), np.linalg.solve(T, qd), u
+    mujoco.mj_forward(mapped.model, d)
+    tau = np.linalg.inv(T).T @ d.qfrc_actuator  # generalized force in coordinates
+    np.testing.assert_allclose(tau, [0.0, 0.5], atol=1e-12)
