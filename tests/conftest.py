@@ -21,3 +21,15 @@ def _deterministic():
     assert torch.get_default_dtype() == dtype, "a test changed torch's default dtype"
     torch.set_default_dtype(dtype)
     torch.set_num_threads(threads)
+
+
+FURUTA_CONFIG = __import__("pathlib").Path(__file__).resolve().parents[1] / "configs" / "furuta.yaml"
+
+
+def furuta_section(name: str, **overrides):
+    """A section of the shipped ``configs/furuta.yaml`` (resolved), with ``overrides`` replaced."""
+    import dataclasses
+
+    from bemlearn.pipeline.config import load_pipeline_config
+
+    return dataclasses.replace(getattr(load_pipeline_config(FURUTA_CONFIG), name), **overrides)

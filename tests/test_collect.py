@@ -10,8 +10,9 @@ import pytest
 from bemlearn.data.collect import CollectConfig, collect
 from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
 from bemlearn.data.trajectory_io import ground_truth_path, read_ground_truth, read_trajectory, write_trajectory
+from conftest import furuta_section
 
-SMALL = CollectConfig(n_trials=4, duration_s=2.0, workers=1, seed=3)
+SMALL = furuta_section("collect", n_trials=4, duration_s=2.0, workers=1, seed=3)
 
 
 def test_same_seed_is_bit_identical_and_independent_of_workers():
@@ -39,7 +40,7 @@ def test_falls_are_kept_up_to_the_fall_and_marked():
 
 
 def test_mixture_of_successful_and_failed_trials_with_default_excitation():
-    cfg = dataclasses.replace(CollectConfig(), n_trials=8, duration_s=8.0, workers=1, seed=0)
+    cfg = furuta_section("collect", n_trials=8, duration_s=8.0, workers=1, seed=0)
     data, _ = collect("furuta", cfg, progress=False)
     outcomes = list(data.meta.trial_failed.values())
     assert any(outcomes) and not all(outcomes)

@@ -12,7 +12,8 @@ from bemlearn.control.bem_sources import ModelBEM, PredictorBEM, make_bem_source
 from bemlearn.data.sensors import SensorConfig
 from bemlearn.apps.furuta.model import AnalyticFuruta
 from bemlearn.robots.reference import ConstantAcceleration
-from bemlearn.sim.closed_loop import SimulateConfig, simulate
+from bemlearn.sim.closed_loop import simulate
+from conftest import furuta_section
 
 IDEAL = SensorConfig(counts_per_rev=0, velocity_cutoff=400.0)
 
@@ -20,7 +21,7 @@ IDEAL = SensorConfig(counts_per_rev=0, velocity_cutoff=400.0)
 def test_alpha_settles_on_the_bem_under_constant_acceleration():
     """Section III-A: constant θ̈ — α follows the BEM of eq. (9) along q_a^d(t)."""
     ref = ConstantAcceleration((0.0,), (0.0,), (3.0,))
-    cfg = SimulateConfig(duration_s=3.0, bem_source="model", sensor=IDEAL)
+    cfg = furuta_section("simulate", duration_s=3.0, bem_source="model", sensor=IDEAL)
     res = simulate("furuta", cfg, progress=False, reference=ref)
     assert not res.fell
     qa, qad, qadd = ref.evaluate(res.t)
@@ -35,7 +36,7 @@ def test_alpha_settles_on_the_bem_under_constant_acceleration():
 
 
 def test_seeded_run_is_deterministic():
-    cfg = dataclasses.replace(SimulateConfig(duration_s=1.0, bem_source="model"), sensor=SensorConfig(noise_std=1e-3, velocity_cutoff=100.0), seed=5)
+    cfg = furuta_section("simulate", duration_s=1.0, bem_source="model", sensor=SensorConfig(noise_std=1e-3, velocity_cutoff=100.0), seed=5)
     a = simulate("furuta", cfg, progress=False)
     b = simulate("furuta", cfg, progress=False)
     assert np.array_equal(a.q, b.q) and np.array_equal(a.u, b.u)
@@ -81,13 +82,24 @@ def test_predictor_for_another_robot(tmp_path):
         PredictorBEM(path, robot=AnalyticFuruta())
 
 
-def test_nominal_mismatch_only_for_furuta():
+def test_nominal_mismatch_generic_matches_analytic_furuta():
+    """Scaling the MJCF pendulum body (MjSpec) equals the analytic Furuta with m_p, J_p, L_p, L_r scaled."""
+    import dataclasses
+
+    from bemlearn.apps.furuta.model import FurutaParameters
     from bemlearn.sim.closed_loop import NominalConfig, nominal_robot
 
-    bad = nominal_robot("furuta", NominalConfig(mass_scale=1.2))
-    assert abs(bad.params.m_p - 1.2 * 0.127) < 1e-12
-    with pytest.raises(ValueError, match="only modelled for the Furuta"):
-        nominal_robot("biped", NominalConfig(mass_scale=1.2))
+    ms, ls = 1.2, 0.9
+    mj = nominal_robot("furuta", NominalConfig(mass_scale=ms, length_scale=ls, bodies=("pendulum",)))
+    p = FurutaParameters()
+    p = dataclasses.replace(p, m_p=p.m_p * ms, J_p=p.J_p * ms * ls**2, L_p=p.L_p * ls, L_r=p.L_r * ls, J_ax=p.J_ax * ms * ls**2)
+    an = AnalyticFuruta(p)
+    q = torch.tensor([[0.3, 0.2], [-1.0, -0.4]], dtype=torch.float64)
+    qd = torch.tensor([[1.0, -2.0], [0.5, 0.3]], dtype=torch.float64)
+    torch.testing.assert_close(mj.mass_matrix(q), an.mass_matrix(q), rtol=1e-9, atol=1e-12)
+    torch.testing.assert_close(mj.bias(q, qd), an.bias(q, qd), rtol=1e-9, atol=1e-12)
+    biped = nominal_robot("biped", NominalConfig(mass_scale=1.2))  # any MJCF robot now
+    assert biped.m == 4
 
 
 def test_offscreen_gif_rendering(tmp_path):

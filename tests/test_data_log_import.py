@@ -18,11 +18,12 @@ from bemlearn.data import (
     detect_quantization_step,
     read_trajectory,
 )
-from bemlearn.data.collect import CollectConfig, collect
+from bemlearn.data.collect import collect
 from bemlearn.data.import_map import ImportMap, load_import_map
 from bemlearn.data.log_import import import_logs
 from bemlearn.data.rig_logs import RigLogStyle, rig_log_map, write_rig_logs
 from bemlearn.data.sensors import SensorConfig
+from conftest import furuta_section
 
 STEP = 2 * math.pi / 2048
 
@@ -30,7 +31,7 @@ STEP = 2 * math.pi / 2048
 @pytest.fixture(scope="module")
 def rig():
     """Three 3-s Furuta excitation trials on a 2048-count encoder (the simulator's data file)."""
-    cfg = CollectConfig(n_trials=3, duration_s=3.0, workers=1, seed=4, sensor=SensorConfig(counts_per_rev=2048))
+    cfg = furuta_section("collect", n_trials=3, duration_s=3.0, workers=1, seed=4, sensor=SensorConfig(counts_per_rev=2048))
     data, _ = collect("furuta", cfg, progress=False)
     return data
 

@@ -10,20 +10,24 @@ import torch
 import yaml
 
 from bemlearn.cli.main import main
-from bemlearn.data.collect import CollectConfig, collect
+from bemlearn.data.collect import collect
 from bemlearn.data.trajectory_io import write_trajectory
 from bemlearn.export import load_learned_bem
 from bemlearn.models.learned_bem import srinivas_kappa
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.train import train_run
+from conftest import furuta_section
 
 
 @pytest.fixture(scope="module")
 def small(tmp_path_factory):
     root = tmp_path_factory.mktemp("train")
-    data, _ = collect("furuta", CollectConfig(n_trials=6, duration_s=6.0, workers=1, seed=1), progress=False)
+    data, _ = collect("furuta", furuta_section("collect", n_trials=6, duration_s=6.0, workers=1, seed=1), progress=False)
     path = write_trajectory(data, root / "data.npz")
-    cfg = PipelineConfig(robot="furuta")
+    from bemlearn.pipeline.config import load_pipeline_config
+    from conftest import FURUTA_CONFIG
+
+    cfg = load_pipeline_config(FURUTA_CONFIG)
     cfg = dataclasses.replace(cfg, dataset=dataclasses.replace(cfg.dataset, n_points=150), train=dataclasses.replace(cfg.train, max_iter=30))
     out = root / "run"
     metrics = train_run(cfg, path, out, progress=False)

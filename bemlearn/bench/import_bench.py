@@ -105,16 +105,12 @@ def bench_model_free_accuracy(
         bem_slices,
         heldout_prediction,
     )
-    from bemlearn.pipeline.evaluation import (
-        EvaluationConfig,
-        evaluate_bem,
-        ground_truth_robot,
-        held_out_references,
-    )
+    from bemlearn.pipeline.evaluation import evaluate_bem, held_out_references
+    from bemlearn.robots import load
 
     style = style or RigLogStyle()
-    robot = ground_truth_robot("furuta")
-    ecfg = EvaluationConfig()
+    robot = load(config.robot)  # the model the simulator data came from: the reference of the comparison
+    ecfg = config.evaluate
     with tempfile.TemporaryDirectory() as tmp:
         paths = write_rig_logs(source, Path(tmp), style)
         imported = import_logs(paths, from_dict(ImportMap, rig_log_map(source, style)))

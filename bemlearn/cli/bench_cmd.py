@@ -7,6 +7,8 @@
 * ``bench gpdm`` — GPDM fit time and recovery on synthetic gait data (issue 7);
 * the installed applications' benches (e.g. the biped's ``bench biped-bem`` and ``bench walks``).
 * ``bench import [--rows N] [--accuracy]`` — logger CSV import speed and the model-free path's accuracy (issue 14).
+* ``bench robots [MJCF …]`` — collect → train → export → held-out BEM → closed loop on MJCF
+  robots with model-derived values only (issue 13).
 """
 
 from __future__ import annotations
@@ -47,9 +49,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     t.add_argument("--data", type=Path, required=True, help="trajectory file to train on")
     t.add_argument("--no-svgp", action="store_true", help="skip the 10⁶-point svgp run (minutes)")
     t.set_defaults(func=_train)
-    s = sub.add_parser("sim", help="learned BEM in the EIC loop: 5 references × 5 seeds, mismatch, Lemma 1, speed")
-    s.add_argument("predictor", type=Path, help="exported bem_predictor.pt (or a run folder holding one)")
-    s.add_argument("--config", type=Path, default=Path("configs/furuta.yaml"))
+    s = sub.add_parser("sim", help="learned BEM in the EIC loop of a run's robot: references × seeds, mismatch, Lemma 1, speed")
+    s.add_argument("run_dir", type=Path, help="a run folder (its robot, closed-loop config and bem_predictor.pt are used)")
+    s.add_argument("--mismatch-bodies", nargs="+", default=None, metavar="BODY",
+                   help="bodies whose mass and lengths the mismatch study scales (default: all)")
     s.add_argument("--refs", type=int, default=5)
     s.add_argument("--seeds", type=int, default=5)
     s.add_argument("--duration", type=float, default=60.0, help="simulated seconds per run")
@@ -79,6 +82,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     im.add_argument("--config", type=Path, default=None, help="pipeline YAML (robot, dataset and train sections); needed with --accuracy")
     im.add_argument("--figures", type=Path, default=None, help="folder for the BEM slice figures")
     im.set_defaults(func=_import)
+    rb = sub.add_parser("robots", help="the whole chain on MJCF robots with derived values only (issue 13)")
+    rb.add_argument("robots", nargs="+", help="MJCF files or registry names, e.g. tests/robots/*.xml")
+    rb.add_argument("--out", type=Path, default=Path("runs/bench-robots"), help="folder of the per-robot runs")
+    rb.add_argument("--trials", type=int, default=24, help="excitation trials per robot (default 24)")
+    rb.add_argument("--duration", type=float, default=20.0, help="seconds per excitation trial (default 20)")
+    rb.add_argument("--sim-duration", type=float, default=30.0, help="closed-loop seconds per BEM source (default 30)")
+    rb.add_argument("--workers", type=int, default=1, help="collect processes (default 1)")
+    rb.add_argument("--seed", type=int, default=0, help="collect seed (default 0)")
+    rb.set_defaults(func=_robots)
 
 
 def run_predict(args: argparse.Namespace) -> int:
@@ -119,11 +131,10 @@ def _train(args: argparse.Namespace) -> int:
 
 def _sim(args: argparse.Namespace) -> int:
     from bemlearn.bench.sim_bench import format_sim_bench, run_sim_bench
-    from bemlearn.pipeline.config import load_pipeline_config
 
-    pred = args.predictor / "bem_predictor.pt" if args.predictor.is_dir() else args.predictor
-    cfg = load_pipeline_config(args.config)
-    r = run_sim_bench(pred, base=cfg.simulate, n_refs=args.refs, n_seeds=args.seeds, duration_s=args.duration, mismatch=not args.no_mismatch)
+    bodies = tuple(args.mismatch_bodies) if args.mismatch_bodies else None
+    r = run_sim_bench(args.run_dir, n_refs=args.refs, n_seeds=args.seeds, duration_s=args.duration,
+                      mismatch=not args.no_mismatch, bodies=bodies)
     print(format_sim_bench(r))
     return 0
 
@@ -175,4 +186,19 @@ def _import(args: argparse.Namespace) -> int:
 
         result["accuracy"] = bench_model_free_accuracy(source, load_pipeline_config(args.config), figure_dir=args.figures)
     print(json.dumps(result, indent=2, default=float))
+    return 0
+
+
+def _robots(args: argparse.Namespace) -> int:
+    import os
+
+    from bemlearn.bench.robots_bench import format_robots_bench, robot_chain
+
+    rows = []
+    for path in args.robots:
+        out = args.out / Path(path).stem
+        rows.append(robot_chain(path, out, n_trials=args.trials, duration_s=args.duration, sim_duration_s=args.sim_duration,
+                                workers=args.workers, seed=args.seed, progress=print))
+    print(f"load average {os.getloadavg()[0]:.2f}")
+    print(format_robots_bench(rows))
     return 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 
 __all__ = ["add_parser"]
 
@@ -18,9 +19,17 @@ def add_parser(sub) -> None:
     bem.add_argument("--qad", type=float, nargs="+", required=True, help="actuated rates, rad/s")
     bem.add_argument("--qadd", type=float, nargs="+", required=True, help="actuated accelerations, rad/s²")
     bem.set_defaults(func=_bem)
-    lem = rs.add_parser("lemma1", help="Lemma 1 on the Furuta: ΔΓ vs Ḣ_u and max |q_u^d − q_u^e| for composite sinusoids")
-    lem.add_argument("robot", nargs="?", default="furuta")
+    lem = rs.add_parser("lemma1", help="Lemma 1 on any robot: ΔΓ vs Ḣ_u and max |q_u^d − q_u^e| for composite sinusoids")
+    lem.add_argument("robot", help="registry name or MJCF path")
+    lem.add_argument("--rtol", type=float, default=1e-6,
+                     help="fail (exit 1) when max|ΔΓ − Ḣ_u − b_u q̇_u^e| / max|ΔΓ| exceeds this (default 1e-6)")
+    lem.add_argument("--fixed-references", action="store_true",
+                     help="four fixed references (amplitudes 0.1–0.5, in the actuated joints' unit) instead of references scaled to the robot")
     lem.set_defaults(func=_lemma1)
+    lqr = rs.add_parser("lqr", help="discrete LQR excitation gains of MuJoCo's linearisation at upright (u = K e)")
+    lqr.add_argument("robot", help="shipped robot name or MJCF path")
+    lqr.add_argument("--rate", type=float, default=None, help="control rate, Hz (default: derived, ≥ 100 Hz, whole physics steps)")
+    lqr.set_defaults(func=_lqr)
     from bemlearn.applications import applications
 
     for app in applications().values():
@@ -59,17 +68,73 @@ def _lemma1(args) -> int:
 
     from bemlearn.robots import load
     from bemlearn.robots.reference import CompositeSinusoid
-    from bemlearn.robots.zero_dynamics import lemma1
+    from bemlearn.robots.zero_dynamics import lemma1, lemma1_relative_gap, scaled_references
 
     robot = load(args.robot)
-    refs = {
-        "0.3 sin(π t) + 0.2 sin(2π t + 0.7)": CompositeSinusoid.single([0.3, 0.2], [0.5, 1.0], [0.0, 0.7]),
-        "0.4 sin(π/2 t + 0.3) + 0.1 sin(3π/2 t + 1.1)": CompositeSinusoid.single([0.4, 0.1], [0.25, 0.75], [0.3, 1.1]),
-        "0.2/0.15/0.1 at 0.2/0.6/1.0 Hz": CompositeSinusoid.single([0.2, 0.15, 0.1], [0.2, 0.6, 1.0], [0.0, 0.5, 2.0]),
-        "0.5 sin(2π t)": CompositeSinusoid.single([0.5], [1.0]),
-    }
-    print(f"{'reference q_a^d(t) (rad)':<46}{'max|ΔΓ|':>10}{'max|ΔΓ−Ḣ_u−b_u q̇_u^e|':>24}{'max|Γ(q_u^d)|':>15}{'max|q_u^d−q_u^e|':>18}")
+    if args.fixed_references:
+        refs = {
+            "0.3 sin(π t) + 0.2 sin(2π t + 0.7)": CompositeSinusoid.single([0.3, 0.2], [0.5, 1.0], [0.0, 0.7]),
+            "0.4 sin(π/2 t + 0.3) + 0.1 sin(3π/2 t + 1.1)": CompositeSinusoid.single([0.4, 0.1], [0.25, 0.75], [0.3, 1.1]),
+            "0.2/0.15/0.1 at 0.2/0.6/1.0 Hz": CompositeSinusoid.single([0.2, 0.15, 0.1], [0.2, 0.6, 1.0], [0.0, 0.5, 2.0]),
+            "0.5 sin(2π t)": CompositeSinusoid.single([0.5], [1.0]),
+        }
+        if robot.m != 1:
+            refs = {k: CompositeSinusoid(v.amplitudes * robot.m, v.frequencies * robot.m, v.phases * robot.m, v.offsets * robot.m) for k, v in refs.items()}
+    else:
+        refs = scaled_references(robot)
+    units = _units(robot)
+    print(f"Lemma 1 on {robot.name}: q_a^d in {units[0]}, ΔΓ in {units[1]}, q_u in {units[2]}; pass when relative gap ≤ {args.rtol:g}")
+    width = max(46, max(len(k) for k in refs) + 2)
+    print(f"{'reference q_a^d(t)':<{width}}{'max|ΔΓ|':>10}{'max|ΔΓ−Ḣ_u−b_u q̇_u^e|':>24}{'relative':>10}{'max|Γ(q_u^d)|':>15}{'max|q_u^d−q_u^e|':>18}")
+    worst = 0.0
     for label, ref in refs.items():
         L = lemma1(robot, ref, n_nodes=256)
-        print(f"{label:<46}{np.abs(L.delta_gamma).max():>10.3e}{np.abs(L.gap).max():>24.2e}{np.abs(L.zero_dynamics.residual).max():>15.2e}{L.max_distance:>18.4f}")
+        rel = lemma1_relative_gap(L)
+        worst = max(worst, rel)
+        print(f"{label:<{width}}{np.abs(L.delta_gamma).max():>10.3e}{np.abs(L.gap).max():>24.2e}{rel:>10.1e}"
+              f"{np.abs(L.zero_dynamics.residual).max():>15.2e}{L.max_distance:>18.4f}")
+    ok = worst <= args.rtol
+    print(f"{'PASS' if ok else 'FAIL'}: worst relative gap {worst:.2e} (tolerance {args.rtol:g})")
+    return 0 if ok else 1
+
+
+def _units(robot) -> tuple[str, str, str]:
+    """Units of q_a, of the unactuated row's generalized force, and of q_u (by joint kind)."""
+    kinds = getattr(robot, "joint_kinds", None)
+    if kinds is None or not np.allclose(robot.T.numpy(), np.eye(robot.n)):
+        return "rad", "N·m", "rad"
+    ka = {kinds[i] for i in robot.actuated_index}
+    qa = "rad" if ka == {"hinge"} else "m" if ka == {"slide"} else "rad or m"
+    ku = kinds[robot.unactuated_index]
+    return qa, "N·m" if ku == "hinge" else "N", "rad" if ku == "hinge" else "m"
+
+
+def _lqr(args) -> int:
+    from bemlearn.control.lqr import discrete_lqr
+    from bemlearn.pipeline.derive import control_rate, design_region, input_units
+    from bemlearn.robots import load
+
+    robot = load(args.robot)
+    rate = control_rate(robot)
+    if args.rate is None:
+        hz, h = rate.value.rate_hz, rate.value.timestep
+        print(f"rate       {rate.note}")
+    else:
+        hz, h = args.rate, (rate.value.timestep if rate.value.timestep_changed else None)
+    d = design_region(robot).value
+    res = discrete_lqr(robot, rate_hz=hz, timestep=h, design_qu=d, qu0=0.25 * d)
+    unit = input_units(robot).value
+    kinds = getattr(robot, "joint_kinds", ("hinge",) * robot.n)
+    pos = ["rad" if k == "hinge" else "m" for k in kinds]
+    if not np.allclose(robot.T.numpy(), np.eye(robot.n)):
+        pos = ["rad"] * robot.n
+    cols = [f"{nm} [{unit}/{u}]" for nm, u in zip(robot.joint_names, pos)] + [f"d{nm} [{unit}/({u}/s)]" for nm, u in zip(robot.joint_names, pos)]
+    print(f"robot      {robot.name}: u = K e, e = [q − q_t, q̇ − q̇_t]; {hz:g} Hz, {res.substeps} × {res.timestep:g} s physics steps")
+    print(f"weights    Bryson (|q_u| ≤ {d:g}, joint ranges, ctrlrange){'' if res.r_scale == 1 else f', R × {res.r_scale:g} to stay in ctrlrange'}")
+    width = max(len(c) for c in cols) + 2
+    names = [robot.model.actuator(i).name or f"u{i}" for i in range(robot.model.nu)]
+    print(f"{'':<12}" + "".join(f"{c:>{width}}" for c in cols))
+    for name, row in zip(names, res.K):
+        print(f"{name:<12}" + "".join(f"{v:>{width}.6g}" for v in row))
+    print(f"closed-loop spectral radius {res.spectral_radius:.6f}; peak |u|/u_max for a {0.25 * d:g} q_u error: {res.u_peak:.2f}")
     return 0

@@ -1,18 +1,20 @@
-"""Controllers: the EIC law (eq. 3, 8), BEM sources, actuator maps."""
+"""Controllers: the EIC law (eq. 3, 8), BEM sources, the inverse of MuJoCo's actuator model, LQR."""
 
-from bemlearn.control.actuators import ActuatorModel, DirectTorque, FurutaMotor
+from bemlearn.control.actuator_inverse import MujocoActuatorInverse
 from bemlearn.control.bem_sources import BEM_SOURCES, ModelBEM, PredictorBEM, ZeroBEM, make_bem_source
 from bemlearn.control.eic import EICController, EICGains
+from bemlearn.control.lqr import LQRResult, discrete_lqr, linearize
 
 __all__ = [
-    "ActuatorModel",
     "BEM_SOURCES",
-    "DirectTorque",
     "EICController",
     "EICGains",
-    "FurutaMotor",
+    "LQRResult",
     "ModelBEM",
+    "MujocoActuatorInverse",
     "PredictorBEM",
     "ZeroBEM",
+    "discrete_lqr",
+    "linearize",
     "make_bem_source",
 ]

@@ -27,6 +27,12 @@ Per control tick, with the measured q, estimated q̇ and the desired q_a^d(t):
    mapped to the actuator (volts for the Furuta motor, with saturation).
 
 D, h come from a *nominal* robot (``terms(q, q̇)``), which may differ from the simulated one.
+
+Guards.  A BEM value that is NaN, infinite or outside ``qu_limits`` (default: the nominal
+robot's admissible q_u range) never reaches the actuator: the last valid value is held
+and :attr:`EICController.bem_rejected` counts the ticks where that happened (the BEM
+rates along the reference are held the same way).  A non-finite command is replaced by
+the last finite one (zero at the start) and counted in :attr:`EICController.command_rejected`.
 """
 
 from __future__ import annotations
@@ -45,8 +51,9 @@ class EICGains:
     """Gains of the EIC law (module docstring).
 
     Attributes:
-        kp_a, kd_a: external loop, 1/s², 1/s (same for every actuated joint).
-        kp_u, kd_u: internal loop on q_u, 1/s², 1/s.
+        kp_a, kd_a: external loop, 1/s², 1/s (same for every actuated joint; ``null``: derived from the
+            model, ``bemlearn.pipeline.derive.eic_gains``).
+        kp_u, kd_u: internal loop on q_u, 1/s², 1/s (``null``: derived from the model).
         deriv_step: h of the BEM derivatives along the reference, s.
         momentum_correction: evaluate the BEM source's full map (eq. 11) at the BEM's own
             rates, q_u^* = f(v_a^ext, q̇_a, q_a, q̈_u^e, q̇_u^e), instead of at q̇_u = q̈_u = 0
@@ -54,10 +61,10 @@ class EICGains:
             (plus damping), which drives a tracking error; the correction removes it.
     """
 
-    kp_a: float = 4.0
-    kd_a: float = 4.0
-    kp_u: float = 200.0
-    kd_u: float = 30.0
+    kp_a: float | None = None
+    kd_a: float | None = None
+    kp_u: float | None = None
+    kd_u: float | None = None
     deriv_step: float = 0.01
     momentum_correction: bool = True
 
@@ -73,9 +80,14 @@ class EICController:
         gains: :class:`EICGains`.
     """
 
-    def __init__(self, nominal, bem, reference: CompositeSinusoid, actuator, gains: EICGains = EICGains(), *, rate_hz: float | None = None, chunk: int = 400) -> None:
+    def __init__(self, nominal, bem, reference: CompositeSinusoid, actuator, gains: EICGains = EICGains(), *, rate_hz: float | None = None, chunk: int = 400,
+                 qu_limits: tuple[float, float] | None = None) -> None:
         if reference.m != nominal.m:
             raise ValueError(f"EICController: reference has {reference.m} actuated joints, robot {nominal.name!r} has {nominal.m}")
+        unset = [n for n in ("kp_a", "kd_a", "kp_u", "kd_u") if getattr(gains, n) is None]
+        if unset:
+            raise ValueError(f"EICController: gains {unset} not set; derive them from the model "
+                             "(bemlearn.pipeline.derive.eic_gains) or give them")
         self.nominal, self.bem, self.reference, self.actuator, self.gains = nominal, bem, reference, actuator, gains
         self.ia = np.array(nominal.actuated_index)
         self._aa = np.ix_(self.ia, self.ia)
@@ -87,6 +99,16 @@ class EICController:
         # t and t ± h) are evaluated ``chunk`` ticks at a time in one batched call
         self.rate_hz, self.chunk = rate_hz, chunk
         self._cache_k0 = None
+        self.qu_limits = tuple(qu_limits) if qu_limits is not None else tuple(nominal.qu_range)
+        self.bem_rejected = 0
+        self.command_rejected = 0
+        self._qu_last = float(nominal.qu_nominal)
+        self._rates_last = (0.0, 0.0)
+        self._u_last: np.ndarray | None = None
+
+    def _valid(self, v) -> bool:
+        lo, hi = self.qu_limits
+        return bool(np.all(np.isfinite(v)) and np.all(v >= lo) and np.all(v <= hi))
 
     def _reference_terms(self, t: float):
         """q_a^d, q̇_a^d, q̈_a^d at t and the BEM along the reference at (t − h, t, t + h)."""
@@ -124,8 +146,14 @@ class EICController:
         qa_d, qad_d, qadd_d, b = self._reference_terms(t)
         qa, qad = q[ia], qd[ia]
         v_ext = qadd_d - g.kd_a * (qad - qad_d) - g.kp_a * (qa - qa_d)
-        qud_e = (b[2] - b[0]) / (2 * h)  # BEM rates along the reference
-        qudd_e = (b[2] - 2 * b[1] + b[0]) / (h * h)
+        rejected = False
+        if self._valid(b):
+            qud_e = (b[2] - b[0]) / (2 * h)  # BEM rates along the reference
+            qudd_e = (b[2] - 2 * b[1] + b[0]) / (h * h)
+            self._rates_last = (qud_e, qudd_e)
+        else:
+            qud_e, qudd_e = self._rates_last
+            rejected = True
         if g.momentum_correction:
             xf = self._xf
             xf[0, :m], xf[0, m : 2 * m], xf[0, 2 * m : 3 * m] = v_ext, qad, qa
@@ -135,6 +163,12 @@ class EICController:
             x = self._x
             x[0, :m], x[0, m : 2 * m], x[0, 2 * m :] = v_ext, qad, qa
             qu_e = float(self.bem(x)[0])
+        if self._valid(qu_e):
+            self._qu_last = qu_e
+        else:
+            qu_e = self._qu_last
+            rejected = True
+        self.bem_rejected += rejected
         v_u = qudd_e - g.kd_u * (qd[iu] - qud_e) - g.kp_u * (q[iu] - qu_e)
         D, hv = self.nominal.terms(q, qd)
         D_ua = D[iu, ia]  # (m,)
@@ -142,4 +176,8 @@ class EICController:
         v_a = -pinv * (D[iu, iu] * v_u + hv[iu]) + v_ext - pinv * (D_ua @ v_ext)
         tau_a = D[self._aa] @ v_a + D[ia, iu] * v_u + hv[ia]
         u = self.actuator.command(tau_a, q, qd)
+        if not np.all(np.isfinite(u)):
+            self.command_rejected += 1
+            u = self._u_last.copy() if self._u_last is not None else np.zeros_like(u, dtype=np.float64)
+        self._u_last = u
         return u, {"qu_e": qu_e, "qud_e": float(qud_e), "qudd_e": float(qudd_e), "v_ext": v_ext, "v_u": float(v_u), "tau_a": tau_a}

@@ -26,6 +26,7 @@ import logging
 import math
 import os
 from concurrent.futures import ProcessPoolExecutor
+import dataclasses
 from dataclasses import dataclass, field
 
 import mujoco
@@ -37,6 +38,7 @@ from bemlearn.config import to_dict
 from bemlearn.data.plant import SensedPlant
 from bemlearn.data.sensors import SensorConfig
 from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
+from bemlearn.units import q_unit_label
 
 __all__ = ["CollectConfig", "TrialResult", "collect", "simulate_trial"]
 
@@ -50,47 +52,52 @@ class CollectConfig:
     Attributes:
         n_trials: number of trials.
         duration_s: time limit of a trial, s.
-        rate_hz: control and logging rate, Hz (the physics steps ``1/(rate·timestep)`` times per tick).
-        fall_window: a trial falls when |q_u − nominal| exceeds this, rad.
-        gains: nominal k, row-major ``(m, 2n)`` for e = [q − q_t, q̇ − q̇_t] in joint order.
-            Default: a discrete LQR of the Furuta at 400 Hz (Q = diag(5, 1, 0.5, 0.1), R = 0.5).
-        gain_scale: each gain is multiplied by U(lo, hi) per trial.
-        n_sines: (min, max) number of sine components per actuated joint.
-        amplitude: (min, max) amplitude of each component, rad.
-        frequency_hz: (min, max) frequency of each component, Hz.
-        initial_qa, initial_qu: (min, max) initial actuated / unactuated angles, rad.
-        input_units: unit of the logged inputs (``"V"`` for the Furuta motor).
+        rate_hz: control and logging rate, Hz (the physics steps ``1/(rate·timestep)`` times per tick) (``null``: derived from the model, see ``bemlearn config show``).
+        fall_window: a trial falls when |q_u − nominal| exceeds this, in q_u's unit (``null``: derived from the model, see ``bemlearn config show``).
+        gains: nominal k, row-major ``(m, 2n)`` for e = [q − q_t, q̇ − q̇_t] in joint order (``null``: derived from the model, see ``bemlearn config show``): a
+            discrete LQR of MuJoCo's linearisation (``bemlearn robot lqr``).
+        gain_scale: each gain is multiplied by U(lo, hi) per trial (``null``: derived from the model, see ``bemlearn config show``).
+        n_sines: (min, max) number of sine components per actuated joint (``null``: derived from the model, see ``bemlearn config show``).
+        amplitude: (min, max) amplitude of each component, in the actuated joints' units (``null``: derived from the model, see ``bemlearn config show``).
+        frequency_hz: (min, max) frequency of each component, Hz (``null``: derived from the model, see ``bemlearn config show``).
+        initial_qa, initial_qu: (min, max) initial actuated / unactuated coordinates, in their units (``null``: derived from the model, see ``bemlearn config show``).
+        input_units: unit of the logged inputs, e.g. ``V`` for a motor driven in volts (``null``: derived from the model, see ``bemlearn config show``).
         seed: master seed.
         workers: processes (0 = one per core, 1 = in-process).
         sensor: the encoder and velocity-filter model.
+        physics_timestep: physics step, s (``null``: the model file's; derived finer when the file's step is
+            coarser than the control rate needs).
     """
 
-    n_trials: int = 40
-    duration_s: float = 30.0
-    rate_hz: float = 400.0
-    fall_window: float = 0.6
-    gains: tuple[float, ...] = (2.97, -26.8, 2.64, -3.68)
-    gain_scale: tuple[float, float] = (0.6, 1.4)
-    n_sines: tuple[int, int] = (2, 4)
-    amplitude: tuple[float, float] = (0.03, 0.3)
-    frequency_hz: tuple[float, float] = (0.1, 1.5)
-    initial_qa: tuple[float, float] = (-0.1, 0.1)
-    initial_qu: tuple[float, float] = (-0.05, 0.05)
-    input_units: str = "V"
+    n_trials: int = 24
+    duration_s: float = 20.0
+    rate_hz: float | None = None
+    fall_window: float | None = None
+    gains: tuple[float, ...] | None = None
+    gain_scale: tuple[float, float] | None = None
+    n_sines: tuple[int, int] | None = None
+    amplitude: tuple[float, float] | None = None
+    frequency_hz: tuple[float, float] | None = None
+    initial_qa: tuple[float, float] | None = None
+    initial_qu: tuple[float, float] | None = None
+    input_units: str | None = None
     seed: int = 0
     workers: int = 0
     sensor: SensorConfig = field(default_factory=SensorConfig)
+    physics_timestep: float | None = None
 
     def __post_init__(self) -> None:
         if self.n_trials < 1:
             raise ValueError(f"collect.n_trials must be ≥ 1, got {self.n_trials}")
-        if self.duration_s <= 0 or self.rate_hz <= 0 or self.fall_window <= 0:
+        if self.duration_s <= 0 or (self.rate_hz is not None and self.rate_hz <= 0) or (self.fall_window is not None and self.fall_window <= 0):
             raise ValueError("collect.duration_s, rate_hz and fall_window must be > 0")
         for name in ("gain_scale", "n_sines", "amplitude", "frequency_hz", "initial_qa", "initial_qu"):
+            if getattr(self, name) is None:
+                continue
             lo, hi = getattr(self, name)
             if lo > hi:
                 raise ValueError(f"collect.{name}: expected (min, max) with min ≤ max, got {(lo, hi)}")
-        if self.n_sines[0] < 1:
+        if self.n_sines is not None and self.n_sines[0] < 1:
             raise ValueError(f"collect.n_sines: need at least one sine, got {self.n_sines}")
 
 
@@ -121,7 +128,7 @@ def simulate_trial(robot, config: CollectConfig, trial_id: int, seed_seq: np.ran
     """Run one excitation trial (module docstring) and return its logged and true signals."""
     rng = np.random.default_rng(seed_seq)
     model, n, m = robot.model, robot.n, robot.m
-    plant = SensedPlant(robot, rate_hz=config.rate_hz, sensor=config.sensor, rng=rng, where="collect")
+    plant = SensedPlant(robot, rate_hz=config.rate_hz, sensor=config.sensor, rng=rng, where="collect", timestep=config.physics_timestep)
     dt = plant.dt
     K = np.asarray(config.gains, dtype=np.float64)
     if K.size != m * 2 * n:
@@ -147,7 +154,7 @@ def simulate_trial(robot, config: CollectConfig, trial_id: int, seed_seq: np.ran
     for tick in range(n_ticks):
         t = tick * dt
         q_true = plant.true_q()
-        if abs(q_true[iu] - robot.qu_nominal) > config.fall_window:
+        if not abs(q_true[iu] - robot.qu_nominal) <= config.fall_window:  # also catches NaN
             failed, k = True, tick
             break
         y, v = plant.measure(q_true)
@@ -159,6 +166,9 @@ def simulate_trial(robot, config: CollectConfig, trial_id: int, seed_seq: np.ran
             qd_ref[j] = np.sum(A * w * np.cos(w * t + ph))
         u = K @ np.concatenate([y - q_ref, v - qd_ref])
         u = np.where(limited, np.clip(u, lo, hi), u)
+        if not np.all(np.isfinite(u)):  # diverged state: never hand MuJoCo a non-finite ctrl
+            failed, k = True, tick
+            break
         qd, qdd = plant.apply(u)
         rec["q_meas"][tick], rec["u"][tick], rec["q"][tick], rec["qd"][tick], rec["qdd"][tick] = y, u, q_true, qd, qdd
     t = np.arange(k) * dt
@@ -187,6 +197,10 @@ def collect(robot_name: str, config: CollectConfig, *, progress: bool = True) ->
     ``meta.extra["dropped_trials"]``.
     """
     robot = _robot_and_model(robot_name)
+    unset = [f.name for f in dataclasses.fields(config) if getattr(config, f.name) is None and f.name != "physics_timestep"]
+    if unset:
+        raise ValueError(f"collect: {unset} not set; derive them from the model with "
+                         "bemlearn.pipeline.complete_section(robot, 'collect', config) (as every pipeline command does) or give them")
     seqs = np.random.SeedSequence(config.seed).spawn(config.n_trials)
     jobs = [(config, i, s) for i, s in enumerate(seqs)]
     workers = config.workers or (os.cpu_count() or 1)
@@ -224,7 +238,8 @@ def collect(robot_name: str, config: CollectConfig, *, progress: bool = True) ->
         actuator_names=tuple(model.actuator(i).name or f"u{i}" for i in range(model.nu)),
         sample_rate_hz=config.rate_hz,
         trial_failed={r.trial_id: r.failed for r in kept},
-        units={"t": "s", "q": "rad", "u": config.input_units},
+        units={"t": "s", "q": q_unit_label(robot.coordinate_kinds), "u": config.input_units},
+        joint_kinds=robot.coordinate_kinds,
         extra={
             "generator": f"bemlearn {__version__} collect",
             "collect_config": to_dict(config),

@@ -5,9 +5,15 @@ Both the excitation collector (:mod:`bemlearn.data.collect`) and the closed-loop
 are read, measured through the encoder and the velocity filter (:mod:`bemlearn.data.sensors`),
 the controller's command is held over ``round(1 / (rate · timestep))`` physics steps, and the
 true q̇, q̈ at the tick (with the new command) are returned for ground-truth logging.
+
+``timestep`` (optional) runs the physics with a finer step than the model file's (public
+models often use 20 ms, too coarse for a ≥ 100 Hz control loop); the robot's own model is
+left unchanged (the plant uses a copy).
 """
 
 from __future__ import annotations
+
+import copy
 
 import mujoco
 import numpy as np
@@ -26,11 +32,17 @@ class SensedPlant:
         sensor: encoder and velocity-filter options.
         rng: the generator of the sensor noise.
         where: a label for error messages (e.g. ``"collect"``).
+        timestep: physics step override, s (default: the model's ``opt.timestep``).
     """
 
-    def __init__(self, robot, *, rate_hz: float, sensor: SensorConfig, rng: np.random.Generator, where: str) -> None:
+    def __init__(self, robot, *, rate_hz: float, sensor: SensorConfig, rng: np.random.Generator, where: str, timestep: float | None = None) -> None:
         self.robot = robot
         self.model = robot.model
+        if timestep is not None and timestep != self.model.opt.timestep:
+            if not timestep > 0:
+                raise ValueError(f"{where}: physics_timestep must be > 0 s, got {timestep}")
+            self.model = copy.deepcopy(robot.model)
+            self.model.opt.timestep = timestep
         self.data = mujoco.MjData(self.model)
         self.dt = 1.0 / rate_hz
         steps = self.dt / self.model.opt.timestep
@@ -38,7 +50,7 @@ class SensedPlant:
             raise ValueError(f"{where}: 1/rate_hz = {self.dt} s is not a whole number of physics steps ({self.model.opt.timestep} s)")
         self.substeps = int(round(steps))
         self.T, self.Tinv = robot.T.numpy(), robot.Tinv.numpy()
-        self.encoder = Encoder(sensor, rng)
+        self.encoder = Encoder(sensor, rng, kinds=_coordinate_kinds(robot))
         self.velocity = FilteredDifferentiator(robot.n, cutoff=sensor.velocity_cutoff, dt=self.dt)
 
     def reset(self, q0: np.ndarray, qd0: np.ndarray | None = None) -> None:
@@ -59,9 +71,19 @@ class SensedPlant:
     def apply(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Hold command ``u (nu,)`` for one tick; returns the true ``(q̇, q̈)`` at the tick, ``(n,)`` each."""
         m, d = self.model, self.data
+        if not np.all(np.isfinite(u)):
+            raise FloatingPointError(f"SensedPlant.apply: non-finite command {u}; it must not reach MuJoCo's ctrl")
         d.ctrl[:] = u
         mujoco.mj_forward(m, d)
         qd, qdd = self.T @ d.qvel, self.T @ d.qacc
         for _ in range(self.substeps):
             mujoco.mj_step(m, d)
         return qd, qdd
+
+
+def _coordinate_kinds(robot) -> tuple[str, ...] | None:
+    """Joint kinds per coordinate when coordinates are the joints (T = I), else None."""
+    kinds = getattr(robot, "joint_kinds", None)
+    if kinds is None or not np.allclose(robot.T.numpy(), np.eye(robot.n)):
+        return None
+    return tuple(kinds)

@@ -73,7 +73,7 @@ def write_rig_logs(traj: Trajectory, folder: str | Path, style: RigLogStyle = Ri
     """
     meta = traj.meta
     if meta.n_joints - 1 != 1 or any(k != "hinge" for k in meta.joint_kinds):
-        raise ValueError("write_rig_logs: expects one input and hinge joints (a Furuta-like rig)")
+        raise ValueError("write_rig_logs: expects one input and hinge joints (a rotary-pendulum-like rig)")
     unknown = sorted(set(style.flip) - set(meta.joint_names))
     if unknown:
         raise ValueError(f"write_rig_logs: flip names unknown joint(s) {unknown}; joints are {list(meta.joint_names)}")

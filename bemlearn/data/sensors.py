@@ -1,7 +1,8 @@
 """What a real rig measures: quantized encoder angles and a filtered velocity estimate.
 
 * Encoder: y = step · round((q + n) / step), step = 2π / counts_per_rev (Quanser: 4096
-  counts/rev → 1.53 mrad), n ~ N(0, noise_std²) optional.
+  counts/rev → 1.53 mrad) for hinges and ``m_per_count`` (m) for slide joints when set,
+  n ~ N(0, noise_std²) optional.
 * Velocity estimate used by the *controller* (never written to data files): the
   bilinear (Tustin) discretization of the high-pass differentiator H(s) = ω_c s / (s + ω_c)
   that Quanser's controllers use (ω_c = 50 rad/s by default):
@@ -26,11 +27,13 @@ class SensorConfig:
         counts_per_rev: encoder resolution; 0 disables quantization.
         noise_std: additive angle noise before quantization, rad.
         velocity_cutoff: ω_c of the controller's velocity filter, rad/s.
+        m_per_count: resolution of slide-joint encoders, m (0: slides use the angle step).
     """
 
     counts_per_rev: int = 4096
     noise_std: float = 0.0
     velocity_cutoff: float = 50.0
+    m_per_count: float = 0.0
 
     def __post_init__(self) -> None:
         if self.counts_per_rev < 0:
@@ -39,6 +42,8 @@ class SensorConfig:
             raise ValueError(f"sensor.noise_std must be ≥ 0, got {self.noise_std}")
         if self.velocity_cutoff <= 0:
             raise ValueError(f"sensor.velocity_cutoff must be > 0 rad/s, got {self.velocity_cutoff}")
+        if self.m_per_count < 0:
+            raise ValueError(f"sensor.m_per_count must be ≥ 0 m, got {self.m_per_count}")
 
     @property
     def step(self) -> float:
@@ -47,15 +52,23 @@ class SensorConfig:
 
 
 class Encoder:
-    """Quantize (and optionally perturb) joint angles: ``q (n,)`` rad → ``(n,)`` rad."""
+    """Quantize (and optionally perturb) joint angles: ``q (n,)`` rad → ``(n,)`` rad.
 
-    def __init__(self, config: SensorConfig, rng: np.random.Generator) -> None:
+    ``kinds`` (the joint kind of each coordinate) selects ``m_per_count`` for slides.
+    """
+
+    def __init__(self, config: SensorConfig, rng: np.random.Generator, *, kinds: tuple[str, ...] | None = None) -> None:
         self.step = config.step
+        if kinds is not None and config.m_per_count > 0 and "slide" in kinds:
+            self.step = np.array([config.m_per_count if k == "slide" else config.step for k in kinds])
         self.noise_std = config.noise_std
         self.rng = rng
 
     def __call__(self, q: np.ndarray) -> np.ndarray:
         y = q + self.rng.normal(0.0, self.noise_std, size=q.shape) if self.noise_std > 0 else q.copy()
+        if np.ndim(self.step):
+            safe = np.where(self.step > 0, self.step, 1.0)
+            return np.where(self.step > 0, np.round(y / safe) * safe, y)
         return np.round(y / self.step) * self.step if self.step > 0 else y
 
 

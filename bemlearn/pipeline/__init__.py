@@ -1,23 +1,31 @@
-"""Orchestration of the stages: configs, training runs, evaluation, closed-loop runs, reports."""
+"""Orchestration of the stages: configs (resolved from the model), training runs, evaluation, closed-loop runs, reports."""
 
 from bemlearn.pipeline.config import PipelineConfig, load_pipeline_config
 from bemlearn.pipeline.data_evaluation import SliceSpec, bem_slice_figure, bem_slices, heldout_prediction
-from bemlearn.pipeline.evaluation import EvaluationConfig, evaluate_bem, held_out_references
+from bemlearn.pipeline.evaluation import EvaluationConfig, evaluate_bem, held_out_references, run_truth_robot
+from bemlearn.pipeline.gp_stage import GPStageResult, fit_bem_gp
 from bemlearn.pipeline.lemma import learned_lemma1
+from bemlearn.pipeline.resolve import ResolvedConfig, complete_section, resolve_pipeline_config
 from bemlearn.pipeline.run import run_pipeline
 from bemlearn.pipeline.train import train_run
 
 __all__ = [
     "EvaluationConfig",
+    "GPStageResult",
+    "PipelineConfig",
+    "ResolvedConfig",
     "SliceSpec",
     "bem_slice_figure",
     "bem_slices",
-    "heldout_prediction",
-    "PipelineConfig",
+    "complete_section",
     "evaluate_bem",
+    "fit_bem_gp",
     "held_out_references",
+    "heldout_prediction",
     "learned_lemma1",
     "load_pipeline_config",
+    "resolve_pipeline_config",
     "run_pipeline",
+    "run_truth_robot",
     "train_run",
 ]

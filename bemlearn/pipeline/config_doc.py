@@ -30,7 +30,7 @@ misspelt key, or a value of the wrong type, is an error that names the file and 
 The smallest config names only the robot:
 
 ```yaml
-robot: path/to/my_robot.xml     # or a registry name: furuta, biped, ...
+robot: path/to/my_robot.xml     # or a registry name (bemlearn robot info NAME)
 ```
 
 Everything else is either **derived from the robot's model** when the config does not give it

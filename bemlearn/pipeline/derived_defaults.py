@@ -1,10 +1,124 @@
-"""Adapter: the pipeline keys the robot's model determines (filled in by the derive stage)."""
+"""The pipeline keys the robot's model determines, as dotted config keys with how each was derived.
+
+:func:`derive_pipeline_values` turns the model-derived values of :mod:`bemlearn.pipeline.derive`
+into ``{"collect.rate_hz": (value, note), ...}`` leaves for
+:func:`~bemlearn.pipeline.resolve.resolve_pipeline_config`, which fills in only the keys the
+config does not give.  Values that depend on each other are derived consistently with what the
+config *does* give: a given control rate is used for the excitation LQR, the velocity filter and
+the EIC gains, and the closed loop runs at the collection's rate unless told otherwise.
+"""
 
 from __future__ import annotations
 
+import dataclasses
+import math
+from typing import Any
+
+from bemlearn.pipeline import config_doc
+
 __all__ = ["derive_pipeline_values"]
 
+_COLLECT = ("rate_hz", "physics_timestep", "gains", "gain_scale", "fall_window", "input_units", "sensor", "n_sines",
+            "amplitude", "frequency_hz", "initial_qa", "initial_qu")
+_SIMULATE = ("rate_hz", "physics_timestep", "gains", "reference", "fall_window", "sensor")
 
-def derive_pipeline_values(robot, config) -> dict:
-    """``{dotted key: (value, how it was derived)}`` for every derivable key (see docs/config.md)."""
-    return {}
+config_doc.DERIVED_KEYS.update({f"collect.{k}": "" for k in _COLLECT if k != "sensor"})
+config_doc.DERIVED_KEYS.update({f"collect.sensor.{k}": "" for k in ("counts_per_rev", "m_per_count", "velocity_cutoff")})
+config_doc.DERIVED_KEYS.update({f"simulate.{k}": "" for k in _SIMULATE if k not in ("gains", "reference", "sensor")})
+config_doc.DERIVED_KEYS.update({f"simulate.gains.{k}": "" for k in ("kp_a", "kd_a", "kp_u", "kd_u")})
+config_doc.DERIVED_KEYS.update({f"simulate.reference.{k}": "" for k in ("amplitudes", "frequencies_hz", "phases", "offset")})
+config_doc.DERIVED_KEYS.update({f"simulate.sensor.{k}": "" for k in ("counts_per_rev", "m_per_count", "velocity_cutoff")})
+config_doc.DERIVED_KEYS.update({f"evaluate.{k}": "" for k in ("n_sines", "amplitude_max", "amplitude_min", "frequency_hz")})
+
+
+def _plain(v: Any) -> Any:
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):
+        return {f.name: _plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
+    if isinstance(v, dict):
+        return {k: _plain(x) for k, x in v.items()}
+    if isinstance(v, tuple):
+        return [_plain(x) for x in v]
+    return v
+
+
+def _leaves(prefix: str, value: Any, note: str, out: dict) -> None:
+    value = _plain(value)
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _leaves(f"{prefix}.{k}", v, note, out)
+    else:
+        out[prefix] = (value, note)
+
+
+def _rate(robot, rate_hz: float | None, timestep: float | None):
+    """The :class:`~bemlearn.pipeline.derive.RateChoice` of a given rate (and physics step), or the derived one."""
+    from bemlearn.pipeline.derive import RateChoice, control_rate
+
+    if rate_hz is None:
+        return control_rate(robot)
+    h = float(timestep or robot.model.opt.timestep)
+    n = 1.0 / (rate_hz * h)
+    if abs(n - round(n)) > 1e-6 or round(n) < 1:
+        raise ValueError(f"rate_hz = {rate_hz:g} Hz is not a whole number of physics steps of {h:g} s "
+                         f"({n:.4g} steps); give a rate that divides 1/{h:g} s or set physics_timestep")
+    from bemlearn.pipeline.derive import Derived
+
+    return Derived(RateChoice(rate_hz, int(round(n)), h, timestep is not None and not math.isclose(h, robot.model.opt.timestep)),
+                   f"the given {rate_hz:g} Hz")
+
+
+def derive_pipeline_values(robot, config, given: set[str] | frozenset[str] = frozenset()) -> dict[str, tuple[Any, str]]:
+    """``{dotted key: (value, how it was derived)}`` for every derivable key of ``config`` (docs/config.md).
+
+    Args:
+        robot: the config's robot (a :class:`~bemlearn.robots.MujocoRobot`; other robots derive nothing).
+        config: the config as given (its given values steer the derivation: see module docstring).
+        given: the dotted keys the config gives.
+    """
+    from bemlearn.pipeline import derive
+    from bemlearn.robots import MujocoRobot
+
+    if not isinstance(robot, MujocoRobot):
+        return {}
+    out: dict[str, tuple[Any, str]] = {}
+    c, s = config.collect, config.simulate
+    given_collect_rate = c.rate_hz if _given(given, "collect.rate_hz") else None
+    given_sim_rate = s.rate_hz if _given(given, "simulate.rate_hz") else given_collect_rate
+    crate = _rate(robot, given_collect_rate, c.physics_timestep if _given(given, "collect.physics_timestep") else None)
+    srate = _rate(robot, given_sim_rate, s.physics_timestep if _given(given, "simulate.physics_timestep") else None)
+    rc, rs = crate.value, srate.value
+    sig = derive.excitation_signals(robot, rc)
+    gains = derive.excitation_gains(robot, rc)
+    init = derive.initial_ranges(robot)
+    fw = derive.fall_window(robot)
+    sen = derive.sensor(robot, rc)
+    sen_sim = derive.sensor(robot, rs)
+    _leaves("collect.rate_hz", rc.rate_hz, crate.note, out)
+    _leaves("collect.physics_timestep", rc.timestep if rc.timestep_changed else None, crate.note, out)
+    _leaves("collect.gains", gains.value["gains"], gains.note, out)
+    _leaves("collect.gain_scale", gains.value["gain_scale"], gains.note, out)
+    _leaves("collect.fall_window", fw.value, fw.note, out)
+    units = derive.input_units(robot)
+    _leaves("collect.input_units", units.value, units.note, out)
+    _leaves("collect.sensor", sen.value, sen.note, out)
+    for k in ("n_sines", "amplitude", "frequency_hz"):
+        _leaves(f"collect.{k}", sig.value[k], sig.note, out)
+    for k in ("initial_qa", "initial_qu"):
+        _leaves(f"collect.{k}", init.value[k], init.note, out)
+    ev = derive.evaluation(robot, sig.value)
+    _leaves("evaluate", {k: v for k, v in _plain(ev.value).items() if k != "n_references"}, ev.note, out)
+    _leaves("simulate.rate_hz", rs.rate_hz, srate.note + ("" if _given(given, "simulate.rate_hz") else " (the collection's rate)"), out)
+    _leaves("simulate.physics_timestep", rs.timestep if rs.timestep_changed else None, srate.note, out)
+    eic = derive.eic_gains(robot, rs)
+    _leaves("simulate.gains", {k: v for k, v in _plain(eic.value).items() if k in ("kp_a", "kd_a", "kp_u", "kd_u")}, eic.note, out)
+    ref = derive.closed_loop_reference(robot, sig.value)
+    _leaves("simulate.reference", ref.value, ref.note, out)
+    _leaves("simulate.fall_window", fw.value, fw.note, out)
+    _leaves("simulate.sensor", {**sen_sim.value, "velocity_cutoff": 2 * sen_sim.value["velocity_cutoff"]},
+            sen_sim.note + "; × 2 in the closed loop", out)
+    return out
+
+
+def _given(given, dotted: str) -> bool:
+    """Whether ``dotted`` (or a section holding it) was given."""
+    return dotted in given or any(dotted.startswith(g + ".") for g in given)

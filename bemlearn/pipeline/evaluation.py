@@ -26,20 +26,21 @@ class EvaluationConfig:
 
     Attributes:
         n_references: number of random composite sinusoids.
-        n_sines: (min, max) components per reference.
-        amplitude_max: max |q_a^d| bound: Σ|A_k| ≤ this, rad (the issue's |θ| ≤ 0.5 rad).
-        amplitude_min: Σ|A_k| ≥ this, rad.
-        frequency_hz: (min, max) component frequency, Hz.
+        n_sines: (min, max) components per reference (``null``: derived from the model).
+        amplitude_max: max |q_a^d| bound: Σ|A_k| ≤ this, in q_a's unit (``null``: derived, inside what the
+            excitation collected).
+        amplitude_min: Σ|A_k| ≥ this, in q_a's unit (``null``: derived).
+        frequency_hz: (min, max) component frequency, Hz (``null``: derived).
         duration_s: evaluated time per reference, s.
         rate_hz: evaluation grid, Hz.
         seed: seed of the references (independent of training data).
     """
 
     n_references: int = 5
-    n_sines: tuple[int, int] = (2, 3)
-    amplitude_max: float = 0.5
-    amplitude_min: float = 0.3
-    frequency_hz: tuple[float, float] = (0.1, 1.0)
+    n_sines: tuple[int, int] | None = None
+    amplitude_max: float | None = None
+    amplitude_min: float | None = None
+    frequency_hz: tuple[float, float] | None = None
     duration_s: float = 20.0
     rate_hz: float = 100.0
     seed: int = 12345
@@ -47,6 +48,10 @@ class EvaluationConfig:
 
 def held_out_references(config: EvaluationConfig, m: int) -> list[CompositeSinusoid]:
     """Random composite sinusoids within the configured amplitude and frequency ranges."""
+    unset = [n for n in ("n_sines", "amplitude_max", "amplitude_min", "frequency_hz") if getattr(config, n) is None]
+    if unset:
+        raise ValueError(f"evaluate: {unset} not set; derive them from the model with "
+                         "bemlearn.pipeline.complete_section(robot, 'evaluate', config) or give them")
     rng = np.random.default_rng(config.seed)
     refs = []
     for _ in range(config.n_references):

@@ -21,7 +21,7 @@ from typing import Any
 from bemlearn.config import ConfigError, from_dict, load_yaml, to_dict
 from bemlearn.pipeline.config import PipelineConfig
 
-__all__ = ["ResolvedConfig", "resolve_pipeline_config", "format_resolved", "flatten"]
+__all__ = ["ResolvedConfig", "resolve_pipeline_config", "complete_section", "format_resolved", "flatten"]
 
 Origin = str  # "given" | "derived" | "default"
 
@@ -102,7 +102,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
         from bemlearn.robots import load
 
         robot = load(parsed.robot)
-        for key, (value, note) in derive_pipeline_values(robot, parsed).items():
+        for key, (value, note) in derive_pipeline_values(robot, parsed, given).items():
             if not _has(raw, key):
                 _set(raw, key, value)
                 notes[key] = note
@@ -130,3 +130,21 @@ def format_resolved(resolved: ResolvedConfig) -> str:
         note = f"  # {r['note']}" if "note" in r else ""
         lines.append(f"{key:<{width}}  {value:<40}  {r['origin']:<8}{note}")
     return "\n".join(lines)
+
+
+def _strip_none(data: Any) -> Any:
+    if isinstance(data, Mapping):
+        return {k: _strip_none(v) for k, v in data.items() if v is not None}
+    return data
+
+
+def complete_section(robot: str, section: str, value):
+    """A config section (e.g. a :class:`~bemlearn.data.collect.CollectConfig`) with its ``None``
+    fields derived from ``robot``'s model, as :func:`resolve_pipeline_config` would.
+
+    Library calls (``collect(robot, CollectConfig(n_trials=4))``) get the same derived values
+    as a pipeline run; fields that are set count as given.
+    """
+    if not any(v is None for v in flatten(to_dict(value)).values()):
+        return value
+    return getattr(resolve_pipeline_config({"robot": str(robot), section: _strip_none(to_dict(value))}).config, section)

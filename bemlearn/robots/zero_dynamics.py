@@ -45,6 +45,8 @@ __all__ = [
     "finite_zero_dynamics",
     "lemma1",
     "spectral_derivative",
+    "scaled_references",
+    "lemma1_relative_gap",
 ]
 
 
@@ -246,3 +248,36 @@ def lemma1(robot: Robot, reference: CompositeSinusoid, *, n_nodes: int = 256) ->
         max_distance=float(np.max(np.abs(zd.qu - qu_e))),
         zero_dynamics=zd,
     )
+
+
+def scaled_references(robot: Robot, *, design_qu: float = 0.2) -> dict[str, CompositeSinusoid]:
+    """Periodic composite sinusoids scaled to ``robot`` for Lemma 1 (labels → references).
+
+    Base frequency f_0 = 0.1 λ/2π (λ = √(Γ_q/D_uu), :func:`bemlearn.robots.scales.instability_rate`)
+    rounded to 1e-3 Hz so that the components (f_0, 2f_0), (f_0, 3f_0), (2f_0, 3f_0) and
+    (4f_0) share a period; amplitudes (3 : 2 for two components) so that the linearised BEM
+    peaks at ``design_qu``/2 (never more than half a limited actuated joint's range).
+    """
+    from bemlearn.robots.scales import UNLIMITED_HALF_RANGE, bem_gain, bem_slopes, instability_rate, qa_half_ranges
+
+    lam = instability_rate(robot)
+    f0 = max(round(0.1 * lam / (2 * np.pi), 3), 1e-3)
+    slopes = bem_slopes(robot)
+    half = qa_half_ranges(robot)
+    cap = float(np.min(np.where(half == UNLIMITED_HALF_RANGE, np.inf, 0.5 * half)))
+    out = {}
+    for ks, w in (((1, 2), (0.6, 0.4)), ((1, 3), (0.6, 0.4)), ((2, 3), (0.5, 0.5)), ((4,), (1.0,))):
+        f = np.array(ks, dtype=float) * f0
+        g = np.max(bem_gain(slopes, 2 * np.pi * f), axis=0)
+        scale = min(0.5 * design_qu / max(float(np.dot(w, g)), 1e-12), cap)
+        A = [float(f"{scale * x:.4g}") for x in w]
+        ph = [0.0, 0.7][: len(ks)]
+        label = " + ".join(f"{a:g} sin(2π·{fk:g} t{'' if p == 0 else f' + {p:g}'})" for a, fk, p in zip(A, f, ph))
+        out[label] = CompositeSinusoid((tuple(A),) * robot.m, (tuple(float(x) for x in f),) * robot.m, (tuple(ph),) * robot.m, (0.0,) * robot.m)
+    return out
+
+
+def lemma1_relative_gap(result: LemmaOneResult) -> float:
+    """max|ΔΓ − Ḣ_u − b_u q̇_u^e| / max|ΔΓ|: Lemma 1's residual relative to the term it explains."""
+    scale = float(np.abs(result.delta_gamma).max())
+    return float(np.abs(result.gap).max()) / scale if scale > 0 else float("inf")

@@ -4,11 +4,15 @@ The plant is the robot's MuJoCo model (the *true* system); the controller uses a
 model (optionally with mass/length errors) and sees only quantized angles and filtered
 velocity estimates (:mod:`bemlearn.data.sensors`), at the control rate with the command
 held between ticks.  A run stops early when |q_u − nominal| leaves ``fall_window``.
+
+The commands come from the generic inverse of the model's actuators
+(:class:`~bemlearn.control.actuator_inverse.MujocoActuatorInverse`); the metrics count the
+ticks where the EIC rejected a non-finite or out-of-range BEM value (``bem_rejected``) or a
+non-finite command (``command_rejected``).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -16,7 +20,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from bemlearn.control.actuators import DirectTorque, FurutaMotor
+from bemlearn.control.actuator_inverse import MujocoActuatorInverse
 from bemlearn.control.bem_sources import make_bem_source
 from bemlearn.control.eic import EICController, EICGains
 from bemlearn.data.plant import SensedPlant
@@ -31,15 +35,21 @@ class ReferenceConfig:
     """A composite sinusoid for each actuated joint (the same for all when m > 1).
 
     Attributes:
-        amplitudes: rad per component.  frequencies_hz: Hz.  phases: rad.  offset: rad.
+        amplitudes: per component, in the actuated joints' unit (rad or m) (``null``: derived from the model).
+        frequencies_hz: per component, Hz (``null``: derived from the model).
+        phases: per component, rad (``null``: derived from the model).
+        offset: constant offset, in the actuated joints' unit (``null``: derived from the model).
     """
 
-    amplitudes: tuple[float, ...] = (0.3, 0.2)
-    frequencies_hz: tuple[float, ...] = (0.2, 0.4)
-    phases: tuple[float, ...] = (0.0, 0.0)
-    offset: float = 0.0
+    amplitudes: tuple[float, ...] | None = None
+    frequencies_hz: tuple[float, ...] | None = None
+    phases: tuple[float, ...] | None = None
+    offset: float | None = None
 
     def build(self, m: int) -> CompositeSinusoid:
+        if None in (self.amplitudes, self.frequencies_hz, self.phases, self.offset):
+            raise ValueError("simulate.reference: amplitudes, frequencies_hz, phases and offset must be set "
+                             "(derive them from the model with bemlearn.pipeline.complete_section)")
         if not (len(self.amplitudes) == len(self.frequencies_hz) == len(self.phases)):
             raise ValueError("reference: amplitudes, frequencies_hz and phases must have the same length")
         rows = lambda v: tuple(tuple(v) for _ in range(m))  # noqa: E731
@@ -48,15 +58,18 @@ class ReferenceConfig:
 
 @dataclass(frozen=True)
 class NominalConfig:
-    """The controller's model of the robot: relative parameter errors (Furuta only).
+    """The controller's model of the robot: relative parameter errors of the MJCF
+    (:mod:`bemlearn.robots.variants`).
 
     Attributes:
-        mass_scale: multiplies the pendulum mass m_p (and its inertias).
-        length_scale: multiplies the lengths L_p and L_r (inertias scale with length²).
+        mass_scale: multiplies the masses (and inertias) of ``bodies``.
+        length_scale: multiplies the lengths of ``bodies`` (inertias scale with length²).
+        bodies: the scaled bodies (None: every body).
     """
 
     mass_scale: float = 1.0
     length_scale: float = 1.0
+    bodies: tuple[str, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -65,21 +78,22 @@ class SimulateConfig:
 
     Attributes:
         duration_s: simulated time, s.
-        rate_hz: control rate, Hz.
+        rate_hz: control rate, Hz (``null``: derived from the model): the collection's rate.
         bem_source: ``"predictor"``, ``"model"`` or ``"zero"``.
         predictor: path of the exported ``bem_predictor.pt`` (for ``predictor``).
         reference: q_a^d(t).
-        gains: EIC gains.
+        gains: EIC gains (:class:`~bemlearn.control.EICGains`) (``null``: derived from the model).
         nominal: model mismatch of the controller's nominal model.
         sensor: encoder and velocity filter.
-        initial_qu: initial q_u, rad.
-        fall_window: |q_u| beyond this is a fall, rad.
+        initial_qu: initial q_u − nominal, in q_u's unit.
+        fall_window: |q_u − nominal| beyond this is a fall, in q_u's unit (``null``: derived from the model).
         warmup_s: samples before this time are excluded from the tracking RMSE, s.
         seed: sensor-noise seed.
+        physics_timestep: physics step, s (``null``: the model file's; derived finer when the file's step is too coarse).
     """
 
     duration_s: float = 60.0
-    rate_hz: float = 400.0
+    rate_hz: float | None = None
     bem_source: str = "predictor"
     predictor: str | None = None
     reference: ReferenceConfig = field(default_factory=ReferenceConfig)
@@ -87,9 +101,10 @@ class SimulateConfig:
     nominal: NominalConfig = field(default_factory=NominalConfig)
     sensor: SensorConfig = field(default_factory=lambda: SensorConfig(velocity_cutoff=100.0))
     initial_qu: float = 0.0
-    fall_window: float = 0.6
+    fall_window: float | None = None
     warmup_s: float = 1.0
     seed: int = 0
+    physics_timestep: float | None = None
 
 
 @dataclass(frozen=True)
@@ -113,20 +128,18 @@ class SimResult:
 
 
 def nominal_robot(robot_name: str, nominal: NominalConfig):
-    """The controller's model: the true model, or for the Furuta a mis-parametrized analytic one."""
-    from bemlearn.apps.furuta.model import AnalyticFuruta, FurutaParameters
-    from bemlearn.robots import load
+    """The controller's model: the true MJCF model, scaled by :func:`~bemlearn.robots.variants.
+    scaled_robot` when ``nominal`` asks for a mismatch (any MJCF robot)."""
+    from bemlearn.robots import MujocoRobot, load
+    from bemlearn.robots.variants import scaled_robot
 
-    if robot_name in ("furuta", "furuta-analytic"):
-        p = FurutaParameters()
-        ms, ls = nominal.mass_scale, nominal.length_scale
-        p = dataclasses.replace(p, m_p=p.m_p * ms, J_p=p.J_p * ms * ls**2, L_p=p.L_p * ls, L_r=p.L_r * ls)
-        robot = AnalyticFuruta(p)
-        robot.name = "furuta"
+    robot = load(robot_name)
+    if (nominal.mass_scale, nominal.length_scale) == (1.0, 1.0):
         return robot
-    if (nominal.mass_scale, nominal.length_scale) != (1.0, 1.0):
-        raise ValueError(f"simulate.nominal: parameter mismatch is only modelled for the Furuta, not {robot_name!r}")
-    return load(robot_name)
+    if not isinstance(robot, MujocoRobot):
+        raise ValueError(f"simulate.nominal: parameter mismatch needs an MJCF robot, {robot_name!r} is {type(robot).__name__}")
+    out = scaled_robot(robot.source, name=robot.name, mass_scale=nominal.mass_scale, length_scale=nominal.length_scale, bodies=nominal.bodies)
+    return out
 
 
 class _Timed:
@@ -166,6 +179,13 @@ def simulate(robot_name: str, config: SimulateConfig, *, progress: bool = True, 
 
 
 def _simulate(robot_name: str, config: SimulateConfig, *, progress: bool, reference) -> SimResult:
+    unset = [n for n in ("rate_hz", "fall_window") if getattr(config, n) is None]
+    unset += [f"gains.{n}" for n in ("kp_a", "kd_a", "kp_u", "kd_u") if getattr(config.gains, n) is None]
+    if unset and reference is None:
+        unset += [f"reference.{n}" for n in ("amplitudes", "frequencies_hz", "phases", "offset") if getattr(config.reference, n) is None]
+    if unset:
+        raise ValueError(f"simulate: {unset} not set; derive them from the model with "
+                         "bemlearn.pipeline.complete_section(robot, 'simulate', config) (as every pipeline command does) or give them")
     from bemlearn.robots import MujocoRobot, load
 
     plant = load(robot_name)
@@ -174,10 +194,11 @@ def _simulate(robot_name: str, config: SimulateConfig, *, progress: bool, refere
     nominal = nominal_robot(robot_name, config.nominal)
     bem = _Timed(make_bem_source(config.bem_source, robot=nominal, predictor=config.predictor))
     ref = reference if reference is not None else config.reference.build(plant.m)
-    actuator = FurutaMotor() if plant.name == "furuta" else DirectTorque(plant.input_matrix[list(plant.actuated_index)].numpy(), plant.model.actuator_ctrlrange[:, 1])
+    actuator = MujocoActuatorInverse(plant)
     ctrl = EICController(nominal, bem, ref, actuator, config.gains, rate_hz=config.rate_hz)
     model = plant.model
-    sensed = SensedPlant(plant, rate_hz=config.rate_hz, sensor=config.sensor, rng=np.random.default_rng(config.seed), where="simulate")
+    sensed = SensedPlant(plant, rate_hz=config.rate_hz, sensor=config.sensor, rng=np.random.default_rng(config.seed), where="simulate",
+                         timestep=config.physics_timestep)
     dt = sensed.dt
     n, m, iu, ia = plant.n, plant.m, plant.unactuated_index, list(plant.actuated_index)
     q0, qd0 = np.zeros(n), np.zeros(n)
@@ -194,7 +215,7 @@ def _simulate(robot_name: str, config: SimulateConfig, *, progress: bool, refere
     bar = tqdm(total=steps, desc=f"simulate ({config.bem_source})", unit="tick", disable=not progress, mininterval=0.5)
     for tick in range(steps):
         q_true = sensed.true_q()
-        if abs(q_true[iu] - plant.qu_nominal) > config.fall_window:
+        if not abs(q_true[iu] - plant.qu_nominal) <= config.fall_window:  # also a NaN state
             fell, k = True, tick
             break
         y, v = sensed.measure(q_true)
@@ -227,6 +248,8 @@ def _simulate(robot_name: str, config: SimulateConfig, *, progress: bool, refere
         "tracking_max": float(np.abs(err).max()) if mask.any() else float("nan"),
         "qu_max": float(np.abs(logs["q"][:, iu]).max()) if K else float("nan"),
         "u_max": float(np.abs(logs["u"]).max()) if K else float("nan"),
+        "bem_rejected": int(ctrl.bem_rejected),
+        "command_rejected": int(ctrl.command_rejected),
         "real_time_factor": float(K * dt / wall) if wall > 0 else float("inf"),
         "tick_us": {
             "physics": 1e6 * t_phys / max(K, 1),

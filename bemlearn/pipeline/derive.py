@@ -1,0 +1,271 @@
+"""Defaults derived from the robot's model, so that ``robot: my_robot.xml`` alone runs.
+
+Every function is a pure function of a :class:`~bemlearn.robots.MujocoRobot` (and of
+values derived before it) and returns a :class:`Derived`: the value plus a one-line note
+of how it was derived, for ``config show``.  The model scales used
+(:mod:`bemlearn.robots.scales`):
+
+* λ = √(Γ_q/D_uu), the unactuated row's instability rate with the actuated joints held;
+* the linearised BEM q_u^e ≈ s_p q_a + s_v q̇_a + s_a q̈_a at upright (eq. 9), so a sine
+  A sin ωt on an actuated joint moves the BEM by A·|s_p − s_a ω²| (:func:`bem_gain`);
+* the design region |q_u^e − nominal| ≤ 0.2 rad (or the q_u half range if smaller);
+* joint ranges and ``ctrlrange``.
+
+Frequencies are kept below ~λ/2π, where the BEM is a quasi-static balance and the
+momentum correction of the EIC converges (eq. 10); amplitudes are chosen so that one
+sine component at the top frequency moves the BEM by 1.5× the design bound, within the
+joint ranges.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from bemlearn.robots.scales import bem_gain, bem_slopes, instability_rate, qa_half_ranges, qu_half_range
+
+__all__ = [
+    "Derived",
+    "RateChoice",
+    "DESIGN_QU",
+    "design_region",
+    "control_rate",
+    "excitation_gains",
+    "excitation_signals",
+    "fall_window",
+    "initial_ranges",
+    "sensor",
+    "input_units",
+    "evaluation",
+    "eic_gains",
+    "closed_loop_reference",
+    "derive_all",
+]
+
+log = logging.getLogger(__name__)
+
+DESIGN_QU = 0.2
+"""The BEM range the data must cover, |q_u^e − nominal| ≤ 0.2 rad (issue 13)."""
+
+
+@dataclass(frozen=True)
+class Derived:
+    """A derived value and a one-line explanation of how it was obtained."""
+
+    value: Any
+    note: str
+
+
+@dataclass(frozen=True)
+class RateChoice:
+    """Control rate (Hz), physics steps per tick, physics timestep (s), and whether the
+    timestep differs from the model file's (then the plant must run with ``timestep``)."""
+
+    rate_hz: float
+    substeps: int
+    timestep: float
+    timestep_changed: bool
+
+
+def design_region(robot) -> Derived:
+    """Half width of the BEM design region: min(0.2, q_u half range), rad (m for a slide)."""
+    half = qu_half_range(robot)
+    d = min(DESIGN_QU, half)
+    return Derived(d, f"|q_u^e − nominal| ≤ {d:g} (issue 13's 0.2 rad, q_u half range {half:.3g})")
+
+
+def control_rate(robot, *, preferred_hz: float = 200.0, min_hz: float = 100.0, fine_timestep: float = 0.001) -> Derived:
+    """Control rate with a whole number of physics steps per tick.
+
+    rate = 1/(N h) with N = max(1, ⌊1/(preferred·h)⌋) for the file's timestep h; if that is
+    below ``min_hz`` (h too coarse, e.g. 20 ms) the physics runs at ``fine_timestep``
+    instead (logged) and N = round(1/(preferred·fine_timestep)).
+
+    Returns:
+        ``Derived(RateChoice, note)``.
+    """
+    h = float(robot.model.opt.timestep)
+    N = max(1, int(math.floor(1.0 / (preferred_hz * h) + 1e-9)))
+    rate = 1.0 / (N * h)
+    if rate >= min_hz:
+        return Derived(RateChoice(rate, N, h, False), f"{rate:g} Hz = {N} physics steps of the file's {h:g} s (target ≥ {preferred_hz:g} Hz)")
+    N = max(1, int(round(1.0 / (preferred_hz * fine_timestep))))
+    rate = 1.0 / (N * fine_timestep)
+    note = (f"{rate:g} Hz = {N} physics steps of {fine_timestep:g} s: the file's timestep {h:g} s is coarser than "
+            f"1/{min_hz:g} Hz, so the plant is simulated with the finer step")
+    log.info("%s: %s", robot.name, note)
+    return Derived(RateChoice(rate, N, fine_timestep, True), note)
+
+
+def excitation_gains(robot, rate: RateChoice) -> Derived:
+    """Excitation feedback u = K e (collect's convention) by discrete LQR (:mod:`bemlearn.control.lqr`).
+
+    Returns:
+        ``Derived({"gains": tuple (m·2n,), "gain_scale": (0.6, 1.4)}, note)``.
+    """
+    from bemlearn.control.lqr import discrete_lqr
+
+    d = design_region(robot).value
+    res = discrete_lqr(robot, rate_hz=rate.rate_hz, timestep=rate.timestep, design_qu=d, qu0=0.25 * d)
+    gains = tuple(float(f"{k:.6g}") for k in res.K.ravel())
+    scale, frac = _robust_gain_scale(res.A, res.B, res.K)
+    note = (f"discrete LQR of mjd_transitionFD at {rate.rate_hz:g} Hz, Bryson weights (|q_u| ≤ {d:g}, joint ranges, ctrlrange"
+            f"{'' if res.r_scale == 1 else f', R × {res.r_scale:g} to stay in ctrlrange'}); closed-loop spectral radius "
+            f"{res.spectral_radius:.4f}; per-trial gain scale U{scale}: the widest of ±40/20/10 % with ≥ 95 % of 400 "
+            f"random per-gain scalings stable ({100 * frac:.0f} %), else none")
+    return Derived({"gains": gains, "gain_scale": scale}, note)
+
+
+def _robust_gain_scale(A: np.ndarray, B: np.ndarray, K: np.ndarray, *, draws: int = 400) -> tuple[tuple[float, float], float]:
+    """The widest per-gain scale range U(1 − w, 1 + w), w ∈ {0.4, 0.2, 0.1, 0}, for which at least
+    95 % of random scalings keep the linear tick map stable (spectral radius < 1)."""
+    rng = np.random.default_rng(0)
+    for w in (0.4, 0.2, 0.1):
+        s = rng.uniform(1 - w, 1 + w, size=(draws,) + K.shape)
+        rho = np.array([np.max(np.abs(np.linalg.eigvals(A + B @ (K * si)))) for si in s])
+        frac = float(np.mean(rho < 1.0))
+        if frac >= 0.95:
+            return (1 - w, 1 + w), frac
+    return (1.0, 1.0), 1.0
+
+
+def _frequency_band(robot, rate: RateChoice) -> tuple[float, float, float]:
+    lam = instability_rate(robot)
+    f_hi = float(np.clip(1.4 * lam / (2 * math.pi), 0.5, rate.rate_hz / 40))
+    return f_hi / 15, f_hi, lam
+
+
+def excitation_signals(robot, rate: RateChoice, *, n_sines: tuple[int, int] = (2, 4)) -> Derived:
+    """Sine amplitudes and frequencies of the excitation reference (collect's ranges).
+
+    f ∈ [f_hi/15, f_hi], f_hi = 1.4 λ/2π (clipped to [0.5 Hz, rate/40]); the top amplitude
+    A_hi makes one component at f_hi move the BEM by 1.5 × the design bound,
+    A_hi = 1.5 d / max_j |s_p,j − s_a,j ω_hi²|, capped so that n_max components stay within
+    0.8 × the tightest limited joint's half range; the bottom amplitude is A_hi / 10.
+
+    Returns:
+        ``Derived({"n_sines", "amplitude", "frequency_hz"}, note)`` (amplitudes in rad or m).
+    """
+    d = design_region(robot).value
+    f_lo, f_hi, lam = _frequency_band(robot, rate)
+    slopes = bem_slopes(robot)
+    g_hi = float(np.max(bem_gain(slopes, 2 * math.pi * f_hi)))
+    a_bem = 1.5 * d / max(g_hi, 1e-12)
+    limited = _limited_actuated(robot)
+    half = qa_half_ranges(robot)
+    cap = float(np.min(0.8 * half[limited] / n_sines[1])) if limited.any() else math.inf
+    a_hi = min(a_bem, cap)
+    reach = a_hi * g_hi * n_sines[1]
+    note = (f"f ∈ [{f_lo:.3g}, {f_hi:.3g}] Hz (f_hi = 1.4 λ/2π, λ = {lam:.3g} 1/s); A ≤ {a_hi:.3g} "
+            f"({'1.5 × design bound / BEM gain at f_hi' if a_hi == a_bem else 'joint range / n_max'}); "
+            f"n_max components at f_hi reach |q_u^e| ≈ {reach:.3g}")
+    if reach < d:
+        log.warning("%s: the excitation reaches |q_u^e| ≈ %.3g < %.3g within the joint ranges", robot.name, reach, d)
+    return Derived({"n_sines": tuple(n_sines), "amplitude": (a_hi / 10, a_hi), "frequency_hz": (f_lo, f_hi)}, note)
+
+
+def _limited_actuated(robot) -> np.ndarray:
+    if not np.allclose(robot.T.numpy(), np.eye(robot.n)):
+        return np.ones(robot.m, dtype=bool)
+    return np.array([bool(robot.model.jnt_limited[j]) for j in robot.actuated_index])
+
+
+def fall_window(robot) -> Derived:
+    """|q_u − nominal| beyond which a trial or run has fallen: min(3 d, 0.9 × q_u half range)."""
+    d = design_region(robot).value
+    w = min(3 * d, 0.9 * qu_half_range(robot))
+    return Derived(w, f"{w:.3g} = min(3 × design bound, 0.9 × q_u half range)")
+
+
+def initial_ranges(robot) -> Derived:
+    """Initial-state ranges of the excitation trials: q_u ± d/4, q_a ± min(0.1, 0.1 × half range)."""
+    d = design_region(robot).value
+    qa = float(min(0.1, 0.1 * np.min(qa_half_ranges(robot))))
+    return Derived({"initial_qa": (-qa, qa), "initial_qu": (-d / 4, d / 4)}, f"q_u ± {d / 4:.3g} (design bound / 4), q_a ± {qa:.3g}")
+
+
+def sensor(robot, rate: RateChoice) -> Derived:
+    """Encoder and velocity filter: 4096 counts/rev for hinges (a common optical encoder,
+    1.53 mrad), 2.5e-5 m/count for slides (a typical linear encoder), velocity filter cutoff
+    ω_c = clip(10 λ, 50, 0.2 · 2π · rate) rad/s.
+
+    Returns:
+        ``Derived(dict of SensorConfig fields, note)``.
+    """
+    lam = instability_rate(robot)
+    wc = float(np.clip(10 * lam, 50.0, 0.2 * 2 * math.pi * rate.rate_hz))
+    slide = "slide" in getattr(robot, "joint_kinds", ())
+    out = {"counts_per_rev": 4096, "noise_std": 0.0, "velocity_cutoff": wc, "m_per_count": 2.5e-5 if slide else 0.0}
+    note = f"hinges 4096 counts/rev{', slides 2.5e-5 m/count' if slide else ''} (defaults, not from the model); velocity filter {wc:.3g} rad/s = clip(10 λ, 50, 0.2·2π·rate)"
+    return Derived(out, note)
+
+
+def input_units(robot) -> Derived:
+    """Unit of the logged inputs: N·m / N for a unit-gain unbiased motor on a hinge / slide, else ``ctrl``."""
+    model = robot.model
+    kinds = set()
+    for i in range(model.nu):
+        direct = model.actuator_gear[i, 0] == 1 and model.actuator_gainprm[i, 0] == 1 and not np.any(model.actuator_biasprm[i, :3])
+        j = int(model.actuator_trnid[i, 0])
+        kinds.add(("N·m" if robot.joint_kinds[j] == "hinge" else "N") if direct else "ctrl")
+    unit = kinds.pop() if len(kinds) == 1 else "ctrl"
+    return Derived(unit, f"{unit} (actuator gain/gear {'are unit' if unit != 'ctrl' else 'are not unit: commands are in ctrl units'})")
+
+
+def evaluation(robot, signals: dict, *, n_references: int = 5) -> Derived:
+    """Held-out references inside the collected ranges: frequencies in the lower 2/3 of the
+    excitation band, Σ|A_k| ≤ twice the amplitude at which one sine at that band's top moves
+    the BEM by the design bound (the components spread over the band, so the BEM peaks near
+    the bound), and ≤ n_max × the collected top amplitude.
+
+    Returns:
+        ``Derived(dict of EvaluationConfig fields, note)``.
+    """
+    d = design_region(robot).value
+    f_lo, f_hi = signals["frequency_hz"]
+    f_top = f_lo + (f_hi - f_lo) * 2 / 3
+    g = float(np.max(bem_gain(bem_slopes(robot), 2 * math.pi * f_top)))
+    a_max = min(2 * d / max(g, 1e-12), signals["n_sines"][1] * signals["amplitude"][1])
+    out = {"n_references": n_references, "n_sines": (2, 3), "amplitude_max": a_max, "amplitude_min": 0.5 * a_max,
+           "frequency_hz": (f_lo, f_top)}
+    note = f"f ∈ [{f_lo:.3g}, {f_top:.3g}] Hz, Σ|A| ∈ [{0.5 * a_max:.3g}, {a_max:.3g}] (one sine of Σ|A|/2 at {f_top:.3g} Hz moves the BEM by the design bound)"
+    return Derived(out, note)
+
+
+def derive_all(robot) -> dict[str, Derived]:
+    """Every derived default of ``robot``, keyed ``collect.<field>``, ``evaluate``, ``simulate.<field>``."""
+    rate = control_rate(robot)
+    r = rate.value
+    sig = excitation_signals(robot, r)
+    gains = excitation_gains(robot, r)
+    init = initial_ranges(robot)
+    fw = fall_window(robot)
+    sen = sensor(robot, r)
+    out = {
+        "collect.rate_hz": Derived(r.rate_hz, rate.note),
+        "collect.physics_timestep": Derived(r.timestep if r.timestep_changed else None, rate.note),
+        "collect.gains": Derived(gains.value["gains"], gains.note),
+        "collect.gain_scale": Derived(gains.value["gain_scale"], gains.note),
+        "collect.fall_window": fw,
+        "collect.input_units": input_units(robot),
+        "collect.sensor": sen,
+        "evaluate": evaluation(robot, sig.value),
+        "simulate.rate_hz": Derived(r.rate_hz, rate.note),
+        "simulate.physics_timestep": Derived(r.timestep if r.timestep_changed else None, rate.note),
+        "simulate.gains": eic_gains(robot, r),
+        "simulate.reference": closed_loop_reference(robot, sig.value),
+        "simulate.fall_window": fw,
+        "simulate.sensor": Derived({**sen.value, "velocity_cutoff": 2 * sen.value["velocity_cutoff"]}, sen.note + "; × 2 in the closed loop"),
+    }
+    for k in ("n_sines", "amplitude", "frequency_hz"):
+        out[f"collect.{k}"] = Derived(sig.value[k], sig.note)
+    for k in ("initial_qa", "initial_qu"):
+        out[f"collect.{k}"] = Derived(init.value[k], init.note)
+    return out
+
+
+from bemlearn.pipeline.derive_loop import closed_loop_reference, eic_gains  # noqa: E402  (re-export; derive_loop imports this module)

@@ -1,0 +1,84 @@
+"""Model scales of a balance robot at upright, from which defaults are derived.
+
+* Instability rate of the unactuated row with the actuated joints held (eq. 5 linearised):
+      D_uu δq̈_u = Γ_q δq_u,   Γ_q = −∂Γ_0/∂q_u,   λ = √(Γ_q / D_uu)   (1/s)
+* Linearised BEM (eq. 9) about upright, per actuated coordinate j:
+      q_u^e ≈ q_u,nominal + s_p,j q_a,j + s_v,j q̇_a,j + s_a,j q̈_a,j
+  so a reference component A sin ωt on joint j moves the BEM by A |s_p,j − s_a,j ω²| (and
+  s_v,j ω in quadrature).
+* Half ranges of the coordinates (joint ``range`` when limited, else a default).
+
+Units follow the joint (rad or m).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+__all__ = ["instability_rate", "bem_slopes", "qu_half_range", "qa_half_ranges", "bem_gain", "UNLIMITED_HALF_RANGE"]
+
+UNLIMITED_HALF_RANGE = 0.5
+"""Half range assumed for an unlimited actuated coordinate, rad or m."""
+
+
+def instability_rate(robot, *, step: float = 1e-5) -> float:
+    """λ = √(|Γ_q| / D_uu) at upright (1/s); see the module docstring."""
+    n, iu = robot.n, robot.unactuated_index
+    m = robot.m
+    z = torch.zeros(2, m, dtype=torch.float64)
+    qu = torch.tensor([robot.qu_nominal + step, robot.qu_nominal - step], dtype=torch.float64)
+    g = robot.gamma0(qu, z, z, z)
+    gq = -float(g[0] - g[1]) / (2 * step)
+    q0 = torch.zeros(1, n, dtype=torch.float64)
+    q0[0, iu] = robot.qu_nominal
+    duu = float(robot.mass_matrix(q0)[0, iu, iu])
+    return math.sqrt(abs(gq) / duu)
+
+
+def bem_slopes(robot, *, step: float = 1e-4) -> np.ndarray:
+    """``(3, m)`` rows (s_p, s_v, s_a): ∂q_u^e/∂q_a, ∂/∂q̇_a, ∂/∂q̈_a at upright (module docstring)."""
+    m = robot.m
+    rows = np.zeros((6 * m, 3, m))
+    for k in range(3):
+        for j in range(m):
+            rows[(2 * k) * m + j, k, j] = step
+            rows[(2 * k + 1) * m + j, k, j] = -step
+    qa, qad, qadd = (torch.from_numpy(rows[:, k].copy()) for k in range(3))
+    qu = robot.bem(qa, qad, qadd).qu.numpy()
+    if not np.all(np.isfinite(qu)):
+        raise ValueError(f"bem_slopes: robot {robot.name!r} has no BEM near upright")
+    out = np.empty((3, m))
+    for k in range(3):
+        for j in range(m):
+            out[k, j] = (qu[(2 * k) * m + j] - qu[(2 * k + 1) * m + j]) / (2 * step)
+    return out
+
+
+def bem_gain(slopes: np.ndarray, omega: float | np.ndarray) -> np.ndarray:
+    """|Δq_u^e| per unit amplitude of a sine at ω (rad/s) on each actuated joint, ``(m,)`` or ``(m, K)``."""
+    w = np.asarray(omega, dtype=np.float64)
+    sp, sv, sa = (s.reshape(s.shape + (1,) * w.ndim) for s in slopes)
+    return np.hypot(sp - sa * w**2, sv * w)
+
+
+def qu_half_range(robot) -> float:
+    """Distance from q_u,nominal to the nearer end of the admissible q_u range (rad or m)."""
+    lo, hi = robot.qu_range
+    return float(min(hi - robot.qu_nominal, robot.qu_nominal - lo))
+
+
+def qa_half_ranges(robot) -> np.ndarray:
+    """``(m,)`` half ranges of the actuated coordinates: min(|lo|, |hi|) of a limited joint,
+    else :data:`UNLIMITED_HALF_RANGE` (also when the model declares a coordinate map)."""
+    out = np.full(robot.m, UNLIMITED_HALF_RANGE)
+    model = robot.model
+    if not np.allclose(robot.T.numpy(), np.eye(robot.n)):
+        return out
+    for k, j in enumerate(robot.actuated_index):
+        if model.jnt_limited[j]:
+            lo, hi = model.jnt_range[j]
+            out[k] = float(min(abs(lo), abs(hi)))
+    return out
