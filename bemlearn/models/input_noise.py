@@ -29,7 +29,7 @@ import torch
 
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["mean_gradient", "savgol_noise_std", "quantization_input_std", "propagated_variance"]
+__all__ = ["mean_gradient", "savgol_noise_std", "estimator_noise_gains", "quantization_input_std", "propagated_variance"]
 
 
 def mean_gradient(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
@@ -53,13 +53,37 @@ def savgol_noise_std(window: int, polyorder: int, sample_rate_hz: float, step: f
     return base * float(np.linalg.norm(h1)), base * float(np.linalg.norm(h2))
 
 
-def quantization_input_std(input_names: tuple[str, ...], *, window: int, polyorder: int,
-                           sample_rate_hz: float, step: float) -> torch.Tensor:
-    """s of (N3) for every GP column (``qdd_*``, ``qd_*``, ``q_*``): ``(d,)`` in each column's unit."""
-    sd, sdd = savgol_noise_std(window, polyorder, sample_rate_hz, step)
+def estimator_noise_gains(estimator, sample_rate_hz: float) -> tuple[float, float]:
+    """(‖h₁‖ s⁻¹, ‖h₂‖ s⁻²) of any *linear* derivative estimator, from its impulse response.
+
+    The estimator (``bemlearn.data.derivatives``) is applied to a unit impulse in the middle of
+    a zero signal long enough for its interior; the centre responses are its coefficients, so
+    white input noise of std σ gives q̇, q̈ noise of std σ‖h₁‖, σ‖h₂‖ (eq. N3).
+    """
+    n = max(estimator.min_samples(sample_rate_hz), 3)
+    T = 4 * n + 1
+    impulse = np.zeros((T, 1))
+    impulse[T // 2] = 1.0
+    qd, qdd = estimator(impulse, sample_rate_hz=sample_rate_hz)
+    interior = slice(n, T - n)
+    return float(np.linalg.norm(qd[interior])), float(np.linalg.norm(qdd[interior]))
+
+
+def quantization_input_std(input_names: tuple[str, ...], steps: dict[str, float], *, estimator,
+                           sample_rate_hz: float) -> torch.Tensor:
+    """s of (N3) for every GP column (``qdd_<j>``, ``qd_<j>``, ``q_<j>``): ``(d,)``, each column's unit.
+
+    Args:
+        steps: quantization step Δ of each joint ``{name: Δ}`` (rad or m); a joint without an
+            entry (no quantization detected) gets s = 0.
+        estimator: the derivative estimator that built the inputs.
+    """
+    g1, g2 = estimator_noise_gains(estimator, sample_rate_hz)
     out = []
     for name in input_names:
-        out.append(sdd if name.startswith("qdd_") else sd if name.startswith("qd_") else step / math.sqrt(12.0))
+        prefix, joint = name.split("_", 1)
+        base = steps.get(joint, 0.0) / math.sqrt(12.0)
+        out.append(base * (g2 if prefix == "qdd" else g1 if prefix == "qd" else 1.0))
     return torch.tensor(out, dtype=torch.float64)
 
 

@@ -129,6 +129,9 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         model, lik, x_mean=train.x_mean, x_std=train.x_std, y_mean=train.y_mean, y_std=train.y_std,
         input_names=names, n_train=len(train),
     )
+    from bemlearn.pipeline.uncertainty import calibrate_band
+
+    state, band_summary = calibrate_band(state, traj, config.dataset, seed=config.dataset.seed)  # std of eq. (B1)
     hyp = hyperparameter_metrics(model, lik)
     phys_ls = {n: float(state.lengthscale[j] * state.x_std[j]) for j, n in enumerate(names)}
     meta = traj.meta
@@ -156,7 +159,8 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
             "hyperparameters": {**hyp, "lengthscale_physical": phys_ls},
             "bemlearn_version": __version__,
             "data_sha256": file_sha256(data_path),
-            "extra": {"interrupted": interrupted, "data_file": str(data_path), "dataset_report": ds.report},
+            "extra": {"interrupted": interrupted, "data_file": str(data_path), "dataset_report": ds.report,
+                      "uncertainty": band_summary},
         },
     )
     metrics: dict = {"fit": fit_summary, "hyperparameters": hyp, "lengthscale_physical": phys_ls, "n_train": len(train), "n_val": len(val), "dataset": ds.report, "interrupted": interrupted}
@@ -169,6 +173,11 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         metrics["val_mean_log_likelihood"] = float((-0.5 * (err**2 / var_pred + var_pred.log() + math.log(2 * math.pi))).mean())
         writer.add_scalar("val/rmse", metrics["val_rmse"], 0)
         writer.add_scalar("val/mean_log_likelihood", metrics["val_mean_log_likelihood"], 0)
+        from bemlearn.models.band import band_reference
+
+        band = band_reference(state, val.x)[1]  # model-free: held-out q_u inside ±2√(σ_band² + σ_0²)
+        metrics["val_coverage_2sigma_band"] = float((err.abs() <= 2 * (band**2 + state.y_std**2 * state.noise).sqrt()).double().mean())
+        metrics["val_coverage_2sigma_predictive"] = float((err.abs() <= 2 * var_pred.sqrt()).double().mean())
     # held-out learned BEM vs model-based BEM (eq. 14 vs 9)
     from bemlearn.pipeline.evaluation import EvaluationConfig
 
@@ -177,6 +186,11 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     ev = evaluate_bem(state, robot, held_out_references(ecfg, robot.m), duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
     curves = ev.pop("curves")
     metrics["bem_heldout"] = ev
+    metrics["uncertainty"] = band_summary
+    writer.add_scalar("bem/coverage_2sigma_band", ev["coverage_2sigma_band"], 0)
+    from bemlearn.pipeline.reliability import reliability_figure
+
+    writer.add_figure("bem/reliability", reliability_figure(ev["reliability"]), 0)
     for k in ("rmse", "max_abs", "coverage_2sigma_latent", "coverage_2sigma_predictive"):
         writer.add_scalar(f"bem/{k}", ev[k], 0)
     fig = _bem_figure(curves, meta.unactuated)
