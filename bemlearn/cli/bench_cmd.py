@@ -7,7 +7,8 @@
 * ``bench gpdm`` — GPDM fit time and recovery on synthetic gait data (issue 7);
 * ``bench biped-bem [CONFIG] [--data D | --collect-seeds S …]`` — learned torso BEM error over training
   subsets and training walks (issue 7);
-* ``bench walks [CONFIG]`` — seeded biped walks per gait and torso BEM source (issue 7).
+* ``bench walks [CONFIG]`` — seeded biped walks per gait and torso BEM source (issue 7);
+* ``bench uncertainty`` — candidate BEM bands: coverage, sharpness, bound violations, cost (issue 15).
 """
 
 from __future__ import annotations
@@ -90,6 +91,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     w.add_argument("--sensor-noise", type=float, default=0.001, help="encoder noise std, rad (default 0.001)")
     w.add_argument("--no-progress", action="store_true")
     w.set_defaults(func=_walks)
+    u = sub.add_parser("uncertainty", help="candidate BEM bands: coverage of the model BEM, sharpness, bound violations, cost",
+                       description="Fit the Furuta (and a generated cart-pole) BEM GP and score each candidate band "
+                       "on held-out references against the model-based BEM (see bemlearn/bench/uncertainty_bench.py).")
+    u.add_argument("--config", type=Path, default=Path("configs/furuta.yaml"))
+    u.add_argument("--data", type=Path, default=Path("data/furuta_excitation.npz"))
+    u.add_argument("--no-cartpole", action="store_true", help="only the Furuta (the cart-pole collects ~10 s of trials)")
+    u.add_argument("--workdir", type=Path, default=None, help="keep the cart-pole MJCF and data here (default: a temp dir)")
+    u.add_argument("--json", type=Path, default=None, help="also write the full results (reliability tables) as JSON")
+    u.set_defaults(func=_uncertainty)
 
 
 def run_predict(args: argparse.Namespace) -> int:
@@ -190,4 +200,17 @@ def _walks(args: argparse.Namespace) -> int:
                           initial_noise=args.initial_noise, sensor_noise=args.sensor_noise,
                           progress=not args.no_progress)
     print(format_walk_bench(rows, steps=args.steps))
+    return 0
+
+
+def _uncertainty(args: argparse.Namespace) -> int:
+    import json
+
+    from bemlearn.bench.uncertainty_bench import format_uncertainty_bench, run_uncertainty_bench
+
+    results = run_uncertainty_bench(furuta_config=args.config, furuta_data=args.data, cartpole=not args.no_cartpole,
+                                    workdir=args.workdir, progress=print)
+    print(format_uncertainty_bench(results))
+    if args.json is not None:
+        args.json.write_text(json.dumps(results, indent=1, default=float))
     return 0
