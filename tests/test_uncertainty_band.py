@@ -217,10 +217,10 @@ def test_replica_calibration_sees_trial_correlated_errors():
     q = torch.randn(500, 5, generator=g, dtype=F64) * 0.7
     iid = f + 0.1 * torch.randn(len(f), generator=g, dtype=F64)
     c_iid = calibrate_replicas(st, x, iid, trial, q, n_points=300, n_pairs=4)
-    offset = 0.2 * torch.randn(n_trials, generator=g, dtype=F64)[trial]
+    offset = 0.5 * torch.randn(n_trials, generator=g, dtype=F64)[trial]
     c_off = calibrate_replicas(st, x, iid + offset, trial, q, n_points=300, n_pairs=4)
     assert c_iid.raw_scale <= 1.4 and c_iid.scale == 1.0, c_iid
-    assert c_off.scale >= 2.0 * max(c_iid.raw_scale, 1.0), (c_iid, c_off)
+    assert c_off.raw_scale >= 2.0 * c_iid.raw_scale and c_off.scale >= 1.5, (c_iid, c_off)
     with pytest.raises(ValueError, match="2 distinct trials"):
         calibrate_replicas(st, x, iid, torch.zeros_like(trial), q)
 
