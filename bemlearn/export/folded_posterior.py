@@ -226,12 +226,12 @@ class FoldedPosterior(nn.Module):
     def _mean_band(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         k, v = self._kernel_v(x)
         mean = torch.addmv(self.offset, k, self.w)
-        var = self._latent_var(k).mul_(self.scale2)
+        var = self._latent_var(k)
         if self.banded:
             h = torch.mm(k, self.G)
             g = torch.addcmul(h[:, : self.n_inputs], v * h[:, self.n_inputs :], self.gamma)
-            var = var + torch.linalg.vecdot(g, g)
-        return mean, var.sqrt_()
+            return mean, torch.add(torch.linalg.vecdot(g, g), var, alpha=self.scale2).sqrt_()
+        return mean, var.mul_(self.scale2).sqrt_()
 
     def _mean(self, x: torch.Tensor) -> torch.Tensor:
         return torch.addmv(self.offset, self._kernel(x), self.w)
