@@ -209,11 +209,11 @@ def _bem_figure(curves: dict, qu_name: str):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    t, model, mean, std = curves["t"], curves["model"], curves["mean"], curves["std"]
+    t, model, mean, std = curves["t"], curves["model"], curves["mean"], curves.get("band_std", curves["std"])
     fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
     ax[0].plot(t, model, "k", lw=1.2, label="model-based BEM (eq. 9)")
     ax[0].plot(t, mean, "C1--", lw=1.2, label="learned BEM μ(x₀ᵉ) (eq. 14)")
-    ax[0].fill_between(t, mean - 2 * std, mean + 2 * std, color="C1", alpha=0.25, label="±2σ")
+    ax[0].fill_between(t, mean - 2 * std, mean + 2 * std, color="C1", alpha=0.25, label="±2σ (calibrated band, eq. B1)")
     ax[0].set_ylabel(f"{qu_name} (rad)")
     ax[0].legend(fontsize=8)
     ax[0].set_title("held-out composite-sinusoid reference")
