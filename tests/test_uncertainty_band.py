@@ -16,14 +16,29 @@ import pytest
 import torch
 
 from bemlearn.data import make_estimator
-from bemlearn.export import BEMPredictor, PredictorMetadata, load_pt2_predictor, save_pt2, script_predictor
+from bemlearn.export import (
+    BEMPredictor,
+    PredictorMetadata,
+    load_pt2_predictor,
+    save_pt2,
+    script_predictor,
+)
 from bemlearn.export.checkpoint import load_checkpoint, write_checkpoint
 from bemlearn.export.folded_posterior import FoldedPosterior
 from bemlearn.export.variance_factor import kernel_gram, variance_factor
 from bemlearn.export.verify import verify_predictor
-from bemlearn.fitting.calibration import calibrate_replicas, condition_state, gaussian_quantile
+from bemlearn.fitting.calibration import (
+    calibrate_replicas,
+    condition_state,
+    gaussian_quantile,
+)
 from bemlearn.models.band import band_reference
-from bemlearn.models.input_noise import estimator_noise_gains, mean_gradient, quantization_input_std, savgol_noise_std
+from bemlearn.models.input_noise import (
+    estimator_noise_gains,
+    mean_gradient,
+    quantization_input_std,
+    savgol_noise_std,
+)
 from bemlearn.models.learned_bem import LearnedBEM
 from bemlearn.models.predictor_state import PredictorState
 from bemlearn.pipeline.reliability import reliability_table
@@ -137,7 +152,7 @@ def test_export_parity_band_and_latent(exported):
 def test_metadata_documents_the_band(exported):
     import json
 
-    state, eager, scripted, _ = exported
+    state, _, scripted, _ = exported
     doc = json.loads(scripted.metadata())
     assert doc["uncertainty"]["std_scale"] == pytest.approx(1.3, rel=0, abs=0)
     assert doc["normalization"]["input_std"] == state.input_std.tolist()
@@ -154,8 +169,8 @@ def test_old_checkpoint_without_band_fields_loads_as_latent(tmp_path):
     old = load_checkpoint(path).predictor_state
     assert float(old.std_scale) == 1.0 and bool((old.input_std == 0).all())
     x = _x(state, 20)
-    mean, std = BEMPredictor(old, _meta(old))(x[:, :3].contiguous())
-    ref_mean, ref_lat = old.predict_reference(torch.cat([x[:, :3], torch.zeros(20, 2, dtype=F64)], 1))
+    _, std = BEMPredictor(old, _meta(old))(x[:, :3].contiguous())
+    _, ref_lat = old.predict_reference(torch.cat([x[:, :3], torch.zeros(20, 2, dtype=F64)], 1))
     torch.testing.assert_close(std, ref_lat, rtol=1e-8, atol=0)
     again = load_checkpoint(write_checkpoint(tmp_path / "new", model_state={}, predictor_state=state, metadata=_meta(state)))
     torch.testing.assert_close(again.predictor_state.input_std, state.input_std, rtol=0, atol=0)
@@ -183,7 +198,7 @@ def test_noisy_input_band_covers_truth_with_known_input_noise():
     g = torch.Generator().manual_seed(3)
     s = torch.tensor([0.15, 0.15, 0.15, 0.15, 0.15], dtype=F64)
     w = torch.tensor([0.9, -0.6, 0.5, 0.4, -0.3], dtype=F64)
-    f = lambda x: torch.sin(x @ w)  # noqa: E731
+    f = lambda x: torch.sin(x @ w)
     xt = torch.randn(1500, 5, generator=g, dtype=F64)
     xh = xt + s * torch.randn(1500, 5, generator=g, dtype=F64)
     st = _state(n=3, std_scale=1.0, input_std=tuple(s.tolist()))

@@ -29,7 +29,7 @@ import torch
 
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["mean_gradient", "savgol_noise_std", "estimator_noise_gains", "quantization_input_std", "propagated_variance"]
+__all__ = ["estimator_noise_gains", "mean_gradient", "propagated_variance", "quantization_input_std", "savgol_noise_std"]
 
 
 def mean_gradient(state: PredictorState, x: torch.Tensor) -> torch.Tensor:

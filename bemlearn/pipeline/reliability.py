@@ -13,7 +13,7 @@ import numpy as np
 
 from bemlearn.fitting.calibration import gaussian_quantile
 
-__all__ = ["NOMINAL_LEVELS", "reliability_table", "reliability_figure"]
+__all__ = ["NOMINAL_LEVELS", "reliability_figure", "reliability_table"]
 
 #: Nominal levels of the reliability diagram (50–99 %).
 NOMINAL_LEVELS = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 0.99)
