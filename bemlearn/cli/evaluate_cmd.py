@@ -55,5 +55,10 @@ def run(args) -> int:
     print(f"{'all':<10}{ev['rmse']:>12.5f}{ev['max_abs']:>12.5f}")
     print(f"inside ±2σ: {100 * ev['coverage_2sigma_latent']:.1f}% with the latent std, "
           f"{100 * ev['coverage_2sigma_predictive']:.1f}% with the predictive std (eq. 12 as printed: k* includes σ_0²)")
+    if "coverage_2sigma_band" in ev:
+        v = ev["bound_violation"]
+        print(f"calibrated band (exported std): inside ±2σ {100 * ev['coverage_2sigma_band']:.1f}%, median σ / RMSE "
+              f"{ev['median_band_std_over_rmse']:.2f}; eq. (13)/(15) bound at κ = 2 violated {100 * v['observed']:.1f}% "
+              f"(nominal {100 * v['nominal']:.1f}%)")
     print(f"wrote {out / 'evaluation.json'} and {out / 'evaluation.png'}")
     return 0
