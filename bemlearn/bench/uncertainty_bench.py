@@ -41,7 +41,7 @@ from bemlearn.models.input_noise import mean_gradient, quantization_input_std
 from bemlearn.pipeline.reliability import reliability_table
 from bemlearn.pipeline.uncertainty import calibrate_band
 
-__all__ = ["format_uncertainty_bench", "run_case", "run_uncertainty_bench"]
+__all__ = ["format_seed_sweep", "format_uncertainty_bench", "run_case", "run_seed_sweep", "run_uncertainty_bench"]
 
 def _references(case: BenchCase, state) -> tuple[torch.Tensor, np.ndarray]:
     from bemlearn.pipeline.evaluation import ground_truth_robot, held_out_references
@@ -230,15 +230,64 @@ def run_case(case: BenchCase, *, progress=print) -> dict:
             "quantization_input_std": s_q.tolist(), "input_names": list(tr.input_names), "nigp_noise": nigp_noise}
 
 
+def run_seed_sweep(case: BenchCase, seeds, *, progress=print) -> list[dict]:
+    """The chosen band as ``bemlearn train`` computes it, over dataset seeds (training draw
+    *and* train/validation trial split change): robustness of coverage and sharpness."""
+    from bemlearn.data import build_datasets, read_trajectory
+    from bemlearn.fitting import train_gp
+    from bemlearn.models import predictor_state
+    from bemlearn.pipeline.evaluation import (
+        evaluate_bem,
+        ground_truth_robot,
+        held_out_references,
+    )
+
+    cfg = case.config
+    traj = read_trajectory(case.data_path, robot=cfg.robot)
+    robot = ground_truth_robot(cfg.robot)
+    ev_cfg = case.evaluation
+    rows = []
+    for seed in seeds:
+        dcfg = dataclasses.replace(cfg.dataset, seed=int(seed))
+        tr = build_datasets(traj, dcfg).train
+        model, lik, _ = train_gp(tr.x_normalized, tr.y_normalized, config=cfg.train)
+        st = predictor_state(model, lik, x_mean=tr.x_mean, x_std=tr.x_std, y_mean=tr.y_mean, y_std=tr.y_std,
+                             input_names=tr.input_names, n_train=len(tr))
+        st, summary = calibrate_band(st, traj, dcfg, seed=int(seed))
+        ev = evaluate_bem(st, robot, held_out_references(ev_cfg, robot.m), duration_s=ev_cfg.duration_s, rate_hz=ev_cfg.rate_hz)
+        row = {"robot": case.name, "seed": int(seed), "rmse": ev["rmse"], "latent": ev["coverage_2sigma_latent"],
+               "band": ev["coverage_2sigma_band"], "median_over_rmse": ev["median_band_std_over_rmse"],
+               "c": summary["std_scale"], "violation": ev["bound_violation"]["observed"]}
+        progress(f"{case.name} dataset seed {seed}: BEM RMSE {row['rmse']:.5f}, band {100 * row['band']:.1f}%")
+        rows.append(row)
+    return rows
+
+
+def format_seed_sweep(rows: list[dict]) -> str:
+    """Markdown table of :func:`run_seed_sweep` rows."""
+    lines = [("| robot | dataset seed | BEM RMSE (rad) | inside ±2σ latent | inside ±2σ band | median σ / RMSE | c | "
+              "bound κ = 2 violated (nominal 4.55%) |"), "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for r in rows:
+        lines.append(f"| {r['robot']} | {r['seed']} | {r['rmse']:.5f} | {100 * r['latent']:.1f}% | {100 * r['band']:.1f}% | "
+                     f"{r['median_over_rmse']:.2f} | {r['c']:.2f} | {100 * r['violation']:.1f}% |")
+    return "\n".join(lines)
+
+
 def run_uncertainty_bench(*, furuta_config="configs/furuta.yaml", furuta_data="data/furuta_excitation.npz",
-                          cartpole: bool = True, workdir: str | Path | None = None, progress=print) -> list[dict]:
-    """Run :func:`run_case` on the Furuta and (optionally) the generated cart-pole."""
-    results = [run_case(furuta_case(furuta_config, furuta_data), progress=progress)]
+                          cartpole: bool = True, workdir: str | Path | None = None, seeds: int = 0,
+                          progress=print) -> tuple[list[dict], list[dict]]:
+    """Run :func:`run_case` on the Furuta and (optionally) the generated cart-pole, and
+    :func:`run_seed_sweep` over dataset seeds 1..``seeds`` (0: no sweep)."""
+    fur = furuta_case(furuta_config, furuta_data)
+    results = [run_case(fur, progress=progress)]
+    sweep = run_seed_sweep(fur, range(1, seeds + 1), progress=progress) if seeds else []
     if cartpole:
         with tempfile.TemporaryDirectory(prefix="bemlearn-uncertainty-") as tmp:
             case = cartpole_case(workdir or tmp)
             results.append(run_case(case, progress=progress))
-    return results
+            if seeds:
+                sweep += run_seed_sweep(case, range(1, seeds + 1), progress=progress)
+    return results, sweep
 
 
 def format_uncertainty_bench(results: list[dict]) -> str:

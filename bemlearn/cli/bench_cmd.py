@@ -98,6 +98,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     u.add_argument("--data", type=Path, default=Path("data/furuta_excitation.npz"))
     u.add_argument("--no-cartpole", action="store_true", help="only the Furuta (the cart-pole collects ~10 s of trials)")
     u.add_argument("--workdir", type=Path, default=None, help="keep the cart-pole MJCF and data here (default: a temp dir)")
+    u.add_argument("--seeds", type=int, default=0, help="also refit the chosen band with dataset seeds 1..K (robustness)")
     u.add_argument("--json", type=Path, default=None, help="also write the full results (reliability tables) as JSON")
     u.set_defaults(func=_uncertainty)
 
@@ -206,11 +207,16 @@ def _walks(args: argparse.Namespace) -> int:
 def _uncertainty(args: argparse.Namespace) -> int:
     import json
 
-    from bemlearn.bench.uncertainty_bench import format_uncertainty_bench, run_uncertainty_bench
+    from bemlearn.bench.uncertainty_bench import format_seed_sweep, format_uncertainty_bench, run_uncertainty_bench
 
-    results = run_uncertainty_bench(furuta_config=args.config, furuta_data=args.data, cartpole=not args.no_cartpole,
-                                    workdir=args.workdir, progress=print)
+    if args.seeds < 0:
+        raise ValueError(f"--seeds: expected a non-negative integer, got {args.seeds}")
+    results, sweep = run_uncertainty_bench(furuta_config=args.config, furuta_data=args.data, cartpole=not args.no_cartpole,
+                                           workdir=args.workdir, seeds=args.seeds, progress=print)
     print(format_uncertainty_bench(results))
+    if sweep:
+        print("\nchosen band over dataset seeds (training draw and trial split):")
+        print(format_seed_sweep(sweep))
     if args.json is not None:
-        args.json.write_text(json.dumps(results, indent=1, default=float))
+        args.json.write_text(json.dumps({"candidates": results, "seeds": sweep}, indent=1, default=float))
     return 0
