@@ -13,8 +13,7 @@ from bemlearn.cli.main import main
 from bemlearn.data.collect import collect
 from bemlearn.data.trajectory_io import write_trajectory
 from bemlearn.export import load_learned_bem
-from bemlearn.models.learned_bem import srinivas_kappa
-from bemlearn.pipeline.config import PipelineConfig
+from bemlearn.models.learned_bem import LearnedBEM, srinivas_kappa
 from bemlearn.pipeline.train import train_run
 from conftest import furuta_section
 
@@ -106,3 +105,27 @@ def test_evaluate_cli(small, capsys):
     assert main(["evaluate", str(out), "--references", "2"]) == 0
     text = capsys.readouterr().out
     assert "inside ±2σ" in text and (out / "evaluation.json").is_file()
+
+
+def test_training_computes_the_calibrated_band(small):
+    """train_run stores c ≥ 1 and the quantization input std, reports the band and the bound."""
+    import math
+
+    from bemlearn.models.band import band_reference
+
+    _, _, out, metrics = small
+    learned = load_learned_bem(out)
+    st = learned.state
+    assert float(st.std_scale) >= 1.0 and float(st.std_scale) == metrics["uncertainty"]["std_scale"]
+    step = 2 * math.pi / 4096  # the collect default encoder
+    assert float(st.input_std[2]) == pytest.approx(step / math.sqrt(12), rel=1e-6)   # q_theta: Δ/√12
+    assert float(st.input_std[0]) > float(st.input_std[1]) > float(st.input_std[2]) > 0  # q̈ > q̇ > q noise
+    b = metrics["bem_heldout"]
+    assert b["bound_violation"]["nominal"] == pytest.approx(1 - LearnedBEM.nominal_confidence(2.0), rel=1e-12)
+    assert b["bound_violation"]["observed"] == pytest.approx(1 - b["coverage_2sigma_band"], abs=1e-12)
+    assert [r["level"] for r in b["reliability"]["band"]] == [0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 0.99]
+    qa = torch.tensor([[0.1]], dtype=torch.float64)
+    pred = learned.bem(qa, 0 * qa, 2 + 0 * qa)
+    ref = band_reference(st, torch.tensor([[2.0, 0.0, 0.1, 0.0, 0.0]], dtype=torch.float64), n_inputs=3)
+    torch.testing.assert_close(pred.band_std, ref[1], rtol=0, atol=0)
+    assert 0 <= metrics["val_coverage_2sigma_band"] <= 1

@@ -324,7 +324,8 @@ def run_predict_bench(
             elif step == "gpytorch":
                 lat.update(_gpytorch_latency(gp, x1, repeats=gpytorch_repeats))
                 m_ref, s_ref = (torch.cat(t) for t in zip(*(gp(c) for c in xp.split(2000))))
-                m_ts, s_ts = ts.forward(xp)
+                # GPyTorch gives the latent std; forward's std is the calibrated band (docs/uncertainty.md)
+                m_ts, s_ts = (ts.forward_latent if hasattr(ts, "forward_latent") else ts.forward)(xp)
                 m_ld = _extended_precision_mean(state, xp)
                 parity = {
                     "n": float(n_parity),

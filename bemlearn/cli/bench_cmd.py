@@ -9,6 +9,7 @@
 * ``bench import [--rows N] [--accuracy]`` — logger CSV import speed and the model-free path's accuracy (issue 14).
 * ``bench robots [MJCF …]`` — collect → train → export → held-out BEM → closed loop on MJCF
   robots with model-derived values only (issue 13).
+* ``bench uncertainty`` — candidate BEM bands: coverage, sharpness, bound violations, cost (issue 15).
 """
 
 from __future__ import annotations
@@ -91,6 +92,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     rb.add_argument("--workers", type=int, default=1, help="collect processes (default 1)")
     rb.add_argument("--seed", type=int, default=0, help="collect seed (default 0)")
     rb.set_defaults(func=_robots)
+    u = sub.add_parser("uncertainty", help="candidate BEM bands: coverage of the model BEM, sharpness, bound violations, cost",
+                       description="Fit the Furuta (and a generated cart-pole) BEM GP and score each candidate band "
+                       "on held-out references against the model-based BEM (see bemlearn/bench/uncertainty_bench.py).")
+    u.add_argument("--config", type=Path, required=True, help="pipeline YAML of the robot (e.g. the shipped configs/*.yaml)")
+    u.add_argument("--data", type=Path, required=True, help="its excitation data (e.g. the shipped data/*.npz)")
+    u.add_argument("--no-cartpole", action="store_true", help="only the Furuta (the cart-pole collects ~10 s of trials)")
+    u.add_argument("--workdir", type=Path, default=None, help="keep the cart-pole MJCF and data here (default: a temp dir)")
+    u.add_argument("--seeds", type=int, default=0, help="also refit the chosen band with dataset seeds 1..K (robustness)")
+    u.add_argument("--json", type=Path, default=None, help="also write the full results (reliability tables) as JSON")
+    u.set_defaults(func=_uncertainty)
 
 
 def run_predict(args: argparse.Namespace) -> int:
@@ -201,4 +212,22 @@ def _robots(args: argparse.Namespace) -> int:
                                 workers=args.workers, seed=args.seed, progress=print))
     print(f"load average {os.getloadavg()[0]:.2f}")
     print(format_robots_bench(rows))
+    return 0
+
+
+def _uncertainty(args: argparse.Namespace) -> int:
+    import json
+
+    from bemlearn.bench.uncertainty_bench import format_seed_sweep, format_uncertainty_bench, run_uncertainty_bench
+
+    if args.seeds < 0:
+        raise ValueError(f"--seeds: expected a non-negative integer, got {args.seeds}")
+    results, sweep = run_uncertainty_bench(config=args.config, data=args.data, cartpole=not args.no_cartpole,
+                                           workdir=args.workdir, seeds=args.seeds, progress=print)
+    print(format_uncertainty_bench(results))
+    if sweep:
+        print("\nchosen band over dataset seeds (training draw and trial split):")
+        print(format_seed_sweep(sweep))
+    if args.json is not None:
+        args.json.write_text(json.dumps({"candidates": results, "seeds": sweep}, indent=1, default=float))
     return 0

@@ -35,6 +35,7 @@ def run(args) -> int:
     from bemlearn.config import from_dict, load_yaml
     from bemlearn.export.checkpoint import load_checkpoint
     from bemlearn.pipeline.evaluation import EvaluationConfig, evaluate_bem, held_out_references, run_truth_robot
+    from bemlearn.pipeline.resolve import complete_section
 
     ck = load_checkpoint(args.run_dir)
     out = ck.path.parent
@@ -43,6 +44,7 @@ def run(args) -> int:
     ecfg = EvaluationConfig()
     if cfg_path.is_file():
         ecfg = from_dict(EvaluationConfig, load_yaml(cfg_path).get("evaluate"), where=f"{cfg_path}:evaluate")
+    ecfg = complete_section(ref["mjcf"] or ref["registry"], "evaluate", ecfg)  # derived from the model where unset
     overrides = {k: v for k, v in (("n_references", args.references), ("seed", args.seed)) if v is not None}
     ecfg = dataclasses.replace(ecfg, **overrides)
     refs = held_out_references(ecfg, robot.m)
@@ -67,5 +69,10 @@ def run(args) -> int:
     print(f"{'all':<10}{ev['rmse']:>12.5f}{ev['max_abs']:>12.5f}")
     print(f"inside ±2σ: {100 * ev['coverage_2sigma_latent']:.1f}% with the latent std, "
           f"{100 * ev['coverage_2sigma_predictive']:.1f}% with the predictive std (eq. 12 as printed: k* includes σ_0²)")
+    if "coverage_2sigma_band" in ev:
+        v = ev["bound_violation"]
+        print(f"calibrated band (exported std): inside ±2σ {100 * ev['coverage_2sigma_band']:.1f}%, median σ / RMSE "
+              f"{ev['median_band_std_over_rmse']:.2f}; eq. (13)/(15) bound at κ = 2 violated {100 * v['observed']:.1f}% "
+              f"(nominal {100 * v['nominal']:.1f}%)")
     print(f"wrote {out / 'evaluation.json'} and {out / 'evaluation.png'}")
     return 0

@@ -52,4 +52,9 @@ def run(args) -> int:
     else:
         print(f"held-out BEM vs model ({m['robot']['name']}): RMSE {b['rmse']:.5f} {unit}, max {b['max_abs']:.5f} {unit}, "
               f"inside ±2σ: {100 * b['coverage_2sigma_latent']:.1f}% (latent), {100 * b['coverage_2sigma_predictive']:.1f}% (predictive)")
+    if b is not None and "coverage_2sigma_band" in b:
+        v = b["bound_violation"]
+        print(f"calibrated band (exported std): inside ±2σ {100 * b['coverage_2sigma_band']:.1f}%, median σ / RMSE "
+              f"{b['median_band_std_over_rmse']:.2f}; eq. (13)/(15) bound at κ = 2 violated {100 * v['observed']:.1f}% "
+              f"(nominal {100 * v['nominal']:.1f}%)")
     return 0

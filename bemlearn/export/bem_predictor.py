@@ -4,10 +4,16 @@
 traces.  Its methods (the contract of docs/predictor-contract.md):
 
     forward(x)       x: (B, 3m) float64 [q̈_a, q̇_a, q_a] (rad/s², rad/s, rad)
-                     → (mean (B,), std (B,)) rad: μ(x_0^e), σ(x_0^e), x_0^e = [x, 0, 0]  (eq. 14)
+                     → (mean (B,), std (B,)) rad: μ(x_0^e), σ_band(x_0^e), x_0^e = [x, 0, 0]  (eq. 14)
     bem_mean(x)      same input → mean (B,) rad only (the control-loop path)
     predict_full(x)  x: (B, 3m + 2) [q̈_a, q̇_a, q_a, q̈_u, q̇_u] → (mean, std) of f(x)  (eq. 11)
+    forward_latent(x), predict_full_latent(x)
+                     the same means with the latent posterior std of f (eq. 12), the ``std``
+                     of artifacts written before the calibrated band
     metadata()       JSON string (robot, columns, units, model, provenance)
+
+``std`` is the calibrated band σ_band² = c² σ² + Σ_i (s_i ∂μ/∂x_i)² over the method's input
+columns (:mod:`bemlearn.models.band`, docs/uncertainty.md); c and s are in the metadata.
 
 Inputs of the wrong rank, width or dtype, an empty batch, and non-finite inputs raise
 ValueError from inside the TorchScript module (``torch.jit.Error`` in Python, message
@@ -25,10 +31,12 @@ from bemlearn.export.metadata import PredictorMetadata, artifact_metadata
 from bemlearn.export.variance_factor import variance_factor
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["BEMPredictor", "EXPORTED_METHODS"]
+__all__ = ["BEMPredictor", "EXPORTED_METHODS", "LATENT_METHODS"]
 
 #: Methods besides ``forward`` that the TorchScript artifact exports.
-EXPORTED_METHODS = ("bem_mean", "predict_full", "full_mean", "metadata")
+EXPORTED_METHODS = ("bem_mean", "predict_full", "full_mean", "forward_latent", "predict_full_latent", "metadata")
+#: Exported methods that artifacts written before the calibrated band lack (their ``std`` is latent).
+LATENT_METHODS = ("forward_latent", "predict_full_latent")
 
 
 def _dtype_name(x: torch.Tensor) -> str:
@@ -117,11 +125,19 @@ class BEMPredictor(nn.Module):
 
     # ---- the contract --------------------------------------------------------------------
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """BEM mean and std: ``x: (B, 3m)`` float64 [q̈_a (rad/s²), q̇_a (rad/s), q_a (rad)];
-        returns (μ(x_0^e), σ(x_0^e)), each ``(B,)`` rad (eq. 12, 14)."""
+        """BEM mean and calibrated std: ``x: (B, 3m)`` float64 [q̈_a (rad/s²), q̇_a (rad/s), q_a (rad)];
+        returns (μ(x_0^e), σ_band(x_0^e)), each ``(B,)`` rad (eq. 14, B1)."""
         self._check_input(x, self.n_bem, "forward", self.bem_columns)
-        mean, std = self.bem.mean_std(x)
+        mean, std = self.bem.mean_band(x)
         self._check_finite(mean, x, "forward")
+        return mean, std
+
+    @torch.jit.export
+    def forward_latent(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """As :meth:`forward` with the latent posterior std of f (eq. 12) instead of the band."""
+        self._check_input(x, self.n_bem, "forward_latent", self.bem_columns)
+        mean, std = self.bem.mean_std(x)
+        self._check_finite(mean, x, "forward_latent")
         return mean, std
 
     @torch.jit.export
@@ -135,10 +151,18 @@ class BEMPredictor(nn.Module):
     @torch.jit.export
     def predict_full(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Full learned map f (eq. 11): ``x: (B, 3m + 2)`` float64 [q̈_a, q̇_a, q_a, q̈_u, q̇_u];
-        returns (mean, std), each ``(B,)`` rad."""
+        returns (mean, σ_band), each ``(B,)`` rad (eq. B1 over all 3m + 2 columns)."""
         self._check_input(x, self.n_full, "predict_full", self.full_columns)
-        mean, std = self.full.mean_std(x)
+        mean, std = self.full.mean_band(x)
         self._check_finite(mean, x, "predict_full")
+        return mean, std
+
+    @torch.jit.export
+    def predict_full_latent(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """As :meth:`predict_full` with the latent posterior std of f (eq. 12)."""
+        self._check_input(x, self.n_full, "predict_full_latent", self.full_columns)
+        mean, std = self.full.mean_std(x)
+        self._check_finite(mean, x, "predict_full_latent")
         return mean, std
 
     @torch.jit.export

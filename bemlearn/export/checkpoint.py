@@ -38,6 +38,8 @@ _TOP_KEYS = ("format", "kind", "model_state", "predictor_state", "metadata")
 _STATE_TENSORS = tuple(
     f.name for f in dataclasses.fields(PredictorState) if f.name not in ("kind", "input_names", "n_train")
 )
+#: Tensors added after v1 checkpoints were first written (calibrated band); absent → defaults.
+_OPTIONAL_TENSORS = ("std_scale", "input_std")
 
 
 @dataclass(frozen=True)
@@ -77,13 +79,15 @@ def _checkpoint_path(run_dir_or_file: str | os.PathLike[str]) -> Path:
 def _parse_state(data: Any, kind: str, where: str) -> PredictorState:
     if not isinstance(data, dict):
         raise ValueError(f"{where}: expected a dict (PredictorState.to_dict()), got {type(data).__name__}")
-    missing = [k for k in (*_STATE_TENSORS, "kind", "input_names", "n_train") if k not in data]
+    missing = [k for k in (*_STATE_TENSORS, "kind", "input_names", "n_train") if k not in data and k not in _OPTIONAL_TENSORS]
     if missing:
         raise ValueError(f"{where}: missing key(s) {missing}")
     unknown = sorted(set(data) - {*_STATE_TENSORS, "kind", "input_names", "n_train"})
     if unknown:
         raise ValueError(f"{where}: unknown key(s) {unknown}")
     for name in _STATE_TENSORS:
+        if name in _OPTIONAL_TENSORS and name not in data:
+            continue
         t = data[name]
         if not isinstance(t, torch.Tensor):
             raise ValueError(f"{where}.{name}: expected a tensor, got {type(t).__name__}")
@@ -107,6 +111,9 @@ def _parse_state(data: Any, kind: str, where: str) -> PredictorState:
             raise ValueError(f"{where}.{name}: expected positive values, got {getattr(state, name).tolist()}")
     if float(state.noise) < 0:
         raise ValueError(f"{where}.noise: expected >= 0, got {float(state.noise)}")
+    if not float(state.std_scale) > 0 or not bool((state.input_std >= 0).all()):
+        raise ValueError(f"{where}: std_scale must be > 0 and input_std >= 0, got {float(state.std_scale)} and "
+                         f"{state.input_std.tolist()}")
     return state
 
 

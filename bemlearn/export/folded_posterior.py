@@ -22,6 +22,17 @@ F = L⁻¹ and v comes from one triangular solve, v (L / (y_std σ_f²))ᵀ = ex
 n..d−1 of the GP input can be held at zero, which gives the BEM input
 x_0^e = [q̈_a, q̇_a, q_a, 0, 0] of eq. (14): their terms are constant and move into the offsets.
 
+The calibrated band (:mod:`bemlearn.models.band`, eq. B1) reuses the same row exp(e):
+with ρ_i = 1 (raw) or a_i (centered), P the linear part of W (first n columns) and
+q_i = W[·, n + i] (the same −½ a_i² or −½ in every row), ∂e_j/∂x_i = ρ_i (P_ji + 2 q_i v_i), so
+
+    h = exp(e) G,              G = [w_j s_i ρ_i P_ji | w_j]  (M + 1, n + 1), sentinel row 0
+    g_i = h_i + γ_i v_i h_n,   γ_i = 2 q_i s_i ρ_i           (g_i = s_i ∂μ/∂x_i, rad)
+    σ_band(x) = sqrt(c² max(0, y_std² σ_f² − Σ_i s_i v_i²) + Σ_i g_i²)
+
+(one ``mm`` of the (B, M + 1) row with an (M + 1, n + 1) matrix more than the latent std;
+c = ``std_scale``, s = ``input_std`` of the state; with s = 0 the ``mm`` is skipped).
+
 One extra *sentinel* column j = M has zero linear weights, a tiny positive weight 10⁻³⁰⁰ on
 Σ v_i², offset 0 and w = 1 (with 1 taken off y_mean); the factor ignores it (zero row, or a
 10³⁰⁰ diagonal entry in the triangular case).  For finite |v| < 10¹⁴² its exp is exactly 1
@@ -69,7 +80,9 @@ class FoldedPosterior(nn.Module):
     centered: bool
     signed: bool
     triangular: bool
+    banded: bool
     var0: float
+    scale2: float
 
     def __init__(
         self,
@@ -138,12 +151,27 @@ class FoldedPosterior(nn.Module):
         self.signed = factor.signs is not None
         self.triangular = factor.L is not None
         self.var0 = float(state.y_std**2 * state.outputscale)
+        # calibrated band (module docstring): G and γ over the n free columns
+        s_in = state.input_std[free].to(**f64)
+        rho = a[free] if self.centered else torch.ones(n_inputs, **f64)
+        G = torch.zeros(M + 1, n_inputs + 1, **f64)
+        wM = gain * state.alpha
+        G[:M, :n_inputs] = wM[:, None] * W[:M, :n_inputs] * (s_in * rho)
+        G[:M, n_inputs] = wM
+        self.register_buffer("G", G)
+        self.register_buffer("gamma", 2.0 * W[0, n_inputs:] * s_in * rho if M > 0 else torch.zeros(n_inputs, **f64))
+        self.banded = bool((s_in > 0).any())
+        self.scale2 = float(state.std_scale) ** 2
 
     def _kernel(self, x: torch.Tensor) -> torch.Tensor:
         """exp(e): ``(B, M + 1)`` kernel row / σ_f² (last column: sentinel) for ``x: (B, n)``."""
+        return self._kernel_v(x)[0]
+
+    def _kernel_v(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(exp(e), v): the kernel row and the variable v (x raw, or u centered), ``(B, n)``."""
         v = torch.addcmul(self.nb, x, self.a) if self.centered else x
         vv = torch.pow(v.unsqueeze(1), self.powers).reshape(v.size(0), 2 * self.n_inputs)   # rows [v, v∘v]
-        return F.linear(vv, self.W, self.c).exp_()
+        return F.linear(vv, self.W, self.c).exp_(), v
 
     def _chunked(self, x: torch.Tensor) -> bool:
         # Large batches run in row blocks so the (rows, M + 1) kernel block stays in cache
@@ -172,6 +200,38 @@ class FoldedPosterior(nn.Module):
                 mean[i : i + self.chunk], std[i : i + self.chunk] = self._mean_std(x[i : i + self.chunk])
             return mean, std
         return self._mean_std(x)
+
+    @torch.jit.export
+    def mean_band(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(μ(x), σ_band(x)): each ``(B,)`` rad, σ_band the calibrated band (module docstring, eq. B1)."""
+        if self._chunked(x):
+            mean = torch.empty(x.size(0), dtype=x.dtype)
+            std = torch.empty(x.size(0), dtype=x.dtype)
+            for i in range(0, x.size(0), self.chunk):
+                mean[i : i + self.chunk], std[i : i + self.chunk] = self._mean_band(x[i : i + self.chunk])
+            return mean, std
+        return self._mean_band(x)
+
+    def _latent_var(self, k: torch.Tensor) -> torch.Tensor:
+        if self.triangular:
+            v = torch.linalg.solve_triangular(self.FT, k, upper=True, left=False)
+        else:
+            v = torch.mm(k, self.FT)
+        if self.signed:
+            q = torch.mv(v * v, self.signs)
+        else:
+            q = torch.linalg.vecdot(v, v)
+        return torch.rsub(q, self.var0).clamp_min_(0.0)
+
+    def _mean_band(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        k, v = self._kernel_v(x)
+        mean = torch.addmv(self.offset, k, self.w)
+        var = self._latent_var(k)
+        if self.banded:
+            h = torch.mm(k, self.G)
+            g = torch.addcmul(h[:, : self.n_inputs], v * h[:, self.n_inputs :], self.gamma)
+            return mean, torch.add(torch.linalg.vecdot(g, g), var, alpha=self.scale2).sqrt_()
+        return mean, var.mul_(self.scale2).sqrt_()
 
     def _mean(self, x: torch.Tensor) -> torch.Tensor:
         return torch.addmv(self.offset, self._kernel(x), self.w)

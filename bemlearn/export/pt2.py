@@ -6,6 +6,7 @@ method and the metadata JSON as an extra file:
     models/model.json          forward(x: (B, 3m)) -> (mean (B,), std (B,))   [torch.export.load]
     models/bem_mean.json       bem_mean(x: (B, 3m)) -> mean (B,)
     models/predict_full.json   predict_full(x: (B, 3m + 2)) -> (mean, std)
+    models/forward_latent.json, models/predict_full_latent.json   the same with the latent std
     extra/metadata.json        the metadata() JSON document
 
 ``torch.export.load(path)`` returns the ``forward`` program (the archive's default ``model``);
@@ -35,7 +36,10 @@ __all__ = ["save_pt2", "load_pt2_predictor", "Pt2Predictor", "PT2_PROGRAMS", "PT
 log = logging.getLogger(__name__)
 
 #: Program name in the archive → BEMPredictor method it exports.
-PT2_PROGRAMS = {"model": "forward", "bem_mean": "bem_mean", "predict_full": "predict_full", "full_mean": "full_mean"}
+PT2_PROGRAMS = {"model": "forward", "bem_mean": "bem_mean", "predict_full": "predict_full", "full_mean": "full_mean",
+                "forward_latent": "forward_latent", "predict_full_latent": "predict_full_latent"}
+#: Programs that archives written before the calibrated band lack.
+_OPTIONAL_PROGRAMS = ("forward_latent", "predict_full_latent")
 PT2_METADATA_FILE = "metadata.json"
 
 
@@ -57,7 +61,7 @@ def _export_programs(predictor: BEMPredictor) -> dict[str, torch.export.Exported
     batch = torch.export.Dim("batch", min=1)
     programs = {}
     for name, method in PT2_PROGRAMS.items():
-        width = predictor.n_full if method in ("predict_full", "full_mean") else predictor.n_bem
+        width = predictor.n_full if method in ("predict_full", "full_mean", "predict_full_latent") else predictor.n_bem
         example = torch.zeros(4, width, dtype=torch.float64)
         with torch.no_grad():
             programs[name] = torch.export.export(
@@ -99,6 +103,10 @@ class Pt2Predictor:
         self._bem_mean = self.programs["bem_mean"].module()
         self._predict_full = self.programs["predict_full"].module()
         self._full_mean = self.programs["full_mean"].module() if "full_mean" in self.programs else None
+        self._forward_latent = self.programs["forward_latent"].module() if "forward_latent" in self.programs else None
+        self._predict_full_latent = (
+            self.programs["predict_full_latent"].module() if "predict_full_latent" in self.programs else None
+        )
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(μ(x_0^e), σ(x_0^e)) for ``x: (B, 3m)`` float64, each ``(B,)`` rad (eq. 12, 14)."""
@@ -121,6 +129,15 @@ class Pt2Predictor:
             return self._predict_full(x)[0]
         return self._full_mean(x)
 
+    def forward_latent(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(μ(x_0^e), latent σ(x_0^e)) (eq. 12, 14); archives without the program return ``forward``
+        (written before the calibrated band, when ``std`` was the latent std)."""
+        return self._forward(x) if self._forward_latent is None else self._forward_latent(x)
+
+    def predict_full_latent(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(mean, latent std) of f(x) (eq. 11, 12); see :meth:`forward_latent` for old archives."""
+        return self._predict_full(x) if self._predict_full_latent is None else self._predict_full_latent(x)
+
     def metadata(self) -> str:
         """The metadata JSON document."""
         return self.metadata_json
@@ -137,7 +154,7 @@ def load_pt2_predictor(path: str | os.PathLike[str]) -> Pt2Predictor:
         contents = load_pt2(path)
     except Exception as exc:  # torch raises several types for foreign archives
         raise ValueError(f"{path}: not a torch.export .pt2 archive ({type(exc).__name__}: {exc})") from exc
-    missing = [k for k in PT2_PROGRAMS if k not in contents.exported_programs]
+    missing = [k for k in PT2_PROGRAMS if k not in contents.exported_programs and k not in _OPTIONAL_PROGRAMS]
     meta = contents.extra_files.get(PT2_METADATA_FILE)
     if missing or not meta:
         raise ValueError(f"{path}: not a bemlearn BEM predictor (missing {missing or [PT2_METADATA_FILE]})")

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import torch
 
-from bemlearn.export.bem_predictor import EXPORTED_METHODS, BEMPredictor
+from bemlearn.export.bem_predictor import EXPORTED_METHODS, LATENT_METHODS, BEMPredictor
 
 __all__ = ["script_predictor", "save_torchscript", "load_torchscript", "METADATA_FILE"]
 
@@ -69,7 +69,7 @@ def load_torchscript(path: str | os.PathLike[str]) -> torch.jit.ScriptModule:
             module = torch.jit.load(str(path), map_location="cpu", _extra_files=extra)
     except RuntimeError as exc:
         raise ValueError(f"{path}: not a TorchScript file ({exc})") from exc
-    missing = [m for m in EXPORTED_METHODS if not hasattr(module, m)]
+    missing = [m for m in EXPORTED_METHODS if not hasattr(module, m) and m not in LATENT_METHODS]
     if missing or not extra[METADATA_FILE]:
         raise ValueError(f"{path}: not a bemlearn BEM predictor (missing {missing or [METADATA_FILE]})")
     return module

@@ -15,6 +15,7 @@ from __future__ import annotations
 import torch
 
 from bemlearn.export.variance_factor import kernel_gram
+from bemlearn.models.input_noise import mean_gradient
 from bemlearn.models.predictor_state import PredictorState
 
 __all__ = ["reference_posterior", "verify_predictor"]
@@ -55,7 +56,10 @@ def verify_predictor(
     """Compare a predictor with :func:`reference_posterior` on ``n`` random inputs.
 
     Inputs are x_mean + 2 x_std · N(0, 1) per column; ``forward`` (at x_0^e, eq. 14) and
-    ``predict_full`` (eq. 11) are checked, and ``bem_mean`` must equal ``forward``'s mean.
+    ``predict_full`` (eq. 11) are checked with the calibrated band (eq. B1 of
+    :mod:`bemlearn.models.band`, gradient by eq. N2), ``forward_latent`` and
+    ``predict_full_latent`` (when present) with the latent std, and ``bem_mean`` must equal
+    ``forward``'s mean.
 
     Args:
         predictor: anything with ``forward``, ``bem_mean`` and ``predict_full`` (a loaded
@@ -77,9 +81,18 @@ def verify_predictor(
     x0 = torch.cat([x_bem, torch.zeros(n, 2, dtype=torch.float64)], 1)
     mean_tol = mean_atol + 1e-12 * float(state.y_std * state.outputscale) * float(state.alpha.abs().sum())
     worst_mean, worst_var = 0.0, 0.0
-    for name, x, ref_x in (("forward", x_bem, x0), ("predict_full", x_full, x_full)):
+    cases = [("forward", x_bem, x0, d - 2, True), ("predict_full", x_full, x_full, d, True)]
+    if hasattr(predictor, "forward_latent"):
+        cases += [("forward_latent", x_bem, x0, d - 2, False), ("predict_full_latent", x_full, x_full, d, False)]
+    for name, x, ref_x, n_in, band in cases:
         mean, std = getattr(predictor, name)(x)
         ref_mean, ref_std, bound = reference_posterior(state, ref_x)
+        if band:  # eq. (B1): c² σ² + Σ_{i < n_in} (s_i ∂μ/∂x_i)²
+            s = state.input_std.clone()
+            s[n_in:] = 0.0
+            var_in = ((mean_gradient(state, ref_x) * s) ** 2).sum(-1)
+            ref_std = (state.std_scale**2 * ref_std.square() + var_in).sqrt()
+            bound = bound * float(state.std_scale) ** 2
         dm = float((mean - ref_mean).abs().max())
         dv = float(((std.square() - ref_std.square()).abs() / (ref_std.square() + bound / var_rtol)).max())
         worst_mean, worst_var = max(worst_mean, dm), max(worst_var, dv)

@@ -1,6 +1,7 @@
 """bemlearn.fitting: build, initialize and fit the BEM GPs (functions, not model methods)."""
 
 from bemlearn.fitting.build import build_gp, initial_hyperparameters
+from bemlearn.fitting.calibration import ReplicaCalibration, calibrate_replicas
 from bemlearn.fitting.exact import fit_exact
 from bemlearn.fitting.fit import fit_gp, train_gp
 from bemlearn.fitting.gp_config import GPConfig
@@ -13,6 +14,8 @@ from bemlearn.fitting.svgp import fit_svgp
 from bemlearn.fitting.variational import optimal_variational
 
 __all__ = [
+    "ReplicaCalibration",
+    "calibrate_replicas",
     "GPDMConfig",
     "fit_gpdm",
     "gpdm_metrics",

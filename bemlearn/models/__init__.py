@@ -1,9 +1,11 @@
 """bemlearn.models: GP models of the BEM map (math only) and their frozen posterior form."""
 
+from bemlearn.models.band import band_reference
 from bemlearn.models.exact_gp import ExactBEMGP
 from bemlearn.models.freeze import posterior_weights, predictor_state
 from bemlearn.models.gp_kinds import GP_KINDS, gp_class, gp_kind_of
 from bemlearn.models.gpdm import GPDM, GPDMObjective, LatentComparison, compare_latents, reconstruct_latent
+from bemlearn.models.input_noise import mean_gradient
 from bemlearn.models.learned_bem import BEMPrediction, LearnedBEM, srinivas_kappa
 from bemlearn.models.kernels import ard_se_kernel, gaussian_likelihood, kernel_matrix, se_cross_covariance
 from bemlearn.models.predict import predict
@@ -21,6 +23,8 @@ __all__ = [
     "LearnedBEM",
     "BEMPrediction",
     "srinivas_kappa",
+    "band_reference",
+    "mean_gradient",
     "PredictorState",
     "GPKind",
     "GP_KINDS",

@@ -16,7 +16,16 @@ x̃ = (x − x_mean) / x_std is, with k_Z(x̃) = k(x̃, Z) ∈ R^M,
     svgp:   Z = inducing points, q(u) = N(μ_u, S_u) (un-whitened),
             α = K_ZZ⁻¹ μ_u,  S = K_ZZ⁻¹ − K_ZZ⁻¹ S_u K_ZZ⁻¹
 
-and in physical units μ(x) = y_mean + y_std μ̃(x̃), σ(x) = y_std σ̃(x̃).  S need not be
+and in physical units μ(x) = y_mean + y_std μ̃(x̃), σ(x) = y_std σ̃(x̃).
+
+The calibrated band (docs/uncertainty.md) adds two fields: ``std_scale`` c (trial-split
+replica calibration, :mod:`bemlearn.fitting.calibration`) and ``input_std`` s (the
+Savitzky–Golay quantization model of each input column, :mod:`bemlearn.models.input_noise`):
+
+    σ_band(x)² = c² y_std² σ̃²(x̃) + Σ_{i ∈ inputs} (s_i ∂μ/∂x_i)²
+
+over the columns the caller supplies (3m at x_0^e, all d for the full map).  Defaults
+c = 1, s = 0 give σ_band = σ (checkpoints written before these fields).  S need not be
 positive definite (sgpr/svgp); it is symmetric.  The observation noise σ_0² is kept for
 predictive (noisy) variances but is *not* part of σ̃² above.
 
@@ -53,6 +62,8 @@ class PredictorState:
         y_mean, y_std: ``()`` output normalization, rad.
         input_names: the d column names, in order, e.g. ``("qdd_theta", ..., "qd_alpha")``.
         n_train: number of training points the posterior was conditioned on.
+        std_scale: ``()`` c ≥ 1 of the calibrated band (default 1).
+        input_std: ``(d,)`` s ≥ 0, noise std of each input column, physical units (default 0).
     """
 
     kind: GPKind
@@ -68,9 +79,15 @@ class PredictorState:
     y_std: torch.Tensor
     input_names: tuple[str, ...]
     n_train: int
+    std_scale: torch.Tensor | None = None
+    input_std: torch.Tensor | None = None
 
     def __post_init__(self) -> None:
         M, d = self.Z.shape
+        if self.std_scale is None:
+            object.__setattr__(self, "std_scale", torch.ones((), dtype=self.Z.dtype, device=self.Z.device))
+        if self.input_std is None:
+            object.__setattr__(self, "input_std", torch.zeros(d, dtype=self.Z.dtype, device=self.Z.device))
         checks = {
             "alpha": (self.alpha, (M,)),
             "S": (self.S, (M, M)),
@@ -81,6 +98,8 @@ class PredictorState:
             "x_std": (self.x_std, (d,)),
             "y_mean": (self.y_mean, ()),
             "y_std": (self.y_std, ()),
+            "std_scale": (self.std_scale, ()),
+            "input_std": (self.input_std, (d,)),
         }
         for name, (t, shape) in checks.items():
             if tuple(t.shape) != shape:

@@ -14,7 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from bemlearn.models.band import band_reference
 from bemlearn.models.predictor_state import PredictorState
+from bemlearn.pipeline.reliability import reliability_table
 from bemlearn.robots.reference import CompositeSinusoid
 
 __all__ = ["EvaluationConfig", "held_out_references", "evaluate_bem", "run_truth_robot"]
@@ -100,10 +102,15 @@ def evaluate_bem(state: PredictorState, robot, references: list[CompositeSinusoi
         a dict with ``rmse``, ``max_abs``, ``coverage_2sigma_latent``,
         ``coverage_2sigma_predictive`` (fractions), ``n_points``, ``no_model_root``
         (points where the model has no BEM, excluded), and ``per_reference`` lists; plus
-        ``curves`` (t, model, mean, std of the first reference) for plotting.
+        ``curves`` (t, model, mean, std of the first reference) for plotting.  For the
+        calibrated band σ_band of :mod:`bemlearn.models.band` (the exported ``std``):
+        ``coverage_2sigma_band``, ``median_band_std_over_rmse``, ``bound_violation`` (the
+        eq. 13/15 bound at κ = 2: observed and nominal violation rates) and ``reliability``
+        (coverage vs nominal level, 50–99 %, band and latent); ``curves`` gains ``band_std``.
     """
     t = np.arange(0.0, duration_s, 1.0 / rate_hz)
     errs, lat, pred, per = [], [], [], []
+    bands, lats = [], []
     curves = None
     noise_std = float(state.y_std * state.noise.sqrt())
     skipped = 0
@@ -113,7 +120,9 @@ def evaluate_bem(state: PredictorState, robot, references: list[CompositeSinusoi
         ok = bem.valid.numpy()
         skipped += int((~ok).sum())
         x = np.concatenate([qadd, qad, qa, np.zeros((t.size, 2))], axis=1)
-        mean, std = (v.numpy() for v in state.predict_reference(torch.from_numpy(x)))
+        mean, band, std = (v.numpy() for v in band_reference(state, torch.from_numpy(x), n_inputs=state.dim - 2))
+        bands.append(band[ok])
+        lats.append(std[ok])
         e = (mean - bem.qu.numpy())[ok]
         s = std[ok]
         errs.append(e)
@@ -121,9 +130,18 @@ def evaluate_bem(state: PredictorState, robot, references: list[CompositeSinusoi
         pred.append(np.abs(e) <= 2 * np.sqrt(s**2 + noise_std**2))
         per.append({"rmse": float(np.sqrt(np.mean(e**2))), "max_abs": float(np.abs(e).max())})
         if i == 0:
-            curves = {"t": t, "model": bem.qu.numpy(), "mean": mean, "std": std}
+            curves = {"t": t, "model": bem.qu.numpy(), "mean": mean, "std": std, "band_std": band}
     e = np.concatenate(errs)
-    return {
+    band_all, lat_all = np.concatenate(bands), np.concatenate(lats)
+    rmse = float(np.sqrt(np.mean(e**2)))
+    extra = {
+        "coverage_2sigma_band": float(np.mean(np.abs(e) <= 2 * band_all)),
+        "median_band_std_over_rmse": float(np.median(band_all)) / rmse if rmse > 0 else math.inf,
+        "bound_violation": {"kappa": 2.0, "observed": float(np.mean(np.abs(e) > 2 * band_all)),
+                            "nominal": 1.0 - math.erf(2.0 / math.sqrt(2.0))},
+        "reliability": {"band": reliability_table(e, band_all), "latent": reliability_table(e, lat_all)},
+    }
+    return extra | {
         "rmse": float(np.sqrt(np.mean(e**2))),
         "max_abs": float(np.abs(e).max()),
         "coverage_2sigma_latent": float(np.mean(np.concatenate(lat))),

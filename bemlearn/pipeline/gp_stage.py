@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -46,6 +46,7 @@ class GPStageResult:
         lengthscale_physical: per input column, the lengthscale in the column's own unit.
         interrupted: the fit was stopped by Ctrl-C (the checkpoint holds the parameters reached).
         checkpoint: the file written.
+        calibration: the summary returned by ``calibrate`` (``None`` without it).
     """
 
     state: PredictorState
@@ -56,6 +57,7 @@ class GPStageResult:
     lengthscale_physical: dict[str, float]
     interrupted: bool
     checkpoint: Path
+    calibration: dict | None = None
 
 
 def fit_bem_gp(
@@ -75,6 +77,7 @@ def fit_bem_gp(
     writer=None,
     resume: bool = False,
     progress: bool = True,
+    calibrate: Callable[[PredictorState], tuple[PredictorState, dict]] | None = None,
 ) -> GPStageResult:
     """Fit the GP of eq. (11) on ``(x, y)`` and write ``out_dir/checkpoint.pt``.
 
@@ -92,6 +95,9 @@ def fit_bem_gp(
         extra: more provenance for the checkpoint's metadata.
         writer: a TensorBoard ``SummaryWriter`` (loss, noise, outputscale, lengthscale/<input>).
         resume: start from the hyperparameters of the checkpoint already in ``out_dir``.
+        calibrate: ``calibrate(state) -> (state, summary)`` applied to the frozen posterior before it is
+            written (the calibrated band of the exported std, :func:`~bemlearn.pipeline.uncertainty.calibrate_band`);
+            its summary is stored in the checkpoint metadata (``extra.uncertainty``).
 
     Ctrl-C during the fit keeps the parameters reached, writes the checkpoint (marked
     ``interrupted``) and returns with ``interrupted=True``; the caller decides what to do next.
@@ -129,6 +135,9 @@ def fit_bem_gp(
         model, lik, x_mean=normalization.x_mean, x_std=normalization.x_std, y_mean=normalization.y_mean,
         y_std=normalization.y_std, input_names=names, n_train=int(y.shape[0]),
     )
+    calibration = None
+    if calibrate is not None:
+        state, calibration = calibrate(state)
     hyp = hyperparameter_metrics(model, lik)
     phys_ls = {n: float(state.lengthscale[j] * state.x_std[j]) for j, n in enumerate(names)}
     model_state = dict(model.state_dict())
@@ -153,7 +162,8 @@ def fit_bem_gp(
             "hyperparameters": {**hyp, "lengthscale_physical": phys_ls},
             "bemlearn_version": __version__,
             "data_sha256": data_sha256,
-            "extra": {"interrupted": interrupted, "robot_ref": dict(robot), **dict(extra or {})},
+            "extra": {"interrupted": interrupted, "robot_ref": dict(robot), **dict(extra or {}),
+                      **({"uncertainty": calibration} if calibration is not None else {})},
         },
     )
-    return GPStageResult(state, model, lik, fit, hyp, phys_ls, interrupted, path)
+    return GPStageResult(state, model, lik, fit, hyp, phys_ls, interrupted, path, calibration)

@@ -30,6 +30,8 @@ from bemlearn.data.validation import check_robot
 from bemlearn.models import predict
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.evaluation import evaluate_bem, held_out_references
+from bemlearn.pipeline.reliability import reliability_figure
+from bemlearn.pipeline.uncertainty import calibrate_band
 from bemlearn.units import gp_input_units
 
 __all__ = ["train_run", "file_sha256"]
@@ -113,6 +115,7 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         robot=ref.to_dict(), joint_names=meta.joint_names, unactuated_name=meta.unactuated,
         data_sha256=file_sha256(data_path), extra={"data_file": str(data_path), "dataset_report": ds.report},
         writer=writer, resume=resume, progress=progress,
+        calibrate=lambda st: calibrate_band(st, traj, config.dataset, seed=config.dataset.seed),  # std of eq. (B1)
     )
     state, model, lik = stage.state, stage.model, stage.likelihood
     interrupted = stage.interrupted
@@ -129,9 +132,14 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         err = mean - val.y
         metrics["val_rmse"] = float(err.pow(2).mean().sqrt())
         metrics["val_mean_log_likelihood"] = float((-0.5 * (err**2 / var_pred + var_pred.log() + math.log(2 * math.pi))).mean())
-        metrics["val_inside_2sigma_predictive"] = float((err.abs() <= 2 * var_pred.sqrt()).to(torch.float64).mean())
         writer.add_scalar("val/rmse", metrics["val_rmse"], 0)
         writer.add_scalar("val/mean_log_likelihood", metrics["val_mean_log_likelihood"], 0)
+        from bemlearn.models.band import band_reference
+
+        band = band_reference(state, val.x)[1]  # model-free: held-out q_u inside ±2√(σ_band² + σ_0²)
+        metrics["val_coverage_2sigma_band"] = float((err.abs() <= 2 * (band**2 + state.y_std**2 * state.noise).sqrt()).double().mean())
+        metrics["val_coverage_2sigma_predictive"] = float((err.abs() <= 2 * var_pred.sqrt()).double().mean())
+    metrics["uncertainty"] = stage.calibration
     # data-only evaluation (no model): held-out trials' q_u from f(x), and the BEM on slices with the
     # region the data cover marked, so that extrapolation is visible
     from bemlearn.pipeline.data_evaluation import bem_slice_figure, bem_slices, heldout_prediction
@@ -150,8 +158,10 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         ev = evaluate_bem(state, truth_robot, held_out_references(ecfg, truth_robot.m), duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
         curves = ev.pop("curves")
         metrics["bem_heldout"] = ev
-        for k in ("rmse", "max_abs", "coverage_2sigma_latent", "coverage_2sigma_predictive"):
+        for k in ("rmse", "max_abs", "coverage_2sigma_latent", "coverage_2sigma_predictive", "coverage_2sigma_band"):
             writer.add_scalar(f"bem/{k}", ev[k], 0)
+        writer.add_figure("bem/reliability", reliability_figure(ev["reliability"]), 0)
+        reliability_figure(ev["reliability"]).savefig(out / "reliability.png", dpi=110)
         fig = _bem_figure(curves, meta.unactuated, units[f"qd_{meta.unactuated}"].removesuffix("/s"))
         writer.add_figure("bem/learned_vs_model", fig, 0)
         fig.savefig(out / "bem_validation.png", dpi=110)
@@ -175,11 +185,11 @@ def _bem_figure(curves: dict, qu_name: str, unit: str = "rad"):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    t, model, mean, std = curves["t"], curves["model"], curves["mean"], curves["std"]
+    t, model, mean, std = curves["t"], curves["model"], curves["mean"], curves.get("band_std", curves["std"])
     fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
     ax[0].plot(t, model, "k", lw=1.2, label="model-based BEM (eq. 9)")
     ax[0].plot(t, mean, "C1--", lw=1.2, label="learned BEM μ(x₀ᵉ) (eq. 14)")
-    ax[0].fill_between(t, mean - 2 * std, mean + 2 * std, color="C1", alpha=0.25, label="±2σ")
+    ax[0].fill_between(t, mean - 2 * std, mean + 2 * std, color="C1", alpha=0.25, label="±2σ (calibrated band, eq. B1)")
     ax[0].set_ylabel(f"{qu_name} ({unit})")
     ax[0].legend(fontsize=8)
     ax[0].set_title("held-out composite-sinusoid reference")

@@ -1,0 +1,40 @@
+"""The calibrated BEM band: latent std scaled by c plus input noise through the mean's gradient.
+
+    σ_band(x)² = c² σ(x)² + Σ_{i < n} (s_i ∂μ/∂x_i (x))²                            (B1)
+
+σ the latent posterior std of eq. (12) (physical units), c = ``PredictorState.std_scale``
+(trial-split replica calibration), s = ``PredictorState.input_std`` (Savitzky–Golay
+quantization model, eq. N3 of :mod:`bemlearn.models.input_noise`), ∂μ/∂x of eq. (N2), and
+n the number of columns the caller supplies: 3m for the BEM query x_0^e of eq. (14)
+(q̈_u = q̇_u = 0 are exact there), all d for the full map of eq. (11).  This module is
+the dense reference; the exported predictor folds the same formula
+(:class:`~bemlearn.export.folded_posterior.FoldedPosterior`).
+"""
+
+from __future__ import annotations
+
+import torch
+
+from bemlearn.models.input_noise import mean_gradient
+from bemlearn.models.predictor_state import PredictorState
+
+__all__ = ["band_reference"]
+
+
+def band_reference(state: PredictorState, x: torch.Tensor, *, n_inputs: int | None = None
+                   ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(μ, σ_band, σ) of (B1), each ``(B,)`` rad, for physical ``x (B, d)``.
+
+    Args:
+        n_inputs: columns 0..n−1 carry input noise (default d); the rest are exact.
+    """
+    n = state.dim if n_inputs is None else n_inputs
+    if not 1 <= n <= state.dim:
+        raise ValueError(f"band_reference: n_inputs: expected 1..{state.dim}, got {n}")
+    mean, latent = state.predict_reference(x)
+    s = state.input_std.clone()
+    s[n:] = 0.0
+    var_in = torch.zeros_like(mean)
+    if bool((s > 0).any()):
+        var_in = ((mean_gradient(state, x) * s) ** 2).sum(-1)
+    return mean, torch.sqrt(state.std_scale**2 * latent**2 + var_in), latent

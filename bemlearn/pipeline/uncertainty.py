@@ -1,0 +1,76 @@
+"""The calibrated BEM band of a training run: c and s of eq. (B1) from the data alone.
+
+    σ_band(x)² = c² σ(x)² + Σ_{i ∈ inputs} (s_i ∂μ/∂x_i)²                           (B1)
+
+* s (``PredictorState.input_std``): the derivative estimator's noise gains applied to the
+  quantization step detected in each joint's recorded angles (eq. N3,
+  :mod:`bemlearn.models.input_noise`); joints without a detectable grid get s = 0;
+* c (``PredictorState.std_scale``): trial-split replica calibration at held-out BEM queries
+  (:mod:`bemlearn.fitting.calibration`).
+
+Neither needs a robot model.  :func:`calibrate_band` is called by ``bemlearn train`` after
+the fit; see docs/uncertainty.md for the measurements behind the choice.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+
+import torch
+
+from bemlearn.data import build_datasets
+from bemlearn.data.quantization import detect_quantization_step
+from bemlearn.fitting.calibration import calibrate_replicas
+from bemlearn.models.input_noise import quantization_input_std
+from bemlearn.models.predictor_state import PredictorState
+
+__all__ = ["calibrate_band"]
+
+log = logging.getLogger(__name__)
+
+
+def calibrate_band(state: PredictorState, traj, dataset_config, *, n_queries: int = 2000, n_pairs: int = 4,
+                   level: float = 0.95, seed: int = 0) -> tuple[PredictorState, dict]:
+    """``state`` with ``std_scale`` and ``input_std`` set, and a JSON-able summary.
+
+    Args:
+        state: the fitted posterior (input columns as built from ``traj`` by ``dataset_config``).
+        traj: the training :class:`~bemlearn.data.trajectory.Trajectory`.
+        dataset_config: the :class:`~bemlearn.data.DatasetConfig` the posterior was trained with.
+        n_queries: held-out BEM queries x_0^e for the replica calibration.
+        n_pairs, level, seed: see :func:`~bemlearn.fitting.calibration.calibrate_replicas`.
+    """
+    t0 = time.perf_counter()
+    meta = traj.meta
+    steps = {}
+    for j, name in enumerate(meta.joint_names):
+        step = detect_quantization_step(traj.q[:, j])
+        if step is not None:
+            steps[name] = step
+    est = dataset_config.estimator()
+    s = quantization_input_std(state.input_names, steps, estimator=est, sample_rate_hz=meta.sample_rate_hz)
+    pool = build_datasets(traj, dataclasses.replace(dataset_config, n_points=None, n_val_points=None))
+    source = pool.val if len(pool.val) else pool.train
+    g = torch.Generator().manual_seed(seed)
+    queries = source.x[torch.randperm(len(source), generator=g)[:n_queries]].clone()
+    queries[:, -2:] = 0.0                                  # x_0^e: q̈_u = q̇_u = 0 (eq. 14)
+    summary: dict = {"formula": "std² = std_scale² · latent_std² + Σ_i (input_std_i ∂mean/∂x_i)²",
+                     "quantization_step": steps, "input_std": dict(zip(state.input_names, s.tolist())),
+                     "estimator": est.name, "queries_from": "validation trials" if len(pool.val) else "training trials"}
+    try:
+        cal = calibrate_replicas(state, pool.train.x, pool.train.y, pool.train.trial, queries,
+                                 n_points=state.n_train, n_pairs=n_pairs, level=level, seed=seed)
+        scale = cal.scale
+        summary["replicas"] = cal.to_dict()
+    except ValueError as exc:  # a single training trial: nothing to split
+        log.warning("band calibration: no replica calibration (%s); std_scale = 1", exc)
+        scale = 1.0
+        summary["replicas"] = None
+    summary["std_scale"] = scale
+    summary["seconds"] = time.perf_counter() - t0
+    new = dataclasses.replace(state, std_scale=torch.tensor(scale, dtype=torch.float64), input_std=s.to(torch.float64))
+    log.info("calibrated band: std_scale %.3f, input_std %s (%.2f s)", scale,
+             ", ".join(f"{n} {v:.3g}" for n, v in zip(state.input_names, s.tolist())), summary["seconds"])
+    return new, summary
