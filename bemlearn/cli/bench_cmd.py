@@ -93,11 +93,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     rb.add_argument("--seed", type=int, default=0, help="collect seed (default 0)")
     rb.set_defaults(func=_robots)
     u = sub.add_parser("uncertainty", help="candidate BEM bands: coverage of the model BEM, sharpness, bound violations, cost",
-                       description="Fit the Furuta (and a generated cart-pole) BEM GP and score each candidate band "
+                       description="Fit the config's robot (and a generated cart-pole) BEM GP and score each candidate band "
                        "on held-out references against the model-based BEM (see bemlearn/bench/uncertainty_bench.py).")
     u.add_argument("--config", type=Path, required=True, help="pipeline YAML of the robot (e.g. the shipped configs/*.yaml)")
     u.add_argument("--data", type=Path, required=True, help="its excitation data (e.g. the shipped data/*.npz)")
-    u.add_argument("--no-cartpole", action="store_true", help="only the Furuta (the cart-pole collects ~10 s of trials)")
+    u.add_argument("--no-cartpole", action="store_true", help="only the config's robot (the cart-pole collects ~10 s of trials)")
     u.add_argument("--workdir", type=Path, default=None, help="keep the cart-pole MJCF and data here (default: a temp dir)")
     u.add_argument("--seeds", type=int, default=0, help="also refit the chosen band with dataset seeds 1..K (robustness)")
     u.add_argument("--json", type=Path, default=None, help="also write the full results (reliability tables) as JSON")
