@@ -17,11 +17,7 @@ import typing
 
 from bemlearn.pipeline.config import PipelineConfig
 
-__all__ = ["config_markdown", "attribute_docs", "DERIVED_KEYS"]
-
-#: Keys whose value, when not given, is derived from the robot's model
-#: (:mod:`bemlearn.pipeline.derived_defaults`); set by that module.
-DERIVED_KEYS: dict[str, str] = {}
+__all__ = ["config_markdown", "attribute_docs"]
 
 _INTRO = """# Pipeline configuration
 
@@ -91,6 +87,8 @@ def _default(f: dataclasses.Field) -> str:
 
 
 def _rows(cls, prefix: str, rows: list[str], sections: list[tuple[str, type]]) -> None:
+    from bemlearn.pipeline.derived_defaults import DERIVED_KEYS
+
     hints = typing.get_type_hints(cls)
     docs = attribute_docs(cls)
     for f in dataclasses.fields(cls):
@@ -106,8 +104,6 @@ def _rows(cls, prefix: str, rows: list[str], sections: list[tuple[str, type]]) -
 
 def config_markdown() -> str:
     """The whole ``docs/config.md`` page."""
-    from bemlearn.pipeline import derived_defaults  # noqa: F401  (fills DERIVED_KEYS)
-
     out = [_INTRO]
     pending: list[tuple[str, type]] = [("", PipelineConfig)]
     while pending:

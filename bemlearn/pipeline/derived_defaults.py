@@ -14,21 +14,22 @@ import dataclasses
 import math
 from typing import Any
 
-from bemlearn.pipeline import config_doc
-
-__all__ = ["derive_pipeline_values"]
+__all__ = ["DERIVED_KEYS", "derive_pipeline_values"]
 
 _COLLECT = ("rate_hz", "physics_timestep", "gains", "gain_scale", "fall_window", "input_units", "sensor", "n_sines",
             "amplitude", "frequency_hz", "initial_qa", "initial_qu")
 _SIMULATE = ("rate_hz", "physics_timestep", "gains", "reference", "fall_window", "sensor")
 
-config_doc.DERIVED_KEYS.update({f"collect.{k}": "" for k in _COLLECT if k != "sensor"})
-config_doc.DERIVED_KEYS.update({f"collect.sensor.{k}": "" for k in ("counts_per_rev", "m_per_count", "velocity_cutoff")})
-config_doc.DERIVED_KEYS.update({f"simulate.{k}": "" for k in _SIMULATE if k not in ("gains", "reference", "sensor")})
-config_doc.DERIVED_KEYS.update({f"simulate.gains.{k}": "" for k in ("kp_a", "kd_a", "kp_u", "kd_u")})
-config_doc.DERIVED_KEYS.update({f"simulate.reference.{k}": "" for k in ("amplitudes", "frequencies_hz", "phases", "offset")})
-config_doc.DERIVED_KEYS.update({f"simulate.sensor.{k}": "" for k in ("counts_per_rev", "m_per_count", "velocity_cutoff")})
-config_doc.DERIVED_KEYS.update({f"evaluate.{k}": "" for k in ("n_sines", "amplitude_max", "amplitude_min", "frequency_hz")})
+#: Every config key that the robot's model derives when the config does not give it (docs/config.md).
+DERIVED_KEYS: set[str] = set()
+
+DERIVED_KEYS.update(f"collect.{k}" for k in _COLLECT if k != "sensor")
+DERIVED_KEYS.update(f"collect.sensor.{k}" for k in ("counts_per_rev", "m_per_count", "velocity_cutoff"))
+DERIVED_KEYS.update(f"simulate.{k}" for k in _SIMULATE if k not in ("gains", "reference", "sensor"))
+DERIVED_KEYS.update(f"simulate.gains.{k}" for k in ("kp_a", "kd_a", "kp_u", "kd_u"))
+DERIVED_KEYS.update(f"simulate.reference.{k}" for k in ("amplitudes", "frequencies_hz", "phases", "offset"))
+DERIVED_KEYS.update(f"simulate.sensor.{k}" for k in ("counts_per_rev", "m_per_count", "velocity_cutoff"))
+DERIVED_KEYS.update(f"evaluate.{k}" for k in ("n_sines", "amplitude_max", "amplitude_min", "frequency_hz"))
 
 
 def _plain(v: Any) -> Any:
