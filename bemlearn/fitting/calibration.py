@@ -157,7 +157,10 @@ def calibrate_replicas(
             rows = torch.as_tensor(np.sort(rng.choice(pool, size=k, replace=False)))
             reps.append(condition_state(state, x[rows], y[rows]).predict_reference(queries))
         (ma, sa), (mb, sb) = reps
-        zs.append(((ma - mb) / torch.sqrt(sa**2 + sb**2).clamp_min(1e-300)).numpy())
+        # a latent std that is numerically zero (a posterior that claims to know μ exactly) is floored
+        # at 1e-9 of the output scale, so that z stays finite and such points dominate the quantile
+        floor = 1e-9 * float(state.y_std)
+        zs.append(((ma - mb) / torch.sqrt(sa**2 + sb**2).clamp_min(floor)).numpy())
     z = np.abs(np.concatenate(zs))
     raw = float(np.quantile(z, level)) / kappa
     cal = ReplicaCalibration(scale=max(1.0, raw), raw_scale=raw, level=level, z_std=float(np.sqrt(np.mean(z**2))),
