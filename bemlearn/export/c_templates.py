@@ -117,14 +117,14 @@ $real ${p}_mean(const $real *x)
 {
     $real v[${P}_N_INPUTS], q;
     if (x == NULL || ${p}_bem_prepare(x, v, &q)) return ($real)NAN;
-    return ${p}_bem_sum(v, q, NULL);
+    return ${p}_bem_sum(v, q);
 }
 
 $real ${p}_full_mean(const $real *x)
 {
     $real v[${P}_N_FULL_INPUTS], q;
     if (x == NULL || ${p}_full_prepare(x, v, &q)) return ($real)NAN;
-    return ${p}_full_sum(v, q, NULL);
+    return ${p}_full_sum(v, q);
 }
 
 static int ${p}_finish(int code, $real *mean, $real *std)
@@ -147,7 +147,7 @@ int ${p}_forward(const $real *x, $real *mean, $real *std)
         return code;
     }
     ${p}_bem_prepare(x, v, &q);
-    *mean = ${p}_bem_sum(v, q, k);
+    *mean = ${p}_bem_sum_k(v, q, k);
     *std = ${p}_std(k);
     return ${p}_finish(code, mean, std);
 }
@@ -163,7 +163,7 @@ int ${p}_predict_full(const $real *x, $real *mean, $real *std)
         return code;
     }
     ${p}_full_prepare(x, v, &q);
-    *mean = ${p}_full_sum(v, q, k);
+    *mean = ${p}_full_sum_k(v, q, k);
     *std = ${p}_std(k);
     return ${p}_finish(code, mean, std);
 }
@@ -205,10 +205,17 @@ TRIANGULAR_STD = Template(r"""static $real ${p}_std($real *k)
     const $real *row = ${p}_factor;
     $real s, q = 0, r = 0, y, t;   /* q: compensated (Kahan) sum of v_i^2, r its running error */
     int i, j;
+    $real a0, a1, a2, a3;          /* four partial sums: independent chains the CPU can overlap */
     for (i = 0; i < ${P}_N_SUPPORT; ++i) {
-        s = k[i];
-        for (j = 0; j < i; ++j) s -= row[j] * k[j];
-        s /= row[i];
+        a0 = a1 = a2 = a3 = 0;
+        for (j = 0; j + 4 <= i; j += 4) {
+            a0 += row[j] * k[j];
+            a1 += row[j + 1] * k[j + 1];
+            a2 += row[j + 2] * k[j + 2];
+            a3 += row[j + 3] * k[j + 3];
+        }
+        for (; j < i; ++j) a0 += row[j] * k[j];
+        s = (k[i] - ((a0 + a1) + (a2 + a3))) / row[i];
         k[i] = s;
         y = s * s - r;
         t = q + y;
@@ -224,12 +231,19 @@ TRIANGULAR_STD = Template(r"""static $real ${p}_std($real *k)
 # sgpr / svgp: v = G k, Σ_i s_i v_i².
 DENSE_STD = Template(r"""static $real ${p}_std($real *k)
 {
-    $real s, q = 0, r = 0, y, t;   /* q: compensated (Kahan) sum of s_i v_i^2, r its running error */
+    $real s, q = 0, r = 0, y, t, a0, a1, a2, a3;   /* q: compensated (Kahan) sum of s_i v_i^2, r its error */
     int i, j;
     for (i = 0; i < ${P}_N_SUPPORT; ++i) {
         const $real *g = ${p}_factor + (size_t)i * ${P}_N_SUPPORT;
-        s = 0;
-        for (j = 0; j < ${P}_N_SUPPORT; ++j) s += g[j] * k[j];
+        a0 = a1 = a2 = a3 = 0;         /* four partial sums: independent chains the CPU can overlap */
+        for (j = 0; j + 4 <= ${P}_N_SUPPORT; j += 4) {
+            a0 += g[j] * k[j];
+            a1 += g[j + 1] * k[j + 1];
+            a2 += g[j + 2] * k[j + 2];
+            a3 += g[j + 3] * k[j + 3];
+        }
+        for (; j < ${P}_N_SUPPORT; ++j) a0 += g[j] * k[j];
+        s = (a0 + a1) + (a2 + a3);
         y = $signed_term - r;
         t = q + y;
         r = (t - q) - y;
@@ -255,24 +269,33 @@ POSTERIOR = Template(r"""static int ${p}_${name}_prepare(const $real *x, $real *
     return 0;
 }
 
-static $real ${p}_${name}_sum(const $real *v, $real q, $real *k)
+/* mean only (the control-loop path) */
+static $real ${p}_${name}_sum(const $real *v, $real q)
 {
-    $real e[${P}_BLOCK], acc = 0, t;
+    $real e[${P}_BLOCK], acc = 0;
     int j0, j;
     for (j0 = 0; j0 + ${P}_BLOCK <= ${P}_N_SUPPORT; j0 += ${P}_BLOCK) {
         ${p}_${name}_exponents(v, q, j0, ${P}_BLOCK, e);
-        for (j = 0; j < ${P}_BLOCK; ++j) {
-            t = $exp(e[j]);
-            if (k != NULL) k[j0 + j] = t;
-            acc += ${p}_w[j0 + j] * t;
-        }
+        for (j = 0; j < ${P}_BLOCK; ++j) acc += ${p}_w[j0 + j] * $exp(e[j]);
     }
     if (j0 < ${P}_N_SUPPORT) {
         ${p}_${name}_exponents(v, q, j0, ${P}_N_SUPPORT - j0, e);
-        for (j = 0; j < ${P}_N_SUPPORT - j0; ++j) {
-            t = $exp(e[j]);
-            if (k != NULL) k[j0 + j] = t;
-            acc += ${p}_w[j0 + j] * t;
+        for (j = 0; j < ${P}_N_SUPPORT - j0; ++j) acc += ${p}_w[j0 + j] * $exp(e[j]);
+    }
+    return ${p}_y0 + acc;
+}
+
+/* mean, keeping the kernel row k (M values) for the std */
+static $real ${p}_${name}_sum_k(const $real *v, $real q, $real *k)
+{
+    $real acc = 0;
+    int j0, j;
+    for (j0 = 0; j0 < ${P}_N_SUPPORT; j0 += ${P}_BLOCK) {
+        int len = ${P}_N_SUPPORT - j0 < ${P}_BLOCK ? ${P}_N_SUPPORT - j0 : ${P}_BLOCK;
+        ${p}_${name}_exponents(v, q, j0, len, k + j0);
+        for (j = j0; j < j0 + len; ++j) {
+            k[j] = $exp(k[j]);
+            acc += ${p}_w[j] * k[j];
         }
     }
     return ${p}_y0 + acc;
