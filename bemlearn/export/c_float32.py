@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from scipy.linalg import solve_triangular
 
 from bemlearn.export.c_posterior import CPosterior
 from bemlearn.export.folded_posterior import FoldedPosterior
@@ -62,14 +63,10 @@ def _f32_std(post: CPosterior, k: np.ndarray) -> np.ndarray:
     """σ from float32 kernel rows ``k (B, M)``, float32 arithmetic (the C loops, vectorized over B)."""
     M = post.n_support
     f = post.factor.astype(F32)
-    q = np.zeros(k.shape[0], dtype=F32)
     if post.triangular:
-        v = k.copy()
         rows = np.zeros((M, M), dtype=F32)
         rows[np.tril_indices(M)] = f
-        for i in range(M):
-            s = v[:, i] - v[:, :i] @ rows[i, :i] if i else v[:, i].copy()
-            v[:, i] = (s / rows[i, i]).astype(F32)
+        v = solve_triangular(rows, k.T, lower=True, check_finite=False).T    # float32 LAPACK (strsm)
         sq = v * v
     else:
         v = k @ f.reshape(M, M).T

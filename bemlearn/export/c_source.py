@@ -22,6 +22,7 @@ import re
 from typing import Literal
 
 import numpy as np
+import torch
 
 from bemlearn import __version__
 from bemlearn.export.bem_predictor import BEMPredictor
@@ -38,7 +39,7 @@ from bemlearn.export.c_templates import (
 )
 from bemlearn.export.folded_posterior import FoldedPosterior
 from bemlearn.export.metadata import PredictorMetadata
-from bemlearn.export.variance_factor import variance_factor
+from bemlearn.export.variance_factor import VarianceFactor
 from bemlearn.models.predictor_state import PredictorState
 
 __all__ = ["c_sources", "check_prefix", "CDtype", "ERROR_CODES", "BLOCK", "F32_MEAN_TOL", "F32_STD_RTOL"]
@@ -106,8 +107,10 @@ def _posteriors(predictor: BEMPredictor, state: PredictorState, dtype: CDtype) -
     if dtype == "float64":
         return c_posterior(predictor.bem), c_posterior(predictor.full)
     # float32: centered distance form; w and the variance factor shared with the predictor
-    # (the factor argument only sets the signed / triangular flags)
-    factor = variance_factor(state)
+    # (with ``share`` the factor argument only sets the signed / triangular flags)
+    ref = predictor.full
+    empty = torch.zeros(0, 0, dtype=torch.float64)
+    factor = VarianceFactor(L=empty) if ref.triangular else VarianceFactor(F=empty, signs=ref.signs if ref.signed else None)
     full = FoldedPosterior(state, factor, n_inputs=state.dim, share=predictor.full, form="centered")
     bem = FoldedPosterior(state, factor, n_inputs=predictor.n_bem, share=predictor.full, form="centered")
     return c_posterior(bem, form="distance"), c_posterior(full, form="distance")
