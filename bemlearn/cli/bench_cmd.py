@@ -41,6 +41,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="torch/BLAS threads of the batch case (default: every core)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-pt2", action="store_true", help="skip the torch.export artifact")
+    p.add_argument("--no-c", action="store_true", help="skip the C export (compiled with the system cc)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_predict)
     t = sub.add_parser("train", help="GP fit times and learned-BEM accuracy on the shipped Furuta config")
@@ -108,6 +109,7 @@ def run_predict(args: argparse.Namespace) -> int:
         batch_threads=args.batch_threads,
         pt2=not args.no_pt2,
         progress=not args.no_progress,
+        c=not args.no_c,
     )
     print(format_predict_bench(result))
     return 0
