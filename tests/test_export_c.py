@@ -189,3 +189,16 @@ def test_signed_factor_matches_torchscript(tmp_path):
     mean, std, _ = lib.forward(x)
     ref_mean, ref_std = (t.numpy() for t in ts.forward(torch.from_numpy(x)))
     assert np.abs(mean - ref_mean).max() <= MEAN_ATOL and np.abs(std / ref_std - 1).max() <= STD_RTOL
+
+
+@pytest.mark.skipif(__import__("shutil").which("size") is None, reason="binutils `size` not on PATH")
+def test_footprint_counts_the_variance_factor_bytes():
+    from bemlearn.bench.c_footprint import measure_footprints
+
+    rows = measure_footprints({"exact": (40,), "sgpr": (32,)}, dtypes=("float64", "float32"))
+    for r in rows:
+        size = 8 if r.dtype == "float64" else 4
+        factor = r.M * (r.M + 1) // 2 if r.kind == "exact" else r.M * r.M
+        assert r.rodata_std == size * factor          # packed triangle (exact) or dense M × M (sgpr)
+        assert r.data == 0                            # no writable static data: reentrant
+        assert r.rodata_mean >= size * r.M * (5 + 2 + 1)   # W (d × M), two offsets c, weights w

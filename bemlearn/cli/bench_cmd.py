@@ -7,7 +7,8 @@
 * ``bench gpdm`` — GPDM fit time and recovery on synthetic gait data (issue 7);
 * ``bench biped-bem [CONFIG] [--data D | --collect-seeds S …]`` — learned torso BEM error over training
   subsets and training walks (issue 7);
-* ``bench walks [CONFIG]`` — seeded biped walks per gait and torso BEM source (issue 7).
+* ``bench walks [CONFIG]`` — seeded biped walks per gait and torso BEM source (issue 7);
+* ``bench c-footprint`` — flash/RAM footprint of the C export per model size and kind (issue 17).
 """
 
 from __future__ import annotations
@@ -44,6 +45,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-c", action="store_true", help="skip the C export (compiled with the system cc)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_predict)
+    cf = sub.add_parser("c-footprint", help="flash/RAM footprint of the C export per model size and kind",
+                        description="Compile the C export (bemlearn export --format c) of synthetic exact (N = 100..1000) "
+                        "and sgpr/svgp (M = 64..512) posteriors, float64 and float32, and print a Markdown table of "
+                        "code, constants and stack (needs cc and binutils size).")
+    cf.set_defaults(func=_c_footprint)
     t = sub.add_parser("train", help="GP fit times and learned-BEM accuracy on the shipped Furuta config")
     t.add_argument("config", type=Path, nargs="?", default=Path("configs/furuta.yaml"))
     t.add_argument("--data", type=Path, default=Path("data/furuta_excitation.npz"))
@@ -91,6 +97,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     w.add_argument("--sensor-noise", type=float, default=0.001, help="encoder noise std, rad (default 0.001)")
     w.add_argument("--no-progress", action="store_true")
     w.set_defaults(func=_walks)
+
+
+def _c_footprint(args: argparse.Namespace) -> int:
+    from bemlearn.bench.c_footprint import format_footprints, measure_footprints
+
+    print(format_footprints(measure_footprints()))
+    return 0
 
 
 def run_predict(args: argparse.Namespace) -> int:
