@@ -5,8 +5,9 @@ compiled to an object file with ``cc -std=c99 -O2 -ffunction-sections -fdata-sec
 measured with ``size -A``: code (``.text*``), constants (``.rodata*``), split into those the
 mean path reads and the std's variance factor (``<prefix>_factor``, ``<prefix>_signs``; a
 firmware that never calls ``_forward``/``_predict_full`` drops them with ``-Wl,--gc-sections``),
-and writable data (``.data``/``.bss``: none).  The stack per call is computed from the
-generated code (the C arrays on the stack).
+and writable data (``.data``/``.bss``: none).  The stack per call is gcc's ``-fstack-usage``
+frame of ``bem_mean`` / ``bem_forward`` plus the largest frame of the static helpers they call
+(the call depth is one; libm's ``exp`` not counted).
 
 Sizes are of this host's object code (x86-64); the constants are the same bytes on any
 target, the code differs by a few kB.  The posteriors are synthetic (random support points
@@ -27,7 +28,7 @@ import torch
 
 from bemlearn.bench.predict_bench import synthetic_posterior
 from bemlearn.export.c_build import find_cc
-from bemlearn.export.c_source import BLOCK, c_sources
+from bemlearn.export.c_source import c_sources
 from bemlearn.export.variance_factor import kernel_gram
 
 __all__ = ["Footprint", "measure_footprints", "format_footprints", "SIZES"]
@@ -74,6 +75,15 @@ def _sections(obj: Path) -> dict[str, int]:
     return {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\.\S+)\s+(\d+)", out, re.M)}
 
 
+def _stack_frames(su: Path) -> dict[str, int]:
+    """Frame bytes per function from gcc's ``-fstack-usage`` file."""
+    out = {}
+    for line in su.read_text().splitlines():
+        loc, nbytes, _ = line.split("\t")
+        out[loc.rsplit(":", 1)[-1]] = int(nbytes)
+    return out
+
+
 def measure_footprints(sizes: dict[str, tuple[int, ...]] = SIZES, dtypes: tuple[str, ...] = ("float64", "float32")) -> list[Footprint]:
     """Compile and measure every (kind, M, dtype); needs ``cc`` and binutils ``size``."""
     cc = find_cc()
@@ -89,17 +99,17 @@ def measure_footprints(sizes: dict[str, tuple[int, ...]] = SIZES, dtypes: tuple[
                     for name, text in files.items():
                         Path(tmp, name).write_text(text)
                     obj = Path(tmp, "bem.o")
-                    subprocess.run([cc, "-std=c99", "-O2", "-ffunction-sections", "-fdata-sections", "-c",
+                    subprocess.run([cc, "-std=c99", "-O2", "-ffunction-sections", "-fdata-sections", "-fstack-usage", "-c",
                                     str(Path(tmp, "bem_predictor.c")), "-o", str(obj)], check=True, capture_output=True)
                     sec = _sections(obj)
                     code = sum(v for k, v in sec.items() if k.startswith(".text"))
                     std = sum(v for k, v in sec.items() if re.match(r"\.rodata\.bem_(factor|signs)$", k))
                     rodata = sum(v for k, v in sec.items() if k.startswith(".rodata"))
                     data = sum(v for k, v in sec.items() if k.startswith((".data", ".bss")))
-                    size = 8 if dtype == "float64" else 4
-                    d = state.dim
+                    frames = _stack_frames(obj.with_suffix(".su"))
+                    helpers = max(v for k, v in frames.items() if k == "bem_std" or k.endswith(("_exponents", "_prepare", "_sum", "_sum_k")))
                     rows.append(Footprint(kind, M, dtype, code, rodata - std, std, data,
-                                          stack_mean=size * (BLOCK + d + 2), stack_forward=size * (M + d + BLOCK + 4)))
+                                          stack_mean=frames["bem_mean"] + helpers, stack_forward=frames["bem_forward"] + helpers))
     return rows
 
 
