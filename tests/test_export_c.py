@@ -202,3 +202,21 @@ def test_footprint_counts_the_variance_factor_bytes():
         assert r.rodata_std == size * factor          # packed triangle (exact) or dense M × M (sgpr)
         assert r.data == 0                            # no writable static data: reentrant
         assert r.rodata_mean >= size * r.M * (5 + 2 + 1)   # W (d × M), two offsets c, weights w
+
+
+def test_bench_times_the_c_export_with_its_floor():
+    from bemlearn.bench.c_timing import time_c_predictor
+    from bemlearn.bench.predict_bench import format_predict_bench, run_predict_bench
+
+    state, meta = synthetic_posterior(n_train=64)
+    x = state.x_mean[:3].numpy() + 0.5 * state.x_std[:3].numpy() * np.random.default_rng(0).standard_normal((8, 3))
+    rows = time_c_predictor(c_sources(state, meta), x, kind="exact", calls=20, batches=5)
+    assert [r.flags for r in rows] == ["-O2", "-O3 -march=native"]
+    for r in rows:
+        assert (r.n_exp, r.n_fma_mean, r.n_fma_forward) == (64, 64 * 4, 64 * 4 + 64 * 65 // 2)
+        assert 0 < r.mean_ns < r.forward_ns and r.exp_ns > 0 and r.fma_ns > 0
+    result = run_predict_bench(n_train=64, repeats=50, warmup=5, gpytorch_repeats=2, batch=200, n_parity=100,
+                               pt2=False, progress=False)
+    text = format_predict_bench(result)
+    assert "C export, single queries in a C loop" in text and "C mean / TS bem_mean" in text
+    assert len(result.c_timings) == 2

@@ -331,7 +331,7 @@ def run_predict_bench(
                     notes.append("no C compiler: C export not timed")
                     continue
                 xc = np.concatenate([x1.numpy(), xb[:63].numpy()])
-                c_timings = time_c_predictor(c_sources(state, meta), xc, kind=state.kind)
+                c_timings = time_c_predictor(c_sources(state, meta), xc, kind=state.kind, calls=100, batches=max(repeats // 100, 5))
             elif step == "pt2":
                 p2 = load_pt2_predictor(save_pt2(predictor, Path(tmp) / "bem_predictor.pt2"))
                 n2 = max(repeats // 10, 100)
