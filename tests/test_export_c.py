@@ -129,6 +129,7 @@ def test_float32_within_its_stated_error(name, tmp_path):
     ref_mean, ref_std = (t.numpy() for t in ts.forward(torch.from_numpy(x)))
     err_mean, err_std = np.abs(mean - ref_mean).max(), np.abs(std / ref_std - 1).max()
     assert np.all(codes == 0)
+    assert np.array_equal(lib.mean(x), mean)
     assert err_mean <= 1e-4 and err_std <= 1e-2
     assert err_mean <= 4 * est["mean_abs"] + 1e-7 and err_std <= 4 * est["std_rel"] + 1e-6
 
