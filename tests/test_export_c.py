@@ -176,6 +176,8 @@ def test_export_c_never_overwrites_without_force(tmp_path, capsys):
     assert paths[1].read_text().startswith("/* bem_predictor.c")
     assert sorted(p.name for p in out.iterdir()) == ["bem_predictor.c", "bem_predictor.h"]   # no temporary files left
     assert main(["export", str(run), "--format", "c"]) == 2                                  # --out is required
+    assert main(["export", str(run), "--dtype", "float32"]) == 2                             # C options need --format c
+    assert "apply to --format c only" in capsys.readouterr().err
 
 
 def test_signed_factor_matches_torchscript(tmp_path):

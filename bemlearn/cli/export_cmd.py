@@ -26,7 +26,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "and metadata().  The file loads with torch.jit.load, without bemlearn.",
     )
     parser.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="run directory holding checkpoint.pt (or the checkpoint file)")
-    parser.add_argument("--out", metavar="FILE", type=Path, default=None, help="output file (default RUN_DIR/bem_predictor.pt or .pt2)")
+    parser.add_argument("--out", metavar="FILE", type=Path, default=None, help="output file (default RUN_DIR/bem_predictor.pt or .pt2); with --format c the output folder (required)")
     parser.add_argument(
         "--format",
         dest="fmt",
@@ -64,6 +64,8 @@ def _run_c(args: argparse.Namespace) -> int:
 def run(args: argparse.Namespace) -> int:
     if args.fmt == "c":
         return _run_c(args)
+    if args.prefix != "bem" or args.dtype != "float64":
+        raise ValueError("--prefix and --dtype apply to --format c only")
     for path in export_run(args.run_dir, out=args.out, fmt=args.fmt, verify=not args.no_verify):
         print(f"wrote {path}")
     return 0
