@@ -7,6 +7,7 @@ relative (exact, sgpr, svgp; m = 1, 2).  float32 is held to the tolerances the e
 enforces (mean 1e-4 rad, std 1e-2 relative) and to 4× the export's own error estimate.
 """
 
+import ctypes
 import dataclasses
 import json
 
@@ -223,3 +224,29 @@ def test_bench_times_the_c_export_with_its_floor():
     text = format_predict_bench(result)
     assert "C export, single queries in a C loop" in text and "C mean / TS bem_mean" in text
     assert len(result.c_timings) == 2
+
+
+def test_vectorized_exp_matches_libm(tmp_path):
+    """The float64 export's own exp (a branch-free block the compiler vectorizes) against libm."""
+    state, meta = synthetic_posterior(n_train=40)
+    write_files(c_sources(state, meta), tmp_path)
+    (tmp_path / "expcheck.c").write_text(
+        '#include "bem_predictor.c"\n'
+        "double bem_test_exp(double x)\n{\n    double in[BEM_BLOCK], out[BEM_BLOCK];\n    int j;\n"
+        "    for (j = 0; j < BEM_BLOCK; ++j)\n        in[j] = x * (1.0 - j * 1e-9);\n"
+        "    bem_exp_block(in, out);\n    return out[0];\n}\n"
+        "double bem_libm_exp(double x) { return exp(x); }\n"
+    )
+    lib = ctypes.CDLL(str(compile_shared([tmp_path / "expcheck.c"], tmp_path / "libexp.so")))
+    for f in (lib.bem_test_exp, lib.bem_libm_exp):
+        f.restype, f.argtypes = ctypes.c_double, [ctypes.c_double]
+    xs = np.concatenate([np.linspace(-708.0, 709.0, 200_001), np.linspace(-1.0, 1.0, 20_001),
+                         [-745.2, -720.0, -708.4, -708.3, 709.5, 709.7, 709.8, 710.0, 0.0, -0.0]])
+    ours, ref = np.array([lib.bem_test_exp(x) for x in xs]), np.array([lib.bem_libm_exp(x) for x in xs])
+    normal = np.isfinite(ref) & (ref >= np.finfo(np.float64).tiny)
+    assert np.abs(ours[normal] / ref[normal] - 1).max() <= 5e-16
+    tiny = np.isfinite(ref) & ~normal                                        # subnormal and 0
+    assert tiny.sum() >= 3 and np.abs(ours[tiny] - ref[tiny]).max() <= 1e-322
+    assert np.array_equal(ours[~np.isfinite(ref)], ref[~np.isfinite(ref)])   # overflow: libm's inf
+    for special in (np.nan, np.inf, -np.inf):
+        assert np.array_equal(lib.bem_test_exp(special), lib.bem_libm_exp(special), equal_nan=True)

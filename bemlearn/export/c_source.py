@@ -31,6 +31,8 @@ from bemlearn.export.c_posterior import RANGE_LENGTHSCALES, CPosterior, c_poster
 from bemlearn.export.c_templates import (
     DENSE_STD,
     DISTANCE_EXPONENTS,
+    EXP_BLOCK_F64,
+    EXP_BLOCK_LIBM,
     FOLDED_EXPONENTS,
     HEADER,
     POSTERIOR,
@@ -197,8 +199,9 @@ def c_sources(
         _array(f"{p}_factor", bem.factor, dtype, real),
         "" if bem.signs is None else _array(f"{p}_signs", bem.signs, dtype, real),
     ])
+    exp_block = (EXP_BLOCK_F64 if dtype == "float64" else EXP_BLOCK_LIBM).substitute(sub)
     source = SOURCE.substitute(
-        sub, version=__version__, constants=constants,
+        sub, version=__version__, constants=constants, exp_block=exp_block,
         exponents="\n".join(exponents.substitute(sub, name=nm, n=n) for nm, n in (("bem", n_bem), ("full", n_full))),
         std=std,
         posteriors="\n".join(POSTERIOR.substitute(sub, name=nm, n=n) for nm, n in (("bem", n_bem), ("full", n_full))),
