@@ -8,8 +8,8 @@ monotonic).  The same harness measures the *arithmetic floor* of one query:
     bem_mean:    M exp calls + M (n + 1) multiply-adds      (n = 3m exponent terms and w_j k_j)
     bem_forward: the above + M(M + 1)/2 (exact, triangular solve) or M² (sgpr/svgp) multiply-adds
 
-timed as ⌈M/32⌉ blocks of 32 values of the export's own exp block, summed (float64: branch-free, vectorized by the
-compiler; float32: libm ``expf``) on in-range arguments (e ∈ [−20, 0]) and that many
+timed as ⌈M/32⌉ blocks of 32 values of the export's own exp block, summed (float64:
+branch-free, vectorized by the compiler; float32: libm ``expf``) on in-range arguments (e ∈ [−20, 0]) and that many
 independent multiply-adds in a loop the compiler may vectorize; the floor is their sum.
 M calls of libm's scalar ``exp`` are timed too, for comparison.  The harness includes
 the generated ``.c`` file so it can call the export's static exp block.
