@@ -213,7 +213,7 @@ def c_sources(
         n_support=M, dtype=dtype, range_ls=f"{RANGE_LENGTHSCALES:g}",
         bem_columns=", ".join(doc["inputs"]), full_columns=", ".join(doc["full_inputs"]),
         units="; ".join(f"{k} [{units[k]}]" for k in doc["full_inputs"]) + "; mean, std [rad]",
-        stack_bytes=size * (M + n_full + BLOCK + 4) + 64,
+        stack_bytes=size * (M + 2 * BLOCK + n_full) + 1024,
         bem_lo=", ".join(_literal(v, dtype) for v in lo[:n_bem]), bem_hi=", ".join(_literal(v, dtype) for v in hi[:n_bem]),
         full_lo=", ".join(_literal(v, dtype) for v in lo), full_hi=", ".join(_literal(v, dtype) for v in hi),
         metadata=_c_string(json.dumps(doc, allow_nan=False, ensure_ascii=True, separators=(",", ":"))),
