@@ -9,7 +9,7 @@ The C functions evaluate the folded posterior of the TorchScript module (eq. 12,
     <prefix>_predict_full(...)  as ``forward`` for f(x)
 
 float64 uses the folded exponent of the TorchScript module (n multiply-adds and one ``exp``
-per support point); float32 uses the distance form on centered inputs, and is refused, with
+per support point, the exp a vectorizable block of :mod:`bemlearn.export.c_exp`); float32 uses the distance form on centered inputs, and is refused, with
 the measured error, for posteriors it cannot evaluate accurately
 (:mod:`bemlearn.export.c_float32`; docs/c-export.md).  The std sums Σ v_i² with compensated
 (Kahan) summation: σ² = var0 − Σ v_i² cancels by var0/σ² near the data.
@@ -28,11 +28,10 @@ from bemlearn import __version__
 from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.export.c_float32 import Float32Errors, float32_errors, sample_inputs
 from bemlearn.export.c_posterior import RANGE_LENGTHSCALES, CPosterior, c_posterior, support_box
+from bemlearn.export.c_exp import EXP_BLOCK_F64, EXP_BLOCK_LIBM
 from bemlearn.export.c_templates import (
     DENSE_STD,
     DISTANCE_EXPONENTS,
-    EXP_BLOCK_F64,
-    EXP_BLOCK_LIBM,
     FOLDED_EXPONENTS,
     HEADER,
     POSTERIOR,
