@@ -128,7 +128,7 @@ def _check_float32(predictor: BEMPredictor, state: PredictorState, bem: CPosteri
             f"{err.std_rel:.2g} relative (tolerance {std_rtol:g}).  Why: the mean is a sum of terms w_j k_j up to "
             f"{err.weight_sum:.3g} rad in total that cancel, each k_j known to ~1e-6 relative in float32, and the "
             "std is sqrt(var0 - sum v_i^2), which cancels near the data.  Use dtype float64 (software double on an "
-            "FPU without double), or a model with larger noise or fewer inducing points (sgpr/svgp)."
+            "FPU without double precision)."
         )
     return err
 
