@@ -17,6 +17,9 @@ and NumPy cases are timed in 10 alternating rounds, so their ratios hold under c
 * an empty TorchScript method (``x -> x``): the fixed cost of calling a TorchScript module
   from Python, which no formula can go below;
 
+* the C export (``bemlearn export --format c``) compiled with the system ``cc`` and timed in a
+  C loop, with its arithmetic floor (:mod:`bemlearn.bench.c_timing`);
+
 plus the time of 10⁵ queries in one batch on ``batch_threads`` threads (default: every core),
 with the floor of the exact variance: the triangular solve v = L⁻¹k alone on the same batch
 (B·M² flops, memory- and BLAS-bound), and parity of the TorchScript ``forward`` with that
@@ -42,7 +45,10 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from bemlearn.bench.c_timing import CTiming, time_c_predictor
 from bemlearn.export.bem_predictor import BEMPredictor
+from bemlearn.export.c_build import find_cc
+from bemlearn.export.c_source import c_sources
 from bemlearn.export.checkpoint import load_checkpoint
 from bemlearn.export.metadata import PredictorMetadata
 from bemlearn.export.pt2 import load_pt2_predictor, save_pt2
@@ -78,6 +84,7 @@ class PredictBenchResult:
     parity: dict[str, float]
     loadavg: tuple[str, str]
     notes: list[str] = field(default_factory=list)
+    c_timings: list[CTiming] = field(default_factory=list)
 
 
 def synthetic_posterior(*, n_train: int = 500, m: int = 1, seed: int = 0, noise: float = 1e-3) -> tuple[PredictorState, PredictorMetadata]:
@@ -269,6 +276,7 @@ def run_predict_bench(
     batch_threads: int | None = None,
     pt2: bool = True,
     progress: bool = True,
+    c: bool = True,
 ) -> PredictBenchResult:
     """Run the benchmark (see module docstring) and return the numbers.
 
@@ -283,6 +291,7 @@ def run_predict_bench(
         batch_threads: torch / BLAS threads for the batch case (``None``: ``os.cpu_count()``).
         pt2: also time the torch.export artifact (exporting takes a few seconds).
         progress: show a tqdm bar over the cases.
+        c: also time the C export (:mod:`bemlearn.bench.c_timing`; needs a C compiler).
     """
     if checkpoint is None:
         state, meta = synthetic_posterior(n_train=n_train, seed=seed)
@@ -302,6 +311,7 @@ def run_predict_bench(
     xp = state.x_mean[:n_bem] + 2 * scale * torch.randn(n_parity, n_bem, generator=g, dtype=torch.float64)
     gp = _gpytorch_exact(state) if state.kind == "exact" else None
     lat: dict[str, Latency] = {}
+    c_timings: list[CTiming] = []
     batch_s: dict[str, float] = {}
     parity: dict[str, float] = {}
     with tempfile.TemporaryDirectory() as tmp, _threads(threads) as notes:
@@ -312,10 +322,16 @@ def run_predict_bench(
             "torchscript bem_mean": (ts.bem_mean, x1),
         }
         single |= {name: (fn, x1.numpy()) for name, fn in _numpy_baselines(predictor, state).items()}
-        steps = ["single", *(["pt2"] if pt2 else []), *(["gpytorch"] if gp is not None else []), "batch"]
+        steps = ["single", *(["c"] if c else []), *(["pt2"] if pt2 else []), *(["gpytorch"] if gp is not None else []), "batch"]
         for step in tqdm(steps, desc="bench predict", disable=not progress, leave=False):
             if step == "single":
                 lat.update(_interleaved(single, repeats=repeats, warmup=warmup))
+            elif step == "c":
+                if find_cc() is None:
+                    notes.append("no C compiler: C export not timed")
+                    continue
+                xc = np.concatenate([x1.numpy(), xb[:63].numpy()])
+                c_timings = time_c_predictor(c_sources(state, meta), xc, kind=state.kind, calls=100, batches=max(repeats // 100, 5))
             elif step == "pt2":
                 p2 = load_pt2_predictor(save_pt2(predictor, Path(tmp) / "bem_predictor.pt2"))
                 n2 = max(repeats // 10, 100)
@@ -341,7 +357,7 @@ def run_predict_bench(
                         batch_s[name] = _batch_seconds(fn, xb)
                     if predictor.bem.triangular:
                         batch_s["floor: v = L⁻¹k alone"] = _solve_floor(predictor, xb)
-    return PredictBenchResult(model, threads, lat, batch, batch_s, n_batch, parity, (load_before, _loadavg()), notes)
+    return PredictBenchResult(model, threads, lat, batch, batch_s, n_batch, parity, (load_before, _loadavg()), notes, c_timings)
 
 
 def _extended_precision_mean(state: PredictorState, x: torch.Tensor) -> np.ndarray:
@@ -404,6 +420,28 @@ def _batch_seconds(fn: Callable[[torch.Tensor], Any], xb: torch.Tensor) -> float
     return float(np.median(runs))
 
 
+def _format_c(result: PredictBenchResult) -> list[str]:
+    """The C export's rows: per-call µs in a C loop, the ratio to TorchScript from Python, the floor."""
+    if not result.c_timings:
+        return []
+    ts = result.latencies.get("torchscript bem_mean")
+    t0 = result.c_timings[0]
+    lines = [f"C export, single queries in a C loop (one thread; floor = {t0.n_exp} exp + {t0.n_fma_mean} multiply-adds "
+             f"for the mean, + {t0.n_fma_forward - t0.n_fma_mean} for the std):",
+             f"  {'build':20s} {'mean µs':>9s} {'forward µs':>11s} {'floor mean µs':>14s} {'mean/floor':>11s} "
+             f"{'libm-exp floor µs':>18s} {'C mean / TS bem_mean':>21s}"]
+    for t in result.c_timings:
+        ratio = f"{t.mean_ns / 1e3 / ts.median_us:.3f}" if ts else "n/a"
+        lines.append(f"  {t.flags:20s} {t.mean_ns / 1e3:9.3f} {t.forward_ns / 1e3:11.2f} {t.floor_mean_ns / 1e3:14.3f} "
+                     f"{t.mean_ns / t.floor_mean_ns:11.2f} {t.floor_mean_libm_ns / 1e3:18.3f} {ratio:>21s}")
+    lines.append("  (target: C bem_mean <= 0.25x TorchScript bem_mean from Python); per exp and multiply-add, ns:")
+    for t in result.c_timings:
+        lines.append(f"    {t.flags:20s} own exp {t.exp_block_ns / t.n_exp:.3f}, libm exp {t.exp_ns / t.n_exp:.3f}, "
+                     f"multiply-add {t.fma_ns:.4f}")
+    lines.append("")
+    return lines
+
+
 def format_predict_bench(result: PredictBenchResult) -> str:
     """The report table, with the ratios the targets are stated in."""
     lat = result.latencies
@@ -426,6 +464,7 @@ def format_predict_bench(result: PredictBenchResult) -> str:
         "    (the call alone, before any formula)",
         "",
     ]
+    lines += _format_c(result)
     lines.append(f"batch of {result.batch} queries on {result.batch_threads} thread(s) (target: 1e5 in <= 0.5 s):")
     for name, sec in result.batch_seconds.items():
         lines.append(f"  {name:38s} {sec:.3f} s")

@@ -10,6 +10,7 @@
 * ``bench robots [MJCF …]`` — collect → train → export → held-out BEM → closed loop on MJCF
   robots with model-derived values only (issue 13).
 * ``bench uncertainty`` — candidate BEM bands: coverage, sharpness, bound violations, cost (issue 15).
+* ``bench c-footprint`` — flash/RAM footprint of the C export per model size and kind (issue 17).
 """
 
 from __future__ import annotations
@@ -43,8 +44,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="torch/BLAS threads of the batch case (default: every core)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-pt2", action="store_true", help="skip the torch.export artifact")
+    p.add_argument("--no-c", action="store_true", help="skip the C export (compiled with the system cc)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_predict)
+    cf = sub.add_parser("c-footprint", help="flash/RAM footprint of the C export per model size and kind",
+                        description="Compile the C export (bemlearn export --format c) of synthetic exact (N = 100..1000) "
+                        "and sgpr/svgp (M = 64..512) posteriors, float64 and float32, and print a Markdown table of "
+                        "code, constants and stack (needs cc and binutils size).")
+    cf.set_defaults(func=_c_footprint)
     t = sub.add_parser("train", help="GP fit times (exact / sgpr / svgp) and learned-BEM accuracy of a config on a data file")
     t.add_argument("config", type=Path, help="pipeline YAML naming the robot (its model BEM is the reference)")
     t.add_argument("--data", type=Path, required=True, help="trajectory file to train on")
@@ -104,6 +111,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     u.set_defaults(func=_uncertainty)
 
 
+def _c_footprint(args: argparse.Namespace) -> int:
+    from bemlearn.bench.c_footprint import format_footprints, measure_footprints
+
+    print(format_footprints(measure_footprints()))
+    return 0
+
+
 def run_predict(args: argparse.Namespace) -> int:
     for name in ("n_train", "repeats", "gpytorch_repeats", "batch", "threads", "batch_threads"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
@@ -120,6 +134,7 @@ def run_predict(args: argparse.Namespace) -> int:
         batch_threads=args.batch_threads,
         pt2=not args.no_pt2,
         progress=not args.no_progress,
+        c=not args.no_c,
     )
     print(format_predict_bench(result))
     return 0

@@ -1,4 +1,5 @@
-"""``bemlearn export RUN_DIR [--out FILE] [--format torchscript|pt2|both]``.
+"""``bemlearn export RUN_DIR [--out FILE] [--format torchscript|pt2|both]``;
+``bemlearn export RUN_DIR --format c --out DIR [--prefix bem] [--dtype float64|float32] [--force]``.
 
 Writes the BEM predictor of a trained run (``RUN_DIR/bem_predictor.pt`` by default), a
 TorchScript module that loads with ``torch.jit.load`` without bemlearn; see
@@ -25,19 +26,46 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "and metadata().  The file loads with torch.jit.load, without bemlearn.",
     )
     parser.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="run directory holding checkpoint.pt (or the checkpoint file)")
-    parser.add_argument("--out", metavar="FILE", type=Path, default=None, help="output file (default RUN_DIR/bem_predictor.pt or .pt2)")
+    parser.add_argument("--out", metavar="FILE", type=Path, default=None, help="output file (default RUN_DIR/bem_predictor.pt or .pt2); with --format c the output folder (required)")
     parser.add_argument(
         "--format",
         dest="fmt",
-        choices=("torchscript", "pt2", "both"),
+        choices=("torchscript", "pt2", "both", "c"),
         default="torchscript",
-        help="torchscript (.pt, default), pt2 (torch.export) or both (.pt and .pt2 side by side)",
+        help="torchscript (.pt, default), pt2 (torch.export), both (.pt and .pt2 side by side), or c "
+        "(--out DIR gets <prefix>_predictor.h/.c, C99 + libm; docs/c-export.md)",
     )
+    _add_c_arguments(parser)
     parser.add_argument("--no-verify", action="store_true", help="skip reloading and checking the written file(s)")
     parser.set_defaults(func=run)
 
 
+def _add_c_arguments(parser: argparse.ArgumentParser) -> None:
+    c = parser.add_argument_group("--format c")
+    c.add_argument("--prefix", default="bem", help="C identifier prefixed to every name (default bem: bem_mean, ...)")
+    c.add_argument("--dtype", choices=("float64", "float32"), default="float64", help="C floating type (default float64)")
+    c.add_argument("--force", action="store_true", help="overwrite existing files")
+
+
+def _run_c(args: argparse.Namespace) -> int:
+    from bemlearn.export.c_export import export_c
+
+    if args.out is None:
+        raise ValueError("--format c: give the output folder with --out DIR")
+    try:
+        paths = export_c(args.run_dir, args.out, prefix=args.prefix, dtype=args.dtype, force=args.force)
+    except FileExistsError as exc:
+        raise ValueError(str(exc)) from exc
+    for path in paths:
+        print(f"wrote {path}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.fmt == "c":
+        return _run_c(args)
+    if args.prefix != "bem" or args.dtype != "float64":
+        raise ValueError("--prefix and --dtype apply to --format c only")
     for path in export_run(args.run_dir, out=args.out, fmt=args.fmt, verify=not args.no_verify):
         print(f"wrote {path}")
     return 0

@@ -1,4 +1,4 @@
-"""Exported BEM predictors (TorchScript ``.pt``, torch.export ``.pt2``) and checkpoints.
+"""Exported BEM predictors (TorchScript ``.pt``, torch.export ``.pt2``, C99 source) and checkpoints.
 
 Everything here consumes a :class:`~bemlearn.models.predictor_state.PredictorState` plus
 metadata, never a GPyTorch model.  The contract of the exported files is in
@@ -6,6 +6,8 @@ docs/predictor-contract.md.
 """
 
 from bemlearn.export.bem_predictor import EXPORTED_METHODS, BEMPredictor
+from bemlearn.export.c_export import export_c
+from bemlearn.export.c_source import c_sources
 from bemlearn.export.checkpoint import (
     CHECKPOINT_FORMAT,
     CHECKPOINT_NAME,
@@ -35,6 +37,8 @@ __all__ = [
     "Pt2Predictor",
     "VarianceFactor",
     "artifact_metadata",
+    "c_sources",
+    "export_c",
     "export_run",
     "kernel_gram",
     "load_checkpoint",

@@ -1,0 +1,98 @@
+"""Can the posterior be evaluated in float32?  Emulate the float32 C predictor and measure.
+
+In float32 (ε = 6·10⁻⁸) the C predictor evaluates e_j = c_j − ½ Σ_i (u_i − z_ij)² with a
+relative error of about ε·|e_j| (≈10⁻⁶ for |e_j| ≈ 20), so each kernel value k_j = exp(e_j)
+carries that relative error and the mean μ = y_mean + Σ_j w_j k_j (eq. 12) an absolute error
+of about 10⁻⁶ · Σ_j |w_j k_j|.  When the weights cancel — an exact GP on nearly noise-free
+data has ‖α‖ ≫ |μ| (cond K of 10⁷ and more) — that is far above the model's own accuracy, and
+no reordering of float32 operations removes it (the inputs themselves are only known to ε).
+The std is worse: σ² = var0 − Σ v_i² cancels by var0/σ², so near the data, where σ ≪ √var0,
+float32 loses all its digits.
+
+:func:`float32_errors` runs the float32 algorithm in NumPy (same formulas and constants as the
+generated C, float32 arithmetic throughout) on in-range inputs (the support points' own BEM
+inputs, where σ is smallest, and random inputs) and returns the largest mean and std errors
+against the float64 predictor; the export refuses float32 when they exceed the tolerances.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from scipy.linalg import solve_triangular
+
+from bemlearn.export.c_posterior import CPosterior
+from bemlearn.export.folded_posterior import FoldedPosterior
+
+__all__ = ["Float32Errors", "float32_errors", "sample_inputs"]
+
+F32 = np.float32
+
+
+@dataclass(frozen=True)
+class Float32Errors:
+    """Largest float32-vs-float64 errors over the sample.
+
+    Attributes:
+        mean_abs: max |μ₃₂ − μ₆₄|, rad.
+        std_rel: max |σ₃₂ − σ₆₄| / σ₆₄.
+        std_abs: max |σ₃₂ − σ₆₄|, rad.
+        weight_sum: max Σ_j |w_j k_j| over the sample, rad (the scale of the mean's rounding).
+        n: inputs in the sample.
+    """
+
+    mean_abs: float
+    std_rel: float
+    std_abs: float
+    weight_sum: float
+    n: int
+
+
+def sample_inputs(Z: torch.Tensor, x_mean: torch.Tensor, x_std: torch.Tensor, n_inputs: int, lo: np.ndarray, hi: np.ndarray,
+                  *, n_random: int = 1000, seed: int = 0) -> np.ndarray:
+    """In-range inputs ``(M + n_random, n_inputs)``: support points (physical) and N(x_mean, x_std²) clipped to [lo, hi]."""
+    phys = (Z * x_std + x_mean).numpy()[:, :n_inputs]
+    g = np.random.default_rng(seed)
+    rand = x_mean.numpy()[:n_inputs] + x_std.numpy()[:n_inputs] * g.standard_normal((n_random, n_inputs))
+    return np.clip(np.concatenate([phys, rand]), lo[:n_inputs], hi[:n_inputs])
+
+
+def _f32_std(post: CPosterior, k: np.ndarray) -> np.ndarray:
+    """σ from float32 kernel rows ``k (B, M)``, float32 arithmetic (the C loops, vectorized over B)."""
+    M = post.n_support
+    f = post.factor.astype(F32)
+    if post.triangular:
+        rows = np.zeros((M, M), dtype=F32)
+        rows[np.tril_indices(M)] = f
+        v = solve_triangular(rows, k.T, lower=True, check_finite=False).T    # float32 LAPACK (strsm)
+        sq = v * v
+    else:
+        v = k @ f.reshape(M, M).T
+        sq = v * v * (post.signs.astype(F32) if post.signs is not None else F32(1))
+    q = sq.sum(1, dtype=F32)
+    return np.sqrt(np.maximum(F32(post.var0) - q, F32(0)))
+
+
+def float32_errors(post: CPosterior, reference: FoldedPosterior, x: np.ndarray) -> Float32Errors:
+    """Errors of the float32 C algorithm for ``post`` (distance form) on ``x (B, n)`` against ``reference`` (float64)."""
+    xf = x.astype(F32)
+    u = xf * post.a.astype(F32) + post.nb.astype(F32)
+    z = post.W.astype(F32)                                     # (n, M)
+    d = u[:, :, None] - z[None]
+    e = post.c.astype(F32)[None] - (F32(0.5) * d * d).sum(1, dtype=F32)
+    k = np.exp(e).astype(F32)
+    wk = k * post.w.astype(F32)
+    mean = F32(post.y0) + wk.sum(1, dtype=F32)
+    std = _f32_std(post, k)
+    with torch.no_grad():
+        m64, s64 = (t.numpy() for t in reference.mean_std(torch.from_numpy(np.ascontiguousarray(x, dtype=np.float64))))
+    ds = np.abs(std.astype(np.float64) - s64)
+    return Float32Errors(
+        mean_abs=float(np.abs(mean.astype(np.float64) - m64).max()),
+        std_rel=float((ds / np.maximum(s64, 1e-300)).max()),
+        std_abs=float(ds.max()),
+        weight_sum=float(np.abs(k.astype(np.float64) * post.w).sum(1).max()),
+        n=int(x.shape[0]),
+    )

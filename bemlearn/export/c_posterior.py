@@ -1,0 +1,145 @@
+"""The constants the C export compiles in, read from the TorchScript module's own buffers.
+
+The C predictor evaluates the same folded posterior as
+:class:`~bemlearn.export.folded_posterior.FoldedPosterior` (eq. 12, 14): for a query
+x ∈ R^n (n = 3m for the BEM, n = 3m + 2 for the full map of eq. 11)
+
+    μ(x) = y_mean + Σ_j w_j exp(e_j(x)),        w = y_std σ_f² α
+    σ(x) = sqrt(max(0, var0 − Σ_i s_i v_i²)),   var0 = y_std² σ_f²
+
+    exact:       v solves (L / (y_std σ_f²)) v = exp(e)   (forward substitution, L L^T = K)
+    sgpr, svgp:  v = G exp(e),  G = y_std σ_f² F           (dense matvec)
+
+Only e_j differs between the two C forms:
+
+* ``"folded"`` (float64): e_j = c_j + q(v) + Σ_i W_ij v_i with v = x (raw) or v = a∘x − b
+  (centered) and q(v) = Σ_i W2_i v_i², where ``W2`` is the quadratic row of the folded
+  linear weights — the same for every j, so it costs n multiply-adds per query, not per
+  support point;
+* ``"distance"`` (float32): e_j = c_j − ½ Σ_i (u_i − z_ij)², u = a∘x − b, z = Z/ℓ.  Its
+  rounding error is ε·|e_j| instead of ε·max(|c_j|, |W v|), which float32 needs (see
+  docs/c-export.md).
+
+The columns held at zero (q̈_u, q̇_u in eq. 14) are already folded into ``c``.  Every array
+comes from the buffers of a :class:`FoldedPosterior` (the std formula therefore lives in
+one place: a change there, e.g. a calibrated std, reaches the C export through ``var0``,
+``factor`` and ``signs``), never from the GP hyperparameters directly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import torch
+
+from bemlearn.export.folded_posterior import FoldedPosterior
+
+__all__ = ["CPosterior", "c_posterior", "support_box", "RANGE_LENGTHSCALES"]
+
+#: Out-of-range inputs: farther than this many lengthscales outside the box of the support points.
+RANGE_LENGTHSCALES = 3.0
+
+
+@dataclass(frozen=True)
+class CPosterior:
+    """One folded posterior (BEM or full map) as NumPy float64 arrays for the C generator.
+
+    Attributes:
+        form: ``"folded"`` (raw or centered folded exponent) or ``"distance"``.
+        centered: whether v = a∘x − b (else v = x); always True for ``"distance"``.
+        a, nb: ``(n,)`` input scale 1/(x_std ℓ) and offset −x_mean/(x_std ℓ).
+        W: ``(n, M)`` linear weights (folded) or scaled support points z = Z/ℓ (distance), column-major
+            by input so the loop over support points is contiguous.
+        W2: ``(n,)`` quadratic weights of the folded form (zeros for distance).
+        c: ``(M,)`` exponent offsets (columns held at zero folded in).
+        w: ``(M,)`` mean weights y_std σ_f² α, rad.
+        y0: output offset y_mean, rad.
+        var0: prior variance y_std² σ_f², rad².
+        triangular: exact GP: ``factor`` is the packed lower-triangular L/(y_std σ_f²).
+        factor: packed lower triangle ``(M(M+1)/2,)`` (triangular) or dense ``(M, M)`` G.
+        signs: ``(M,)`` ±1 of a signed factor, or ``None``.
+    """
+
+    form: Literal["folded", "distance"]
+    centered: bool
+    a: np.ndarray
+    nb: np.ndarray
+    W: np.ndarray
+    W2: np.ndarray
+    c: np.ndarray
+    w: np.ndarray
+    y0: float
+    var0: float
+    triangular: bool
+    factor: np.ndarray
+    signs: np.ndarray | None
+
+    @property
+    def n_inputs(self) -> int:
+        return int(self.a.shape[0])
+
+    @property
+    def n_support(self) -> int:
+        return int(self.c.shape[0])
+
+
+def _np(t: torch.Tensor) -> np.ndarray:
+    return t.detach().cpu().numpy().astype(np.float64, copy=True)
+
+
+def c_posterior(post: FoldedPosterior, *, form: Literal["folded", "distance"] = "folded") -> CPosterior:
+    """Read the C constants from ``post``'s buffers (module docstring).
+
+    Args:
+        post: a FoldedPosterior; for ``form="distance"`` it must be in the centered form
+            (``FoldedPosterior(..., form="centered")``), whose linear weights are z = Z/ℓ.
+        form: ``"folded"`` or ``"distance"``.
+
+    Raises:
+        ValueError: ``form="distance"`` on a raw-form posterior, or folded quadratic weights
+            that differ between support points (not a FoldedPosterior as documented).
+    """
+    n = post.n_inputs
+    W = _np(post.W)
+    M = W.shape[0] - 1                              # the last row is the sentinel (the C code checks x itself)
+    lin, quad, c = W[:M, :n], W[:M, n:], _np(post.c)[:M]
+    if M > 0 and not np.all(quad == quad[0]):
+        raise ValueError("FoldedPosterior.W: quadratic weights differ between support points")
+    W2 = quad[0] if M > 0 else np.zeros(n)
+    if form == "distance":
+        if not post.centered:
+            raise ValueError("c_posterior(form='distance'): needs a centered FoldedPosterior (form='centered')")
+        c = c + 0.5 * (lin**2).sum(1)               # −½‖z_j‖² + fixed part, back to the fixed part only
+        W2 = np.zeros(n)
+    elif form != "folded":
+        raise ValueError(f"form: expected 'folded' or 'distance', got {form!r}")
+    FT = _np(post.FT)
+    if post.triangular:
+        Lg = FT[:M, :M].T                           # FT = (L / gain)ᵀ
+        factor = Lg[np.tril_indices(M)]             # row-major packed lower triangle
+    else:
+        factor = np.ascontiguousarray(FT[:M, :M].T)  # v = G k, G = (gain F)
+    w = _np(post.w)[:M]
+    y0 = float(_np(post.offset)[0]) + float(_np(post.w)[M])   # offset = y_mean − sentinel weight
+    return CPosterior(
+        form=form, centered=bool(post.centered) or form == "distance", a=_np(post.a), nb=_np(post.nb),
+        W=np.ascontiguousarray(lin.T), W2=W2, c=c, w=w, y0=y0, var0=float(post.var0),
+        triangular=bool(post.triangular), factor=factor, signs=_np(post.signs) if post.signed else None,
+    )
+
+
+def support_box(Z: torch.Tensor, x_mean: torch.Tensor, x_std: torch.Tensor, lengthscale: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+    """Accepted input range per column: the support points' box ± RANGE_LENGTHSCALES lengthscales.
+
+    Args:
+        Z: ``(M, d)`` normalized support points; x_mean, x_std, lengthscale: ``(d,)``.
+
+    Returns:
+        (lo, hi), each ``(d,)`` in physical units.  Farther out every kernel value is below
+        exp(−½·3²) ≈ 0.011 of σ_f² and the GP reverts to its prior (mean y_mean).
+    """
+    phys = _np(Z) * _np(x_std) + _np(x_mean)
+    margin = RANGE_LENGTHSCALES * _np(lengthscale) * _np(x_std)
+    return phys.min(0) - margin, phys.max(0) + margin

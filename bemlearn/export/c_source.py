@@ -1,0 +1,225 @@
+"""Generate ``<prefix>_predictor.h`` / ``<prefix>_predictor.c``: the BEM predictor in C99.
+
+The C functions evaluate the folded posterior of the TorchScript module (eq. 12, 14; see
+:mod:`bemlearn.export.c_posterior`) with every constant a ``static const`` array:
+
+    <prefix>_mean(x)            μ(x_0^e), x = [q̈_a, q̇_a, q_a] (3m values)  — the control-loop path
+    <prefix>_forward(x, &μ, &σ) μ and the latent std, with input checks and an error code
+    <prefix>_full_mean(x)       mean of the full map f(x), x of 3m + 2 values (eq. 11)
+    <prefix>_predict_full(...)  as ``forward`` for f(x)
+
+float64 uses the folded exponent of the TorchScript module (n multiply-adds and one ``exp``
+per support point, the exp a vectorizable block of :mod:`bemlearn.export.c_exp`); float32 uses the distance form on centered inputs, and is refused, with
+the measured error, for posteriors it cannot evaluate accurately
+(:mod:`bemlearn.export.c_float32`; docs/c-export.md).  The std sums Σ v_i² with compensated
+(Kahan) summation: σ² = var0 − Σ v_i² cancels by var0/σ² near the data.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from typing import Literal
+
+import numpy as np
+import torch
+
+from bemlearn import __version__
+from bemlearn.export.bem_predictor import BEMPredictor
+from bemlearn.export.c_float32 import Float32Errors, float32_errors, sample_inputs
+from bemlearn.export.c_posterior import RANGE_LENGTHSCALES, CPosterior, c_posterior, support_box
+from bemlearn.export.c_exp import EXP_BLOCK_F64, EXP_BLOCK_LIBM
+from bemlearn.export.c_templates import (
+    DENSE_STD,
+    DISTANCE_EXPONENTS,
+    FOLDED_EXPONENTS,
+    HEADER,
+    POSTERIOR,
+    SOURCE,
+    TRIANGULAR_STD,
+)
+from bemlearn.export.folded_posterior import FoldedPosterior
+from bemlearn.export.metadata import PredictorMetadata
+from bemlearn.export.variance_factor import VarianceFactor
+from bemlearn.models.predictor_state import PredictorState
+
+__all__ = ["c_sources", "check_prefix", "CDtype", "ERROR_CODES", "BLOCK", "F32_MEAN_TOL", "F32_STD_RTOL"]
+
+CDtype = Literal["float64", "float32"]
+
+#: The return codes of ``<prefix>_forward`` / ``<prefix>_predict_full`` (also in the header).
+ERROR_CODES = {"OK": 0, "ERR_NONFINITE": 1, "ERR_OUT_OF_RANGE": 2, "ERR_NULL": 3}
+#: Support points per block of exponents (the vectorizable inner loop); must match the template.
+BLOCK = 32
+
+#: Default float32 tolerances: mean error (rad) and std relative error.
+F32_MEAN_TOL = 1e-4
+F32_STD_RTOL = 1e-2
+
+_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_PER_LINE = 4
+
+
+def check_prefix(prefix: str) -> str:
+    """``prefix`` if it is a C identifier not reserved to the implementation, else ValueError."""
+    if not isinstance(prefix, str) or not _IDENT.match(prefix):
+        raise ValueError(f"prefix: expected a C identifier ([A-Za-z_][A-Za-z0-9_]*), got {prefix!r}")
+    if prefix.startswith("__") or re.match(r"^_[A-Z]", prefix):
+        raise ValueError(f"prefix: {prefix!r} is reserved in C (leading __ or _ and a capital)")
+    return prefix
+
+
+def _literal(v: float, dtype: CDtype) -> str:
+    if dtype == "float64":
+        return repr(float(v))
+    return np.format_float_scientific(np.float32(v), unique=True, trim="0") + "f"
+
+
+def _array(name: str, values: np.ndarray, dtype: CDtype, real: str) -> str:
+    flat = np.asarray(values, dtype=np.float64).reshape(-1)
+    items = [_literal(v, dtype) for v in flat]
+    lines = [", ".join(items[i : i + _PER_LINE]) for i in range(0, len(items), _PER_LINE)]
+    return f"static const {real} {name}[{len(items)}] = {{\n    " + ",\n    ".join(lines) + "\n};\n"
+
+
+def _c_string(text: str, width: int = 96) -> str:
+    """``text`` (ASCII) as adjacent C string literals; ``?`` escaped against trigraphs."""
+    def esc(chunk: str) -> str:
+        return chunk.replace("\\", "\\\\").replace('"', '\\"').replace("?", "\\?")
+    return "\n".join(f'    "{esc(text[i : i + width])}"' for i in range(0, len(text), width)) or '    ""'
+
+
+def _posterior_constants(p: str, name: str, post: CPosterior, dtype: CDtype, real: str, share_W: str | None) -> str:
+    parts = [
+        f"static const int {p}_{name}_centered = {int(post.centered)};\n",
+        _array(f"{p}_{name}_a", post.a, dtype, real),
+        _array(f"{p}_{name}_nb", post.nb, dtype, real),
+        _array(f"{p}_{name}_W2", post.W2, dtype, real),
+        _array(f"{p}_{name}_c", post.c, dtype, real),
+    ]
+    if share_W is None:
+        parts.append(_array(f"{p}_{name}_W", post.W, dtype, real))
+    else:   # the first n rows of the full map's weights
+        parts.append(f"static const {real} *const {p}_{name}_W = {share_W};\n")
+    return "".join(parts)
+
+
+def _posteriors(predictor: BEMPredictor, state: PredictorState, dtype: CDtype) -> tuple[CPosterior, CPosterior]:
+    if dtype == "float64":
+        return c_posterior(predictor.bem), c_posterior(predictor.full)
+    # float32: centered distance form; w and the variance factor shared with the predictor
+    # (with ``share`` the factor argument only sets the signed / triangular flags)
+    ref = predictor.full
+    empty = torch.zeros(0, 0, dtype=torch.float64)
+    factor = VarianceFactor(L=empty) if ref.triangular else VarianceFactor(F=empty, signs=ref.signs if ref.signed else None)
+    full = FoldedPosterior(state, factor, n_inputs=state.dim, share=predictor.full, form="centered")
+    bem = FoldedPosterior(state, factor, n_inputs=predictor.n_bem, share=predictor.full, form="centered")
+    return c_posterior(bem, form="distance"), c_posterior(full, form="distance")
+
+
+def _check_float32(predictor: BEMPredictor, state: PredictorState, bem: CPosterior, lo: np.ndarray, hi: np.ndarray,
+                   mean_tol: float, std_rtol: float) -> Float32Errors:
+    x = sample_inputs(state.Z, state.x_mean, state.x_std, bem.n_inputs, lo, hi)
+    err = float32_errors(bem, predictor.bem, x)
+    if err.mean_abs > mean_tol or err.std_rel > std_rtol:
+        raise ValueError(
+            f"dtype float32: this {state.kind} posterior cannot be evaluated accurately in float32: on {err.n} in-range "
+            f"inputs the float32 mean is off by up to {err.mean_abs:.2g} rad (tolerance {mean_tol:g}) and the std by "
+            f"{err.std_rel:.2g} relative (tolerance {std_rtol:g}).  Why: the mean is a sum of terms w_j k_j up to "
+            f"{err.weight_sum:.3g} rad in total that cancel, each k_j known to ~1e-6 relative in float32, and the "
+            "std is sqrt(var0 - sum v_i^2), which cancels near the data.  Use dtype float64 (software double on an "
+            "FPU without double precision)."
+        )
+    return err
+
+
+def c_sources(
+    state: PredictorState,
+    metadata: PredictorMetadata,
+    *,
+    prefix: str = "bem",
+    dtype: CDtype = "float64",
+    f32_mean_tol: float = F32_MEAN_TOL,
+    f32_std_rtol: float = F32_STD_RTOL,
+) -> dict[str, str]:
+    """The header and source text, ``{"<prefix>_predictor.h": ..., "<prefix>_predictor.c": ...}``.
+
+    Args:
+        state: the frozen float64 posterior (exact, sgpr or svgp).
+        metadata: its validated metadata (``m`` fixes the input widths).
+        prefix: C identifier prefixed to every public name (``bem_mean``, ``BEM_OK``, ...).
+        dtype: ``"float64"`` (``double``) or ``"float32"`` (``float``, for FPUs without double).
+        f32_mean_tol, f32_std_rtol: float32 only: refuse when the emulated float32 predictor
+            (:func:`~bemlearn.export.c_float32.float32_errors`) differs from float64 by more
+            than this in the mean (rad) or the std (relative) on in-range inputs.
+
+    Raises:
+        ValueError: a bad prefix or dtype, or float32 too inaccurate for this posterior
+            (the message gives the measured errors and why).
+    """
+    p = check_prefix(prefix)
+    if dtype not in ("float64", "float32"):
+        raise ValueError(f"dtype: expected 'float64' or 'float32', got {dtype!r}")
+    P = p.upper()
+    real, exp, sqrt = ("double", "exp", "sqrt") if dtype == "float64" else ("float", "expf", "sqrtf")
+    predictor = BEMPredictor(state, metadata)
+    bem, full = _posteriors(predictor, state, dtype)
+    n_bem, n_full, M = bem.n_inputs, full.n_inputs, bem.n_support
+    if not (np.array_equal(bem.w, full.w) and bem.y0 == full.y0 and np.array_equal(bem.factor, full.factor)):
+        raise AssertionError("c_sources: the BEM and full posteriors must share w, y0 and the variance factor")
+    lo, hi = support_box(state.Z, state.x_mean, state.x_std, state.lengthscale)
+    doc = json.loads(predictor.metadata_json)
+    f32 = _check_float32(predictor, state, bem, lo, hi, f32_mean_tol, f32_std_rtol) if dtype == "float32" else None
+    doc["c_export"] = {
+        "prefix": p, "dtype": dtype, "form": bem.form,
+        "error_codes": {f"{P}_{k}": v for k, v in ERROR_CODES.items()},
+        "input_range": {"rule": f"support points' box +- {RANGE_LENGTHSCALES:g} lengthscales",
+                        "lo": lo[:n_bem].tolist(), "hi": hi[:n_bem].tolist(),
+                        "full_lo": lo.tolist(), "full_hi": hi.tolist()},
+    }
+    if f32 is not None:
+        doc["c_export"]["float32_error"] = {
+            "mean_abs": f32.mean_abs, "std_rel": f32.std_rel, "std_abs": f32.std_abs, "n_inputs": f32.n,
+            "how": "float32 algorithm emulated in NumPy vs the float64 predictor on the support points and random in-range inputs",
+        }
+    share = f"{p}_full_W" if bem.form == full.form and np.array_equal(bem.W, full.W[:n_bem]) else None
+    sub = {"p": p, "P": P, "real": real, "exp": exp, "sqrt": sqrt}
+    exponents = DISTANCE_EXPONENTS if bem.form == "distance" else FOLDED_EXPONENTS
+    if bem.triangular:
+        std = TRIANGULAR_STD.substitute(sub)
+    else:
+        std = DENSE_STD.substitute(sub, signed_term="s * s" if bem.signs is None else f"{p}_signs[i] * s * s")
+    constants = "".join([
+        _posterior_constants(p, "full", full, dtype, real, None),
+        _posterior_constants(p, "bem", bem, dtype, real, share),
+        _array(f"{p}_w", bem.w, dtype, real),
+        f"static const {real} {p}_y0 = {_literal(bem.y0, dtype)};\n",
+        f"static const {real} {p}_var0 = {_literal(bem.var0, dtype)};\n",
+        _array(f"{p}_factor", bem.factor, dtype, real),
+        "" if bem.signs is None else _array(f"{p}_signs", bem.signs, dtype, real),
+    ])
+    exp_block = (EXP_BLOCK_F64 if dtype == "float64" else EXP_BLOCK_LIBM).substitute(sub)
+    source = SOURCE.substitute(
+        sub, version=__version__, constants=constants, exp_block=exp_block,
+        exponents="\n".join(exponents.substitute(sub, name=nm, n=n) for nm, n in (("bem", n_bem), ("full", n_full))),
+        std=std,
+        posteriors="\n".join(POSTERIOR.substitute(sub, name=nm, n=n) for nm, n in (("bem", n_bem), ("full", n_full))),
+    )
+    units = doc["units"]
+    size = 8 if dtype == "float64" else 4
+    header = HEADER.substitute(
+        sub, robot=doc["robot"], kind=state.kind, version=__version__, m=metadata.m, n_bem=n_bem, n_full=n_full,
+        n_support=M, dtype=dtype, range_ls=f"{RANGE_LENGTHSCALES:g}",
+        bem_columns=", ".join(doc["inputs"]), full_columns=", ".join(doc["full_inputs"]),
+        units="; ".join(f"{k} [{units[k]}]" for k in doc["full_inputs"]) + "; mean, std [rad]",
+        stack_bytes=size * (M + 2 * BLOCK + n_full) + 1024,
+        bem_lo=", ".join(_literal(v, dtype) for v in lo[:n_bem]), bem_hi=", ".join(_literal(v, dtype) for v in hi[:n_bem]),
+        full_lo=", ".join(_literal(v, dtype) for v in lo), full_hi=", ".join(_literal(v, dtype) for v in hi),
+        metadata=_c_string(json.dumps(doc, allow_nan=False, ensure_ascii=True, separators=(",", ":"))),
+    )
+    return {f"{p}_predictor.h": _ascii(header), f"{p}_predictor.c": _ascii(source)}
+
+
+def _ascii(text: str) -> str:
+    """C sources in ASCII: superscripts as ^2, ^3, anything else non-ASCII as a \\x escape (comments only)."""
+    return text.replace("²", "^2").replace("³", "^3").encode("ascii", "backslashreplace").decode("ascii")
