@@ -95,7 +95,8 @@ def run_truth_robot(run_dir, *, model=None):
     return ref.load(), ref.to_dict()
 
 
-def evaluate_bem(state: PredictorState, robot, references: list[CompositeSinusoid], *, duration_s: float = 20.0, rate_hz: float = 100.0) -> dict:
+def evaluate_bem(state: PredictorState, robot, references: list[CompositeSinusoid], *, duration_s: float = 20.0, rate_hz: float = 100.0,
+                 design_bound: float | None = None) -> dict:
     """RMSE, max error and calibration of the learned BEM along ``references``.
 
     Returns:
@@ -107,9 +108,15 @@ def evaluate_bem(state: PredictorState, robot, references: list[CompositeSinusoi
         ``coverage_2sigma_band``, ``median_band_std_over_rmse``, ``bound_violation`` (the
         eq. 13/15 bound at κ = 2: observed and nominal violation rates) and ``reliability``
         (coverage vs nominal level, 50–99 %, band and latent); ``curves`` gains ``band_std``.
+        ``design_region``: RMSE and max error over the points whose model BEM lies within
+        ``design_bound`` of the nominal q_u (default: min(0.2, the q_u half range), the region the
+        derived excitation is designed to cover), with their count.
     """
+    if design_bound is None:
+        lo, hi = robot.qu_range
+        design_bound = min(0.2, 0.5 * (hi - lo))
     t = np.arange(0.0, duration_s, 1.0 / rate_hz)
-    errs, lat, pred, per = [], [], [], []
+    errs, lat, pred, per, inside = [], [], [], [], []
     bands, lats = [], []
     curves = None
     noise_std = float(state.y_std * state.noise.sqrt())
@@ -124,6 +131,7 @@ def evaluate_bem(state: PredictorState, robot, references: list[CompositeSinusoi
         bands.append(band[ok])
         lats.append(std[ok])
         e = (mean - bem.qu.numpy())[ok]
+        inside.append(np.abs(bem.qu.numpy()[ok] - robot.qu_nominal) <= design_bound)
         s = std[ok]
         errs.append(e)
         lat.append(np.abs(e) <= 2 * s)
@@ -134,7 +142,11 @@ def evaluate_bem(state: PredictorState, robot, references: list[CompositeSinusoi
     e = np.concatenate(errs)
     band_all, lat_all = np.concatenate(bands), np.concatenate(lats)
     rmse = float(np.sqrt(np.mean(e**2)))
+    ein = e[np.concatenate(inside)]
     extra = {
+        "design_region": {"bound": float(design_bound), "n_points": int(ein.size),
+                          "rmse": float(np.sqrt(np.mean(ein**2))) if ein.size else float("nan"),
+                          "max_abs": float(np.abs(ein).max()) if ein.size else float("nan")},
         "coverage_2sigma_band": float(np.mean(np.abs(e) <= 2 * band_all)),
         "median_band_std_over_rmse": float(np.median(band_all)) / rmse if rmse > 0 else math.inf,
         "bound_violation": {"kappa": 2.0, "observed": float(np.mean(np.abs(e) > 2 * band_all)),

@@ -68,8 +68,20 @@ def write_report(out: str | Path, *, config, resolved, data: dict, train: dict, 
                   f"| max error ({unit}) | {_f(b['max_abs'], '.5f')} |",
                   f"| points without a model BEM in range (excluded) | {b['no_model_root']} |",
                   f"| inside ±2σ, latent std | {_pct(b['coverage_2sigma_latent'])} |",
-                  f"| inside ±2σ, predictive std (eq. 12 with k* = σ_f² + σ_0²) | {_pct(b['coverage_2sigma_predictive'])} |",
-                  "", "![learned vs model BEM](bem_validation.png)", ""]
+                  f"| inside ±2σ, predictive std (eq. 12 with k* = σ_f² + σ_0²) | {_pct(b['coverage_2sigma_predictive'])} |"]
+        dr = b.get("design_region")
+        if dr is not None:
+            lines += [f"| RMSE / max over \\|q_u^e\\| ≤ {dr['bound']:g} {unit} ({dr['n_points']} points) | "
+                      f"{_f(dr['rmse'], '.5f')} / {_f(dr['max_abs'], '.5f')} |"]
+        if "coverage_2sigma_band" in b:
+            v = b["bound_violation"]
+            lines += [f"| inside ±2σ, calibrated band (the exported std) | {_pct(b['coverage_2sigma_band'])} |",
+                      f"| median band σ / RMSE | {_f(b['median_band_std_over_rmse'], '.2f')} |",
+                      f"| eq. (13)/(15) bound at κ = {v['kappa']:g}: violated / nominal | {_pct(v['observed'])} / {_pct(v['nominal'])} |"]
+        lines += ["", "![learned vs model BEM](bem_validation.png)", ""]
+        if (out / "reliability.png").is_file():
+            lines += ["Reliability of the band: coverage of the model BEM against the nominal level (50–99 %).", "",
+                      "![reliability](reliability.png)", ""]
     lines += ["## Exported predictor", *[f"- `{p.name}`" for p in export], ""]
     if sim:
         qa_unit = "/".join(sorted({v for k, v in train.get("units", {}).items() if k.startswith("q_")})) or "rad"
