@@ -24,15 +24,12 @@ from typing import Any
 import numpy as np
 
 from bemlearn.data.quantization import detect_quantization_step
+from bemlearn.errors import TrajectoryFormatError
 
 __all__ = ["TrajectoryMeta", "Trajectory", "TrialSlice", "TrajectoryFormatError", "DEFAULT_UNITS"]
 
 #: Units assumed when none are given; ``q`` must be rad, ``t`` must be s.
 DEFAULT_UNITS: dict[str, str] = {"t": "s", "q": "rad", "u": "V"}
-
-
-class TrajectoryFormatError(ValueError):
-    """A trajectory file or array set is malformed; the message names file, column and row."""
 
 
 @dataclass(frozen=True)

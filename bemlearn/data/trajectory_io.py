@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, TrajectoryMeta
+from bemlearn.files import atomic_path
 from bemlearn.data.validation import MIN_TRIAL_SAMPLES, RATE_RTOL, RobotLike, column_names, validate
 
 __all__ = ["read_trajectory", "read_ground_truth", "write_trajectory", "ground_truth_path", "CSV_MAGIC", "SUFFIXES"]
@@ -118,16 +119,11 @@ def write_trajectory(
     path = Path(path)
     suffix = _suffix(path)
     validate(traj, source=f"write {path}", min_trial_samples=min_trial_samples, rate_rtol=rate_rtol)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    try:
+    with atomic_path(path) as tmp:
         if suffix == ".npz":
             _write_npz(traj, tmp)
         else:
             _write_csv(traj, tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     logger.debug("wrote %s: %d samples", path, traj.n_samples)
     return path
 

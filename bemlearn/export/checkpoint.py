@@ -24,6 +24,7 @@ import torch
 
 from bemlearn.config import ConfigError
 from bemlearn.export.metadata import PredictorMetadata, artifact_metadata
+from bemlearn.files import atomic_path
 from bemlearn.models.predictor_state import GPKind, PredictorState
 
 __all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_NAME", "Checkpoint", "load_checkpoint", "write_checkpoint"]
@@ -177,10 +178,8 @@ def write_checkpoint(
         "metadata": meta.to_dict(),
     }
     _parse_state(data["predictor_state"], predictor_state.kind, "predictor_state")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(data, tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        torch.save(data, tmp)
     load_checkpoint(path)
     log.info("wrote checkpoint %s (%s GP)", path, predictor_state.kind)
     return path

@@ -29,6 +29,7 @@ import torch
 from torch import nn
 
 from bemlearn.export.bem_predictor import BEMPredictor
+from bemlearn.files import atomic_path
 
 __all__ = ["save_pt2", "load_pt2_predictor", "Pt2Predictor", "PT2_PROGRAMS", "PT2_METADATA_FILE"]
 
@@ -72,14 +73,11 @@ def save_pt2(predictor: BEMPredictor, path: str | os.PathLike[str]) -> Path:
 
     path = Path(path)
     programs = _export_programs(predictor)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".partial.pt2")
-    with warnings.catch_warnings():
+    with atomic_path(path) as tmp, warnings.catch_warnings():
         # bem and full share their weight/factor tensors; torch warns about the shared group,
         # harmless for CPU weights (the test suite checks every program's numbers after loading)
         warnings.filterwarnings("ignore", message="No complete tensor found in the group")
         package_pt2(tmp, exported_programs=programs, extra_files={PT2_METADATA_FILE: predictor.metadata_json})
-    os.replace(tmp, path)
     log.info("wrote torch.export BEM predictor %s", path)
     return path
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import torch
 
 from bemlearn.export.bem_predictor import EXPORTED_METHODS, BEMPredictor
+from bemlearn.files import atomic_path
 
 __all__ = ["script_predictor", "save_torchscript", "load_torchscript", "METADATA_FILE"]
 
@@ -49,11 +50,8 @@ def save_torchscript(predictor: BEMPredictor, path: str | os.PathLike[str], *, f
     """Script ``predictor`` and write it to ``path`` (parent directories are created)."""
     path = Path(path)
     scripted = script_predictor(predictor, freeze=freeze)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    with _quiet_jit():
+    with atomic_path(path) as tmp, _quiet_jit():
         torch.jit.save(scripted, str(tmp), _extra_files={METADATA_FILE: predictor.metadata_json})
-    os.replace(tmp, path)
     log.info("wrote TorchScript BEM predictor %s", path)
     return path
 
