@@ -18,6 +18,7 @@ import contextlib
 import logging
 import os
 import shutil
+import tempfile
 import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -53,26 +54,30 @@ def _fsync_dir(folder: Path) -> None:
 
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; on success fsync it and rename it to ``path``.
+    """Yield a temporary path for ``path``; on success fsync it and rename it to ``path``.
 
-    The temporary name keeps ``path``'s suffix (``savefig`` and ``np.savez`` pick the format
-    from it) and starts with a dot.  On any exception (or Ctrl-C) the temporary file is
-    removed and ``path`` is left as it was.  Parent folders are created.
+    The temporary file has ``path``'s own name inside a hidden folder beside it
+    (``.<name>.tmp-<pid>-<n>/<name>``), so writers that pick the format from the suffix
+    (``savefig``, ``np.savez``) or name an archive after the file (``torch.jit.save``) see
+    the real name, and the rename stays on one file system.  On any exception (or Ctrl-C)
+    the temporary folder is removed and ``path`` is left as it was.  Parent folders are
+    created.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}-{time.monotonic_ns() % 10**9}{path.suffix}")
+    tmp_dir = path.parent / f".{path.name}.tmp-{os.getpid()}-{time.monotonic_ns() % 10**9}"
+    tmp_dir.mkdir()
+    tmp = tmp_dir / path.name
     try:
         yield tmp
-        if not tmp.exists():
+        if not tmp.is_file():
             raise FileNotFoundError(f"{path}: the writer did not create the temporary file {tmp}")
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, path)
         _fsync_dir(path.parent)
     finally:
-        if tmp.exists():
-            tmp.unlink()
+        shutil.rmtree(tmp_dir, ignore_errors=True)
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
@@ -142,8 +147,11 @@ def check_writable(folder: str | os.PathLike[str], *, what: str = "--out") -> No
         probe = probe.parent
     if probe.exists() and not probe.is_dir():
         raise EnvironmentProblem(f"{what}: {probe} is a file, expected a folder")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise EnvironmentProblem(f"{what}: cannot write in {probe} (permission denied)")
+    try:  # a real probe: os.access says yes to root even on read-only file systems
+        with tempfile.TemporaryFile(dir=probe):
+            pass
+    except OSError as exc:
+        raise EnvironmentProblem(f"{what}: cannot write in {probe} ({exc.strerror or exc})") from None
 
 
 @contextlib.contextmanager

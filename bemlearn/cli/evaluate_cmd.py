@@ -18,6 +18,7 @@ def add_parser(sub) -> None:
     p.add_argument("run_dir", type=Path)
     p.add_argument("--references", type=int, default=5, help="number of held-out references (default 5)")
     p.add_argument("--seed", type=int, default=12345, help="seed of the references")
+    p.add_argument("--force", action="store_true", help="replace RUN_DIR/evaluation.{json,png} if they exist")
     p.set_defaults(func=run)
 
 
@@ -32,7 +33,12 @@ def run(args) -> int:
     from bemlearn.export.checkpoint import load_checkpoint
     from bemlearn.pipeline.evaluation import EvaluationConfig, evaluate_bem, ground_truth_robot, held_out_references
 
+    from bemlearn.export.staleness import check_run_predictors
+    from bemlearn.files import atomic_path, atomic_write_text, check_outputs
+
     ck = load_checkpoint(args.run_dir)
+    check_run_predictors(ck.path.parent)
+    check_outputs([ck.path.parent / "evaluation.json", ck.path.parent / "evaluation.png"], args.force, what="evaluate")
     robot = ground_truth_robot(ck.metadata.robot)
     ecfg = dataclasses.replace(EvaluationConfig(), n_references=args.references, seed=args.seed)
     refs = held_out_references(ecfg, robot.m)
@@ -47,8 +53,9 @@ def run(args) -> int:
     ax.set_ylabel(f"{ck.metadata.unactuated_name} (rad)")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(out / "evaluation.png", dpi=110)
-    (out / "evaluation.json").write_text(json.dumps(ev, indent=2))
+    with atomic_path(out / "evaluation.png") as tmp:
+        fig.savefig(tmp, dpi=110)
+    atomic_write_text(out / "evaluation.json", json.dumps(ev, indent=2))
     print(f"{'reference':<10}{'RMSE (rad)':>12}{'max (rad)':>12}")
     for i, r in enumerate(ev["per_reference"]):
         print(f"{i:<10}{r['rmse']:>12.5f}{r['max_abs']:>12.5f}")

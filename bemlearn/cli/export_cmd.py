@@ -34,10 +34,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="torchscript (.pt, default), pt2 (torch.export) or both (.pt and .pt2 side by side)",
     )
     parser.add_argument("--no-verify", action="store_true", help="skip reloading and checking the written file(s)")
+    parser.add_argument("--force", action="store_true", help="replace existing predictor file(s)")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    for path in export_run(args.run_dir, out=args.out, fmt=args.fmt, verify=not args.no_verify):
+    for path in export_run(args.run_dir, out=args.out, fmt=args.fmt, verify=not args.no_verify, force=args.force):
         print(f"wrote {path}")
     return 0

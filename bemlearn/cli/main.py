@@ -14,6 +14,7 @@ import sys
 
 from bemlearn._version import __version__
 from bemlearn.config import ConfigError
+from bemlearn.errors import BemlearnError
 
 __all__ = ["main", "build_parser"]
 
@@ -58,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     try:
         return int(args.func(args) or 0)
-    except (ConfigError, ValueError, FileNotFoundError, KeyError) as exc:
+    except (BemlearnError, ConfigError, ValueError, FileNotFoundError, KeyError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         print(f"bemlearn {args.command}: error: {msg}", file=sys.stderr)
         return 2

@@ -15,7 +15,8 @@ def add_parser(sub) -> None:
         "closed loop with the learned, model-based and zero BEM, and write RUN_DIR/report.md.",
     )
     p.add_argument("config", type=Path, help="pipeline YAML, e.g. configs/furuta.yaml")
-    p.add_argument("--out", type=Path, help="run folder (default runs/<robot>-<timestamp>)")
+    p.add_argument("--out", type=Path, help="run folder (default: a new runs/<robot>-<timestamp>)")
+    p.add_argument("--force", action="store_true", help="write into a non-empty --out folder, replacing its files")
     p.add_argument("--device", choices=["cpu", "cuda"], help="GP training device (default: the config's train.device)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_run)
@@ -28,13 +29,25 @@ def add_parser(sub) -> None:
     s.add_argument("config", type=Path)
     s.add_argument("--predictor", type=Path, help="exported bem_predictor.pt (overrides simulate.predictor)")
     s.add_argument("--source", action="append", choices=["predictor", "model", "zero"], help="BEM source(s); default: simulate.bem_source")
-    s.add_argument("--out", type=Path, default=Path("runs") / "simulate")
-    s.add_argument("--gif", action="store_true", help="also render OUT/simulate/<source>.gif (needs MUJOCO_GL=egl or osmesa without a display)")
+    s.add_argument("--out", type=Path, help="output folder (default: a new runs/simulate-<timestamp>)")
+    s.add_argument("--force", action="store_true", help="replace an existing OUT/simulate folder's files")
+    s.add_argument("--gif", action="store_true", help="also render OUT/simulate/<source>.gif (offscreen: picks EGL or OSMesa by itself)")
     s.add_argument("--no-progress", action="store_true")
     s.set_defaults(func=_simulate)
 
 
 def _run(args) -> int:
+    from bemlearn.files import created_dir, new_run_dir
+    from bemlearn.pipeline.preflight import preflight
+
+    raw = preflight(config=args.config, device=args.device)
+    args.out = args.out or new_run_dir(Path(str(raw["robot"])).stem if "robot" in raw else "run")
+    preflight(out_dir=args.out, outputs=[args.out], force=args.force)
+    with created_dir(args.out):
+        return _run_into(args)
+
+
+def _run_into(args) -> int:
     from bemlearn.pipeline.biped import is_biped_config, load_biped_config, run_biped_pipeline
     from bemlearn.pipeline.config import load_pipeline_config
     from bemlearn.pipeline.run import run_pipeline
@@ -55,9 +68,27 @@ def _run(args) -> int:
 
 def _simulate(args) -> int:
     from bemlearn.pipeline.config import load_pipeline_config
+    from bemlearn.export.staleness import check_predictor_matches
+    from bemlearn.files import created_dir, new_run_dir
+    from bemlearn.pipeline.preflight import preflight
     from bemlearn.pipeline.simulate import simulate_stage
 
+    args.out = args.out or new_run_dir("simulate")
+    preflight(config=args.config, out_dir=args.out, outputs=[args.out / "simulate"], force=args.force)
     cfg = load_pipeline_config(args.config)
+    pred = args.predictor or (Path(cfg.simulate.predictor) if getattr(cfg.simulate, "predictor", None) else None)
+    if pred is not None and pred.is_file() and (pred.parent / "checkpoint.pt").is_file():
+        check_predictor_matches(pred, pred.parent / "checkpoint.pt")
+    if args.gif:
+        from bemlearn.sim.render import require_offscreen_backend
+
+        require_offscreen_backend()
+    with created_dir(args.out):
+        return _simulate_into(args, cfg, simulate_stage)
+
+
+def _simulate_into(args, cfg, simulate_stage) -> int:
+    """The closed loop of ``cfg`` into ``args.out`` (checked by :func:`_simulate`)."""
     sources = tuple(args.source or [cfg.simulate.bem_source])
     res = simulate_stage(cfg, args.out, predictor=args.predictor, sources=sources, progress=not args.no_progress, gif=args.gif)
     print(f"{'source':<10}{'fell':>6}{'duration s':>12}{'RMSE rad':>10}{'max|V|':>8}{'×real time':>12}")

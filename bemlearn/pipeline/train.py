@@ -29,6 +29,7 @@ from bemlearn._version import __version__
 from bemlearn.config import save_yaml
 from bemlearn.data import build_datasets, read_trajectory
 from bemlearn.export.checkpoint import load_checkpoint, write_checkpoint
+from bemlearn.files import atomic_path, atomic_write_text
 from bemlearn.fitting import build_gp, fit_gp, hyperparameter_metrics
 from bemlearn.models import predict, predictor_state
 from bemlearn.pipeline.config import PipelineConfig
@@ -181,9 +182,10 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         writer.add_scalar(f"bem/{k}", ev[k], 0)
     fig = _bem_figure(curves, meta.unactuated)
     writer.add_figure("bem/learned_vs_model", fig, 0)
-    fig.savefig(out / "bem_validation.png", dpi=110)
+    with atomic_path(out / "bem_validation.png") as tmp:
+        fig.savefig(tmp, dpi=110)
     writer.close()
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=float))
+    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
     if interrupted:
         raise KeyboardInterrupt
     return metrics
