@@ -15,6 +15,7 @@ import sys
 from bemlearn._version import __version__
 from bemlearn.config import ConfigError
 from bemlearn.errors import BemlearnError
+from bemlearn.interrupts import sigint_handling
 
 __all__ = ["main", "build_parser"]
 
@@ -58,7 +59,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 0
     try:
-        return int(args.func(args) or 0)
+        with sigint_handling():  # Ctrl-C: stop soon keeping the best state; twice: exit at once
+            return int(args.func(args) or 0)
     except (BemlearnError, ConfigError, ValueError, FileNotFoundError, KeyError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         print(f"bemlearn {args.command}: error: {msg}", file=sys.stderr)

@@ -161,6 +161,10 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         },
     )
     metrics: dict = {"fit": fit_summary, "hyperparameters": hyp, "lengthscale_physical": phys_ls, "n_train": len(train), "n_val": len(val), "dataset": ds.report, "interrupted": interrupted}
+    if interrupted:  # the best checkpoint is written; skip the slow evaluation so Ctrl-C ends within seconds
+        writer.close()
+        atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
+        raise KeyboardInterrupt
     if len(val):
         mean, var = predict(model, lik, val.x_normalized.to(device=gp_cfg.device, dtype=dtype), noisy=True)
         mean = mean.cpu().to(torch.float64) * train.y_std + train.y_mean
