@@ -33,6 +33,7 @@ from torch import nn
 
 from bemlearn.errors import PredictorInputError
 from bemlearn.export.bem_predictor import BEMPredictor
+from bemlearn.errors import CheckpointError
 from bemlearn.files import atomic_path
 
 __all__ = ["save_pt2", "load_pt2_predictor", "Pt2Predictor", "PT2_PROGRAMS", "PT2_METADATA_FILE"]
@@ -176,11 +177,16 @@ def load_pt2_predictor(path: str | os.PathLike[str]) -> Pt2Predictor:
     try:
         contents = load_pt2(path)
     except Exception as exc:  # torch raises several types for foreign archives
-        raise ValueError(f"{path}: not a torch.export .pt2 archive ({type(exc).__name__}: {exc})") from exc
+        raise CheckpointError(f"{path}: not a torch.export .pt2 archive ({type(exc).__name__}: {exc})") from exc
     missing = [k for k in PT2_PROGRAMS if k not in contents.exported_programs]
     meta = contents.extra_files.get(PT2_METADATA_FILE)
     if missing or not meta:
-        raise ValueError(f"{path}: not a bemlearn BEM predictor (missing {missing or [PT2_METADATA_FILE]})")
-    meta_text = meta.decode() if isinstance(meta, bytes) else str(meta)
-    json.loads(meta_text)
+        raise CheckpointError(f"{path}: not a bemlearn BEM predictor (missing {missing or [PT2_METADATA_FILE]})")
+    try:
+        meta_text = meta.decode() if isinstance(meta, bytes) else str(meta)
+        doc = json.loads(meta_text)
+        if not isinstance(doc, dict) or not all(isinstance(doc.get(k), list) for k in ("inputs", "full_inputs")):
+            raise ValueError("expected a JSON object with lists 'inputs' and 'full_inputs'")
+    except ValueError as exc:  # also UnicodeDecodeError and JSONDecodeError
+        raise CheckpointError(f"{path}: extra/{PT2_METADATA_FILE} is not the bemlearn predictor metadata ({exc})") from None
     return Pt2Predictor(programs=dict(contents.exported_programs), metadata_json=meta_text)

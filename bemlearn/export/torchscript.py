@@ -19,6 +19,7 @@ from pathlib import Path
 import torch
 
 from bemlearn.export.bem_predictor import EXPORTED_METHODS, BEMPredictor
+from bemlearn.errors import CheckpointError
 from bemlearn.files import atomic_path
 
 __all__ = ["script_predictor", "save_torchscript", "load_torchscript", "METADATA_FILE"]
@@ -65,9 +66,9 @@ def load_torchscript(path: str | os.PathLike[str]) -> torch.jit.ScriptModule:
     try:
         with _quiet_jit():
             module = torch.jit.load(str(path), map_location="cpu", _extra_files=extra)
-    except RuntimeError as exc:
-        raise ValueError(f"{path}: not a TorchScript file ({exc})") from exc
+    except Exception as exc:  # torch raises RuntimeError and others for foreign or truncated files
+        raise CheckpointError(f"{path}: not a TorchScript file ({type(exc).__name__}: {exc})") from exc
     missing = [m for m in EXPORTED_METHODS if not hasattr(module, m)]
     if missing or not extra[METADATA_FILE]:
-        raise ValueError(f"{path}: not a bemlearn BEM predictor (missing {missing or [METADATA_FILE]})")
+        raise CheckpointError(f"{path}: not a bemlearn BEM predictor (missing {missing or [METADATA_FILE]})")
     return module
