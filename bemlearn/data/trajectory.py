@@ -155,6 +155,9 @@ class TrajectoryMeta:
                 raise TrajectoryFormatError(
                     f"{source}: metadata key {key!r} must be a JSON {typ.__name__}, got {data[key]!r}"
                 )
+        bad_units = {k: v for k, v in data.get("units", {}).items() if not isinstance(v, str)}
+        if bad_units:
+            raise TrajectoryFormatError(f"{source}: metadata key 'units' must map names to unit strings, got {bad_units!r}")
         for key in ("joint_names", "actuator_names"):
             if not all(isinstance(s, str) for s in data[key]):
                 raise TrajectoryFormatError(f"{source}: metadata key {key!r} must list strings, got {data[key]!r}")

@@ -164,9 +164,6 @@ def load_checkpoint(run_dir_or_file: str | os.PathLike[str]) -> Checkpoint:
         raise CheckpointError(f"{path}: kind is {kind!r}, expected one of {list(get_args(GPKind))}")
     if not isinstance(data["model_state"], dict):
         raise CheckpointError(f"{path}: model_state: expected a state dict, got {type(data['model_state']).__name__}")
-    recorded = data.get("content_sha256")
-    if recorded is not None and recorded != _content_sha256(data):
-        raise CheckpointError(f"{path}: the tensors do not match the checkpoint's content_sha256: the file is corrupted; retrain or restore it")
     state = _parse_state(data["predictor_state"], kind, f"{path}: predictor_state")
     try:
         meta = PredictorMetadata.from_dict(data["metadata"], where=f"{path}: metadata")
@@ -174,6 +171,9 @@ def load_checkpoint(run_dir_or_file: str | os.PathLike[str]) -> Checkpoint:
     except (ConfigError, ValueError, TypeError) as exc:
         msg = str(exc)
         raise CheckpointError(msg if msg.startswith(str(path)) else f"{path}: {msg}") from exc
+    recorded = data.get("content_sha256")  # last: the specific checks above name the bad key first
+    if recorded is not None and recorded != _content_sha256(data):
+        raise CheckpointError(f"{path}: the tensors do not match the checkpoint's content_sha256: the file is corrupted; retrain or restore it")
     log.debug("loaded %s: %s GP, %d support points, d = %d", path, kind, state.n_support, state.dim)
     return Checkpoint(path=path, kind=kind, model_state=data["model_state"], predictor_state=state, metadata=meta)
 
