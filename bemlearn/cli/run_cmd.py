@@ -31,7 +31,7 @@ def add_parser(sub) -> None:
     s.add_argument("--source", action="append", choices=["predictor", "model", "zero"], help="BEM source(s); default: simulate.bem_source")
     s.add_argument("--out", type=Path, help="output folder (default: a new runs/simulate-<timestamp>)")
     s.add_argument("--force", action="store_true", help="replace an existing OUT/simulate folder's files")
-    s.add_argument("--gif", action="store_true", help="also render OUT/simulate/<source>.gif (offscreen: picks EGL or OSMesa by itself)")
+    s.add_argument("--gif", action="store_true", help="also render OUT/simulate/<source>.gif (offscreen: picks a working OpenGL backend by itself, EGL first)")
     s.add_argument("--no-progress", action="store_true")
     s.set_defaults(func=_simulate)
 
