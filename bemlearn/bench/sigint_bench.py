@@ -27,7 +27,8 @@ __all__ = ["measure_sigint", "format_sigint"]
 def _reader(stream, lines: list[str], started: threading.Event, stamps: dict[str, float]) -> None:
     for line in iter(stream.readline, ""):
         lines.append(line)
-        for key, marker in (("stopped", "keeping the best parameters"), ("checkpoint", "wrote checkpoint")):
+        for key, marker in (("stopped", "keeping the best parameters"), ("checkpoint", "wrote checkpoint"),
+                            ("reported", "bemlearn train: interrupted")):
             if marker in line and key not in stamps:
                 stamps[key] = time.perf_counter()
         if "dataset:" in line:
@@ -97,6 +98,7 @@ def measure_sigint(
             "n_points": n_points, "kind": kind, "delay_s": delay_s, "returncode": rc,
             "latency_s": t_end - t0, "stop_s": stamps["stopped"] - t0 if "stopped" in stamps else None,
             "checkpoint_s": stamps["checkpoint"] - t0 if "checkpoint" in stamps else None,
+            "reported_s": stamps["reported"] - t0 if "reported" in stamps else None,
             "after_second_s": None if t_second is None else t_end - t_second,
             "checkpoint": ck_ok, "interrupted": interrupted, "stderr_tail": "".join(lines[-5:]),
         }

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 
 from bemlearn._version import __version__
@@ -67,6 +68,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         print(f"bemlearn {args.command}: interrupted", file=sys.stderr)
+        if argv is None:  # the real command line: outputs are written and closed, skip the slow teardown
+            logging.shutdown()
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(130)
         return 130
 
 
