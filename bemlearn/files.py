@@ -155,12 +155,13 @@ def check_writable(folder: str | os.PathLike[str], *, what: str = "--out") -> No
 
 
 @contextlib.contextmanager
-def created_dir(folder: str | os.PathLike[str]) -> Iterator[Path]:
+def created_dir(folder: str | os.PathLike[str], *, keep_on_interrupt: Iterable[str] | None = None) -> Iterator[Path]:
     """Create ``folder`` (and parents); if the block raises an ``Exception``, remove what was created.
 
     A folder (or any parent) that existed before is kept, with the files the block wrote
-    in it.  Ctrl-C (``KeyboardInterrupt``) keeps everything: an interrupted command has
-    written its best state on purpose.
+    in it.  Ctrl-C (``KeyboardInterrupt``) keeps the new folder when ``keep_on_interrupt``
+    is ``None`` or names a file the block wrote there (e.g. ``checkpoint.pt``: an
+    interrupted command writes its best state on purpose), and removes it otherwise.
     """
     folder = Path(folder)
     first_new = None
@@ -173,6 +174,11 @@ def created_dir(folder: str | os.PathLike[str]) -> Iterator[Path]:
     folder.mkdir(parents=True, exist_ok=True)
     try:
         yield folder
+    except KeyboardInterrupt:
+        keep = keep_on_interrupt is None or any((folder / name).exists() for name in keep_on_interrupt)
+        if first_new is not None and not keep:
+            shutil.rmtree(first_new, ignore_errors=True)
+        raise
     except Exception:
         if first_new is not None:
             shutil.rmtree(first_new, ignore_errors=True)

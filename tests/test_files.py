@@ -88,6 +88,11 @@ def test_created_dir_removes_what_a_failed_command_created(tmp_path):
             (out / "checkpoint.pt").write_text("x")
             raise KeyboardInterrupt
     assert (tmp_path / "run2" / "checkpoint.pt").is_file()
+    with pytest.raises(KeyboardInterrupt):  # nothing worth keeping yet: removed
+        with created_dir(tmp_path / "run3", keep_on_interrupt=["checkpoint.pt"]) as out:
+            (out / "config.yaml").write_text("x")
+            raise KeyboardInterrupt
+    assert not (tmp_path / "run3").exists()
 
 
 def test_check_writable(tmp_path):

@@ -74,7 +74,7 @@ def run(args) -> int:
     cfg = load_biped_config(args.config)
     fit = cfg.gpdm.fit if args.max_iter is None else dataclasses.replace(cfg.gpdm.fit, max_iter=args.max_iter)
     seqs, where = _sequences(args, cfg)
-    with created_dir(out):
+    with created_dir(out, keep_on_interrupt=["metrics.json"]):
         model = fit_gpdm_logged(seqs, out, config=fit, threads=cfg.gpdm.threads, progress=not args.no_progress)
     m = json.loads((out / "metrics.json").read_text())
     print(f"data: {where}")

@@ -43,7 +43,7 @@ def _run(args) -> int:
     raw = preflight(config=args.config, device=args.device)
     args.out = args.out or new_run_dir(Path(str(raw["robot"])).stem if "robot" in raw else "run")
     preflight(out_dir=args.out, outputs=[args.out], force=args.force)
-    with created_dir(args.out):
+    with created_dir(args.out, keep_on_interrupt=["data.npz", "checkpoint.pt"]):
         return _run_into(args)
 
 
@@ -83,7 +83,7 @@ def _simulate(args) -> int:
         from bemlearn.sim.render import require_offscreen_backend
 
         require_offscreen_backend()
-    with created_dir(args.out):
+    with created_dir(args.out, keep_on_interrupt=[]):
         return _simulate_into(args, cfg, simulate_stage)
 
 

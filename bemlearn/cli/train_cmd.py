@@ -43,7 +43,7 @@ def run(args) -> int:
         raise FileNotFoundError(f"--resume: no checkpoint in {out}")
     preflight(data=data, out_dir=out, outputs=[] if args.resume else [out], force=args.force)
     try:
-        with created_dir(out):
+        with created_dir(out, keep_on_interrupt=["checkpoint.pt"]):
             m = train_run(cfg, data, out, device=args.device, resume=args.resume, progress=not args.no_progress, threads=args.threads)
     finally:
         if out.is_dir() and (args.force or args.resume):

@@ -37,7 +37,7 @@ def run(args) -> int:
     preflight(config=args.config, out_dir=args.out, outputs=[args.out / n for n in names], force=args.force)
     if args.predictor is not None and not args.predictor.is_file():
         raise FileNotFoundError(f"--predictor: no such file {args.predictor} (expected an exported bem_predictor.pt)")
-    with created_dir(args.out):
+    with created_dir(args.out, keep_on_interrupt=[]):
         return _walk(args)
 
 
