@@ -115,7 +115,7 @@ def check_outputs(paths: Iterable[str | os.PathLike[str]], force: bool = False, 
     if found and not force:
         shown = ", ".join(str(p) for p in found[:8]) + (f" and {len(found) - 8} more" if len(found) > 8 else "")
         head = f"{what}: " if what else ""
-        raise OutputExistsError(f"{head}would overwrite {shown}; use --force to replace, or choose another --out")
+        raise OutputExistsError(f"{head}would overwrite {shown}; use --force to replace")
     return found
 
 

@@ -386,7 +386,16 @@ def run_fuzz(*, examples: int = 5, seed: int = 0, folder: str | os.PathLike[str]
     """Every bad-input class with ``examples`` seeds; returns the outcomes (one per case)."""
     import logging
 
-    logging.getLogger("bemlearn").setLevel(logging.ERROR)
+    logger = logging.getLogger("bemlearn")
+    level = logger.level
+    logger.setLevel(logging.ERROR)  # the readers log warnings for some bad inputs
+    try:
+        return _run_fuzz(examples=examples, seed=seed, folder=folder)
+    finally:
+        logger.setLevel(level)
+
+
+def _run_fuzz(*, examples: int, seed: int, folder: str | os.PathLike[str] | None) -> list[Outcome]:
     with tempfile.TemporaryDirectory(prefix="bemlearn-fuzz-") as tmp:
         root = Path(folder) if folder is not None else Path(tmp)
         base = make_base(root / "base")

@@ -40,6 +40,10 @@ def _run(args) -> int:
     from bemlearn.files import created_dir, new_run_dir
     from bemlearn.pipeline.preflight import preflight
 
+    from bemlearn.pipeline.biped import is_biped_config
+
+    if args.device not in (None, "cpu") and is_biped_config(args.config):
+        raise ValueError(f"--device {args.device}: the biped pipeline trains on the CPU (set train.device in the config)")
     raw = preflight(config=args.config, device=args.device)
     args.out = args.out or new_run_dir(Path(str(raw["robot"])).stem if "robot" in raw else "run")
     preflight(out_dir=args.out, outputs=[args.out], force=args.force)

@@ -35,8 +35,11 @@ def run(args) -> int:
     args.out = args.out or new_run_dir("walk")
     names = ("walk.json", "walk.npz", "walk.truth.npz", "walk.png")
     preflight(config=args.config, out_dir=args.out, outputs=[args.out / n for n in names], force=args.force)
+    source = args.source or ("predictor" if args.predictor else None)
+    if args.predictor is not None and source != "predictor":
+        raise ValueError(f"--predictor is only used with --source predictor, got --source {source}")
     if args.predictor is not None and not args.predictor.is_file():
-        raise FileNotFoundError(f"--predictor: no such file {args.predictor} (expected an exported bem_predictor.pt)")
+        raise FileNotFoundError(f"--predictor: {args.predictor} not found (expected an exported bem_predictor.pt)")
     with created_dir(args.out, keep_on_interrupt=[]):
         return _walk(args)
 

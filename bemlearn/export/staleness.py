@@ -115,9 +115,18 @@ def check_run_predictors(run_dir: str | os.PathLike[str]) -> None:
     """Raise :class:`StalePredictorError` naming every predictor file of ``run_dir`` that does not match."""
     run_dir = Path(run_dir)
     stale = stale_predictors(run_dir)
-    if stale:
-        check_predictor_matches(stale[0], run_dir / _CHECKPOINT) if (run_dir / _CHECKPOINT).is_file() else None
-        raise StalePredictorError(f"{', '.join(map(str, stale))}: stale predictor(s) beside {run_dir / _CHECKPOINT}")
+    if not stale:
+        return
+    names = ", ".join(map(str, stale))
+    try:
+        check_predictor_matches(stale[0], run_dir / _CHECKPOINT)
+    except StalePredictorError as exc:
+        raise StalePredictorError(f"{exc} (stale: {names})") from None
+    except (CheckpointError, OSError):
+        pass
+    raise StalePredictorError(
+        f"{names}: stale predictor(s) beside {run_dir / _CHECKPOINT}; re-export with `bemlearn export {run_dir} --format both --force`"
+    )
 
 
 def remove_stale_predictors(run_dir: str | os.PathLike[str]) -> list[Path]:
