@@ -8,5 +8,27 @@ predictors) → ``control`` / ``sim`` (EIC controller, closed loop) → ``cli``.
 """
 
 from bemlearn._version import __version__
+from bemlearn.errors import (
+    BemlearnError,
+    CheckpointError,
+    ConfigError,
+    EnvironmentProblem,
+    OutputExistsError,
+    PredictorInputError,
+    RobotModelError,
+    StalePredictorError,
+    TrajectoryFormatError,
+)
 
-__all__ = ["__version__"]
+__all__ = [
+    "__version__",
+    "BemlearnError",
+    "CheckpointError",
+    "ConfigError",
+    "EnvironmentProblem",
+    "OutputExistsError",
+    "PredictorInputError",
+    "RobotModelError",
+    "StalePredictorError",
+    "TrajectoryFormatError",
+]

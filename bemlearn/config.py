@@ -20,13 +20,12 @@ from typing import Any, TypeVar
 
 import yaml
 
+from bemlearn.errors import ConfigError
+from bemlearn.files import atomic_write_text
+
 __all__ = ["ConfigError", "from_dict", "to_dict", "load_yaml", "save_yaml", "replace_path"]
 
 T = TypeVar("T")
-
-
-class ConfigError(ValueError):
-    """A configuration value is missing, unknown or of the wrong type."""
 
 
 def _type_name(tp: Any) -> str:
@@ -151,7 +150,9 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     if not path.is_file():
         raise ConfigError(f"{path}: config file not found")
     try:
-        data = yaml.safe_load(path.read_text())
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not a UTF-8 text file (byte {exc.start}); expected a YAML config") from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
     if data is None:
@@ -163,7 +164,7 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
 
 def save_yaml(obj: Any, path: str | Path) -> None:
     """Write the resolved config (a dataclass or mapping) as YAML."""
-    Path(path).write_text(yaml.safe_dump(to_dict(obj), sort_keys=False))
+    atomic_write_text(path, yaml.safe_dump(to_dict(obj), sort_keys=False))
 
 
 def replace_path(obj: T, dotted: str, value: Any) -> T:

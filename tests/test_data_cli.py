@@ -78,7 +78,7 @@ def test_convert_round_trip_bit_identical(npz, tmp_path, capsys):
         assert a[key].dtype == b[key].dtype and a[key].tobytes() == b[key].tobytes(), key
     capsys.readouterr()
     assert main(["data", "convert", str(npz), str(csv)]) == 2
-    assert "already exists (use --force to overwrite)" in capsys.readouterr().err
+    assert f"would overwrite {csv}; use --force" in capsys.readouterr().err
     assert main(["data", "convert", str(npz), str(csv), "--force"]) == 0
     assert main(["data", "convert", str(npz), str(tmp_path / "x.h5")]) == 2
     assert "unsupported output suffix '.h5'" in capsys.readouterr().err

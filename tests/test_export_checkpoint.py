@@ -47,7 +47,7 @@ def test_round_trip(run_dir, posterior):
     assert ckpt.metadata == meta
     assert load_checkpoint(run_dir / "checkpoint.pt").metadata == meta
     raw = torch.load(run_dir / "checkpoint.pt", weights_only=True)
-    assert raw["format"] == CHECKPOINT_FORMAT and set(raw) == {"format", "kind", "model_state", "predictor_state", "metadata"}
+    assert raw["format"] == CHECKPOINT_FORMAT and set(raw) == {"format", "kind", "model_state", "predictor_state", "metadata", "content_sha256"}
 
 
 def test_metadata_extras_and_unit_list_are_kept(tmp_path, posterior):

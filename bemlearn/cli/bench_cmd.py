@@ -11,6 +11,8 @@
   robots with model-derived values only (issue 13).
 * ``bench uncertainty`` — candidate BEM bands: coverage, sharpness, bound violations, cost (issue 15).
 * ``bench c-footprint`` — flash/RAM footprint of the C export per model size and kind (issue 17).
+* ``bench sigint CONFIG --data FILE`` — Ctrl-C latency of ``train`` on the 3,000-point exact GP (issue 16);
+* ``bench fuzz`` — bad-input classes fed to every reader and how many end in a named error (issue 16).
 """
 
 from __future__ import annotations
@@ -110,6 +112,22 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     u.add_argument("--json", type=Path, default=None, help="also write the full results (reliability tables) as JSON")
     u.set_defaults(func=_uncertainty)
 
+    g = sub.add_parser("sigint", help="Ctrl-C latency of `bemlearn train` (SIGINT → exit, checkpoint left)",
+                       description="Start `bemlearn train` in a child process, send SIGINT a few seconds into the fit and "
+                       "time until it exits; checks the interrupted checkpoint it leaves.")
+    g.add_argument("config", type=Path, help="pipeline YAML (e.g. the shipped configs/*.yaml)")
+    g.add_argument("--data", type=Path, required=True, help="trajectory file to train on (e.g. the shipped data/*.npz)")
+    g.add_argument("--n-points", type=int, default=3000, help="training points (default 3000: the largest exact fit)")
+    g.add_argument("--kind", choices=["exact", "sgpr"], default="exact")
+    g.add_argument("--delays", type=float, nargs="+", default=[3.0, 5.0, 7.0, 9.0, 11.0],
+                   help="seconds after the fit starts at which SIGINT is sent, one run each")
+    g.add_argument("--twice", action="store_true", help="also a run with a second SIGINT 0.2 s after the first")
+    g.set_defaults(func=_sigint)
+    z = sub.add_parser("fuzz", help="generated bad inputs for every reader: classes tried, named errors",
+                       description="Feed generated bad trajectory files, configs, MJCF paths and checkpoint/predictor "
+                       "files to bemlearn's readers and count the bad-input classes that end in a named error.")
+    z.add_argument("--examples", type=int, default=20, help="generated examples per class (default 20)")
+    z.set_defaults(func=_fuzz)
 
 def _c_footprint(args: argparse.Namespace) -> int:
     from bemlearn.bench.c_footprint import format_footprints, measure_footprints
@@ -245,4 +263,24 @@ def _uncertainty(args: argparse.Namespace) -> int:
         print(format_seed_sweep(sweep))
     if args.json is not None:
         args.json.write_text(json.dumps({"candidates": results, "seeds": sweep}, indent=1, default=float))
+    return 0
+
+
+def _sigint(args: argparse.Namespace) -> int:
+    import os
+
+    from bemlearn.bench.sigint_bench import format_sigint, measure_sigint
+
+    rows = [measure_sigint(args.config, args.data, n_points=args.n_points, kind=args.kind, delay_s=d) for d in args.delays]
+    if args.twice:
+        rows.append(measure_sigint(args.config, args.data, n_points=args.n_points, kind=args.kind, delay_s=args.delays[0], twice=True))
+    print(format_sigint(rows))
+    print(f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f} on {os.cpu_count()} cores")
+    return 0
+
+
+def _fuzz(args: argparse.Namespace) -> int:
+    from bemlearn.bench.fuzz_bench import format_fuzz, run_fuzz
+
+    print(format_fuzz(run_fuzz(examples=args.examples)))
     return 0

@@ -20,7 +20,8 @@ def add_parser(sub) -> None:
         "to FILE (.npz or .csv), plus the simulator's ground truth to <stem>.truth<suffix>.",
     )
     p.add_argument("config", type=Path, help="pipeline YAML (its 'robot' and 'collect' sections are used)")
-    p.add_argument("--out", type=Path, required=True, help="output file, .npz or .csv")
+    p.add_argument("--out", type=Path, help="output file, .npz or .csv (default: a new runs/collect-<timestamp>/data.npz)")
+    p.add_argument("--force", action="store_true", help="replace FILE and its ground-truth file if they exist")
     p.add_argument("--trials", type=int, help="override collect.n_trials")
     p.add_argument("--seed", type=int, help="override collect.seed")
     p.add_argument("--workers", type=int, help="override collect.workers (0 = one per core)")
@@ -31,14 +32,18 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     from bemlearn.data.collect import collect
     from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
+    from bemlearn.files import new_run_dir
     from bemlearn.pipeline.config import load_pipeline_config
+    from bemlearn.pipeline.preflight import preflight
 
+    if args.out is None:
+        args.out = new_run_dir("collect") / "data.npz"
+    if args.out.suffix.lower() not in (".npz", ".csv"):
+        raise ValueError(f"--out: expected a .npz or .csv file name, got {args.out}")
+    preflight(config=args.config, outputs=[args.out, ground_truth_path(args.out)], out_dir=args.out.parent, force=args.force)
     cfg = load_pipeline_config(args.config)
     overrides = {k: v for k, v in (("n_trials", args.trials), ("seed", args.seed), ("workers", args.workers)) if v is not None}
     ccfg = dataclasses.replace(cfg.collect, **overrides)
-    if args.out.suffix.lower() not in (".npz", ".csv"):
-        raise ValueError(f"--out: expected a .npz or .csv file name, got {args.out}")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
     data, truth = collect(cfg.robot, ccfg, progress=not args.no_progress)
     write_trajectory(data, args.out)
     gt = write_trajectory(truth, ground_truth_path(args.out))

@@ -121,8 +121,9 @@ def run_convert(args: argparse.Namespace) -> int:
         raise ValueError(
             f"{args.output}: unsupported output suffix {args.output.suffix!r}; expected one of {list(SUFFIXES)}"
         )
-    if args.output.exists() and not args.force:
-        raise ValueError(f"{args.output}: already exists (use --force to overwrite)")
+    from bemlearn.files import check_outputs
+
+    check_outputs([args.output], args.force, what="data convert")
     if args.output.resolve() == args.input.resolve():
         raise ValueError(f"{args.output}: output is the input file")
     limits = {"min_trial_samples": args.min_trial_samples, "rate_rtol": args.rate_rtol, "jitter_rtol": args.jitter_rtol}

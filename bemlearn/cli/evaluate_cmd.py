@@ -21,6 +21,7 @@ def add_parser(sub) -> None:
     p.add_argument("--references", type=int, help="number of held-out references (default: the run's evaluate.n_references)")
     p.add_argument("--seed", type=int, help="seed of the references (default: the run's evaluate.seed)")
     p.add_argument("--model", help="compare with this robot instead (registry name or MJCF path), e.g. for a model-free run")
+    p.add_argument("--force", action="store_true", help="replace RUN_DIR/evaluation.{json,png} if they exist")
     p.set_defaults(func=run)
 
 
@@ -37,7 +38,12 @@ def run(args) -> int:
     from bemlearn.pipeline.evaluation import EvaluationConfig, evaluate_bem, held_out_references, run_truth_robot
     from bemlearn.pipeline.resolve import complete_section
 
+    from bemlearn.export.staleness import check_run_predictors
+    from bemlearn.files import atomic_path, atomic_write_text, check_outputs
+
     ck = load_checkpoint(args.run_dir)
+    check_run_predictors(ck.path.parent)
+    check_outputs([ck.path.parent / "evaluation.json", ck.path.parent / "evaluation.png"], args.force, what="evaluate")
     out = ck.path.parent
     robot, ref = run_truth_robot(out, model=args.model)
     cfg_path = out / "config.yaml"
@@ -60,8 +66,9 @@ def run(args) -> int:
     ax.set_ylabel(f"{ck.metadata.unactuated_name} ({unit})")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(out / "evaluation.png", dpi=110)
-    (out / "evaluation.json").write_text(json.dumps(ev, indent=2))
+    with atomic_path(out / "evaluation.png") as tmp:
+        fig.savefig(tmp, dpi=110)
+    atomic_write_text(out / "evaluation.json", json.dumps(ev, indent=2))
     print(f"robot: {ref['name']} ({ref['mjcf'] or ref['registry']})")
     print(f"{'reference':<10}{f'RMSE ({unit})':>12}{f'max ({unit})':>12}")
     for i, r in enumerate(ev["per_reference"]):

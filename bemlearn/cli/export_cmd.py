@@ -37,6 +37,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     _add_c_arguments(parser)
     parser.add_argument("--no-verify", action="store_true", help="skip reloading and checking the written file(s)")
+    parser.add_argument("--force", action="store_true", help="replace existing predictor file(s)")
     parser.set_defaults(func=run)
 
 
@@ -66,6 +67,6 @@ def run(args: argparse.Namespace) -> int:
         return _run_c(args)
     if args.prefix != "bem" or args.dtype != "float64":
         raise ValueError("--prefix and --dtype apply to --format c only")
-    for path in export_run(args.run_dir, out=args.out, fmt=args.fmt, verify=not args.no_verify):
+    for path in export_run(args.run_dir, out=args.out, fmt=args.fmt, verify=not args.no_verify, force=args.force):
         print(f"wrote {path}")
     return 0

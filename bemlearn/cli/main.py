@@ -10,11 +10,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 
 from bemlearn._version import __version__
 from bemlearn.applications import applications
 from bemlearn.config import ConfigError
+from bemlearn.errors import BemlearnError
+from bemlearn.interrupts import sigint_handling
 
 __all__ = ["main", "build_parser"]
 
@@ -60,13 +63,19 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 0
     try:
-        return int(args.func(args) or 0)
-    except (ConfigError, ValueError, FileNotFoundError, KeyError) as exc:
+        with sigint_handling():  # Ctrl-C: stop soon keeping the best state; twice: exit at once
+            return int(args.func(args) or 0)
+    except (BemlearnError, ConfigError, ValueError, FileNotFoundError, KeyError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         print(f"bemlearn {args.command}: error: {msg}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"bemlearn {args.command}: interrupted", file=sys.stderr)
+        if argv is None:  # the real command line: outputs are written and closed, skip the slow teardown
+            logging.shutdown()
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(130)
         return 130
 
 

@@ -15,7 +15,8 @@ def add_parser(sub) -> None:
         "closed loop with the learned, model-based and zero BEM, and write RUN_DIR/report.md.",
     )
     p.add_argument("config", type=Path, help="pipeline YAML; `robot: path/to/robot.xml` alone is enough")
-    p.add_argument("--out", type=Path, help="run folder (default runs/<robot>-<timestamp>)")
+    p.add_argument("--out", type=Path, help="run folder (default: a new runs/<robot>-<timestamp>)")
+    p.add_argument("--force", action="store_true", help="write into a non-empty --out folder, replacing its files")
     p.add_argument("--device", choices=["cpu", "cuda"], help="GP training device (default: the config's train.device)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_run)
@@ -28,42 +29,72 @@ def add_parser(sub) -> None:
     s.add_argument("config", type=Path)
     s.add_argument("--predictor", type=Path, help="exported bem_predictor.pt (overrides simulate.predictor)")
     s.add_argument("--source", action="append", choices=["predictor", "model", "zero"], help="BEM source(s); default: simulate.bem_source")
-    s.add_argument("--out", type=Path, default=Path("runs") / "simulate")
-    s.add_argument("--gif", action="store_true", help="also render OUT/simulate/<source>.gif (needs MUJOCO_GL=egl or osmesa without a display)")
+    s.add_argument("--out", type=Path, help="output folder (default: a new runs/simulate-<timestamp>)")
+    s.add_argument("--force", action="store_true", help="replace an existing OUT/simulate folder's files")
+    s.add_argument("--gif", action="store_true", help="also render OUT/simulate/<source>.gif (offscreen: picks a working OpenGL backend by itself, EGL first)")
     s.add_argument("--no-progress", action="store_true")
     s.set_defaults(func=_simulate)
 
 
 def _run(args) -> int:
     from bemlearn.applications import get_application
-    from bemlearn.config import load_yaml
-    from bemlearn.pipeline.resolve import resolve_pipeline_config
-    from bemlearn.pipeline.run import run_pipeline
+    from bemlearn.files import created_dir, new_run_dir
+    from bemlearn.pipeline.preflight import preflight
 
-    app_name = load_yaml(args.config).get("application")
-    if app_name is not None:  # a config of an application (e.g. the biped's): it runs its own stages
-        app = get_application(str(app_name))
+    raw = preflight(config=args.config, device=args.device)
+    app = None
+    if raw.get("application") is not None:  # a config of an application (e.g. the biped's): it runs its own stages
+        app = get_application(str(raw["application"]))
         if app.run is None:
-            raise ValueError(f"{args.config}: application {app_name!r} has no pipeline of its own; remove the 'application' key")
-        out = app.run(args.config, args.out, device=args.device, progress=not args.no_progress)
-        print((out / "report.md").read_text())
-        print(f"\nrun folder: {out}")
-        return 0
-    resolved = resolve_pipeline_config(args.config)
-    out = run_pipeline(resolved, args.out, device=args.device, progress=not args.no_progress)
+            raise ValueError(f"{args.config}: application {raw['application']!r} has no pipeline of its own; remove the 'application' key")
+        resolved = None
+    else:
+        from bemlearn.pipeline.resolve import resolve_pipeline_config
+
+        resolved = resolve_pipeline_config(args.config)  # strict parse and model-derived values, before any folder exists
+    stem = Path(str(raw["robot"])).stem if "robot" in raw else Path(str(raw.get("data", "run"))).stem
+    args.out = args.out or new_run_dir(stem)
+    preflight(out_dir=args.out, outputs=[args.out], force=args.force)
+    with created_dir(args.out, keep_on_interrupt=["data.npz", "checkpoint.pt"]):
+        if app is not None:
+            out = app.run(args.config, args.out, device=args.device, progress=not args.no_progress)
+        else:
+            from bemlearn.pipeline.run import run_pipeline
+
+            out = run_pipeline(resolved, args.out, device=args.device, progress=not args.no_progress)
     print((out / "report.md").read_text())
     print(f"\nrun folder: {out}")
     return 0
 
 
 def _simulate(args) -> int:
+    from bemlearn.export.staleness import check_predictor_matches
+    from bemlearn.files import created_dir, new_run_dir
+    from bemlearn.pipeline.preflight import preflight
     from bemlearn.pipeline.resolve import resolve_pipeline_config
     from bemlearn.pipeline.simulate import simulate_stage
 
+    args.out = args.out or new_run_dir("simulate")
+    preflight(config=args.config, out_dir=args.out, outputs=[args.out / "simulate"], force=args.force)
     cfg = resolve_pipeline_config(args.config).config
+    if cfg.robot is None:
+        raise ValueError(f"{args.config}: simulate needs a robot (a model to simulate); the config names only data")
+    pred = args.predictor or (Path(cfg.simulate.predictor) if getattr(cfg.simulate, "predictor", None) else None)
+    if pred is not None and pred.is_file() and (pred.parent / "checkpoint.pt").is_file():
+        check_predictor_matches(pred, pred.parent / "checkpoint.pt")
+    if args.gif:
+        from bemlearn.sim.render import require_offscreen_backend
+
+        require_offscreen_backend()
+    with created_dir(args.out, keep_on_interrupt=[]):
+        return _simulate_into(args, cfg, simulate_stage)
+
+
+def _simulate_into(args, cfg, simulate_stage) -> int:
+    """The closed loop of ``cfg`` into ``args.out`` (checked by :func:`_simulate`)."""
     sources = tuple(args.source or [cfg.simulate.bem_source])
     res = simulate_stage(cfg, args.out, predictor=args.predictor, sources=sources, progress=not args.no_progress, gif=args.gif)
-    print(f"{'source':<10}{'fell':>6}{'duration s':>12}{'RMSE rad':>10}{'max|V|':>8}{'×real time':>12}")
+    print(f"{'source':<10}{'fell':>6}{'duration s':>12}{'RMSE q_a':>10}{'max|u|':>8}{'×real time':>12}")
     for src, m in res.items():
         print(f"{src:<10}{str(m['fell']):>6}{m['duration_s']:>12.1f}{m['tracking_rmse']:>10.4f}{m['u_max']:>8.2f}{m['real_time_factor']:>12.1f}")
     print(f"wrote {args.out / 'simulate'}")

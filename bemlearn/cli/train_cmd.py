@@ -15,21 +15,25 @@ def add_parser(sub) -> None:
         "likelihood, and write RUN_DIR/{config.yaml,checkpoint.pt,metrics.json,tb/}. Ctrl-C leaves a usable checkpoint.",
     )
     p.add_argument("config", type=Path, help="pipeline YAML ('robot', 'dataset' and 'train' sections)")
-    p.add_argument("--data", type=Path, help="trajectory file (.npz/.csv); default: data/<robot>_excitation.npz")
+    p.add_argument("--data", type=Path, help="trajectory file (.npz/.csv); default: the config's 'data:'")
     p.add_argument("--out", type=Path, help="run folder (default: runs/train-<timestamp>)")
     p.add_argument("--device", choices=["cpu", "cuda"], help="override train.device")
     p.add_argument("--resume", action="store_true", help="continue from the run folder's checkpoint")
+    p.add_argument("--force", action="store_true",
+                   help="train into an existing run folder, replacing its checkpoint and metrics (stale predictors are removed)")
     p.add_argument("--threads", type=int, default=1, help="torch threads during training (default 1; see README)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    import time
-
+    from bemlearn.export.staleness import remove_stale_predictors
+    from bemlearn.files import created_dir, new_run_dir
     from bemlearn.pipeline.config import load_pipeline_config
+    from bemlearn.pipeline.preflight import preflight
     from bemlearn.pipeline.train import train_run
 
+    preflight(config=args.config, device=args.device)
     cfg = load_pipeline_config(args.config)
     data = args.data or (Path(cfg.data) if cfg.data else None)
     if data is None:
@@ -37,10 +41,17 @@ def run(args) -> int:
                          f"(collect one with `bemlearn collect {args.config} --out FILE`)")
     if not data.is_file():
         raise FileNotFoundError(f"--data: trajectory file {data} not found (collect one with `bemlearn collect {args.config} --out {data}`)")
-    out = args.out or Path("runs") / time.strftime("train-%Y%m%d-%H%M%S")
+    out = args.out or new_run_dir("train")
     if args.resume and not (out / "checkpoint.pt").is_file():
         raise FileNotFoundError(f"--resume: no checkpoint in {out}")
-    m = train_run(cfg, data, out, device=args.device, resume=args.resume, progress=not args.no_progress, threads=args.threads)
+    preflight(data=data, out_dir=out, outputs=[] if args.resume else [out], force=args.force)
+    try:
+        with created_dir(out, keep_on_interrupt=["checkpoint.pt"]):
+            m = train_run(cfg, data, out, device=args.device, resume=args.resume, progress=not args.no_progress, threads=args.threads)
+    finally:
+        if out.is_dir() and (args.force or args.resume):
+            for p in remove_stale_predictors(out):
+                print(f"removed {p}: exported from the previous checkpoint (re-export with `bemlearn export {out}`)")
     unit = m["output_unit"]
     print(f"run folder: {out}")
     print(f"fit: {m['fit'].get('stop_reason')} in {m['fit'].get('seconds', float('nan')):.1f} s on {m['n_train']} points")

@@ -180,6 +180,9 @@ _WORKER_ROBOT = None
 
 def _worker_init(robot_name: str) -> None:
     global _WORKER_ROBOT
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and ends the workers
     _WORKER_ROBOT = _robot_and_model(robot_name)
 
 
@@ -215,10 +218,18 @@ def collect(robot_name: str, config: CollectConfig, *, progress: bool = True) ->
         import multiprocessing as mp
 
         ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
-        with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init, initargs=(robot_name,)) as pool:
+        pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init, initargs=(robot_name,))
+        try:
             for res in pool.map(_worker_run, jobs, chunksize=1):
                 results.append(res)
                 bar.update()
+        except BaseException:  # Ctrl-C or a failed trial: do not wait for the queued trials
+            for proc in list(getattr(pool, "_processes", {}).values()):
+                proc.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+            bar.close()
+            raise
+        pool.shutdown()
     bar.close()
     kept = [r for r in results if r.t.size >= 10]
     dropped = [r.trial_id for r in results if r.t.size < 10]

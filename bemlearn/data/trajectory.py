@@ -27,15 +27,12 @@ import numpy as np
 
 from bemlearn.units import JOINT_KINDS
 from bemlearn.data.quantization import detect_quantization_step
+from bemlearn.errors import TrajectoryFormatError
 
 __all__ = ["TrajectoryMeta", "Trajectory", "TrialSlice", "TrajectoryFormatError", "DEFAULT_UNITS"]
 
 #: Units assumed when none are given; ``q`` must be rad, ``t`` must be s.
 DEFAULT_UNITS: dict[str, str] = {"t": "s", "q": "rad", "u": "V"}
-
-
-class TrajectoryFormatError(ValueError):
-    """A trajectory file or array set is malformed; the message names file, column and row."""
 
 
 @dataclass(frozen=True)
@@ -194,6 +191,9 @@ class TrajectoryMeta:
                 raise TrajectoryFormatError(
                     f"{source}: metadata key {key!r} must be a JSON {typ.__name__}, got {data[key]!r}"
                 )
+        bad_units = {k: v for k, v in data.get("units", {}).items() if not isinstance(v, str)}
+        if bad_units:
+            raise TrajectoryFormatError(f"{source}: metadata key 'units' must map names to unit strings, got {bad_units!r}")
         for key in ("joint_names", "actuator_names", "joint_kinds", "channel_names"):
             if key in data and not all(isinstance(s, str) for s in data[key]):
                 raise TrajectoryFormatError(f"{source}: metadata key {key!r} must list strings, got {data[key]!r}")

@@ -12,14 +12,15 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, TrajectoryMeta
+from bemlearn.files import atomic_path
 from bemlearn.data.validation import JITTER_RTOL, MIN_TRIAL_SAMPLES, RATE_RTOL, RobotLike, column_names, validate
 
 __all__ = ["read_trajectory", "read_ground_truth", "write_trajectory", "ground_truth_path", "CSV_MAGIC", "SUFFIXES"]
@@ -38,7 +39,7 @@ _NPZ_OPTIONAL = ("qd", "qdd", "channels")
 def _suffix(path: Path) -> str:
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:
-        raise ValueError(
+        raise TrajectoryFormatError(
             f"{path}: unsupported trajectory file suffix {path.suffix!r}; expected one of {list(SUFFIXES)}"
         )
     return suffix
@@ -130,16 +131,11 @@ def write_trajectory(
     validate(
         traj, source=f"write {path}", min_trial_samples=min_trial_samples, rate_rtol=rate_rtol, jitter_rtol=jitter_rtol
     )
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    try:
+    with atomic_path(path) as tmp:
         if suffix == ".npz":
             _write_npz(traj, tmp)
         else:
             _write_csv(traj, tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     logger.debug("wrote %s: %d samples", path, traj.n_samples)
     return path
 
@@ -164,7 +160,7 @@ def _read_npz(path: Path) -> Trajectory:
     try:
         with np.load(path, allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in npz.files}
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError, zlib.error) as exc:
         raise TrajectoryFormatError(f"{path}: not a readable NPZ file ({exc})") from None
     missing = [k for k in _NPZ_REQUIRED if k not in arrays]
     unknown = sorted(set(arrays) - set(_NPZ_REQUIRED) - set(_NPZ_OPTIONAL))
@@ -249,8 +245,11 @@ def _write_csv(traj: Trajectory, path: Path) -> None:
 
 def _read_csv(path: Path) -> tuple[Trajectory, int]:
     """The trajectory and the file line (1-based) of its first data row."""
-    with open(path, encoding="utf-8") as fh:
-        lines = fh.read().splitlines()
+    try:
+        with open(path, encoding="utf-8") as fh:
+            lines = fh.read().splitlines()
+    except UnicodeDecodeError as exc:
+        raise TrajectoryFormatError(f"{path}: not a UTF-8 text file (byte {exc.start}); expected a bemlearn trajectory CSV") from None
     if not lines or lines[0].strip() != CSV_MAGIC:
         first = lines[0][:60] if lines else "<empty file>"
         raise TrajectoryFormatError(

@@ -20,6 +20,7 @@ from bemlearn.export.export_run import ExportFormat, export_run
 from bemlearn.export.folded_posterior import FoldedPosterior
 from bemlearn.export.metadata import ARTIFACT_FORMAT, PredictorMetadata, artifact_metadata
 from bemlearn.export.pt2 import Pt2Predictor, load_pt2_predictor, save_pt2
+from bemlearn.export.staleness import check_predictor_matches, check_run_predictors, remove_stale_predictors
 from bemlearn.export.torchscript import load_torchscript, save_torchscript, script_predictor
 from bemlearn.export.variance_factor import VarianceFactor, kernel_gram, variance_factor
 from bemlearn.export.verify import reference_posterior, verify_predictor
@@ -39,11 +40,14 @@ __all__ = [
     "artifact_metadata",
     "c_sources",
     "export_c",
+    "check_predictor_matches",
+    "check_run_predictors",
     "export_run",
     "kernel_gram",
     "load_checkpoint",
     "load_learned_bem",
     "load_pt2_predictor",
+    "remove_stale_predictors",
     "load_torchscript",
     "reference_posterior",
     "save_pt2",

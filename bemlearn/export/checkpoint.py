@@ -23,8 +23,10 @@ from typing import Any, get_args
 import torch
 
 from bemlearn.config import ConfigError
+from bemlearn.errors import CheckpointError
 from bemlearn.export.metadata import PredictorMetadata, artifact_metadata
 from bemlearn.models.learned_bem import LearnedBEM
+from bemlearn.files import atomic_path
 from bemlearn.models.predictor_state import GPKind, PredictorState
 
 __all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_NAME", "Checkpoint", "load_checkpoint", "load_learned_bem", "write_checkpoint"]
@@ -78,43 +80,70 @@ def _checkpoint_path(run_dir_or_file: str | os.PathLike[str]) -> Path:
 
 def _parse_state(data: Any, kind: str, where: str) -> PredictorState:
     if not isinstance(data, dict):
-        raise ValueError(f"{where}: expected a dict (PredictorState.to_dict()), got {type(data).__name__}")
+        raise CheckpointError(f"{where}: expected a dict (PredictorState.to_dict()), got {type(data).__name__}")
     missing = [k for k in (*_STATE_TENSORS, "kind", "input_names", "n_train") if k not in data and k not in _OPTIONAL_TENSORS]
     if missing:
-        raise ValueError(f"{where}: missing key(s) {missing}")
+        raise CheckpointError(f"{where}: missing key(s) {missing}")
     unknown = sorted(set(data) - {*_STATE_TENSORS, "kind", "input_names", "n_train"})
     if unknown:
-        raise ValueError(f"{where}: unknown key(s) {unknown}")
+        raise CheckpointError(f"{where}: unknown key(s) {unknown}")
     for name in _STATE_TENSORS:
         if name in _OPTIONAL_TENSORS and name not in data:
             continue
         t = data[name]
         if not isinstance(t, torch.Tensor):
-            raise ValueError(f"{where}.{name}: expected a tensor, got {type(t).__name__}")
+            raise CheckpointError(f"{where}.{name}: expected a tensor, got {type(t).__name__}")
         if t.dtype != torch.float64:
-            raise ValueError(f"{where}.{name}: expected float64 (GP posteriors are stored in float64), got {t.dtype}")
+            raise CheckpointError(f"{where}.{name}: expected float64 (GP posteriors are stored in float64), got {t.dtype}")
         if not bool(torch.isfinite(t).all()):
-            raise ValueError(f"{where}.{name}: has non-finite values")
+            raise CheckpointError(f"{where}.{name}: has non-finite values")
     if data["kind"] != kind:
-        raise ValueError(f"{where}.kind: {data['kind']!r} differs from the checkpoint's kind {kind!r}")
+        raise CheckpointError(f"{where}.kind: {data['kind']!r} differs from the checkpoint's kind {kind!r}")
     if not isinstance(data["n_train"], int) or isinstance(data["n_train"], bool):
-        raise ValueError(f"{where}.n_train: expected an integer, got {data['n_train']!r}")
+        raise CheckpointError(f"{where}.n_train: expected an integer, got {data['n_train']!r}")
     names = data["input_names"]
     if not isinstance(names, (list, tuple)) or not all(isinstance(n, str) for n in names):
-        raise ValueError(f"{where}.input_names: expected a list of strings, got {names!r}")
+        raise CheckpointError(f"{where}.input_names: expected a list of strings, got {names!r}")
     try:
         state = PredictorState.from_dict(data)
     except ValueError as exc:
-        raise ValueError(f"{where}: {exc}") from exc
+        raise CheckpointError(f"{where}: {exc}") from exc
     for name in ("lengthscale", "x_std", "y_std", "outputscale"):
         if not bool((getattr(state, name) > 0).all()):
-            raise ValueError(f"{where}.{name}: expected positive values, got {getattr(state, name).tolist()}")
+            raise CheckpointError(f"{where}.{name}: expected positive values, got {getattr(state, name).tolist()}")
     if float(state.noise) < 0:
-        raise ValueError(f"{where}.noise: expected >= 0, got {float(state.noise)}")
+        raise CheckpointError(f"{where}.noise: expected >= 0, got {float(state.noise)}")
     if not float(state.std_scale) > 0 or not bool((state.input_std >= 0).all()):
-        raise ValueError(f"{where}: std_scale must be > 0 and input_std >= 0, got {float(state.std_scale)} and "
+        raise CheckpointError(f"{where}: std_scale must be > 0 and input_std >= 0, got {float(state.std_scale)} and "
                          f"{state.input_std.tolist()}")
     return state
+
+
+def _content_sha256(data: dict) -> str:
+    """SHA-256 over the model and posterior tensors (names, dtypes, shapes, bytes) and the metadata JSON.
+
+    Recorded as ``content_sha256`` at write and checked at load: a flipped byte inside a
+    tensor changes values without making the zip unreadable.
+    """
+    import hashlib
+    import json
+
+    h = hashlib.sha256()
+    for group in ("model_state", "predictor_state"):
+        items = data.get(group)
+        if not isinstance(items, dict):
+            continue
+        for name in sorted(items, key=str):
+            v = items[name]
+            h.update(f"{group}.{name}".encode())
+            if isinstance(v, torch.Tensor):
+                t = v.detach().cpu().contiguous()
+                h.update(f"{t.dtype}{tuple(t.shape)}".encode())
+                h.update(t.reshape(-1).view(torch.uint8).numpy().tobytes() if t.numel() else b"")
+            else:
+                h.update(repr(v).encode())
+    h.update(json.dumps(data.get("metadata"), sort_keys=True, default=str).encode())
+    return h.hexdigest()
 
 
 def load_checkpoint(run_dir_or_file: str | os.PathLike[str]) -> Checkpoint:
@@ -122,7 +151,7 @@ def load_checkpoint(run_dir_or_file: str | os.PathLike[str]) -> Checkpoint:
 
     Raises:
         FileNotFoundError: no such file, or a run directory without ``checkpoint.pt``.
-        ValueError: not loadable with ``weights_only=True``, wrong ``format``, a missing key,
+        CheckpointError: (a ValueError) not loadable with ``weights_only=True``, wrong ``format``, a missing key,
             a bad value, or metadata inconsistent with the posterior; the message names the
             file and the key.
     """
@@ -130,26 +159,29 @@ def load_checkpoint(run_dir_or_file: str | os.PathLike[str]) -> Checkpoint:
     try:
         data = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises many types for a corrupt or foreign file
-        raise ValueError(f"{path}: cannot be read as a bemlearn checkpoint ({type(exc).__name__}: {exc})") from exc
+        raise CheckpointError(f"{path}: cannot be read as a bemlearn checkpoint ({type(exc).__name__}: {exc})") from exc
     if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a dict with keys {list(_TOP_KEYS)}, got {type(data).__name__}")
+        raise CheckpointError(f"{path}: expected a dict with keys {list(_TOP_KEYS)}, got {type(data).__name__}")
     missing = [k for k in _TOP_KEYS if k not in data]
     if missing:
-        raise ValueError(f"{path}: missing key(s) {missing}; a checkpoint has keys {list(_TOP_KEYS)}")
+        raise CheckpointError(f"{path}: missing key(s) {missing}; a checkpoint has keys {list(_TOP_KEYS)}")
     if data["format"] != CHECKPOINT_FORMAT:
-        raise ValueError(f"{path}: format is {data['format']!r}, expected {CHECKPOINT_FORMAT!r}")
+        raise CheckpointError(f"{path}: format is {data['format']!r}, expected {CHECKPOINT_FORMAT!r}")
     kind = data["kind"]
     if kind not in get_args(GPKind):
-        raise ValueError(f"{path}: kind is {kind!r}, expected one of {list(get_args(GPKind))}")
+        raise CheckpointError(f"{path}: kind is {kind!r}, expected one of {list(get_args(GPKind))}")
     if not isinstance(data["model_state"], dict):
-        raise ValueError(f"{path}: model_state: expected a state dict, got {type(data['model_state']).__name__}")
+        raise CheckpointError(f"{path}: model_state: expected a state dict, got {type(data['model_state']).__name__}")
     state = _parse_state(data["predictor_state"], kind, f"{path}: predictor_state")
     try:
         meta = PredictorMetadata.from_dict(data["metadata"], where=f"{path}: metadata")
         artifact_metadata(meta, state)  # cross-checks columns, n_train, n_inducing
     except (ConfigError, ValueError, TypeError) as exc:
         msg = str(exc)
-        raise ValueError(msg if msg.startswith(str(path)) else f"{path}: {msg}") from exc
+        raise CheckpointError(msg if msg.startswith(str(path)) else f"{path}: {msg}") from exc
+    recorded = data.get("content_sha256")  # last: the specific checks above name the bad key first
+    if recorded is not None and recorded != _content_sha256(data):
+        raise CheckpointError(f"{path}: the tensors do not match the checkpoint's content_sha256: the file is corrupted; retrain or restore it")
     log.debug("loaded %s: %s GP, %d support points, d = %d", path, kind, state.n_support, state.dim)
     return Checkpoint(path=path, kind=kind, model_state=data["model_state"], predictor_state=state, metadata=meta)
 
@@ -185,10 +217,9 @@ def write_checkpoint(
         "metadata": meta.to_dict(),
     }
     _parse_state(data["predictor_state"], predictor_state.kind, "predictor_state")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(data, tmp)
-    os.replace(tmp, path)
+    data["content_sha256"] = _content_sha256(data)
+    with atomic_path(path) as tmp:
+        torch.save(data, tmp)
     load_checkpoint(path)
     log.info("wrote checkpoint %s (%s GP)", path, predictor_state.kind)
     return path

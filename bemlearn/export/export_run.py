@@ -10,6 +10,7 @@ model is never left behind.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 from pathlib import Path
@@ -19,7 +20,9 @@ from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.export.checkpoint import load_checkpoint
 from bemlearn.export.pt2 import load_pt2_predictor, save_pt2
 from bemlearn.export.torchscript import load_torchscript, save_torchscript
+from bemlearn.export.staleness import file_sha256
 from bemlearn.export.verify import verify_predictor
+from bemlearn.files import check_outputs
 
 __all__ = ["export_run", "ExportFormat", "DEFAULT_NAME"]
 
@@ -35,6 +38,7 @@ def export_run(
     out: str | os.PathLike[str] | None = None,
     fmt: ExportFormat = "torchscript",
     verify: bool = True,
+    force: bool = True,
 ) -> list[Path]:
     """Write the BEM predictor of a trained run.
 
@@ -44,6 +48,11 @@ def export_run(
             With ``fmt="both"`` it names the TorchScript file and the ``.pt2`` goes next to it.
         fmt: ``"torchscript"``, ``"pt2"`` or ``"both"``.
         verify: load each file back and check it with :func:`verify_predictor`.
+        force: replace existing files; ``False`` raises
+            :class:`~bemlearn.errors.OutputExistsError` naming them (the CLI's default).
+
+    The SHA-256 of the checkpoint file is recorded as ``checkpoint_sha256`` in each file's
+    metadata (see :mod:`bemlearn.export.staleness`).
 
     Returns:
         The files written.
@@ -52,13 +61,16 @@ def export_run(
         raise ValueError(f"fmt: expected 'torchscript', 'pt2' or 'both', got {fmt!r}")
     ckpt = load_checkpoint(run_dir_or_file)
     state = ckpt.predictor_state
-    predictor = BEMPredictor(state, ckpt.metadata)
+    meta = ckpt.metadata
+    meta = dataclasses.replace(meta, extra={**meta.extra, "checkpoint_sha256": file_sha256(ckpt.path)})
+    predictor = BEMPredictor(state, meta)
     base = Path(out) if out is not None else ckpt.path.parent / f"{DEFAULT_NAME}.pt"
     targets = []
     if fmt in ("torchscript", "both"):
         targets.append((base, save_torchscript, load_torchscript))
     if fmt in ("pt2", "both"):
         targets.append((base if (out is not None and fmt == "pt2") else base.with_suffix(".pt2"), save_pt2, load_pt2_predictor))
+    check_outputs([t[0] for t in targets], force, what="export")
     written = []
     for path, save, load in targets:
         save(predictor, path)

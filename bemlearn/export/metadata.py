@@ -257,5 +257,7 @@ def artifact_metadata(meta: PredictorMetadata, state: PredictorState) -> dict[st
     }
     if meta.extra:
         doc["extra"] = jsonable(meta.extra, where="metadata")
+        if "checkpoint_sha256" in meta.extra:  # recorded by export_run (bemlearn.export.staleness)
+            doc["checkpoint_sha256"] = meta.extra["checkpoint_sha256"]
     json.dumps(doc, allow_nan=False)  # fail here, not in the exported module
     return doc

@@ -11,10 +11,13 @@ method and the metadata JSON as an extra file:
 
 ``torch.export.load(path)`` returns the ``forward`` program (the archive's default ``model``);
 ``torch.export.pt2_archive._package.load_pt2(path).exported_programs[name]`` returns any of them
-(:func:`load_pt2_predictor` wraps that).  B is dynamic (B ≥ 1).  A wrong width fails
-torch.export's input guard (AssertionError), a wrong rank its input unpacking (IndexError), a
-wrong dtype ``aten._assert_tensor_metadata`` ("Tensor dtype mismatch", RuntimeError), and
-non-finite inputs ``aten._assert_async`` with a BEMPredictor message (RuntimeError).
+(:func:`load_pt2_predictor` wraps that).  B is dynamic (B ≥ 1).  :class:`Pt2Predictor`
+checks inputs exactly as the TorchScript module (rank, width, dtype, B = 0, non-finite) and
+raises :class:`~bemlearn.errors.PredictorInputError` with the same message.  A raw program
+(plain ``torch.export.load``) raises torch's exceptions: a wrong width fails the input guard
+(AssertionError), a wrong dtype ``aten._assert_tensor_metadata`` (RuntimeError), B = 0 and
+non-finite inputs ``aten._assert_async`` with a BEMPredictor message (RuntimeError); see
+docs/predictor-contract.md.
 """
 
 from __future__ import annotations
@@ -29,7 +32,10 @@ from typing import Any
 import torch
 from torch import nn
 
+from bemlearn.errors import PredictorInputError
 from bemlearn.export.bem_predictor import BEMPredictor
+from bemlearn.errors import CheckpointError
+from bemlearn.files import atomic_path
 
 __all__ = ["save_pt2", "load_pt2_predictor", "Pt2Predictor", "PT2_PROGRAMS", "PT2_METADATA_FILE"]
 
@@ -53,6 +59,9 @@ class _Method(nn.Module):
 
     def forward(self, x: torch.Tensor) -> Any:
         torch.ops.aten._assert_tensor_metadata.default(x, dtype=torch.float64)
+        # B is a dynamic dimension with min 1, but torch.export does not guard it at run time:
+        # a tensor-valued assertion keeps an empty batch from returning a (1,) mean
+        torch._assert_async(x.new_ones(x.shape[0]).sum() > 0.5, f"BEMPredictor.{self.method}: x is an empty batch (B = 0); expected B >= 1")
         return getattr(self.predictor, self.method)(x)
 
 
@@ -76,14 +85,11 @@ def save_pt2(predictor: BEMPredictor, path: str | os.PathLike[str]) -> Path:
 
     path = Path(path)
     programs = _export_programs(predictor)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".partial.pt2")
-    with warnings.catch_warnings():
+    with atomic_path(path) as tmp, warnings.catch_warnings():
         # bem and full share their weight/factor tensors; torch warns about the shared group,
         # harmless for CPU weights (the test suite checks every program's numbers after loading)
         warnings.filterwarnings("ignore", message="No complete tensor found in the group")
         package_pt2(tmp, exported_programs=programs, extra_files={PT2_METADATA_FILE: predictor.metadata_json})
-    os.replace(tmp, path)
     log.info("wrote torch.export BEM predictor %s", path)
     return path
 
@@ -99,6 +105,12 @@ class Pt2Predictor:
     def __init__(self, programs: dict[str, torch.export.ExportedProgram], metadata_json: str) -> None:
         self.programs = dict(programs)
         self.metadata_json = metadata_json
+        doc = json.loads(metadata_json)
+        units = doc.get("units", {})
+        self._columns = {
+            False: (len(doc["inputs"]), ", ".join(f"{n} [{units.get(n, '?')}]" for n in doc["inputs"])),
+            True: (len(doc["full_inputs"]), ", ".join(f"{n} [{units.get(n, '?')}]" for n in doc["full_inputs"])),
+        }
         self._forward = self.programs["model"].module()
         self._bem_mean = self.programs["bem_mean"].module()
         self._predict_full = self.programs["predict_full"].module()
@@ -108,26 +120,55 @@ class Pt2Predictor:
             self.programs["predict_full_latent"].module() if "predict_full_latent" in self.programs else None
         )
 
+    def _call(self, program, x: torch.Tensor, method: str, full: bool):
+        """Check ``x`` as the TorchScript module does (same messages), then run ``program``."""
+        n, columns = self._columns[full]
+        if not isinstance(x, torch.Tensor) or x.dim() != 2 or x.size(1) != n or x.size(0) == 0 or x.dtype != torch.float64:
+            shape = list(x.shape) if isinstance(x, torch.Tensor) else type(x).__name__
+            dtype = x.dtype if isinstance(x, torch.Tensor) else "-"
+            raise PredictorInputError(
+                f"BEMPredictor.{method}: expected x of shape (B, {n}), B >= 1, and dtype torch.float64 with columns "
+                f"[{columns}]; got shape {shape} and dtype {dtype}"
+            )
+        bad = torch.nonzero(~torch.isfinite(x))
+        if bad.size(0) > 0:
+            r, c = int(bad[0, 0]), int(bad[0, 1])
+            raise PredictorInputError(
+                f"BEMPredictor.{method}: x[{r}, {c}] is {float(x[r, c])}; inputs must be finite ({bad.size(0)} non-finite entries)"
+            )
+        try:
+            return program(x)
+        except RuntimeError as exc:  # the program's own finite check: entries too large to evaluate
+            if "BEMPredictor." in str(exc):
+                raise PredictorInputError(
+                    f"BEMPredictor.{method}: x has finite entries too large to evaluate (magnitude above ~1e140)"
+                ) from None
+            raise
+
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(μ(x_0^e), σ(x_0^e)) for ``x: (B, 3m)`` float64, each ``(B,)`` rad (eq. 12, 14)."""
-        return self._forward(x)
+        """(μ(x_0^e), σ(x_0^e)) for ``x: (B, 3m)`` float64, each ``(B,)`` rad (eq. 12, 14).
+
+        Raises:
+            PredictorInputError: (a ValueError) wrong rank, width or dtype, B = 0, or non-finite entries.
+        """
+        return self._call(self._forward, x, "forward", False)
 
     def __call__(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        return self._forward(x)
+        return self.forward(x)
 
     def bem_mean(self, x: torch.Tensor) -> torch.Tensor:
         """μ(x_0^e) ``(B,)`` rad for ``x: (B, 3m)`` float64."""
-        return self._bem_mean(x)
+        return self._call(self._bem_mean, x, "bem_mean", False)
 
     def predict_full(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(mean, std) of f(x) (eq. 11) for ``x: (B, 3m + 2)`` float64."""
-        return self._predict_full(x)
+        return self._call(self._predict_full, x, "predict_full", True)
 
     def full_mean(self, x: torch.Tensor) -> torch.Tensor:
         """Mean of the full learned map only (eq. 11), ``(B,)`` rad."""
         if self._full_mean is None:
-            return self._predict_full(x)[0]
-        return self._full_mean(x)
+            return self._call(self._predict_full, x, "full_mean", True)[0]
+        return self._call(self._full_mean, x, "full_mean", True)
 
     def forward_latent(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(μ(x_0^e), latent σ(x_0^e)) (eq. 12, 14); archives without the program return ``forward``
@@ -153,11 +194,16 @@ def load_pt2_predictor(path: str | os.PathLike[str]) -> Pt2Predictor:
     try:
         contents = load_pt2(path)
     except Exception as exc:  # torch raises several types for foreign archives
-        raise ValueError(f"{path}: not a torch.export .pt2 archive ({type(exc).__name__}: {exc})") from exc
+        raise CheckpointError(f"{path}: not a torch.export .pt2 archive ({type(exc).__name__}: {exc})") from exc
     missing = [k for k in PT2_PROGRAMS if k not in contents.exported_programs and k not in _OPTIONAL_PROGRAMS]
     meta = contents.extra_files.get(PT2_METADATA_FILE)
     if missing or not meta:
-        raise ValueError(f"{path}: not a bemlearn BEM predictor (missing {missing or [PT2_METADATA_FILE]})")
-    meta_text = meta.decode() if isinstance(meta, bytes) else str(meta)
-    json.loads(meta_text)
+        raise CheckpointError(f"{path}: not a bemlearn BEM predictor (missing {missing or [PT2_METADATA_FILE]})")
+    try:
+        meta_text = meta.decode() if isinstance(meta, bytes) else str(meta)
+        doc = json.loads(meta_text)
+        if not isinstance(doc, dict) or not all(isinstance(doc.get(k), list) for k in ("inputs", "full_inputs")):
+            raise ValueError("expected a JSON object with lists 'inputs' and 'full_inputs'")
+    except ValueError as exc:  # also UnicodeDecodeError and JSONDecodeError
+        raise CheckpointError(f"{path}: extra/{PT2_METADATA_FILE} is not the bemlearn predictor metadata ({exc})") from None
     return Pt2Predictor(programs=dict(contents.exported_programs), metadata_json=meta_text)

@@ -19,6 +19,8 @@ from pathlib import Path
 import torch
 
 from bemlearn.export.bem_predictor import EXPORTED_METHODS, LATENT_METHODS, BEMPredictor
+from bemlearn.errors import CheckpointError
+from bemlearn.files import atomic_path
 
 __all__ = ["script_predictor", "save_torchscript", "load_torchscript", "METADATA_FILE"]
 
@@ -49,11 +51,8 @@ def save_torchscript(predictor: BEMPredictor, path: str | os.PathLike[str], *, f
     """Script ``predictor`` and write it to ``path`` (parent directories are created)."""
     path = Path(path)
     scripted = script_predictor(predictor, freeze=freeze)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    with _quiet_jit():
+    with atomic_path(path) as tmp, _quiet_jit():
         torch.jit.save(scripted, str(tmp), _extra_files={METADATA_FILE: predictor.metadata_json})
-    os.replace(tmp, path)
     log.info("wrote TorchScript BEM predictor %s", path)
     return path
 
@@ -67,9 +66,9 @@ def load_torchscript(path: str | os.PathLike[str]) -> torch.jit.ScriptModule:
     try:
         with _quiet_jit():
             module = torch.jit.load(str(path), map_location="cpu", _extra_files=extra)
-    except RuntimeError as exc:
-        raise ValueError(f"{path}: not a TorchScript file ({exc})") from exc
+    except Exception as exc:  # torch raises RuntimeError and others for foreign or truncated files
+        raise CheckpointError(f"{path}: not a TorchScript file ({type(exc).__name__}: {exc})") from exc
     missing = [m for m in EXPORTED_METHODS if not hasattr(module, m) and m not in LATENT_METHODS]
     if missing or not extra[METADATA_FILE]:
-        raise ValueError(f"{path}: not a bemlearn BEM predictor (missing {missing or [METADATA_FILE]})")
+        raise CheckpointError(f"{path}: not a bemlearn BEM predictor (missing {missing or [METADATA_FILE]})")
     return module

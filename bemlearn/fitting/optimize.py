@@ -16,6 +16,7 @@ from linear_operator.utils.errors import NanError, NotPSDError
 from tqdm.auto import tqdm
 
 from bemlearn.fitting.result import Callback
+from bemlearn.interrupts import check_interrupt, interruptible
 
 __all__ = ["minimize", "checked_loss", "default_lr", "NumericalFailure"]
 
@@ -97,6 +98,7 @@ def minimize(
         opt = torch.optim.Adam(params, lr=lr)
 
     def closure() -> torch.Tensor:
+        check_interrupt()  # between evaluations, also inside one L-BFGS iteration's line search
         opt.zero_grad(set_to_none=True)
         loss = checked_loss(loss_fn)
         loss.backward()
@@ -119,23 +121,31 @@ def minimize(
         return loss
 
     stop = "max_iter"
-    try:
-        if optimizer == "lbfgs":
-            opt.step(closure)
-            n_iter = opt.state[opt._params[0]].get("n_iter", 0)
-            if n_iter < max_iter and state["evals"] < max_eval:
-                stop = "converged"
-        else:
-            for _ in range(max_iter):
+    with interruptible():
+        try:
+            if optimizer == "lbfgs":
                 opt.step(closure)
-                if tol > 0 and state["since_best"] >= 50:
+                n_iter = opt.state[opt._params[0]].get("n_iter", 0)
+                if n_iter < max_iter and state["evals"] < max_eval:
                     stop = "converged"
-                    break
-    except NumericalFailure as exc:
-        logger.warning("%s: numerical failure after %d evaluations (%s); keeping the best parameters", desc, state["evals"], exc)
-        stop = "numerical failure"
-    finally:
-        bar.close()
+            else:
+                for _ in range(max_iter):
+                    opt.step(closure)
+                    if tol > 0 and state["since_best"] >= 50:
+                        stop = "converged"
+                        break
+        except NumericalFailure as exc:
+            logger.warning("%s: numerical failure after %d evaluations (%s); keeping the best parameters", desc, state["evals"], exc)
+            stop = "numerical failure"
+        except KeyboardInterrupt:
+            logger.warning("%s: interrupted after %d evaluations; keeping the best parameters (loss %.6g)", desc, state["evals"], state["best"])
+            if state["evals"] > 0:
+                with torch.no_grad():
+                    for p, b in zip(params, best_params):
+                        p.copy_(b)
+            raise
+        finally:
+            bar.close()
     if state["evals"] > 0:
         with torch.no_grad():
             for p, b in zip(params, best_params):

@@ -11,6 +11,7 @@ import torch
 from tqdm.auto import tqdm
 
 from bemlearn.fitting.optimize import NumericalFailure, checked_loss
+from bemlearn.interrupts import check_interrupt, interruptible
 from bemlearn.fitting.result import Callback, FitResult, hyperparameter_metrics
 from bemlearn.fitting.variational import optimal_variational
 from bemlearn.models.solver import DEFAULT_JITTER, DEFAULT_MAX_TRIES, cholesky_policy
@@ -100,44 +101,52 @@ def fit_svgp(
     metrics: dict[str, float] = {}
     start = time.perf_counter()
     bar = tqdm(total=epochs * n_batches, desc="SVGP", disable=not progress, leave=False)
-    try:
-        with cholesky_policy(jitter=jitter, max_tries=max_tries):
-            for epoch in range(epochs):
-                order = torch.randperm(N, generator=gen)
-                total = 0.0
-                for b in range(n_batches):
-                    idx = order[b * batch_size : (b + 1) * batch_size]
-                    xb = train_x[idx.to(train_x.device)].to(device)
-                    yb = train_y[idx.to(train_y.device)].to(device)
-                    ngd.zero_grad(set_to_none=True)
-                    opt.zero_grad(set_to_none=True)
-                    loss = checked_loss(lambda: -elbo(model(xb), yb))
-                    loss.backward()
-                    ngd.step()
-                    opt.step()
-                    if any(not bool(torch.isfinite(p).all()) for p in params):
-                        raise NumericalFailure("non-finite parameters after an Adam step")
-                    with torch.no_grad():
-                        for p, g in zip(params, good):
-                            g.copy_(p)
-                    value = float(loss.detach())
-                    total += value * idx.numel()
-                    metrics = {"loss": value, **hyperparameter_metrics(model, likelihood), "lr": lr, "epoch": float(epoch)}
-                    if callback is not None:
-                        callback(step, metrics)
-                    step += 1
-                    bar.update(1)
-                    bar.set_postfix(epoch=epoch, loss=f"{value:.4f}")
-                epoch_loss = total / N
-                logger.debug("SVGP epoch %d: mean -ELBO per point %.6f", epoch, epoch_loss)
-    except NumericalFailure as exc:
-        with torch.no_grad():
-            for p, g in zip(params, good):
-                p.copy_(g)
-        logger.warning("SVGP: numerical failure at step %d (%s); restored the last good parameters", step, exc)
-        stop = "numerical failure"
-    finally:
-        bar.close()
+    with interruptible():
+        try:
+            with cholesky_policy(jitter=jitter, max_tries=max_tries):
+                for epoch in range(epochs):
+                    order = torch.randperm(N, generator=gen)
+                    total = 0.0
+                    for b in range(n_batches):
+                        check_interrupt()  # between mini-batch steps
+                        idx = order[b * batch_size : (b + 1) * batch_size]
+                        xb = train_x[idx.to(train_x.device)].to(device)
+                        yb = train_y[idx.to(train_y.device)].to(device)
+                        ngd.zero_grad(set_to_none=True)
+                        opt.zero_grad(set_to_none=True)
+                        loss = checked_loss(lambda: -elbo(model(xb), yb))
+                        loss.backward()
+                        ngd.step()
+                        opt.step()
+                        if any(not bool(torch.isfinite(p).all()) for p in params):
+                            raise NumericalFailure("non-finite parameters after an Adam step")
+                        with torch.no_grad():
+                            for p, g in zip(params, good):
+                                g.copy_(p)
+                        value = float(loss.detach())
+                        total += value * idx.numel()
+                        metrics = {"loss": value, **hyperparameter_metrics(model, likelihood), "lr": lr, "epoch": float(epoch)}
+                        if callback is not None:
+                            callback(step, metrics)
+                        step += 1
+                        bar.update(1)
+                        bar.set_postfix(epoch=epoch, loss=f"{value:.4f}")
+                    epoch_loss = total / N
+                    logger.debug("SVGP epoch %d: mean -ELBO per point %.6f", epoch, epoch_loss)
+        except NumericalFailure as exc:
+            with torch.no_grad():
+                for p, g in zip(params, good):
+                    p.copy_(g)
+            logger.warning("SVGP: numerical failure at step %d (%s); restored the last good parameters", step, exc)
+            stop = "numerical failure"
+        except KeyboardInterrupt:
+            with torch.no_grad():
+                for p, g in zip(params, good):
+                    p.copy_(g)
+            logger.warning("SVGP: interrupted at step %d; keeping the last good parameters", step)
+            raise
+        finally:
+            bar.close()
     if refresh_q:
         optimal_variational(model, likelihood, train_x.to(device), train_y.to(device))
         model.train()

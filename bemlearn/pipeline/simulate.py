@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from bemlearn.files import atomic_write_text
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.sim.closed_loop import nominal_robot, simulate
 from bemlearn.sim.figures import plot_run
@@ -28,7 +29,7 @@ def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: st
     """Run the closed loop for each BEM source in ``sources``; returns ``{source: metrics}``.
 
     ``gif=True`` also writes ``simulate/<source>.gif`` (first 10 s, offscreen rendering;
-    needs ``MUJOCO_GL=egl`` or ``osmesa`` without a display).
+    the OpenGL backend is picked by :func:`~bemlearn.sim.render.require_offscreen_backend`).
     """
     out = Path(out_dir) / "simulate"
     out.mkdir(parents=True, exist_ok=True)
@@ -80,5 +81,5 @@ def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: st
         results[src] = m
         log.info("simulate %s: %s", src, {k: m[k] for k in ("fell", "tracking_rmse", "u_max")})
     writer.close()
-    (out / "metrics.json").write_text(json.dumps(results, indent=2, default=float))
+    atomic_write_text(out / "metrics.json", json.dumps(results, indent=2, default=float))
     return results

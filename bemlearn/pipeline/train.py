@@ -28,6 +28,7 @@ from bemlearn.config import save_yaml
 from bemlearn.data import build_datasets, read_trajectory
 from bemlearn.data.validation import check_robot
 from bemlearn.models import predict
+from bemlearn.files import atomic_path, atomic_write_text
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.evaluation import evaluate_bem, held_out_references
 from bemlearn.pipeline.reliability import reliability_figure
@@ -124,6 +125,10 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
                      "unactuated": meta.unactuated, "actuated": list(meta.actuated_names),
                      "output_unit": units[f"qd_{meta.unactuated}"].removesuffix("/s"), "n_train": len(train),
                      "n_val": len(val), "dataset": ds.report, "interrupted": interrupted}
+    if interrupted:  # the best checkpoint is written; skip the slow evaluation so Ctrl-C ends within seconds
+        writer.close()
+        atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
+        raise KeyboardInterrupt
     dtype = gp_cfg.torch_dtype
     if len(val):
         mean, var = predict(model, lik, val.x_normalized.to(device=gp_cfg.device, dtype=dtype), noisy=True)
@@ -161,12 +166,14 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         for k in ("rmse", "max_abs", "coverage_2sigma_latent", "coverage_2sigma_predictive", "coverage_2sigma_band"):
             writer.add_scalar(f"bem/{k}", ev[k], 0)
         writer.add_figure("bem/reliability", reliability_figure(ev["reliability"]), 0)
-        reliability_figure(ev["reliability"]).savefig(out / "reliability.png", dpi=110)
+        with atomic_path(out / "reliability.png") as tmp:
+            reliability_figure(ev["reliability"]).savefig(tmp, dpi=110)
         fig = _bem_figure(curves, meta.unactuated, units[f"qd_{meta.unactuated}"].removesuffix("/s"))
         writer.add_figure("bem/learned_vs_model", fig, 0)
-        fig.savefig(out / "bem_validation.png", dpi=110)
+        with atomic_path(out / "bem_validation.png") as tmp:
+            fig.savefig(tmp, dpi=110)
     writer.close()
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=float))
+    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
     if interrupted:
         raise KeyboardInterrupt
     return metrics

@@ -34,6 +34,7 @@ import mujoco
 import numpy as np
 import torch
 
+from bemlearn.errors import RobotModelError
 from bemlearn.robots._mujoco_compat import full_mass_matrix, make_mass_matrix
 from bemlearn.robots.robot import Robot, as_batch
 
@@ -47,10 +48,6 @@ _JOINT_KIND = {
     int(mujoco.mjtJoint.mjJNT_BALL): "ball",
     int(mujoco.mjtJoint.mjJNT_FREE): "free",
 }
-
-
-class RobotModelError(ValueError):
-    """The model is not an underactuated balance robot bemlearn can handle."""
 
 
 def _custom_numeric(model: mujoco.MjModel, name: str) -> np.ndarray | None:

@@ -11,12 +11,12 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["plot_run"]
+__all__ = ["plot_run", "run_figure"]
 
 
 def plot_run(result, path: str | Path, *, model_bem: np.ndarray | None = None, band: tuple[np.ndarray, np.ndarray] | None = None,
              lemma: dict[str, np.ndarray] | None = None, joint_names=("θ", "α"), input_label: str = "V (V)") -> Path:
-    """Write a PNG of a :class:`~bemlearn.sim.closed_loop.SimResult`.
+    """Write a PNG of a :class:`~bemlearn.sim.closed_loop.SimResult` (atomically; see :func:`run_figure`).
 
     Args:
         result: the run.
@@ -25,6 +25,21 @@ def plot_run(result, path: str | Path, *, model_bem: np.ndarray | None = None, b
         band: ``(mean, std)`` of the learned BEM, ``(T,)`` each, rad.
         lemma: ``{"t", "delta_gamma", "hdot"}`` arrays for panel (c).
     """
+    import matplotlib.pyplot as plt
+
+    from bemlearn.files import atomic_path
+
+    fig = run_figure(result, model_bem=model_bem, band=band, lemma=lemma, joint_names=joint_names, input_label=input_label)
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def run_figure(result, *, model_bem: np.ndarray | None = None, band: tuple[np.ndarray, np.ndarray] | None = None,
+               lemma: dict[str, np.ndarray] | None = None, joint_names=("θ", "α"), input_label: str = "V (V)"):
+    """The matplotlib figure of :func:`plot_run`; every panel's time axis spans its own data."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -32,7 +47,7 @@ def plot_run(result, path: str | Path, *, model_bem: np.ndarray | None = None, b
 
     t = result.t
     rows = 4 if lemma is not None else 3
-    fig, ax = plt.subplots(rows, 1, figsize=(9, 2.3 * rows), sharex=lemma is None)
+    fig, ax = plt.subplots(rows, 1, figsize=(9, 2.3 * rows))  # no sharex: (b) shows the last 10 s, (c) one period
     a_name, u_name = joint_names
     ax[0].plot(t, result.q[:, 0], label=f"{a_name}")
     ax[0].plot(t, result.qa_ref[:, 0], "--", label=f"{a_name}$_d$")
@@ -51,6 +66,9 @@ def plot_run(result, path: str | Path, *, model_bem: np.ndarray | None = None, b
     ax[1].set_ylabel(f"{u_name} (rad)")
     ax[1].legend(loc="upper right", fontsize=7, ncol=2)
     ax[1].set_title("(b) unactuated joint and the BEM (last 10 s)")
+    if t.size:
+        ax[0].set_xlim(t[0], t[-1])
+        ax[1].set_xlim(t[w][0], t[w][-1])
     k = 2
     if lemma is not None:
         ax[2].plot(lemma["t"], lemma["hdot"], label="$\\dot H_u$ (model)")
@@ -66,8 +84,9 @@ def plot_run(result, path: str | Path, *, model_bem: np.ndarray | None = None, b
     ax[k].set_ylabel(input_label)
     ax[k].set_xlabel("t (s)")
     ax[k].set_title("(d) actuator command")
+    if t.size:
+        ax[k].set_xlim(t[0], t[-1])
+    if lemma is not None and len(lemma["t"]):
+        ax[2].set_xlim(lemma["t"][0], lemma["t"][-1])
     fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return fig

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 __all__ = ["add_parser"]
@@ -24,6 +23,7 @@ def add_parser(sub) -> None:
     p.add_argument("--data", type=Path, help="trajectory file or human gait CSV (default: simulate the config's walk)")
     p.add_argument("--out", type=Path, help="output folder (default runs/gpdm-<timestamp>)")
     p.add_argument("--max-iter", type=int, help="override gpdm.fit.max_iter")
+    p.add_argument("--force", action="store_true", help="replace OUT/{metrics.json,latents.npz,tb/} if they exist")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run)
 
@@ -63,11 +63,18 @@ def run(args) -> int:
     from bemlearn.apps.biped.pipeline import load_biped_config
     from bemlearn.apps.biped.gpdm_study import fit_gpdm_logged
 
+    from bemlearn.files import created_dir, new_run_dir
+    from bemlearn.pipeline.preflight import preflight
+
+    out = args.out or new_run_dir("gpdm")
+    preflight(config=args.config, out_dir=out, outputs=[out / "metrics.json", out / "latents.npz", out / "tb"], force=args.force)
+    if args.data is not None and not args.data.is_file():
+        raise FileNotFoundError(f"--data: {args.data} not found")
     cfg = load_biped_config(args.config)
     fit = cfg.gpdm.fit if args.max_iter is None else dataclasses.replace(cfg.gpdm.fit, max_iter=args.max_iter)
     seqs, where = _sequences(args, cfg)
-    out = args.out or Path("runs") / time.strftime("gpdm-%Y%m%d-%H%M%S")
-    model = fit_gpdm_logged(seqs, out, config=fit, threads=cfg.gpdm.threads, progress=not args.no_progress)
+    with created_dir(out, keep_on_interrupt=["metrics.json"]):
+        model = fit_gpdm_logged(seqs, out, config=fit, threads=cfg.gpdm.threads, progress=not args.no_progress)
     m = json.loads((out / "metrics.json").read_text())
     print(f"data: {where}")
     print(f"c = [{', '.join(f'{v:+.3f}' for v in model.c.tolist())}] (1/rad, χ = c·(q − q̄))")

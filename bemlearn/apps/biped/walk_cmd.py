@@ -22,15 +22,33 @@ def add_parser(sub) -> None:
     p.add_argument("--duration", type=float, help="override walk.duration_s (s)")
     p.add_argument("--steps", type=int, help="override walk.max_steps (0: no limit)")
     p.add_argument("--seed", type=int, help="override walk.seed")
-    p.add_argument("--out", type=Path, default=Path("runs") / "walk", help="output folder (default runs/walk)")
+    p.add_argument("--out", type=Path, help="output folder (default: a new runs/walk-<timestamp>)")
+    p.add_argument("--force", action="store_true", help="replace OUT/walk.* if they exist")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
+    from bemlearn.files import created_dir, new_run_dir
+    from bemlearn.pipeline.preflight import preflight
+
+    args.out = args.out or new_run_dir("walk")
+    names = ("walk.json", "walk.npz", "walk.truth.npz", "walk.png")
+    preflight(config=args.config, out_dir=args.out, outputs=[args.out / n for n in names], force=args.force)
+    source = args.source or ("predictor" if args.predictor else None)
+    if args.predictor is not None and source != "predictor":
+        raise ValueError(f"--predictor is only used with --source predictor, got --source {source}")
+    if args.predictor is not None and not args.predictor.is_file():
+        raise FileNotFoundError(f"--predictor: {args.predictor} not found (expected an exported bem_predictor.pt)")
+    with created_dir(args.out, keep_on_interrupt=[]):
+        return _walk(args)
+
+
+def _walk(args) -> int:
     import dataclasses
 
     from bemlearn.data import ground_truth_path, write_trajectory
+    from bemlearn.files import atomic_write_text
     from bemlearn.apps.biped.walker import load_walk_config, simulate_walk, walk_trajectories
 
     cfg = load_walk_config(args.config)
@@ -43,12 +61,11 @@ def run(args) -> int:
     predictor = str(args.predictor) if args.predictor is not None else cfg.predictor
     cfg = dataclasses.replace(cfg, bem_source=source, predictor=predictor, **over)
     result = simulate_walk(cfg, progress=not args.no_progress)
-    args.out.mkdir(parents=True, exist_ok=True)
     data, truth = walk_trajectories(result)
     write_trajectory(data, args.out / "walk.npz")
     write_trajectory(truth, ground_truth_path(args.out / "walk.npz"))
     m = result.metrics
-    (args.out / "walk.json").write_text(json.dumps(m, indent=2, default=float))
+    atomic_write_text(args.out / "walk.json", json.dumps(m, indent=2, default=float))
     _plot(result, args.out / "walk.png")
     print(f"{m['gait']} gait, BEM source {m['bem_source']}: {m['steps']} steps in {m['duration_s']:.2f} s, fell: {m['fell']}")
     if m["steps"] > 0:
@@ -77,5 +94,8 @@ def _plot(result, path: Path) -> None:
         a.legend(loc="upper right", fontsize=8)
     ax[2].set_xlabel("t (s)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    from bemlearn.files import atomic_path
+
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)

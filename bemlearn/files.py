@@ -1,0 +1,186 @@
+"""Writing outputs without losing a user's work: atomic writes, overwrite guard, run folders.
+
+- :func:`atomic_path` yields a temporary path in the target's folder; when the block ends
+  normally the file is flushed to disk (``fsync``) and renamed over the target
+  (``os.replace``, atomic on POSIX), so a killed process leaves either the old file or the
+  new one at the target path, never a half-written one.  Writers that want a path
+  (``torch.save``, ``np.savez``, ``fig.savefig``) write to the yielded path.
+- :func:`check_outputs` refuses to replace existing files unless ``force``
+  (:class:`~bemlearn.errors.OutputExistsError` listing them and saying ``use --force``).
+- :func:`new_run_dir` names a new timestamped run folder ``runs/<name>-YYYYmmdd-HHMMSS``
+  that does not exist yet; :func:`created_dir` creates a folder and removes it again if the
+  command that created it fails.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import shutil
+import tempfile
+import time
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+from bemlearn.errors import EnvironmentProblem, OutputExistsError
+
+__all__ = [
+    "atomic_path",
+    "atomic_write_text",
+    "atomic_write_bytes",
+    "check_outputs",
+    "existing_outputs",
+    "new_run_dir",
+    "created_dir",
+    "check_writable",
+]
+
+log = logging.getLogger(__name__)
+
+
+def _fsync_dir(folder: Path) -> None:
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:  # pragma: no cover - platforms without directory fds
+        return
+    try:
+        os.fsync(fd)
+    except OSError:  # pragma: no cover
+        pass
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a temporary path for ``path``; on success fsync it and rename it to ``path``.
+
+    The temporary file has ``path``'s own name inside a hidden folder beside it
+    (``.<name>.tmp-<pid>-<n>/<name>``), so writers that pick the format from the suffix
+    (``savefig``, ``np.savez``) or name an archive after the file (``torch.jit.save``) see
+    the real name, and the rename stays on one file system.  On any exception (or Ctrl-C)
+    the temporary folder is removed and ``path`` is left as it was.  Parent folders are
+    created.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp_dir = path.parent / f".{path.name}.tmp-{os.getpid()}-{time.monotonic_ns() % 10**9}"
+    tmp_dir.mkdir()
+    tmp = tmp_dir / path.name
+    try:
+        yield tmp
+        if not tmp.is_file():
+            raise FileNotFoundError(f"{path}: the writer did not create the temporary file {tmp}")
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+        _fsync_dir(path.parent)
+    finally:
+        shutil.rmtree(tmp_dir, ignore_errors=True)
+
+
+def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_path`); returns ``path``."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically (see :func:`atomic_path`); returns ``path``."""
+    return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def existing_outputs(paths: Iterable[str | os.PathLike[str]]) -> list[Path]:
+    """The entries of ``paths`` that exist (files, or folders that are not empty)."""
+    found = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            if any(p.iterdir()):
+                found.append(p)
+        elif p.exists() or p.is_symlink():
+            found.append(p)
+    return found
+
+
+def check_outputs(paths: Iterable[str | os.PathLike[str]], force: bool = False, *, what: str = "") -> list[Path]:
+    """Refuse to replace existing outputs unless ``force``; returns the existing ones.
+
+    Raises:
+        OutputExistsError: some of ``paths`` exist (a folder counts when it is not empty)
+            and ``force`` is false; the message lists them and says ``use --force``.
+    """
+    found = existing_outputs(paths)
+    if found and not force:
+        shown = ", ".join(str(p) for p in found[:8]) + (f" and {len(found) - 8} more" if len(found) > 8 else "")
+        head = f"{what}: " if what else ""
+        raise OutputExistsError(f"{head}would overwrite {shown}; use --force to replace")
+    return found
+
+
+def new_run_dir(name: str, *, root: str | os.PathLike[str] = "runs", now: float | None = None) -> Path:
+    """``<root>/<name>-YYYYmmdd-HHMMSS`` that does not exist yet (``-2``, ``-3``, … appended if it does).
+
+    The folder is not created (see :func:`created_dir`).
+    """
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(now))
+    base = Path(root) / f"{name}-{stamp}"
+    path, k = base, 1
+    while path.exists():
+        k += 1
+        path = base.with_name(f"{base.name}-{k}")
+    return path
+
+
+def check_writable(folder: str | os.PathLike[str], *, what: str = "--out") -> None:
+    """Fail fast when ``folder`` (or its nearest existing ancestor) cannot be written.
+
+    Raises:
+        EnvironmentProblem: the folder is a file, or the user cannot create files there.
+    """
+    folder = Path(folder)
+    probe = folder
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if probe.exists() and not probe.is_dir():
+        raise EnvironmentProblem(f"{what}: {probe} is a file, expected a folder")
+    try:  # a real probe: os.access says yes to root even on read-only file systems
+        with tempfile.TemporaryFile(dir=probe):
+            pass
+    except OSError as exc:
+        raise EnvironmentProblem(f"{what}: cannot write in {probe} ({exc.strerror or exc})") from None
+
+
+@contextlib.contextmanager
+def created_dir(folder: str | os.PathLike[str], *, keep_on_interrupt: Iterable[str] | None = None) -> Iterator[Path]:
+    """Create ``folder`` (and parents); if the block raises an ``Exception``, remove what was created.
+
+    A folder (or any parent) that existed before is kept, with the files the block wrote
+    in it.  Ctrl-C (``KeyboardInterrupt``) keeps the new folder when ``keep_on_interrupt``
+    is ``None`` or names a file the block wrote there (e.g. ``checkpoint.pt``: an
+    interrupted command writes its best state on purpose), and removes it otherwise.
+    """
+    folder = Path(folder)
+    first_new = None
+    p = folder
+    while not p.exists():
+        first_new = p
+        if p.parent == p:
+            break
+        p = p.parent
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        yield folder
+    except KeyboardInterrupt:
+        keep = keep_on_interrupt is None or any((folder / name).exists() for name in keep_on_interrupt)
+        if first_new is not None and not keep:
+            shutil.rmtree(first_new, ignore_errors=True)
+        raise
+    except Exception:
+        if first_new is not None:
+            shutil.rmtree(first_new, ignore_errors=True)
+            log.info("removed %s after the failure", first_new)
+        raise

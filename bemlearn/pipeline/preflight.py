@@ -1,0 +1,134 @@
+"""Check the whole config and environment before any long step (seconds, nothing written).
+
+Every CLI command that runs a long step (collect, train, run, simulate, walk, gpdm) calls
+:func:`preflight` first: an empty or comment-only config, an unknown robot or missing MJCF,
+a missing or unreadable data file, ``--device cuda`` without CUDA, an unwritable output
+folder, or outputs that exist (without ``--force``) end the command within a second or two,
+before any folder is created.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from bemlearn.config import load_yaml
+from bemlearn.errors import ConfigError, EnvironmentProblem
+from bemlearn.files import check_outputs, check_writable
+
+__all__ = ["preflight", "check_config_file", "check_robot", "check_device", "check_data_file"]
+
+log = logging.getLogger(__name__)
+
+#: Top-level keys of which a config must name at least one (otherwise it is empty for our purpose).
+REQUIRED_ANY = ("robot", "data")
+
+
+def check_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """The config's mapping; empty, comment-only or robot-less configs are errors.
+
+    Raises:
+        ConfigError: the file is missing, not YAML, not a mapping, or names neither
+            ``robot:`` nor ``data:`` (an empty config would silently run on hidden defaults).
+    """
+    data = load_yaml(path)
+    if not any(k in data for k in REQUIRED_ANY):
+        what = "is empty (or only comments)" if not data else f"names neither {' nor '.join(f'{k}:' for k in REQUIRED_ANY)} (keys: {sorted(data)})"
+        raise ConfigError(
+            f"{path}: config {what}; expected at least 'robot: <name or MJCF path>' "
+            "(`robot: path/to/robot.xml` alone is enough; docs/config.md)"
+        )
+    return data
+
+
+def check_robot(name: Any, *, where: str = "robot") -> None:
+    """Load the robot named ``name`` (registry name or MJCF path); errors name ``where``.
+
+    Raises:
+        ConfigError: not a string, an unknown name, or a missing / unreadable MJCF file.
+    """
+    from bemlearn.robots import load, registered_robots
+
+    known = sorted(registered_robots())
+    if not isinstance(name, str) or not name:
+        raise ConfigError(f"{where}: expected a robot name {known} or an MJCF path, got {name!r}")
+    if name not in known:
+        path = Path(name)
+        if path.suffix.lower() != ".xml" and not path.exists():
+            raise ConfigError(f"{where}: unknown robot {name!r}; registered robots are {known}, or give the path of an MJCF (.xml) file")
+        if not path.is_file():
+            raise ConfigError(f"{where}: MJCF file {name} not found")
+    try:
+        load(name)
+    except (ValueError, FileNotFoundError, OSError) as exc:
+        raise ConfigError(f"{where}: cannot load robot {name!r}: {exc}") from exc
+
+
+def check_device(device: str | None, *, where: str = "--device") -> None:
+    """``cuda`` needs a CUDA device.
+
+    Raises:
+        EnvironmentProblem: CUDA was asked for and ``torch.cuda.is_available()`` is false.
+    """
+    if device and str(device).startswith("cuda"):
+        import torch
+
+        if not torch.cuda.is_available():
+            raise EnvironmentProblem(f"{where} {device}: CUDA was requested but no CUDA device is available (use --device cpu)")
+
+
+def check_data_file(path: str | os.PathLike[str], *, robot: str | None = None, where: str = "--data") -> None:
+    """The trajectory file exists and reads (its joints match ``robot`` when given).
+
+    Raises:
+        FileNotFoundError: no such file.
+        TrajectoryFormatError: the file is not a valid trajectory file.
+    """
+    from bemlearn.data import read_trajectory
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{where}: trajectory file {path} not found")
+    read_trajectory(path, robot=robot)
+
+
+def preflight(
+    *,
+    config: str | os.PathLike[str] | None = None,
+    robot: bool = True,
+    device: str | None = None,
+    data: str | os.PathLike[str] | None = None,
+    outputs: Iterable[str | os.PathLike[str]] = (),
+    out_dir: str | os.PathLike[str] | None = None,
+    force: bool = False,
+) -> dict[str, Any]:
+    """Run every check that applies; returns the config mapping (``{}`` without ``config``).
+
+    Args:
+        config: the YAML file (see :func:`check_config_file`); its ``robot`` is loaded when
+            ``robot`` is true, its ``train.device`` checked when ``device`` is ``None``.
+        device: the ``--device`` option.
+        data: a trajectory file that must exist and read for the config's robot.
+        outputs: files (or folders) the command would write; existing ones need ``force``.
+        out_dir: the folder the command writes into; it must be writable.
+        force: allow replacing ``outputs``.
+    """
+    cfg: dict[str, Any] = {}
+    if config is not None:
+        cfg = check_config_file(config)
+        if robot and "robot" in cfg:
+            check_robot(cfg["robot"], where=f"{config}: robot")
+        train = cfg.get("train")
+        if device is None and isinstance(train, dict):
+            check_device(train.get("device"), where=f"{config}: train.device")
+    check_device(device)
+    if data is not None:  # the file must read; its joints are checked against the robot by the command itself
+        check_data_file(data)
+    if out_dir is not None:
+        check_writable(out_dir)
+    check_outputs(outputs, force)
+    log.debug("preflight passed")
+    return cfg
