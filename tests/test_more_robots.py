@@ -85,23 +85,35 @@ def test_control_rate_whole_physics_steps(name):
     assert not r.timestep_changed and r.timestep == robot.model.opt.timestep  # both files use ≤ 2 ms
 
 
-@pytest.mark.parametrize("name", ["pendubot", "xy_cartpole"])
-def test_short_closed_loop_model_bem_stays_up(name):
+def _short_loop(name: str, source: str) -> dict:
+    """3 s EIC closed loop with the derived rate, gains, reference and fall window."""
     from bemlearn.config import from_dict
     from bemlearn.sim.closed_loop import ReferenceConfig, SimulateConfig, simulate
 
-    robot = _robot(name)
-    D = derive.derive_all(robot)
+    D = derive.derive_all(_robot(name))
     ref = {k: list(v) if isinstance(v, tuple) else v for k, v in D["simulate.reference"].value.items()}
     cfg = SimulateConfig(
         duration_s=3.0, rate_hz=D["simulate.rate_hz"].value, physics_timestep=D["simulate.physics_timestep"].value,
-        bem_source="model", reference=from_dict(ReferenceConfig, ref),
+        bem_source=source, reference=from_dict(ReferenceConfig, ref),
         gains=D["simulate.gains"].value, fall_window=D["simulate.fall_window"].value,
     )
-    m = simulate(str(ROBOTS / f"{name}.xml"), cfg, progress=False).metrics
+    return simulate(str(ROBOTS / f"{name}.xml"), cfg, progress=False).metrics
+
+
+@pytest.mark.parametrize("name", ["pendubot", "xy_cartpole"])
+def test_short_closed_loop_model_bem_stays_up(name):
+    D = derive.derive_all(_robot(name))
+    m = _short_loop(name, "model")
     assert not m["fell"] and m["bem_rejected"] == 0 and m["command_rejected"] == 0
     assert m["qu_max"] < D["simulate.fall_window"].value / 2
     assert math.isfinite(m["tracking_rmse"])
+
+
+def test_pendubot_zero_bem_falls():
+    """The same loop with q_u^e ≡ 0 falls: the pendubot's BEM moves with the shoulder (s_p = −1),
+    so the model-BEM loop above stays up because of the BEM, not the gains alone."""
+    m = _short_loop("pendubot", "zero")
+    assert m["fell"] and m["duration_s"] < 3.0
 
 
 @pytest.mark.xfail(raises=ValueError, strict=True, reason=(
