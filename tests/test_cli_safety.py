@@ -6,7 +6,8 @@ import pytest
 import yaml
 
 from bemlearn.cli.main import main
-from bemlearn.data.collect import CollectConfig, collect
+from bemlearn.data.collect import collect
+from conftest import furuta_section
 from bemlearn.data.trajectory_io import write_trajectory
 from bemlearn.export.staleness import check_predictor_matches, predictor_checkpoint_sha256
 from bemlearn.export.staleness import file_sha256
@@ -15,7 +16,7 @@ from bemlearn.export.staleness import file_sha256
 @pytest.fixture(scope="module")
 def small(tmp_path_factory):
     root = tmp_path_factory.mktemp("cli")
-    data, _ = collect("furuta", CollectConfig(n_trials=6, duration_s=6.0, workers=1, seed=1), progress=False)
+    data, _ = collect("furuta", furuta_section("collect", n_trials=6, duration_s=6.0, workers=1, seed=1), progress=False)
     path = write_trajectory(data, root / "data.npz")
     cfg = yaml.safe_load(open("configs/furuta.yaml"))
     cfg["dataset"]["n_points"] = 120

@@ -37,7 +37,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     _add_c_arguments(parser)
     parser.add_argument("--no-verify", action="store_true", help="skip reloading and checking the written file(s)")
-    parser.add_argument("--force", action="store_true", help="replace existing predictor file(s)")
+    parser.add_argument("--force", action="store_true", help="replace existing predictor file(s) (any --format)")
     parser.set_defaults(func=run)
 
 
@@ -45,7 +45,6 @@ def _add_c_arguments(parser: argparse.ArgumentParser) -> None:
     c = parser.add_argument_group("--format c")
     c.add_argument("--prefix", default="bem", help="C identifier prefixed to every name (default bem: bem_mean, ...)")
     c.add_argument("--dtype", choices=("float64", "float32"), default="float64", help="C floating type (default float64)")
-    c.add_argument("--force", action="store_true", help="overwrite existing files")
 
 
 def _run_c(args: argparse.Namespace) -> int:
