@@ -116,10 +116,6 @@ def test_pendubot_zero_bem_falls():
     assert m["fell"] and m["duration_s"] < 3.0
 
 
-@pytest.mark.xfail(raises=ValueError, strict=True, reason=(
-    "core bug (pipeline/evaluation.py held_out_references): the number of sines is drawn per "
-    "actuated joint, CompositeSinusoid needs equal rows, so `bemlearn run` on an m = 2 robot with "
-    "the derived evaluate.n_sines = (2, 3) stops after training; remove this marker once fixed"))
 def test_held_out_references_for_two_actuated_joints():
     from bemlearn.config import from_dict
     from bemlearn.pipeline.evaluation import EvaluationConfig, held_out_references

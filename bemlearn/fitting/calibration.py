@@ -147,6 +147,7 @@ def calibrate_replicas(
     tr = trial.numpy()
     n = min(n_points or state.n_train, 2000)
     zs = []
+    dropped = 0
     for _ in range(n_pairs):
         perm = rng.permutation(ids)
         halves = (perm[: len(ids) // 2], perm[len(ids) // 2:])
@@ -157,11 +158,21 @@ def calibrate_replicas(
             rows = torch.as_tensor(np.sort(rng.choice(pool, size=k, replace=False)))
             reps.append(condition_state(state, x[rows], y[rows]).predict_reference(queries))
         (ma, sa), (mb, sb) = reps
-        # a latent std that is numerically zero (a posterior that claims to know μ exactly) is floored
-        # at 1e-9 of the output scale, so that z stays finite and such points dominate the quantile
-        floor = 1e-9 * float(state.y_std)
-        zs.append(((ma - mb) / torch.sqrt(sa**2 + sb**2).clamp_min(floor)).numpy())
+        # where both replicas' latent variance cancels to (numerically) zero — a near-linear fit with a
+        # huge outputscale, κ(K) ~ 1e11 — z is not defined: those queries are left out of the quantile
+        # (their band is the input-noise term alone) and counted
+        s2 = torch.sqrt(sa**2 + sb**2)
+        ok = s2 > 1e-6 * float(state.y_std)
+        dropped += int((~ok).sum())
+        zs.append(((ma - mb)[ok] / s2[ok]).numpy())
     z = np.abs(np.concatenate(zs))
+    if z.size < 0.5 * n_pairs * queries.shape[0]:
+        log.warning("band calibration: the latent std cancels to zero at %d of %d replica queries (a near-linear fit, "
+                    "ill-conditioned K); std_scale = 1 and the band is the input-noise term", dropped, n_pairs * queries.shape[0])
+        z = np.zeros(1)
+    elif dropped:
+        log.warning("band calibration: %d of %d replica queries have a latent std that cancels to zero; left out",
+                    dropped, n_pairs * queries.shape[0])
     raw = float(np.quantile(z, level)) / kappa
     cal = ReplicaCalibration(scale=max(1.0, raw), raw_scale=raw, level=level, z_std=float(np.sqrt(np.mean(z**2))),
                              n_pairs=n_pairs, n_points=int(k), n_queries=int(queries.shape[0]))

@@ -58,8 +58,10 @@ def held_out_references(config: EvaluationConfig, m: int) -> list[CompositeSinus
     refs = []
     for _ in range(config.n_references):
         rows = []
-        for _ in range(m):
-            k = int(rng.integers(config.n_sines[0], config.n_sines[1] + 1))
+        k = int(rng.integers(config.n_sines[0], config.n_sines[1] + 1))  # one count per reference: rows of equal length
+        for j in range(m):
+            if j:
+                rng.integers(config.n_sines[0], config.n_sines[1] + 1)  # keeps the m = 1 draws as they were
             A = rng.uniform(0.05, 1.0, k)
             A = A / A.sum() * rng.uniform(config.amplitude_min, config.amplitude_max)
             rows.append((tuple(A), tuple(rng.uniform(*config.frequency_hz, k)), tuple(rng.uniform(0, 2 * math.pi, k))))
