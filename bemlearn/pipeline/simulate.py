@@ -18,6 +18,7 @@ from bemlearn.files import atomic_write_text
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.sim.closed_loop import nominal_robot, simulate
 from bemlearn.sim.figures import plot_run
+from bemlearn.units import joint_unit
 
 __all__ = ["simulate_stage"]
 
@@ -69,7 +70,12 @@ def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: st
                 L = learned_lemma1(pred, pred.full, nominal, ref)
                 m["lemma1"] = {"r_learned_vs_model_delta_gamma": L["r"], "r_learned_vs_hdot": L["r_hdot"], "model_gap": L["model_gap"]}
                 lemma = {"t": L["t"], "delta_gamma": L["delta_gamma_learned"], "hdot": L["hdot"], "delta_gamma_model": L["delta_gamma_model"]}
-        plot_run(res, out / f"fig2_{src}.png", model_bem=model_bem, band=band, lemma=lemma)
+        ia, iu = nominal.actuated_index[0], nominal.unactuated_index
+        kinds = nominal.coordinate_kinds
+        plot_run(res, out / f"fig2_{src}.png", model_bem=model_bem, band=band, lemma=lemma,
+                 joint_names=(nominal.joint_names[ia], nominal.joint_names[iu]),
+                 units=(joint_unit(kinds[ia]), joint_unit(kinds[iu])), indices=(ia, iu),
+                 input_label=f"u ({config.collect.input_units or 'ctrl'})")
         if gif:
             from bemlearn.robots import load
             from bemlearn.sim.render import render_gif

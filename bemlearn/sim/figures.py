@@ -15,7 +15,8 @@ __all__ = ["plot_run", "run_figure"]
 
 
 def plot_run(result, path: str | Path, *, model_bem: np.ndarray | None = None, band: tuple[np.ndarray, np.ndarray] | None = None,
-             lemma: dict[str, np.ndarray] | None = None, joint_names=("θ", "α"), input_label: str = "V (V)") -> Path:
+             lemma: dict[str, np.ndarray] | None = None, joint_names=("q_a", "q_u"), units=("rad", "rad"),
+             indices=(0, 1), input_label: str = "u") -> Path:
     """Write a PNG of a :class:`~bemlearn.sim.closed_loop.SimResult` (atomically; see :func:`run_figure`).
 
     Args:
@@ -24,12 +25,16 @@ def plot_run(result, path: str | Path, *, model_bem: np.ndarray | None = None, b
         model_bem: ``(T,)`` model-based BEM at the loop's BEM inputs, rad.
         band: ``(mean, std)`` of the learned BEM, ``(T,)`` each, rad.
         lemma: ``{"t", "delta_gamma", "hdot"}`` arrays for panel (c).
+        joint_names, units, indices: name, unit (rad or m, by joint kind) and column in ``result.q`` of
+            the (first) actuated joint and of the unactuated joint.
+        input_label: axis label of the actuator command (with its unit).
     """
     import matplotlib.pyplot as plt
 
     from bemlearn.files import atomic_path
 
-    fig = run_figure(result, model_bem=model_bem, band=band, lemma=lemma, joint_names=joint_names, input_label=input_label)
+    fig = run_figure(result, model_bem=model_bem, band=band, lemma=lemma, joint_names=joint_names, units=units,
+                     indices=indices, input_label=input_label)
     path = Path(path)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110)
@@ -38,7 +43,8 @@ def plot_run(result, path: str | Path, *, model_bem: np.ndarray | None = None, b
 
 
 def run_figure(result, *, model_bem: np.ndarray | None = None, band: tuple[np.ndarray, np.ndarray] | None = None,
-               lemma: dict[str, np.ndarray] | None = None, joint_names=("θ", "α"), input_label: str = "V (V)"):
+               lemma: dict[str, np.ndarray] | None = None, joint_names=("q_a", "q_u"), units=("rad", "rad"),
+               indices=(0, 1), input_label: str = "u"):
     """The matplotlib figure of :func:`plot_run`; every panel's time axis spans its own data."""
     import matplotlib
 
@@ -49,12 +55,13 @@ def run_figure(result, *, model_bem: np.ndarray | None = None, band: tuple[np.nd
     rows = 4 if lemma is not None else 3
     fig, ax = plt.subplots(rows, 1, figsize=(9, 2.3 * rows))  # no sharex: (b) shows the last 10 s, (c) one period
     a_name, u_name = joint_names
-    ax[0].plot(t, result.q[:, 0], label=f"{a_name}")
+    a_unit, u_unit = units
+    ia, iu = indices
+    ax[0].plot(t, result.q[:, ia], label=f"{a_name}")
     ax[0].plot(t, result.qa_ref[:, 0], "--", label=f"{a_name}$_d$")
-    ax[0].set_ylabel(f"{a_name} (rad)")
+    ax[0].set_ylabel(f"{a_name} ({a_unit})")
     ax[0].legend(loc="upper right")
     ax[0].set_title("(a) actuated joint tracking")
-    iu = 1
     w = t >= t[-1] - 10.0 if t.size else t.astype(bool)  # last 10 s: the lines are distinguishable
     if model_bem is not None:
         ax[1].plot(t[w], model_bem[w], color="C2", lw=0.6, alpha=0.6, label="model-based BEM (at the measured inputs)")
@@ -63,7 +70,7 @@ def run_figure(result, *, model_bem: np.ndarray | None = None, band: tuple[np.nd
         ax[1].fill_between(t[w], (mean - 2 * std)[w], (mean + 2 * std)[w], color="C1", alpha=0.25, label="learned BEM ±2σ (eq. 12)")
     ax[1].plot(t[w], result.qu_e[w], color="C1", lw=1.2, label=f"BEM in the loop ({result.metrics['bem_source']})")
     ax[1].plot(t[w], result.q[w, iu], color="k", lw=1.2, label=f"{u_name}")
-    ax[1].set_ylabel(f"{u_name} (rad)")
+    ax[1].set_ylabel(f"{u_name} ({u_unit})")
     ax[1].legend(loc="upper right", fontsize=7, ncol=2)
     ax[1].set_title("(b) unactuated joint and the BEM (last 10 s)")
     if t.size:
