@@ -233,8 +233,9 @@ def test_band_without_input_noise_on_the_bem_columns(tmp_path):
     state = dataclasses.replace(state, std_scale=torch.tensor(STD_SCALE, dtype=torch.float64), input_std=s)
     meta = _metadata(state, 1)
     lib, ts = _build(state, meta, tmp_path)
-    text = (tmp_path / "bem_predictor.c").read_text()
-    assert "bem_full_P" in text and "bem_bem_P" not in text and "#define BEM_BANDED 1" in (tmp_path / "bem_predictor.h").read_text()
+    text, header = (tmp_path / "bem_predictor.c").read_text(), (tmp_path / "bem_predictor.h").read_text()
+    assert "#define BEM_BANDED 0" in header
+    assert "bem_full_P" in text and "bem_bem_P" not in text and "#define BEM_FULL_BANDED 1" in header
     x, _, _ = _in_range(state, 500, seed=5, width=state.dim)
     mean, std, _ = lib.forward(x[:, :3])
     ref_mean, ref_std = (t.numpy() for t in ts.forward(torch.from_numpy(np.ascontiguousarray(x[:, :3]))))
@@ -265,16 +266,21 @@ def test_bench_times_the_c_export_with_its_floor():
 
     state, meta = synthetic_posterior(n_train=64)
     x = state.x_mean[:3].numpy() + 0.5 * state.x_std[:3].numpy() * np.random.default_rng(0).standard_normal((8, 3))
-    rows = time_c_predictor(c_sources(state, meta), x, kind="exact", calls=20, batches=5)
-    assert [r.flags for r in rows] == ["-O2", "-O3 -march=native"]
-    for r in rows:
-        assert (r.n_exp, r.n_fma_mean, r.n_fma_forward) == (64, 64 * 4, 64 * 4 + 64 * 65 // 2)
-        assert 0 < r.mean_ns < r.forward_ns and r.exp_ns > 0 and r.fma_ns > 0
+    for s, band in ((state, 0), (_banded(state), 3 * 64)):   # band: n M more multiply-adds in bem_forward
+        rows = time_c_predictor(c_sources(s, meta), x, kind="exact", calls=20, batches=5)
+        assert [r.flags for r in rows] == ["-O2", "-O3 -march=native"]
+        for r in rows:
+            assert (r.n_exp, r.n_fma_mean, r.n_fma_forward, r.n_fma_band) == (64, 64 * 4, 64 * 4 + 64 * 65 // 2 + band, band)
+            assert 0 < r.mean_ns < r.forward_ns and 0 < r.mean_ns < r.forward_latent_ns and r.exp_ns > 0 and r.fma_ns > 0
     result = run_predict_bench(n_train=64, repeats=50, warmup=5, gpytorch_repeats=2, batch=200, n_parity=100,
                                pt2=False, progress=False)
     text = format_predict_bench(result)
     assert "C export, single queries in a C loop" in text and "C mean / TS bem_mean" in text
     assert len(result.c_timings) == 2
+    par = result.c_parity
+    assert par["n"] == 3000 and "bem_predict_full / predict_full" in text
+    assert max(par["forward_mean_abs"], par["full_mean_abs"]) <= MEAN_ATOL
+    assert max(par[k] for k in ("forward_std_rel", "forward_latent_std_rel", "full_std_rel", "full_latent_std_rel")) <= STD_RTOL
 
 
 def test_vectorized_exp_matches_libm(tmp_path):

@@ -233,7 +233,7 @@ def c_sources(
     size = 8 if dtype == "float64" else 4
     header = HEADER.substitute(
         sub, robot=doc["robot"], kind=state.kind, version=__version__, m=metadata.m, n_bem=n_bem, n_full=n_full,
-        n_support=M, dtype=dtype, range_ls=f"{RANGE_LENGTHSCALES:g}", banded=int(full.banded),
+        n_support=M, dtype=dtype, range_ls=f"{RANGE_LENGTHSCALES:g}", banded=int(bem.banded), full_banded=int(full.banded),
         std_scale=f"{np.sqrt(bem.scale2):.6g}",
         bem_columns=", ".join(doc["inputs"]), full_columns=", ".join(doc["full_inputs"]),
         units="; ".join(f"{k} [{units[k]}]" for k in doc["full_inputs"]) + "; mean, std [rad]",

@@ -47,7 +47,8 @@ extern "C" {
 #define ${P}_N_SUPPORT $n_support        /* support points (training or inducing points) */
 #define ${P}_DTYPE "$dtype"
 #define ${P}_KIND "$kind"
-#define ${P}_BANDED $banded                   /* 1: the band has an input-noise term (some input_std > 0) */
+#define ${P}_BANDED $banded              /* 1: ${p}_forward's band has an input-noise term (input_std > 0 on a BEM input) */
+#define ${P}_FULL_BANDED $full_banded         /* the same for ${p}_predict_full (any of the 3m + 2 inputs) */
 
 #define ${P}_OK 0                        /* success */
 #define ${P}_ERR_NONFINITE 1             /* an entry of x is NaN or +-inf; *mean = *std = NAN */
