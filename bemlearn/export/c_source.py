@@ -34,17 +34,8 @@ from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.export.c_float32 import Float32Errors, float32_errors, sample_inputs
 from bemlearn.export.c_posterior import RANGE_LENGTHSCALES, CPosterior, c_posterior, support_box
 from bemlearn.export.c_exp import EXP_BLOCK_F64, EXP_BLOCK_LIBM
-from bemlearn.export.c_templates import (
-    BAND_GRADIENT,
-    DENSE_STD,
-    DISTANCE_EXPONENTS,
-    FOLDED_EXPONENTS,
-    HEADER,
-    NO_BAND_GRADIENT,
-    POSTERIOR,
-    SOURCE,
-    TRIANGULAR_STD,
-)
+from bemlearn.export.c_std_templates import BAND_GRADIENT, DENSE_STD, NO_BAND_GRADIENT, TRIANGULAR_STD
+from bemlearn.export.c_templates import DISTANCE_EXPONENTS, FOLDED_EXPONENTS, HEADER, POSTERIOR, SOURCE
 from bemlearn.export.folded_posterior import FoldedPosterior
 from bemlearn.export.metadata import PredictorMetadata
 from bemlearn.export.variance_factor import VarianceFactor
