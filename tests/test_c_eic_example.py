@@ -1,5 +1,6 @@
 """examples/c_eic_furuta: the C EIC controller with the exported C BEM balances the MuJoCo Furuta
-and tracks like the Python EIC (bemlearn.sim.closed_loop.simulate) with the same gains.
+and tracks like the Python EIC (bemlearn.sim.closed_loop.simulate) with the same gains and
+reference: the resolved ``simulate`` section of configs/furuta.yaml (hand-tuned gains).
 
 The BEM is an exact GP with fixed hyperparameters fitted to the analytic Furuta's Γ = 0 roots
 (eq. 5) on 300 random states: quick to build, independent of the training pipeline.
@@ -76,7 +77,6 @@ def test_c_eic_balances_and_tracks_like_python(tmp_path):
     ex = _example()
     lib = ex.build(tmp_path, tmp_path / "libeic.so")
     config = ex.simulate_config(pt, duration_s=6.0)       # the Furuta's resolved simulate section (400 Hz, its gains)
-    assert config.reference.amplitudes == (0.3, 0.2) and config.gains.kp_u is not None
     c = ex.run(lib, config)
     py = simulate("furuta", config, progress=False)
     assert not c.fell and not py.fell
