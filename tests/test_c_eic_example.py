@@ -1,5 +1,6 @@
 """examples/c_eic_furuta: the C EIC controller with the exported C BEM balances the MuJoCo Furuta
-and tracks like the Python EIC (bemlearn.sim.closed_loop.simulate) with the same gains.
+and tracks like the Python EIC (bemlearn.sim.closed_loop.simulate) with the same gains and
+reference: the resolved ``simulate`` section of configs/furuta.yaml (hand-tuned gains).
 
 The BEM is an exact GP with fixed hyperparameters fitted to the analytic Furuta's Γ = 0 roots
 (eq. 5) on 300 random states: quick to build, independent of the training pipeline.
@@ -14,14 +15,13 @@ import numpy as np
 import pytest
 import torch
 
-from bemlearn.control.eic import EICGains
+from bemlearn.apps.furuta.model import AnalyticFuruta
 from bemlearn.export import BEMPredictor, PredictorMetadata, c_sources, save_torchscript
 from bemlearn.export.c_build import find_cc
 from bemlearn.export.c_export import write_files
 from bemlearn.export.variance_factor import kernel_gram
 from bemlearn.models.predictor_state import PredictorState
-from bemlearn.robots.furuta import AnalyticFuruta
-from bemlearn.sim.closed_loop import ReferenceConfig, SimulateConfig, simulate
+from bemlearn.sim.closed_loop import simulate
 
 pytestmark = pytest.mark.skipif(find_cc() is None, reason="no C compiler (cc, gcc, clang or $CC) on PATH")
 
@@ -76,8 +76,7 @@ def test_c_eic_balances_and_tracks_like_python(tmp_path):
     pt = save_torchscript(BEMPredictor(state, meta), tmp_path / "bem_predictor.pt")
     ex = _example()
     lib = ex.build(tmp_path, tmp_path / "libeic.so")
-    config = SimulateConfig(duration_s=6.0, predictor=str(pt), gains=EICGains(),
-                            reference=ReferenceConfig(amplitudes=(0.3, 0.2), frequencies_hz=(0.2, 0.4), phases=(0.0, 0.0)))
+    config = ex.simulate_config(pt, duration_s=6.0)       # the Furuta's resolved simulate section (400 Hz, its gains)
     c = ex.run(lib, config)
     py = simulate("furuta", config, progress=False)
     assert not c.fell and not py.fell

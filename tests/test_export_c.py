@@ -3,7 +3,9 @@
 Each case is compiled with ``cc -std=c99 -Wall -Werror -O2`` into a shared library and called
 through ctypes, one query per call, on random in-range inputs; the reference is the
 TorchScript file of the same posterior: float64 mean within 1e-10 rad, std within 1e-8
-relative (exact, sgpr, svgp; m = 1, 2).  float32 is held to the tolerances the export
+relative (exact, sgpr, svgp; m = 1, 2), for the calibrated band of ``forward`` /
+``predict_full`` (eq. B1, with std_scale c ≠ 1 and nonzero input_std s) and the latent std of
+``forward_latent`` / ``predict_full_latent``.  float32 is held to the tolerances the export
 enforces (mean 1e-4 rad, std 1e-2 relative) and to 4× the export's own error estimate.
 """
 
@@ -29,6 +31,10 @@ MEAN_ATOL = 1e-10   # rad
 STD_RTOL = 1e-8
 N_QUERY = 2000
 
+#: The band of the tests: c = 1.7 and s_i = 0.5 x_std_i (the gradient term is 18–98 % of the band² somewhere).
+STD_SCALE = 1.7
+INPUT_STD_FRACTION = 0.5
+
 CASES = {
     "exact-m1": (_exact_case, 300, 1),
     "exact-m2": (_exact_case, 300, 2),
@@ -53,31 +59,43 @@ def _in_range(state, n, seed, width):
     return np.clip(x, lo, hi)[:, :width], lo, hi
 
 
+def _banded(state):
+    """``state`` with the calibrated band switched on: c = STD_SCALE, s = INPUT_STD_FRACTION · x_std."""
+    return dataclasses.replace(state, std_scale=torch.tensor(STD_SCALE, dtype=torch.float64),
+                               input_std=INPUT_STD_FRACTION * state.x_std)
+
+
 @pytest.fixture(scope="module", params=list(CASES))
 def case(request, tmp_path_factory):
     build, n, m = CASES[request.param]
     _, state = build(n, m, seed=7)
+    state = _banded(state)
     meta = _metadata(state, m)
     lib, ts = _build(state, meta, tmp_path_factory.mktemp(request.param))
     return state, meta, lib, ts
 
 
-def test_c_matches_torchscript(case):
+@pytest.mark.parametrize("full", [False, True], ids=["bem", "full"])
+def test_c_matches_torchscript(case, full):
+    """forward / predict_full (band) and their _latent forms against the TorchScript methods."""
     state, meta, lib, ts = case
-    n = 3 * meta.m
-    x, _, _ = _in_range(state, N_QUERY, seed=1, width=state.dim)
-    mean, std, codes = lib.forward(x[:, :n])
-    ref_mean, ref_std = (t.numpy() for t in ts.forward(torch.from_numpy(np.ascontiguousarray(x[:, :n]))))
-    assert np.all(codes == 0)
+    x, _, _ = _in_range(state, N_QUERY, seed=1, width=state.dim if full else 3 * meta.m)
+    x = np.ascontiguousarray(x)
+    xt = torch.from_numpy(x)
+    band_ref, latent_ref = (ts.predict_full, ts.predict_full_latent) if full else (ts.forward, ts.forward_latent)
+    ref_mean, ref_std = (t.numpy() for t in band_ref(xt))
+    ref_latent = latent_ref(xt)[1].numpy()
+    mean, std, codes = lib.forward(x, full=full)
+    lmean, latent, lcodes = lib.forward(x, full=full, latent=True)
+    assert np.all(codes == 0) and np.all(lcodes == 0)
     assert np.abs(mean - ref_mean).max() <= MEAN_ATOL
     assert np.abs(std / ref_std - 1).max() <= STD_RTOL
-    assert np.array_equal(lib.mean(x[:, :n]), mean)          # bem_mean is exactly forward's mean
-    fmean, fstd, fcodes = lib.forward(x, full=True)         # the full map f (eq. 11)
-    ref_fmean, ref_fstd = (t.numpy() for t in ts.predict_full(torch.from_numpy(x)))
-    assert np.all(fcodes == 0)
-    assert np.abs(fmean - ref_fmean).max() <= MEAN_ATOL
-    assert np.abs(fstd / ref_fstd - 1).max() <= STD_RTOL
-    assert np.array_equal(lib.mean(x, full=True), fmean)
+    assert np.abs(latent / ref_latent - 1).max() <= STD_RTOL
+    assert np.array_equal(lmean, mean)
+    assert np.array_equal(lib.mean(x, full=full), mean)      # bem_mean / bem_full_mean are exactly forward's mean
+    # the inputs exercise both terms of eq. (B1): the gradient term is a sizable part of the band² somewhere
+    grad_share = 1 - STD_SCALE**2 * ref_latent**2 / ref_std**2
+    assert grad_share.max() >= 0.15 and grad_share.min() >= -1e-12
 
 
 def test_error_codes(case):
@@ -88,23 +106,26 @@ def test_error_codes(case):
         for bad in (np.nan, np.inf, -np.inf):
             xb = x.copy()
             xb[0, col] = bad
-            mean, std, code = lib.forward(xb)
-            assert code[0] == 1 and np.isnan(mean[0]) and np.isnan(std[0])
+            for latent in (False, True):
+                mean, std, code = lib.forward(xb, latent=latent)
+                assert code[0] == 1 and np.isnan(mean[0]) and np.isnan(std[0])
             assert np.isnan(lib.mean(xb)[0])
             assert int(lib.lib.bem_check_input(xb.ctypes.data_as(lib._ptr))) == 1
         for side, edge in ((-1, lo[col]), (1, hi[col])):       # just outside the range: code 2, still the GP's value
             xo = x.copy()
             xo[0, col] = edge + side * 0.1 * state.x_std[col].item()
-            mean, std, code = lib.forward(xo)
-            ref_mean, ref_std = (t.numpy() for t in ts.forward(torch.from_numpy(xo)))
-            assert code[0] == 2
-            assert abs(mean[0] - ref_mean[0]) <= MEAN_ATOL and abs(std[0] / ref_std[0] - 1) <= STD_RTOL
+            for latent, ref in ((False, ts.forward), (True, ts.forward_latent)):
+                mean, std, code = lib.forward(xo, latent=latent)
+                ref_mean, ref_std = (t.numpy() for t in ref(torch.from_numpy(xo)))
+                assert code[0] == 2
+                assert abs(mean[0] - ref_mean[0]) <= MEAN_ATOL and abs(std[0] / ref_std[0] - 1) <= STD_RTOL
     huge = np.full((1, n), 1e300)
     mean, std, code = lib.forward(huge)
     assert code[0] == 2 and (np.isnan(mean[0]) or np.isfinite(mean[0]))
     out = np.zeros(1)
-    null = lib._forward(None, out.ctypes.data_as(lib._ptr), out.ctypes.data_as(lib._ptr))
-    assert null == 3
+    for fn in (lib._forward, lib._forward_latent, lib._predict_full, lib._predict_full_latent):
+        assert fn(None, out.ctypes.data_as(lib._ptr), out.ctypes.data_as(lib._ptr)) == 3
+        assert fn(x.ctypes.data_as(lib._ptr), None, out.ctypes.data_as(lib._ptr)) == 3
 
 
 def test_header_metadata_matches_torchscript(case):
@@ -118,21 +139,29 @@ def test_header_metadata_matches_torchscript(case):
 
 
 @pytest.mark.parametrize("name", ["sgpr-m2", "svgp-m1", "exact-m1"])
-def test_float32_within_its_stated_error(name, tmp_path):
+@pytest.mark.parametrize("full", [False, True], ids=["bem", "full"])
+def test_float32_within_its_stated_error(name, full, tmp_path):
+    """float32 band and latent std (BEM and full map) within the tolerances and 4× the export's estimate."""
     build, n, m = CASES[name]
     _, state = build(n, m, seed=7)
+    state = _banded(state)
     meta = _metadata(state, m)
     lib, ts = _build(state, meta, tmp_path, prefix="bem32", dtype="float32")
     est = json.loads(lib.metadata_json)["c_export"]["float32_error"]
-    x, _, _ = _in_range(state, N_QUERY, seed=3, width=3 * m)
+    x, _, _ = _in_range(state, N_QUERY, seed=3, width=state.dim if full else 3 * m)
     x = x.astype(np.float32).astype(np.float64)       # the float32 inputs, exactly, for the reference
-    mean, std, codes = lib.forward(x)
-    ref_mean, ref_std = (t.numpy() for t in ts.forward(torch.from_numpy(x)))
+    xt = torch.from_numpy(x)
+    mean, std, codes = lib.forward(x, full=full)
+    _, latent, _ = lib.forward(x, full=full, latent=True)
+    ref_mean, ref_std = (t.numpy() for t in (ts.predict_full if full else ts.forward)(xt))
+    ref_latent = (ts.predict_full_latent if full else ts.forward_latent)(xt)[1].numpy()
     err_mean, err_std = np.abs(mean - ref_mean).max(), np.abs(std / ref_std - 1).max()
+    err_latent = np.abs(latent / ref_latent - 1).max()
     assert np.all(codes == 0)
-    assert np.array_equal(lib.mean(x), mean)
-    assert err_mean <= 1e-4 and err_std <= 1e-2
+    assert np.array_equal(lib.mean(x, full=full), mean)
+    assert err_mean <= 1e-4 and err_std <= 1e-2 and err_latent <= 1e-2
     assert err_mean <= 4 * est["mean_abs"] + 1e-7 and err_std <= 4 * est["std_rel"] + 1e-6
+    assert err_latent <= 4 * est["latent_std_rel"] + 1e-6
 
 
 def test_float32_refused_for_a_cancelling_exact_posterior():
@@ -185,14 +214,37 @@ def test_signed_factor_matches_torchscript(tmp_path):
     """svgp with S_u ⋠ K_ZZ: an indefinite S and the signed factor path."""
     _, state = _svgp_case(400, 1, seed=7)
     S = state.S - 0.2 * torch.linalg.matrix_norm(state.S, ord=2) * torch.eye(state.n_support, dtype=torch.float64)
-    state = dataclasses.replace(state, S=S)
+    state = dataclasses.replace(_banded(state), S=S)
     meta = _metadata(state, 1)
     lib, ts = _build(state, meta, tmp_path)
     assert "bem_signs" in (tmp_path / "bem_predictor.c").read_text()
     x, _, _ = _in_range(state, 500, seed=4, width=3)
-    mean, std, _ = lib.forward(x)
-    ref_mean, ref_std = (t.numpy() for t in ts.forward(torch.from_numpy(x)))
+    for latent, ref in ((False, ts.forward), (True, ts.forward_latent)):
+        mean, std, _ = lib.forward(x, latent=latent)
+        ref_mean, ref_std = (t.numpy() for t in ref(torch.from_numpy(x)))
+        assert np.abs(mean - ref_mean).max() <= MEAN_ATOL and np.abs(std / ref_std - 1).max() <= STD_RTOL
+
+
+def test_band_without_input_noise_on_the_bem_columns(tmp_path):
+    """c ≠ 1 and input noise only on q̈_u, q̇_u: forward's band is c σ (no gradient code), predict_full's is not."""
+    _, state = _exact_case(300, 1, seed=7)
+    s = torch.zeros(state.dim, dtype=torch.float64)
+    s[3:] = INPUT_STD_FRACTION * state.x_std[3:]
+    state = dataclasses.replace(state, std_scale=torch.tensor(STD_SCALE, dtype=torch.float64), input_std=s)
+    meta = _metadata(state, 1)
+    lib, ts = _build(state, meta, tmp_path)
+    text, header = (tmp_path / "bem_predictor.c").read_text(), (tmp_path / "bem_predictor.h").read_text()
+    assert "#define BEM_BANDED 0" in header
+    assert "bem_full_P" in text and "bem_bem_P" not in text and "#define BEM_FULL_BANDED 1" in header
+    x, _, _ = _in_range(state, 500, seed=5, width=state.dim)
+    mean, std, _ = lib.forward(x[:, :3])
+    ref_mean, ref_std = (t.numpy() for t in ts.forward(torch.from_numpy(np.ascontiguousarray(x[:, :3]))))
+    _, latent, _ = lib.forward(x[:, :3], latent=True)
     assert np.abs(mean - ref_mean).max() <= MEAN_ATOL and np.abs(std / ref_std - 1).max() <= STD_RTOL
+    assert np.abs(std / (STD_SCALE * latent) - 1).max() <= 1e-14
+    fmean, fstd, _ = lib.forward(x, full=True)
+    ref_fmean, ref_fstd = (t.numpy() for t in ts.predict_full(torch.from_numpy(x)))
+    assert np.abs(fmean - ref_fmean).max() <= MEAN_ATOL and np.abs(fstd / ref_fstd - 1).max() <= STD_RTOL
 
 
 @pytest.mark.skipif(__import__("shutil").which("size") is None, reason="binutils `size` not on PATH")
@@ -214,16 +266,21 @@ def test_bench_times_the_c_export_with_its_floor():
 
     state, meta = synthetic_posterior(n_train=64)
     x = state.x_mean[:3].numpy() + 0.5 * state.x_std[:3].numpy() * np.random.default_rng(0).standard_normal((8, 3))
-    rows = time_c_predictor(c_sources(state, meta), x, kind="exact", calls=20, batches=5)
-    assert [r.flags for r in rows] == ["-O2", "-O3 -march=native"]
-    for r in rows:
-        assert (r.n_exp, r.n_fma_mean, r.n_fma_forward) == (64, 64 * 4, 64 * 4 + 64 * 65 // 2)
-        assert 0 < r.mean_ns < r.forward_ns and r.exp_ns > 0 and r.fma_ns > 0
+    for s, band in ((state, 0), (_banded(state), 3 * 64)):   # band: n M more multiply-adds in bem_forward
+        rows = time_c_predictor(c_sources(s, meta), x, kind="exact", calls=20, batches=5)
+        assert [r.flags for r in rows] == ["-O2", "-O3 -march=native"]
+        for r in rows:
+            assert (r.n_exp, r.n_fma_mean, r.n_fma_forward, r.n_fma_band) == (64, 64 * 4, 64 * 4 + 64 * 65 // 2 + band, band)
+            assert 0 < r.mean_ns < r.forward_ns and 0 < r.mean_ns < r.forward_latent_ns and r.exp_ns > 0 and r.fma_ns > 0
     result = run_predict_bench(n_train=64, repeats=50, warmup=5, gpytorch_repeats=2, batch=200, n_parity=100,
                                pt2=False, progress=False)
     text = format_predict_bench(result)
     assert "C export, single queries in a C loop" in text and "C mean / TS bem_mean" in text
     assert len(result.c_timings) == 2
+    par = result.c_parity
+    assert par["n"] == 3000 and "bem_predict_full / predict_full" in text
+    assert max(par["forward_mean_abs"], par["full_mean_abs"]) <= MEAN_ATOL
+    assert max(par[k] for k in ("forward_std_rel", "forward_latent_std_rel", "full_std_rel", "full_latent_std_rel")) <= STD_RTOL
 
 
 def test_vectorized_exp_matches_libm(tmp_path):

@@ -3,11 +3,12 @@
 For each model (exact N = 100 … 1000, sgpr/svgp M = 64 … 512; m = 1, d = 5) the C export is
 compiled to an object file with ``cc -std=c99 -O2 -ffunction-sections -fdata-sections -c`` and
 measured with ``size -A``: code (``.text*``), constants (``.rodata*``), split into those the
-mean path reads and the std's variance factor (``<prefix>_factor``, ``<prefix>_signs``; a
-firmware that never calls ``_forward``/``_predict_full`` drops them with ``-Wl,--gc-sections``),
-and writable data (``.data``/``.bss``: none).  The stack per call is gcc's ``-fstack-usage``
-frame of ``bem_mean`` / ``bem_forward`` plus the largest frame of the static helpers they call
-(the call depth is one; libm's ``exp`` not counted).
+mean path reads and the std's constants (the variance factor ``<prefix>_factor``,
+``<prefix>_signs`` and, with input noise, the band's ``_P`` and ``_gamma``; a firmware that
+never calls ``_forward``/``_predict_full`` drops them with ``-Wl,--gc-sections``), and writable
+data (``.data``/``.bss``: none).  The stack per call is gcc's ``-fstack-usage`` frame of
+``bem_mean`` / ``bem_forward`` (with its evaluator ``bem_bem_eval`` when not inlined) plus the
+largest frame of the static helpers they call (libm's ``exp`` not counted).
 
 Sizes are of this host's object code (x86-64); the constants are the same bytes on any
 target, the code differs by a few kB.  The posteriors are synthetic (random support points
@@ -103,13 +104,15 @@ def measure_footprints(sizes: dict[str, tuple[int, ...]] = SIZES, dtypes: tuple[
                                     str(Path(tmp, "bem_predictor.c")), "-o", str(obj)], check=True, capture_output=True)
                     sec = _sections(obj)
                     code = sum(v for k, v in sec.items() if k.startswith(".text"))
-                    std = sum(v for k, v in sec.items() if re.match(r"\.rodata\.bem_(factor|signs)$", k))
+                    std = sum(v for k, v in sec.items() if re.match(r"\.rodata\.bem_(factor|signs|bem_P|full_P|bem_gamma|full_gamma)$", k))
                     rodata = sum(v for k, v in sec.items() if k.startswith(".rodata"))
                     data = sum(v for k, v in sec.items() if k.startswith((".data", ".bss")))
                     frames = _stack_frames(obj.with_suffix(".su"))
-                    helpers = max(v for k, v in frames.items() if k == "bem_std" or k.endswith(("_exponents", "_prepare", "_sum", "_sum_k")))
+                    helpers = max(v for k, v in frames.items()
+                                  if k == "bem_latent_var" or k.endswith(("_exponents", "_prepare", "_sum", "_sum_k", "_gradient2")))
+                    forward = frames["bem_forward"] + frames.get("bem_bem_eval", 0)   # the evaluator, when not inlined
                     rows.append(Footprint(kind, M, dtype, code, rodata - std, std, data,
-                                          stack_mean=frames["bem_mean"] + helpers, stack_forward=frames["bem_forward"] + helpers))
+                                          stack_mean=frames["bem_mean"] + helpers, stack_forward=forward + helpers))
     return rows
 
 

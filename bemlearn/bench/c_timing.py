@@ -1,12 +1,14 @@
 """Time the exported C predictor in a C loop, and the arithmetic floor of one query.
 
-A small C harness (compiled at bench time with the system ``cc``) calls ``<prefix>_mean`` and
-``<prefix>_forward`` on ``n_inputs`` different in-range queries in turn, ``calls`` calls per
+A small C harness (compiled at bench time with the system ``cc``) calls ``<prefix>_mean``,
+``<prefix>_forward`` (mean and calibrated band) and ``<prefix>_forward_latent`` (mean and latent
+std) on ``n_inputs`` different in-range queries in turn, ``calls`` calls per
 timed batch, and reports the median over batches of the per-call time (``clock_gettime``,
 monotonic).  The same harness measures the *arithmetic floor* of one query:
 
     bem_mean:    M exp calls + M (n + 1) multiply-adds      (n = 3m exponent terms and w_j k_j)
-    bem_forward: the above + M(M + 1)/2 (exact, triangular solve) or M² (sgpr/svgp) multiply-adds
+    bem_forward_latent: the above + M(M + 1)/2 (exact, triangular solve) or M² (sgpr/svgp) multiply-adds
+    bem_forward: the above + n M for the band's gradient term (when the BEM inputs carry input noise)
 
 timed as ⌈M/32⌉ blocks of 32 values of the export's own exp block, summed (float64:
 branch-free, vectorized by the compiler; float32: libm ``expf``) on in-range arguments (e ∈ [−20, 0]) and that many
@@ -70,6 +72,12 @@ int main(int argc, char **argv)
         t[b] = (now_ns() - t0) / calls;
     }
     printf("forward_ns %.3f\n", median(t, batches));
+    for (b = 0; b < batches; ++b) {
+        t0 = now_ns();
+        for (c = 0; c < calls; ++c) { @P@_forward_latent(x + n * (c % n_in), &m, &s); sink += m + s; }
+        t[b] = (now_ns() - t0) / calls;
+    }
+    printf("forward_latent_ns %.3f\n", median(t, batches));
     for (b = 0; b < batches; ++b) {          /* M exp calls */
         double acc = 0;
         t0 = now_ns();
@@ -116,10 +124,13 @@ class CTiming:
 
     Attributes:
         flags: the build flags.
-        mean_ns, forward_ns: median per call of ``<prefix>_mean`` / ``<prefix>_forward``.
+        mean_ns, forward_ns: median per call of ``<prefix>_mean`` / ``<prefix>_forward`` (band).
         exp_ns: M calls of libm's ``exp``; exp_block_ns: M values of the export's own
             (vectorizable, float64) exp block; fma_ns: one multiply-add (throughput).
-        n_exp, n_fma_mean, n_fma_forward: operation counts of one query.
+        n_exp, n_fma_mean, n_fma_forward: operation counts of one query (forward: with the band).
+        forward_latent_ns: median per call of ``<prefix>_forward_latent`` (NaN if not timed).
+        n_fma_band: multiply-adds of the band's gradient term (0 without input noise), part of
+            n_fma_forward.
     """
 
     flags: str
@@ -131,6 +142,8 @@ class CTiming:
     n_exp: int
     n_fma_mean: int
     n_fma_forward: int
+    forward_latent_ns: float = float("nan")
+    n_fma_band: int = 0
 
     @property
     def floor_mean_ns(self) -> float:
@@ -161,9 +174,11 @@ def time_c_predictor(sources: dict[str, str], x: np.ndarray, *, kind: str, prefi
     cc = find_cc()
     if cc is None:
         raise RuntimeError("time_c_predictor: no C compiler found (set $CC or install cc)")
-    n, M = x.shape[1], int(re.search(r"_N_SUPPORT (\d+)", next(t for k, t in sources.items() if k.endswith(".h"))).group(1))
+    header = next(t for k, t in sources.items() if k.endswith(".h"))
+    n, M = x.shape[1], int(re.search(r"_N_SUPPORT (\d+)", header).group(1))
     n_fma_mean = M * (n + 1)
-    n_fma_forward = n_fma_mean + (M * (M + 1) // 2 if kind == "exact" else M * M)
+    n_fma_band = n * M if re.search(rf"#define {prefix.upper()}_BANDED 1\b", header) else 0
+    n_fma_forward = n_fma_mean + (M * (M + 1) // 2 if kind == "exact" else M * M) + n_fma_band
     out = []
     with tempfile.TemporaryDirectory() as tmp:
         for name, text in sources.items():
@@ -180,5 +195,6 @@ def time_c_predictor(sources: dict[str, str], x: np.ndarray, *, kind: str, prefi
                                  input=stdin, check=True, capture_output=True, text=True)
             vals = dict(line.split()[:2] for line in res.stdout.splitlines())
             out.append(CTiming(label, float(vals["mean_ns"]), float(vals["forward_ns"]), float(vals["exp_ns_per_query"]),
-                               float(vals["expblock_ns_per_query"]), float(vals["fma_ns"]), M, n_fma_mean, n_fma_forward))
+                               float(vals["expblock_ns_per_query"]), float(vals["fma_ns"]), M, n_fma_mean, n_fma_forward,
+                               float(vals["forward_latent_ns"]), n_fma_band))
     return out

@@ -18,7 +18,8 @@ and NumPy cases are timed in 10 alternating rounds, so their ratios hold under c
   from Python, which no formula can go below;
 
 * the C export (``bemlearn export --format c``) compiled with the system ``cc`` and timed in a
-  C loop, with its arithmetic floor (:mod:`bemlearn.bench.c_timing`);
+  C loop, with its arithmetic floor (:mod:`bemlearn.bench.c_timing`), and its parity with the
+  TorchScript methods on 3000 in-range inputs (:mod:`bemlearn.bench.c_parity`);
 
 plus the time of 10⁵ queries in one batch on ``batch_threads`` threads (default: every core),
 with the floor of the exact variance: the triangular solve v = L⁻¹k alone on the same batch
@@ -45,6 +46,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from bemlearn.bench.c_parity import c_parity, in_range_inputs
 from bemlearn.bench.c_timing import CTiming, time_c_predictor
 from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.export.c_build import find_cc
@@ -85,6 +87,7 @@ class PredictBenchResult:
     loadavg: tuple[str, str]
     notes: list[str] = field(default_factory=list)
     c_timings: list[CTiming] = field(default_factory=list)
+    c_parity: dict[str, float] = field(default_factory=dict)
 
 
 def synthetic_posterior(*, n_train: int = 500, m: int = 1, seed: int = 0, noise: float = 1e-3) -> tuple[PredictorState, PredictorMetadata]:
@@ -312,6 +315,7 @@ def run_predict_bench(
     gp = _gpytorch_exact(state) if state.kind == "exact" else None
     lat: dict[str, Latency] = {}
     c_timings: list[CTiming] = []
+    c_par: dict[str, float] = {}
     batch_s: dict[str, float] = {}
     parity: dict[str, float] = {}
     with tempfile.TemporaryDirectory() as tmp, _threads(threads) as notes:
@@ -331,7 +335,9 @@ def run_predict_bench(
                     notes.append("no C compiler: C export not timed")
                     continue
                 xc = np.concatenate([x1.numpy(), xb[:63].numpy()])
-                c_timings = time_c_predictor(c_sources(state, meta), xc, kind=state.kind, calls=100, batches=max(repeats // 100, 5))
+                c_src = c_sources(state, meta)
+                c_timings = time_c_predictor(c_src, xc, kind=state.kind, calls=100, batches=max(repeats // 100, 5))
+                c_par = c_parity(c_src, ts, in_range_inputs(state, 3000, seed=seed), n_bem=n_bem)
             elif step == "pt2":
                 p2 = load_pt2_predictor(save_pt2(predictor, Path(tmp) / "bem_predictor.pt2"))
                 n2 = max(repeats // 10, 100)
@@ -357,7 +363,8 @@ def run_predict_bench(
                         batch_s[name] = _batch_seconds(fn, xb)
                     if predictor.bem.triangular:
                         batch_s["floor: v = L⁻¹k alone"] = _solve_floor(predictor, xb)
-    return PredictBenchResult(model, threads, lat, batch, batch_s, n_batch, parity, (load_before, _loadavg()), notes, c_timings)
+    return PredictBenchResult(model, threads, lat, batch, batch_s, n_batch, parity, (load_before, _loadavg()), notes, c_timings,
+                              c_par)
 
 
 def _extended_precision_mean(state: PredictorState, x: torch.Tensor) -> np.ndarray:
@@ -427,17 +434,25 @@ def _format_c(result: PredictBenchResult) -> list[str]:
     ts = result.latencies.get("torchscript bem_mean")
     t0 = result.c_timings[0]
     lines = [f"C export, single queries in a C loop (one thread; floor = {t0.n_exp} exp + {t0.n_fma_mean} multiply-adds "
-             f"for the mean, + {t0.n_fma_forward - t0.n_fma_mean} for the std):",
-             f"  {'build':20s} {'mean µs':>9s} {'forward µs':>11s} {'floor mean µs':>14s} {'mean/floor':>11s} "
-             f"{'libm-exp floor µs':>18s} {'C mean / TS bem_mean':>21s}"]
+             f"for the mean, + {t0.n_fma_forward - t0.n_fma_mean} for the std, of which {t0.n_fma_band} for the band's "
+             "gradient term):",
+             f"  {'build':20s} {'mean µs':>9s} {'forward µs':>11s} {'fwd_latent µs':>14s} {'floor mean µs':>14s} "
+             f"{'mean/floor':>11s} {'libm-exp floor µs':>18s} {'C mean / TS bem_mean':>21s}"]
     for t in result.c_timings:
         ratio = f"{t.mean_ns / 1e3 / ts.median_us:.3f}" if ts else "n/a"
-        lines.append(f"  {t.flags:20s} {t.mean_ns / 1e3:9.3f} {t.forward_ns / 1e3:11.2f} {t.floor_mean_ns / 1e3:14.3f} "
-                     f"{t.mean_ns / t.floor_mean_ns:11.2f} {t.floor_mean_libm_ns / 1e3:18.3f} {ratio:>21s}")
+        lines.append(f"  {t.flags:20s} {t.mean_ns / 1e3:9.3f} {t.forward_ns / 1e3:11.2f} {t.forward_latent_ns / 1e3:14.2f} "
+                     f"{t.floor_mean_ns / 1e3:14.3f} {t.mean_ns / t.floor_mean_ns:11.2f} {t.floor_mean_libm_ns / 1e3:18.3f} "
+                     f"{ratio:>21s}")
     lines.append("  (target: C bem_mean <= 0.25x TorchScript bem_mean from Python); per exp and multiply-add, ns:")
     for t in result.c_timings:
         lines.append(f"    {t.flags:20s} own exp {t.exp_block_ns / t.n_exp:.3f}, libm exp {t.exp_ns / t.n_exp:.3f}, "
                      f"multiply-add {t.fma_ns:.4f}")
+    par = result.c_parity
+    if par:
+        lines.append(f"  C (-O2) vs TorchScript on {int(par['n'])} in-range inputs (targets: mean 1e-10 rad, std 1e-8 relative):")
+        for key, name in (("forward", "bem_forward / forward"), ("full", "bem_predict_full / predict_full")):
+            lines.append(f"    {name:34s} max |Δmean| {par[key + '_mean_abs']:.2e} rad, max |Δstd|/std {par[key + '_std_rel']:.2e} "
+                         f"(band), {par[key + '_latent_std_rel']:.2e} (latent, *_latent)")
     lines.append("")
     return lines
 

@@ -66,7 +66,9 @@ class CPredictorLibrary:
             f.restype, f.argtypes = real, [ptr]
         self._forward = getattr(self.lib, f"{prefix}_forward")
         self._predict_full = getattr(self.lib, f"{prefix}_predict_full")
-        for f in (self._forward, self._predict_full):
+        self._forward_latent = getattr(self.lib, f"{prefix}_forward_latent")
+        self._predict_full_latent = getattr(self.lib, f"{prefix}_predict_full_latent")
+        for f in (self._forward, self._predict_full, self._forward_latent, self._predict_full_latent):
             f.restype, f.argtypes = ctypes.c_int, [ptr, ptr, ptr]
         meta = getattr(self.lib, f"{prefix}_metadata")
         meta.restype, meta.argtypes = ctypes.c_char_p, []
@@ -80,9 +82,11 @@ class CPredictorLibrary:
         fn, x = (self._full_mean if full else self._mean), self._rows(x)
         return np.array([fn(row.ctypes.data_as(self._ptr)) for row in x])
 
-    def forward(self, x: np.ndarray, *, full: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``<prefix>_forward`` (or ``_predict_full``) row by row → (mean, std, codes), each ``(B,)``."""
-        fn, x = (self._predict_full if full else self._forward), self._rows(x)
+    def forward(self, x: np.ndarray, *, full: bool = False, latent: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``<prefix>_forward`` (or ``_predict_full``; with ``latent`` their ``_latent`` forms) row by row
+        → (mean, std, codes), each ``(B,)``; std the calibrated band, or the latent std with ``latent``."""
+        fns = ((self._forward, self._predict_full), (self._forward_latent, self._predict_full_latent))[latent]
+        fn, x = fns[full], self._rows(x)
         mean, std, codes = np.empty(len(x)), np.empty(len(x)), np.empty(len(x), dtype=np.int64)
         m, s = self._real(), self._real()
         for i, row in enumerate(x):

@@ -7,7 +7,10 @@ of about 10⁻⁶ · Σ_j |w_j k_j|.  When the weights cancel — an exact GP on
 data has ‖α‖ ≫ |μ| (cond K of 10⁷ and more) — that is far above the model's own accuracy, and
 no reordering of float32 operations removes it (the inputs themselves are only known to ε).
 The std is worse: σ² = var0 − Σ v_i² cancels by var0/σ², so near the data, where σ ≪ √var0,
-float32 loses all its digits.
+float32 loses all its digits.  The calibrated band σ_band² = c² σ² + Σ_i g_i² (eq. B1) adds the
+gradient terms g_i = h_i + γ_i u_i h_n, h = P k, h_n = Σ_j w_j k_j, whose rounding is about
+10⁻⁶ · Σ_j |P_ij k_j| + ε|γ_i u_i| Σ_j |w_j k_j| — the same cancellation as the mean's; both the
+band and the latent std are measured.
 
 :func:`float32_errors` runs the float32 algorithm in NumPy (same formulas and constants as the
 generated C, float32 arithmetic throughout) on in-range inputs (the support points' own BEM
@@ -37,8 +40,9 @@ class Float32Errors:
 
     Attributes:
         mean_abs: max |μ₃₂ − μ₆₄|, rad.
-        std_rel: max |σ₃₂ − σ₆₄| / σ₆₄.
-        std_abs: max |σ₃₂ − σ₆₄|, rad.
+        std_rel: max |σ₃₂ − σ₆₄| / σ₆₄ of the calibrated band (the ``forward`` std).
+        std_abs: max |σ₃₂ − σ₆₄|, rad, of the band.
+        latent_std_rel, latent_std_abs: the same for the latent std (``forward_latent``).
         weight_sum: max Σ_j |w_j k_j| over the sample, rad (the scale of the mean's rounding).
         n: inputs in the sample.
     """
@@ -46,6 +50,8 @@ class Float32Errors:
     mean_abs: float
     std_rel: float
     std_abs: float
+    latent_std_rel: float
+    latent_std_abs: float
     weight_sum: float
     n: int
 
@@ -59,8 +65,8 @@ def sample_inputs(Z: torch.Tensor, x_mean: torch.Tensor, x_std: torch.Tensor, n_
     return np.clip(np.concatenate([phys, rand]), lo[:n_inputs], hi[:n_inputs])
 
 
-def _f32_std(post: CPosterior, k: np.ndarray) -> np.ndarray:
-    """σ from float32 kernel rows ``k (B, M)``, float32 arithmetic (the C loops, vectorized over B)."""
+def _f32_var(post: CPosterior, k: np.ndarray) -> np.ndarray:
+    """σ² from float32 kernel rows ``k (B, M)``, float32 arithmetic (the C loops, vectorized over B)."""
     M = post.n_support
     f = post.factor.astype(F32)
     if post.triangular:
@@ -72,7 +78,16 @@ def _f32_std(post: CPosterior, k: np.ndarray) -> np.ndarray:
         v = k @ f.reshape(M, M).T
         sq = v * v * (post.signs.astype(F32) if post.signs is not None else F32(1))
     q = sq.sum(1, dtype=F32)
-    return np.sqrt(np.maximum(F32(post.var0) - q, F32(0)))
+    return np.maximum(F32(post.var0) - q, F32(0))
+
+
+def _f32_gradient2(post: CPosterior, u: np.ndarray, k: np.ndarray, hn: np.ndarray) -> np.ndarray:
+    """Σ_i g_i² of the band from float32 ``u (B, n)``, ``k (B, M)``, ``hn (B,)``, float32 arithmetic."""
+    if not post.banded:
+        return np.zeros(k.shape[0], dtype=F32)
+    h = k @ post.P.astype(F32).T                               # (B, n)
+    g = h + post.gamma.astype(F32) * (u * hn[:, None])
+    return (g * g).sum(1, dtype=F32)
 
 
 def float32_errors(post: CPosterior, reference: FoldedPosterior, x: np.ndarray) -> Float32Errors:
@@ -84,15 +99,22 @@ def float32_errors(post: CPosterior, reference: FoldedPosterior, x: np.ndarray) 
     e = post.c.astype(F32)[None] - (F32(0.5) * d * d).sum(1, dtype=F32)
     k = np.exp(e).astype(F32)
     wk = k * post.w.astype(F32)
-    mean = F32(post.y0) + wk.sum(1, dtype=F32)
-    std = _f32_std(post, k)
+    hn = wk.sum(1, dtype=F32)
+    mean = F32(post.y0) + hn
+    var = _f32_var(post, k)
+    latent = np.sqrt(var)
+    band = np.sqrt(F32(post.scale2) * var + _f32_gradient2(post, u, k, hn))
+    x64 = torch.from_numpy(np.ascontiguousarray(x, dtype=np.float64))
     with torch.no_grad():
-        m64, s64 = (t.numpy() for t in reference.mean_std(torch.from_numpy(np.ascontiguousarray(x, dtype=np.float64))))
-    ds = np.abs(std.astype(np.float64) - s64)
+        m64, l64 = (t.numpy() for t in reference.mean_std(x64))
+        b64 = reference.mean_band(x64)[1].numpy()
+    db, dl = np.abs(band.astype(np.float64) - b64), np.abs(latent.astype(np.float64) - l64)
     return Float32Errors(
         mean_abs=float(np.abs(mean.astype(np.float64) - m64).max()),
-        std_rel=float((ds / np.maximum(s64, 1e-300)).max()),
-        std_abs=float(ds.max()),
+        std_rel=float((db / np.maximum(b64, 1e-300)).max()),
+        std_abs=float(db.max()),
+        latent_std_rel=float((dl / np.maximum(l64, 1e-300)).max()),
+        latent_std_abs=float(dl.max()),
         weight_sum=float(np.abs(k.astype(np.float64) * post.w).sum(1).max()),
         n=int(x.shape[0]),
     )

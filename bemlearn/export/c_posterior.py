@@ -10,6 +10,13 @@ x ∈ R^n (n = 3m for the BEM, n = 3m + 2 for the full map of eq. 11)
     exact:       v solves (L / (y_std σ_f²)) v = exp(e)   (forward substitution, L L^T = K)
     sgpr, svgp:  v = G exp(e),  G = y_std σ_f² F           (dense matvec)
 
+and the calibrated band of ``forward`` / ``predict_full`` (eq. B1, :mod:`bemlearn.models.band`)
+from the same kernel row, with h_i = Σ_j P_ij exp(e_j) (P = the FoldedPosterior's gradient
+matrix ``G`` without its last column, which is w) and h_n = Σ_j w_j exp(e_j) = μ − y_mean:
+
+    g_i = h_i + γ_i v_i h_n                     (g_i = s_i ∂μ/∂x_i, rad)
+    σ_band(x) = sqrt(c² σ(x)² + Σ_i g_i²),      c² = ``scale2``
+
 Only e_j differs between the two C forms:
 
 * ``"folded"`` (float64): e_j = c_j + q(v) + Σ_i W_ij v_i with v = x (raw) or v = a∘x − b
@@ -22,8 +29,8 @@ Only e_j differs between the two C forms:
 
 The columns held at zero (q̈_u, q̇_u in eq. 14) are already folded into ``c``.  Every array
 comes from the buffers of a :class:`FoldedPosterior` (the std formula therefore lives in
-one place: a change there, e.g. a calibrated std, reaches the C export through ``var0``,
-``factor`` and ``signs``), never from the GP hyperparameters directly.
+one place: the latent std reaches the C export through ``var0``, ``factor`` and ``signs``, the
+band through ``G``, ``gamma`` and ``scale2``), never from the GP hyperparameters directly.
 """
 
 from __future__ import annotations
@@ -60,6 +67,10 @@ class CPosterior:
         triangular: exact GP: ``factor`` is the packed lower-triangular L/(y_std σ_f²).
         factor: packed lower triangle ``(M(M+1)/2,)`` (triangular) or dense ``(M, M)`` G.
         signs: ``(M,)`` ±1 of a signed factor, or ``None``.
+        banded: whether any input column has input noise (s_i > 0); else P and γ are zero.
+        P: ``(n, M)`` gradient weights w_j s_i ρ_i W_ji (input-major), rad.
+        gamma: ``(n,)`` γ_i = 2 q_i s_i ρ_i of the band's gradient term.
+        scale2: c², the square of the band's ``std_scale``.
     """
 
     form: Literal["folded", "distance"]
@@ -75,6 +86,10 @@ class CPosterior:
     triangular: bool
     factor: np.ndarray
     signs: np.ndarray | None
+    banded: bool
+    P: np.ndarray
+    gamma: np.ndarray
+    scale2: float
 
     @property
     def n_inputs(self) -> int:
@@ -99,7 +114,8 @@ def c_posterior(post: FoldedPosterior, *, form: Literal["folded", "distance"] = 
 
     Raises:
         ValueError: ``form="distance"`` on a raw-form posterior, or folded quadratic weights
-            that differ between support points (not a FoldedPosterior as documented).
+            that differ between support points, or a gradient matrix whose last column is not
+            the mean weights (not a FoldedPosterior as documented).
     """
     n = post.n_inputs
     W = _np(post.W)
@@ -122,11 +138,15 @@ def c_posterior(post: FoldedPosterior, *, form: Literal["folded", "distance"] = 
     else:
         factor = np.ascontiguousarray(FT[:M, :M].T)  # v = G k, G = (gain F)
     w = _np(post.w)[:M]
+    G = _np(post.G)
+    if not np.array_equal(G[:M, n], w) or np.any(G[M:] != 0):
+        raise ValueError("FoldedPosterior.G: its last column must be the mean weights w and its sentinel row zero")
     y0 = float(_np(post.offset)[0]) + float(_np(post.w)[M])   # offset = y_mean − sentinel weight
     return CPosterior(
         form=form, centered=bool(post.centered) or form == "distance", a=_np(post.a), nb=_np(post.nb),
         W=np.ascontiguousarray(lin.T), W2=W2, c=c, w=w, y0=y0, var0=float(post.var0),
         triangular=bool(post.triangular), factor=factor, signs=_np(post.signs) if post.signed else None,
+        banded=bool(post.banded), P=np.ascontiguousarray(G[:M, :n].T), gamma=_np(post.gamma), scale2=float(post.scale2),
     )
 
 

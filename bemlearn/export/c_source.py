@@ -4,9 +4,13 @@ The C functions evaluate the folded posterior of the TorchScript module (eq. 12,
 :mod:`bemlearn.export.c_posterior`) with every constant a ``static const`` array:
 
     <prefix>_mean(x)            μ(x_0^e), x = [q̈_a, q̇_a, q_a] (3m values)  — the control-loop path
-    <prefix>_forward(x, &μ, &σ) μ and the latent std, with input checks and an error code
+    <prefix>_forward(x, &μ, &σ) μ and the calibrated band σ_band (eq. B1), with input checks and an error code
+    <prefix>_forward_latent     as ``forward`` with the latent std σ (eq. 12)
     <prefix>_full_mean(x)       mean of the full map f(x), x of 3m + 2 values (eq. 11)
-    <prefix>_predict_full(...)  as ``forward`` for f(x)
+    <prefix>_predict_full(...)  as ``forward`` for f(x); ``<prefix>_predict_full_latent`` its latent std
+
+The std functions mirror the TorchScript ``forward``, ``forward_latent``, ``predict_full`` and
+``predict_full_latent``; the band's gradient term reads the module's ``G`` and ``gamma``.
 
 float64 uses the folded exponent of the TorchScript module (n multiply-adds and one ``exp``
 per support point, the exp a vectorizable block of :mod:`bemlearn.export.c_exp`); float32 uses the distance form on centered inputs, and is refused, with
@@ -17,6 +21,7 @@ the measured error, for posteriors it cannot evaluate accurately
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from typing import Literal
@@ -29,15 +34,8 @@ from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.export.c_float32 import Float32Errors, float32_errors, sample_inputs
 from bemlearn.export.c_posterior import RANGE_LENGTHSCALES, CPosterior, c_posterior, support_box
 from bemlearn.export.c_exp import EXP_BLOCK_F64, EXP_BLOCK_LIBM
-from bemlearn.export.c_templates import (
-    DENSE_STD,
-    DISTANCE_EXPONENTS,
-    FOLDED_EXPONENTS,
-    HEADER,
-    POSTERIOR,
-    SOURCE,
-    TRIANGULAR_STD,
-)
+from bemlearn.export.c_std_templates import BAND_GRADIENT, DENSE_STD, NO_BAND_GRADIENT, TRIANGULAR_STD
+from bemlearn.export.c_templates import DISTANCE_EXPONENTS, FOLDED_EXPONENTS, HEADER, POSTERIOR, SOURCE
 from bemlearn.export.folded_posterior import FoldedPosterior
 from bemlearn.export.metadata import PredictorMetadata
 from bemlearn.export.variance_factor import VarianceFactor
@@ -89,7 +87,8 @@ def _c_string(text: str, width: int = 96) -> str:
     return "\n".join(f'    "{esc(text[i : i + width])}"' for i in range(0, len(text), width)) or '    ""'
 
 
-def _posterior_constants(p: str, name: str, post: CPosterior, dtype: CDtype, real: str, share_W: str | None) -> str:
+def _posterior_constants(p: str, name: str, post: CPosterior, dtype: CDtype, real: str, share_W: str | None,
+                         share_P: str | None) -> str:
     parts = [
         f"static const int {p}_{name}_centered = {int(post.centered)};\n",
         _array(f"{p}_{name}_a", post.a, dtype, real),
@@ -101,6 +100,12 @@ def _posterior_constants(p: str, name: str, post: CPosterior, dtype: CDtype, rea
         parts.append(_array(f"{p}_{name}_W", post.W, dtype, real))
     else:   # the first n rows of the full map's weights
         parts.append(f"static const {real} *const {p}_{name}_W = {share_W};\n")
+    if post.banded:   # the band's gradient term (unused, hence not written, without input noise)
+        parts.append(_array(f"{p}_{name}_gamma", post.gamma, dtype, real))
+        if share_P is None:
+            parts.append(_array(f"{p}_{name}_P", post.P, dtype, real))
+        else:
+            parts.append(f"static const {real} *const {p}_{name}_P = {share_P};\n")
     return "".join(parts)
 
 
@@ -117,18 +122,21 @@ def _posteriors(predictor: BEMPredictor, state: PredictorState, dtype: CDtype) -
     return c_posterior(bem, form="distance"), c_posterior(full, form="distance")
 
 
-def _check_float32(predictor: BEMPredictor, state: PredictorState, bem: CPosterior, lo: np.ndarray, hi: np.ndarray,
-                   mean_tol: float, std_rtol: float) -> Float32Errors:
-    x = sample_inputs(state.Z, state.x_mean, state.x_std, bem.n_inputs, lo, hi)
-    err = float32_errors(bem, predictor.bem, x)
-    if err.mean_abs > mean_tol or err.std_rel > std_rtol:
+def _check_float32(predictor: BEMPredictor, state: PredictorState, bem: CPosterior, full: CPosterior, lo: np.ndarray,
+                   hi: np.ndarray, mean_tol: float, std_rtol: float) -> Float32Errors:
+    """The larger float32 errors of the BEM (``forward``) and the full map (``predict_full``); ValueError above tolerance."""
+    errs = [float32_errors(post, ref, sample_inputs(state.Z, state.x_mean, state.x_std, post.n_inputs, lo, hi))
+            for post, ref in ((bem, predictor.bem), (full, predictor.full))]
+    err = Float32Errors(**{f.name: max(getattr(e, f.name) for e in errs) for f in dataclasses.fields(Float32Errors)})
+    if err.mean_abs > mean_tol or max(err.std_rel, err.latent_std_rel) > std_rtol:
         raise ValueError(
             f"dtype float32: this {state.kind} posterior cannot be evaluated accurately in float32: on {err.n} in-range "
-            f"inputs the float32 mean is off by up to {err.mean_abs:.2g} rad (tolerance {mean_tol:g}) and the std by "
-            f"{err.std_rel:.2g} relative (tolerance {std_rtol:g}).  Why: the mean is a sum of terms w_j k_j up to "
+            f"inputs each of the BEM and the full map the float32 mean is off by up to {err.mean_abs:.2g} rad (tolerance {mean_tol:g}), the std (calibrated "
+            f"band) by {err.std_rel:.2g} and the latent std by {err.latent_std_rel:.2g} relative (tolerance "
+            f"{std_rtol:g}).  Why: the mean and the band's gradient terms are sums of terms w_j k_j up to "
             f"{err.weight_sum:.3g} rad in total that cancel, each k_j known to ~1e-6 relative in float32, and the "
-            "std is sqrt(var0 - sum v_i^2), which cancels near the data.  Use dtype float64 (software double on an "
-            "FPU without double precision)."
+            "latent std is sqrt(var0 - sum v_i^2), which cancels near the data.  Use dtype float64 (software double "
+            "on an FPU without double precision)."
         )
     return err
 
@@ -165,11 +173,12 @@ def c_sources(
     predictor = BEMPredictor(state, metadata)
     bem, full = _posteriors(predictor, state, dtype)
     n_bem, n_full, M = bem.n_inputs, full.n_inputs, bem.n_support
-    if not (np.array_equal(bem.w, full.w) and bem.y0 == full.y0 and np.array_equal(bem.factor, full.factor)):
-        raise AssertionError("c_sources: the BEM and full posteriors must share w, y0 and the variance factor")
+    if not (np.array_equal(bem.w, full.w) and bem.y0 == full.y0 and np.array_equal(bem.factor, full.factor)
+            and bem.scale2 == full.scale2):
+        raise AssertionError("c_sources: the BEM and full posteriors must share w, y0, the variance factor and c")
     lo, hi = support_box(state.Z, state.x_mean, state.x_std, state.lengthscale)
     doc = json.loads(predictor.metadata_json)
-    f32 = _check_float32(predictor, state, bem, lo, hi, f32_mean_tol, f32_std_rtol) if dtype == "float32" else None
+    f32 = _check_float32(predictor, state, bem, full, lo, hi, f32_mean_tol, f32_std_rtol) if dtype == "float32" else None
     doc["c_export"] = {
         "prefix": p, "dtype": dtype, "form": bem.form,
         "error_codes": {f"{P}_{k}": v for k, v in ERROR_CODES.items()},
@@ -179,10 +188,13 @@ def c_sources(
     }
     if f32 is not None:
         doc["c_export"]["float32_error"] = {
-            "mean_abs": f32.mean_abs, "std_rel": f32.std_rel, "std_abs": f32.std_abs, "n_inputs": f32.n,
-            "how": "float32 algorithm emulated in NumPy vs the float64 predictor on the support points and random in-range inputs",
+            "mean_abs": f32.mean_abs, "std_rel": f32.std_rel, "std_abs": f32.std_abs,
+            "latent_std_rel": f32.latent_std_rel, "latent_std_abs": f32.latent_std_abs, "n_inputs": f32.n,
+            "how": "float32 algorithm emulated in NumPy vs the float64 predictor on the support points and random in-range inputs, "
+                   "BEM and full map, the larger error of the two",
         }
     share = f"{p}_full_W" if bem.form == full.form and np.array_equal(bem.W, full.W[:n_bem]) else None
+    share_P = f"{p}_full_P" if bem.banded and full.banded and np.array_equal(bem.P, full.P[:n_bem]) else None
     sub = {"p": p, "P": P, "real": real, "exp": exp, "sqrt": sqrt}
     exponents = DISTANCE_EXPONENTS if bem.form == "distance" else FOLDED_EXPONENTS
     if bem.triangular:
@@ -190,11 +202,12 @@ def c_sources(
     else:
         std = DENSE_STD.substitute(sub, signed_term="s * s" if bem.signs is None else f"{p}_signs[i] * s * s")
     constants = "".join([
-        _posterior_constants(p, "full", full, dtype, real, None),
-        _posterior_constants(p, "bem", bem, dtype, real, share),
+        _posterior_constants(p, "full", full, dtype, real, None, None),
+        _posterior_constants(p, "bem", bem, dtype, real, share, share_P),
         _array(f"{p}_w", bem.w, dtype, real),
         f"static const {real} {p}_y0 = {_literal(bem.y0, dtype)};\n",
         f"static const {real} {p}_var0 = {_literal(bem.var0, dtype)};\n",
+        f"static const {real} {p}_scale2 = {_literal(bem.scale2, dtype)};   /* std_scale^2 of the band */\n",
         _array(f"{p}_factor", bem.factor, dtype, real),
         "" if bem.signs is None else _array(f"{p}_signs", bem.signs, dtype, real),
     ])
@@ -202,14 +215,17 @@ def c_sources(
     source = SOURCE.substitute(
         sub, version=__version__, constants=constants, exp_block=exp_block,
         exponents="\n".join(exponents.substitute(sub, name=nm, n=n) for nm, n in (("bem", n_bem), ("full", n_full))),
-        std=std,
-        posteriors="\n".join(POSTERIOR.substitute(sub, name=nm, n=n) for nm, n in (("bem", n_bem), ("full", n_full))),
+        std=std + "\n" + "\n".join((BAND_GRADIENT if post.banded else NO_BAND_GRADIENT).substitute(sub, name=nm, n=post.n_inputs)
+                                     for nm, post in (("bem", bem), ("full", full))),
+        posteriors="\n".join(POSTERIOR.substitute(sub, name=nm, n=n, lo=f"{p}_{pre}input_lo", hi=f"{p}_{pre}input_hi")
+                              for nm, n, pre in (("bem", n_bem, ""), ("full", n_full, "full_"))),
     )
     units = doc["units"]
     size = 8 if dtype == "float64" else 4
     header = HEADER.substitute(
         sub, robot=doc["robot"], kind=state.kind, version=__version__, m=metadata.m, n_bem=n_bem, n_full=n_full,
-        n_support=M, dtype=dtype, range_ls=f"{RANGE_LENGTHSCALES:g}",
+        n_support=M, dtype=dtype, range_ls=f"{RANGE_LENGTHSCALES:g}", banded=int(bem.banded), full_banded=int(full.banded),
+        std_scale=f"{np.sqrt(bem.scale2):.6g}",
         bem_columns=", ".join(doc["inputs"]), full_columns=", ".join(doc["full_inputs"]),
         units="; ".join(f"{k} [{units[k]}]" for k in doc["full_inputs"]) + "; mean, std [rad]",
         stack_bytes=size * (M + 2 * BLOCK + n_full) + 1024,

@@ -1,31 +1,42 @@
 """Run the C EIC controller (eic_furuta.c + the exported bem_predictor.c) against the MuJoCo Furuta.
 
-    python examples/c_eic_furuta/simulate_c_eic.py RUN_DIR [--duration 20]
+    python examples/c_eic_furuta/simulate_c_eic.py RUN_DIR [--duration 20] [--config configs/furuta.yaml]
 
 exports RUN_DIR's BEM to C, compiles it with eic_furuta.c into a shared library, closes the
-loop through ctypes at 400 Hz on the simulated plant (bemlearn.data.plant.SensedPlant: encoder,
-velocity filter, zero-order hold) and prints the metrics next to the Python EIC
-(bemlearn.sim.closed_loop.simulate) with the same gains, reference and sensor seed.
+loop through ctypes on the simulated plant (bemlearn.data.plant.SensedPlant: encoder, velocity
+filter, zero-order hold) and prints the metrics next to the Python EIC
+(bemlearn.sim.closed_loop.simulate) with the same gains, reference and sensor seed: the
+resolved ``simulate`` section of the Furuta's pipeline config (400 Hz, the hand-tuned EIC
+gains; :func:`simulate_config`).
 """
 
 from __future__ import annotations
 
 import argparse
 import ctypes
+import dataclasses
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from bemlearn.control.eic import EICGains
+from bemlearn.apps.furuta.model import AnalyticFuruta, FurutaParameters
 from bemlearn.data.plant import SensedPlant
 from bemlearn.export.c_build import STRICT_FLAGS, compile_shared
+from bemlearn.pipeline.config import load_pipeline_config
 from bemlearn.robots import load
-from bemlearn.robots.furuta import AnalyticFuruta, FurutaParameters
 from bemlearn.sim.closed_loop import SimulateConfig
 
 HERE = Path(__file__).resolve().parent
+#: The Furuta's pipeline config (its ``simulate`` section: rate, fall window, hand-tuned EIC gains, reference).
+FURUTA_CONFIG = HERE.parents[1] / "configs" / "furuta.yaml"
+
+
+def simulate_config(predictor: Path, *, duration_s: float, config: Path = FURUTA_CONFIG) -> SimulateConfig:
+    """The resolved ``simulate`` section of ``config`` with the TorchScript ``predictor`` and ``duration_s`` (s)."""
+    sim = load_pipeline_config(config).simulate
+    return dataclasses.replace(sim, duration_s=duration_s, predictor=str(predictor))
 
 
 class Params(ctypes.Structure):
@@ -87,7 +98,8 @@ def run(lib_path: Path, config: SimulateConfig) -> CRun:
     params = furuta_params()
     reference = rc.build(1)
     plant = load("furuta")
-    sensed = SensedPlant(plant, rate_hz=config.rate_hz, sensor=config.sensor, rng=np.random.default_rng(config.seed), where="c_eic")
+    sensed = SensedPlant(plant, rate_hz=config.rate_hz, sensor=config.sensor, rng=np.random.default_rng(config.seed), where="c_eic",
+                         timestep=config.physics_timestep)
     q0, qd0 = np.zeros(2), np.zeros(2)
     q0[0] = reference.derivative(np.array([0.0]), 0).numpy()[0, 0]
     q0[1] = plant.qu_nominal + config.initial_qu
@@ -122,12 +134,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path)
     ap.add_argument("--duration", type=float, default=20.0)
+    ap.add_argument("--config", type=Path, default=FURUTA_CONFIG, help="pipeline config whose simulate section is used")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         export_c(args.run_dir, tmp)
         pt = export_run(args.run_dir, out=tmp / "bem_predictor.pt")[0]
-        config = SimulateConfig(duration_s=args.duration, predictor=str(pt), gains=EICGains())
+        config = simulate_config(pt, duration_s=args.duration, config=args.config)
         c = run(build(tmp, tmp / "libeic.so"), config)
         py = simulate("furuta", config, progress=False)
     print(f"C EIC:      fell={c.fell}  tracking RMSE {c.tracking_rmse:.4f} rad  max|alpha| {c.alpha_max:.4f} rad")

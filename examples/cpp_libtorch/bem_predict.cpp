@@ -1,10 +1,13 @@
 // bem_predict.cpp: load the exported TorchScript BEM predictor (bem_predictor.pt) with the
-// libtorch that ships inside the torch wheel, and call bem_mean and forward (eq. 12, 14).
+// libtorch that ships inside the torch wheel, and call bem_mean, forward and forward_latent
+// (eq. 12, 14, B1).
 //
 //   bem_predict PREDICTOR.pt [x_1 ... x_3m]     (default: x = 0, the upright rest state)
 //
 // Prints the metadata's robot and input columns, then "bem_mean <value>", "forward <mean> <std>"
-// (rad, %.17g), and the microseconds per bem_mean call (median of 2000, one thread).
+// (std: the calibrated band), "forward_latent <mean> <latent std>" (artifacts with that method,
+// i.e. written since the band) (rad, %.17g), and the microseconds per bem_mean call (median of
+// 2000, one thread).
 #include <ATen/Parallel.h>
 #include <torch/script.h>
 
@@ -44,6 +47,11 @@ int main(int argc, char **argv)
         auto out = module.forward({x}).toTuple();
         std::printf("bem_mean %.17g\n", mean);
         std::printf("forward %.17g %.17g\n", out->elements()[0].toTensor().item<double>(), out->elements()[1].toTensor().item<double>());
+        if (auto latent = module.find_method("forward_latent")) {
+            auto lat = (*latent)({x}).toTuple();
+            std::printf("forward_latent %.17g %.17g\n", lat->elements()[0].toTensor().item<double>(),
+                        lat->elements()[1].toTensor().item<double>());
+        }
     } catch (const std::exception &e) {   // e.g. a non-finite input (torch::jit::JITException): "ValueError: BEMPredictor.bem_mean: ..."
         std::fprintf(stderr, "error: %s\n", e.what());
         return 1;
