@@ -296,12 +296,13 @@ def test_cli_import_refuses_overwrite_and_writes_atomically(rig, tmp_path, capsy
 def test_write_is_temp_file_then_replace(rig, tmp_path, monkeypatch):
     import os
 
-    from bemlearn.data import trajectory_io
+    from bemlearn import files
 
     seen = []
     real = os.replace
-    monkeypatch.setattr(trajectory_io.os, "replace", lambda a, b: (seen.append((Path(a).name, Path(b).name)), real(a, b)))
+    monkeypatch.setattr(files.os, "replace", lambda a, b: (seen.append((Path(a).parent.name, Path(b).name)), real(a, b)))
     main_write(dataclasses.replace(rig), tmp_path / "x.npz")
+    # written inside a hidden temporary folder beside the target, then renamed into place
     assert len(seen) == 1 and seen[0][1] == "x.npz" and seen[0][0].startswith(".x.npz.tmp")
 
 

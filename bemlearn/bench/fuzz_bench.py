@@ -77,6 +77,12 @@ def _read_config(path: Path) -> Any:
     return cfg
 
 
+def _read_import_map(path: Path) -> Any:
+    from bemlearn.data.import_map import load_import_map
+
+    return load_import_map(path)
+
+
 def _read_mjcf(path: Path) -> Any:
     from bemlearn.robots import load
 
@@ -107,7 +113,7 @@ def _read_predictor_metadata(path: Path) -> Any:
     return predictor_metadata(path)
 
 
-for _name, _fn in (("trajectory", _read_trajectory), ("config", _read_config), ("mjcf", _read_mjcf),
+for _name, _fn in (("trajectory", _read_trajectory), ("map", _read_import_map), ("config", _read_config), ("mjcf", _read_mjcf),
                    ("checkpoint", _read_checkpoint), ("torchscript", _read_torchscript), ("pt2", _read_pt2),
                    ("predictor_metadata", _read_predictor_metadata)):
     register_reader(_name, _fn)
@@ -256,6 +262,14 @@ _MJ_HEAD = "<mujoco><worldbody><body><geom size='0.1' mass='1'/>"
 _TWO_FREE = _MJ_HEAD + "<joint name='a' type='hinge'/><body pos='0 0 1'><geom size='0.1' mass='1'/><joint name='b' type='hinge'/></body></body></worldbody></mujoco>"
 _FREE = "<mujoco><worldbody><body><freejoint/><geom size='0.1' mass='1'/></body></worldbody><actuator/></mujoco>"
 _NO_JOINT = _MJ_HEAD + "</body></worldbody></mujoco>"
+#: A valid logger import map (docs/log-import.md) that the map cases break one way each.
+_MAP = ("time: {column: t, unit: ms}\n"
+        "joints:\n"
+        "  - {name: theta, column: theta, unit: rad}\n"
+        "  - {name: alpha, column: alpha, unit: deg, sign: -1, unactuated: true}\n"
+        "inputs:\n"
+        "  - {name: voltage, column: u, unit: V}\n")
+
 #: A valid robot of this class for the fuzz base files: a cart on a slide carrying a pole on a hinge.
 BASE_MJCF = (
     "<mujoco model='fuzzbase'><option timestep='0.002'/><worldbody>"
@@ -314,6 +328,18 @@ BAD_INPUTS: list[BadInput] = [
     BadInput("trajectory", "csv unknown column", _csv_lines(lambda l, r: l[:2] + [l[2] + ",bogus"] + [x + ",0" for x in l[3:]])),
     BadInput("trajectory", "csv meta line not JSON", _csv_lines(lambda l, r: [l[0], l[1][: len(l[1]) // 2]] + l[2:])),
     BadInput("trajectory", "csv header only", _csv_lines(lambda l, r: l[:3])),
+    # -- logger import maps (YAML, docs/log-import.md)
+    BadInput("map", "missing file", lambda f, s, b: f / f"missing{s}.map.yaml"),
+    BadInput("map", "empty", _yaml(lambda r: "")),
+    BadInput("map", "not YAML", _yaml(lambda r: r.choice(["time: {column: t", "joints: [", "a: b: c"]))),
+    BadInput("map", "unknown key", _yaml(lambda r: _MAP + "colour: red\n")),
+    BadInput("map", "joint without a column", _yaml(lambda r: _MAP.replace("column: theta, ", ""))),
+    BadInput("map", "unknown joint unit", _yaml(lambda r: _MAP.replace("unit: rad}", "unit: " + r.choice(["furlong", "counts:0", "counts:-5", "DEG"]) + "}"))),
+    BadInput("map", "sign not ±1", _yaml(lambda r: _MAP.replace("sign: -1", "sign: " + r.choice(["0", "2", "-0.5", "minus"])))),
+    BadInput("map", "no unactuated joint", _yaml(lambda r: _MAP.replace(", unactuated: true", ""))),
+    BadInput("map", "two unactuated joints", _yaml(lambda r: _MAP.replace("unit: rad}", "unit: rad, unactuated: true}"))),
+    BadInput("map", "no time and no rate", _yaml(lambda r: _MAP.replace("time: {column: t, unit: ms}\n", ""))),
+    BadInput("map", "time unit unknown", _yaml(lambda r: _MAP.replace("unit: ms", "unit: " + r.choice(["fortnights", "min", ""])))),
     # -- configs (YAML)
     BadInput("config", "missing file", lambda f, s, b: f / f"missing{s}.yaml"),
     BadInput("config", "empty", _yaml(lambda r: "")),

@@ -101,7 +101,10 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
         from bemlearn.pipeline.derived_defaults import derive_pipeline_values
         from bemlearn.robots import load
 
-        robot = load(parsed.robot)
+        try:
+            robot = load(parsed.robot)
+        except (ValueError, FileNotFoundError, OSError) as exc:
+            raise ConfigError(f"{source}: robot: {exc}") from exc
         for key, (value, note) in derive_pipeline_values(robot, parsed, given).items():
             if not _has(raw, key):
                 _set(raw, key, value)
