@@ -26,6 +26,7 @@ from pathlib import Path
 __all__ = ["machine_facts", "timed", "format_timings", "main"]
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # this checkout's bemlearn, also when another one is installed
 
 
 def _cpu_model() -> str:
