@@ -10,14 +10,16 @@ __all__ = ["add_parser"]
 def add_parser(sub) -> None:
     p = sub.add_parser("robot", help="inspect a robot: partition, BEM, Lemma 1", description="Inspect shipped or user MJCF robots.")
     rs = p.add_subparsers(dest="robot_command", metavar="ACTION", required=True)
+    ls = rs.add_parser("list", help="the registered robot names (from the installed applications)")
+    ls.set_defaults(func=_list)
     info = rs.add_parser("info", help="joints, partition and admissible BEM range of a robot")
     info.add_argument("robot", help="shipped robot name or MJCF path")
     info.set_defaults(func=_info)
     bem = rs.add_parser("bem", help="model-based BEM q_u^e for given actuated q_a, q̇_a, q̈_a (eq. 6–9)")
     bem.add_argument("robot")
-    bem.add_argument("--qa", type=float, nargs="+", required=True, help="actuated angles, rad")
-    bem.add_argument("--qad", type=float, nargs="+", required=True, help="actuated rates, rad/s")
-    bem.add_argument("--qadd", type=float, nargs="+", required=True, help="actuated accelerations, rad/s²")
+    bem.add_argument("--qa", type=float, nargs="+", required=True, help="actuated coordinates, in their joints' units (rad for a hinge, m for a slide)")
+    bem.add_argument("--qad", type=float, nargs="+", required=True, help="actuated rates (rad/s or m/s)")
+    bem.add_argument("--qadd", type=float, nargs="+", required=True, help="actuated accelerations (rad/s² or m/s²)")
     bem.set_defaults(func=_bem)
     lem = rs.add_parser("lemma1", help="Lemma 1 on any robot: ΔΓ vs Ḣ_u and max |q_u^d − q_u^e| for composite sinusoids")
     lem.add_argument("robot", help="registry name or MJCF path")
@@ -37,14 +39,29 @@ def add_parser(sub) -> None:
             app.add_robot_commands(rs)
 
 
-def _info(args) -> int:
-    from bemlearn.robots import load
+def _list(args) -> int:
+    from bemlearn.applications import applications
 
-    r = load(args.robot)
+    for app in applications().values():
+        for name in app.robots:
+            print(f"{name:<18} {app.name} application: {app.description}")
+    print("any MJCF file of this class by path (hinge/slide joints, exactly one not driven by an actuator)")
+    return 0
+
+
+def _info(args) -> int:
+    from bemlearn.robots import resolve_robot
+    from bemlearn.units import joint_unit
+
+    r, ref = resolve_robot(args.robot)
+    kinds = dict(zip(r.joint_names, r.coordinate_kinds))
+    show = lambda names: ", ".join(f"{n} ({kinds[n]}, {joint_unit(kinds[n])})" for n in names)  # noqa: E731
+    unit = joint_unit(kinds[r.unactuated_name])
     print(f"robot      {r.name}  ({type(r).__name__})")
-    print(f"joints     {', '.join(r.joint_names)}")
-    print(f"actuated   {', '.join(r.actuated_names)}  (q_a, m = {r.m})")
-    print(f"unactuated {r.unactuated_name}  (q_u), BEM searched in [{r.qu_range[0]:.4f}, {r.qu_range[1]:.4f}], nominal {r.qu_nominal:g}")
+    print(f"model      {ref.mjcf or 'no MJCF file'}" + (f"  (registry name {ref.registry})" if ref.registry else ""))
+    print(f"joints     {show(r.joint_names)}")
+    print(f"actuated   {show(r.actuated_names)}  (q_a, m = {r.m})")
+    print(f"unactuated {show([r.unactuated_name])}  (q_u), BEM searched in [{r.qu_range[0]:.4f}, {r.qu_range[1]:.4f}] {unit}, nominal {r.qu_nominal:g} {unit}")
     return 0
 
 
@@ -59,7 +76,10 @@ def _bem(args) -> int:
     if not bool(res.valid[0]):
         print(f"no BEM in [{r.qu_range[0]:.4f}, {r.qu_range[1]:.4f}] for these inputs")
         return 1
-    print(f"q_u^e = {float(res.qu[0]):.12f} rad  (|Γ_0| = {float(res.residual[0]):.2e} N·m)")
+    from bemlearn.units import generalized_force_unit, joint_unit
+
+    kind = r.coordinate_kinds[r.unactuated_index]
+    print(f"q_u^e = {float(res.qu[0]):.12f} {joint_unit(kind)}  (|Γ_0| = {float(res.residual[0]):.2e} {generalized_force_unit(kind)})")
     return 0
 
 

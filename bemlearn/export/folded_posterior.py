@@ -193,24 +193,23 @@ class FoldedPosterior(nn.Module):
     @torch.jit.export
     def mean_std(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(μ(x), σ(x)): each ``(B,)`` rad, σ the latent posterior std (eq. 12)."""
-        if self._chunked(x):
-            mean = torch.empty(x.size(0), dtype=x.dtype)
-            std = torch.empty(x.size(0), dtype=x.dtype)
-            for i in range(0, x.size(0), self.chunk):
-                mean[i : i + self.chunk], std[i : i + self.chunk] = self._mean_std(x[i : i + self.chunk])
-            return mean, std
-        return self._mean_std(x)
+        return self._mean_and(x, False)
 
     @torch.jit.export
     def mean_band(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(μ(x), σ_band(x)): each ``(B,)`` rad, σ_band the calibrated band (module docstring, eq. B1)."""
-        if self._chunked(x):
-            mean = torch.empty(x.size(0), dtype=x.dtype)
-            std = torch.empty(x.size(0), dtype=x.dtype)
-            for i in range(0, x.size(0), self.chunk):
-                mean[i : i + self.chunk], std[i : i + self.chunk] = self._mean_band(x[i : i + self.chunk])
-            return mean, std
-        return self._mean_band(x)
+        return self._mean_and(x, True)
+
+    def _mean_and(self, x: torch.Tensor, band: bool) -> tuple[torch.Tensor, torch.Tensor]:
+        """μ with the band (``band``) or the latent std, in row chunks for large batches."""
+        if not self._chunked(x):
+            return self._mean_band(x) if band else self._mean_std(x)
+        mean = torch.empty(x.size(0), dtype=x.dtype)
+        std = torch.empty(x.size(0), dtype=x.dtype)
+        for i in range(0, x.size(0), self.chunk):
+            xi = x[i : i + self.chunk]
+            mean[i : i + self.chunk], std[i : i + self.chunk] = self._mean_band(xi) if band else self._mean_std(xi)
+        return mean, std
 
     def _latent_var(self, k: torch.Tensor) -> torch.Tensor:
         if self.triangular:

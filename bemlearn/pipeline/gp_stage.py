@@ -97,7 +97,8 @@ def fit_bem_gp(
         resume: start from the hyperparameters of the checkpoint already in ``out_dir``.
         calibrate: ``calibrate(state) -> (state, summary)`` applied to the frozen posterior before it is
             written (the calibrated band of the exported std, :func:`~bemlearn.pipeline.uncertainty.calibrate_band`);
-            its summary is stored in the checkpoint metadata (``extra.uncertainty``).
+            its summary is stored in the checkpoint metadata (``extra.uncertainty``).  Skipped after Ctrl-C, so
+            that the interrupted checkpoint is written within seconds (its std is then the latent one).
 
     Ctrl-C during the fit keeps the parameters reached, writes the checkpoint (marked
     ``interrupted``) and returns with ``interrupted=True``; the caller decides what to do next.
@@ -136,7 +137,7 @@ def fit_bem_gp(
         y_std=normalization.y_std, input_names=names, n_train=int(y.shape[0]),
     )
     calibration = None
-    if calibrate is not None:
+    if calibrate is not None and not interrupted:  # Ctrl-C: write the best checkpoint at once, uncalibrated
         state, calibration = calibrate(state)
     hyp = hyperparameter_metrics(model, lik)
     phys_ls = {n: float(state.lengthscale[j] * state.x_std[j]) for j, n in enumerate(names)}

@@ -51,8 +51,8 @@ def write_biped_report(out: str | Path, metrics: dict, config) -> Path:
                   "the tracked knee ever moves), so the GP extrapolates, and the torso row is ill-conditioned in q̈ "
                   "(∂q1^e/∂q̈ ≈ 0.04 rad per rad/s²). The result varies with the random training subset (one run is one "
                   "draw), and the fitted likelihood does not rank the subsets' fits. "
-                  "`bemlearn bench biped-bem` measures the spread over training subsets; the module docstring of "
-                  "`bemlearn.apps.biped.pipeline` has the findings.", ""]
+                  "`bemlearn bench biped-bem` measures the spread over training subsets; docs/biped.md has "
+                  "the findings.", ""]
     lines += [
               "## Walking with the exported predictor's `bem_mean` in the loop",
               "", "| gait | steps | fell | speed (m/s) | torso range (rad) | in-loop learned vs model BEM RMSE (rad) |",
