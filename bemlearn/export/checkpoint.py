@@ -192,6 +192,7 @@ def write_checkpoint(
     model_state: dict[str, Any],
     predictor_state: PredictorState,
     metadata: PredictorMetadata | dict[str, Any],
+    read_back: bool = True,
 ) -> Path:
     """Validate and write a checkpoint; returns the file written.
 
@@ -201,9 +202,12 @@ def write_checkpoint(
         model_state: the model's ``state_dict()``.
         predictor_state: the frozen float64 posterior; its ``kind`` is the checkpoint's kind.
         metadata: a :class:`PredictorMetadata` or a dict with its keys.
+        read_back: load the written file back with :func:`load_checkpoint` before returning (the
+            contents are validated before writing either way; an interrupted fit skips the read-back
+            so that Ctrl-C ends promptly).
 
     The file is written to a temporary name and renamed, so a crash never leaves a
-    half-written checkpoint.  It is read back with :func:`load_checkpoint` before returning.
+    half-written checkpoint.
     """
     target = Path(run_dir_or_file)
     path = target if target.suffix == ".pt" else target / CHECKPOINT_NAME
@@ -220,7 +224,8 @@ def write_checkpoint(
     data["content_sha256"] = _content_sha256(data)
     with atomic_path(path) as tmp:
         torch.save(data, tmp)
-    load_checkpoint(path)
+    if read_back:
+        load_checkpoint(path)
     log.info("wrote checkpoint %s (%s GP)", path, predictor_state.kind)
     return path
 

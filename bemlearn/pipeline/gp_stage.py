@@ -148,6 +148,7 @@ def fit_bem_gp(
     actuated = [j for j in joint_names if j != unactuated_name]
     path = write_checkpoint(
         out,
+        read_back=not interrupted,
         model_state=model_state,
         predictor_state=state,
         metadata={
