@@ -237,13 +237,4 @@ class FoldedPosterior(nn.Module):
 
     def _mean_std(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         k = self._kernel(x)
-        mean = torch.addmv(self.offset, k, self.w)
-        if self.triangular:
-            v = torch.linalg.solve_triangular(self.FT, k, upper=True, left=False)
-        else:
-            v = torch.mm(k, self.FT)
-        if self.signed:
-            q = torch.mv(v * v, self.signs)
-        else:
-            q = torch.linalg.vecdot(v, v)
-        return mean, torch.rsub(q, self.var0).clamp_min_(0.0).sqrt_()
+        return torch.addmv(self.offset, k, self.w), self._latent_var(k).sqrt_()
