@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import logging
 import os
 import shutil
@@ -31,6 +32,7 @@ __all__ = [
     "atomic_write_bytes",
     "check_outputs",
     "existing_outputs",
+    "file_sha256",
     "new_run_dir",
     "created_dir",
     "check_writable",
@@ -117,6 +119,15 @@ def check_outputs(paths: Iterable[str | os.PathLike[str]], force: bool = False, 
         head = f"{what}: " if what else ""
         raise OutputExistsError(f"{head}would overwrite {shown}; use --force to replace")
     return found
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """SHA-256 (64 lowercase hex digits) of the file's bytes, read in 1 MiB chunks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
 
 
 def new_run_dir(name: str, *, root: str | os.PathLike[str] = "runs", now: float | None = None) -> Path:

@@ -10,7 +10,6 @@ deletes the predictor files of a run folder that no longer match (``train --forc
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 import os
@@ -18,6 +17,7 @@ import zipfile
 from pathlib import Path
 
 from bemlearn.errors import CheckpointError, StalePredictorError
+from bemlearn.files import file_sha256
 
 __all__ = [
     "file_sha256",
@@ -36,14 +36,6 @@ log = logging.getLogger(__name__)
 PREDICTOR_NAMES = ("bem_predictor.pt", "bem_predictor.pt2")
 _CHECKPOINT = "checkpoint.pt"
 
-
-def file_sha256(path: str | os.PathLike[str]) -> str:
-    """SHA-256 (64 lowercase hex digits) of the file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def predictor_metadata(path: str | os.PathLike[str]) -> dict:

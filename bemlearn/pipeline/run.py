@@ -20,23 +20,18 @@ import time
 from pathlib import Path
 
 from bemlearn.config import save_yaml
+from bemlearn.files import new_run_dir
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.resolve import ResolvedConfig, resolve_pipeline_config
 
-__all__ = ["run_pipeline", "default_run_dir"]
+__all__ = ["run_pipeline"]
 
 log = logging.getLogger(__name__)
 
 
-def default_run_dir(config: PipelineConfig) -> Path:
-    """``runs/<robot or data stem>-<timestamp>`` (a new folder)."""
-    stem = Path(config.robot).stem if config.robot else Path(config.data or "data").stem
-    return Path("runs") / time.strftime(f"{stem}-%Y%m%d-%H%M%S")
-
-
 def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | None = None, *,
                  device: str | None = None, progress: bool = True) -> Path:
-    """Run every stage of ``config`` into ``out_dir`` (default :func:`default_run_dir`); returns the folder."""
+    """Run every stage of ``config`` into ``out_dir`` (default: a new ``runs/<robot or data stem>-<timestamp>``, :func:`~bemlearn.files.new_run_dir`); returns the folder."""
     from bemlearn.data.collect import collect
     from bemlearn.data.trajectory_io import ground_truth_path, read_trajectory, write_trajectory
     from bemlearn.export.export_run import export_run
@@ -46,7 +41,7 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
 
     resolved = config if isinstance(config, ResolvedConfig) else resolve_pipeline_config(_as_dict(config))
     cfg = resolved.config
-    out = Path(out_dir) if out_dir else default_run_dir(cfg)
+    out = Path(out_dir) if out_dir else new_run_dir(Path(cfg.robot or cfg.data or "run").stem)
     out.mkdir(parents=True, exist_ok=True)
     save_yaml(cfg, out / "config.yaml")
     (out / "config_resolved.json").write_text(json.dumps(resolved.to_json_dict(), indent=2, ensure_ascii=False))

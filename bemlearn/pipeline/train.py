@@ -16,7 +16,6 @@ continues the fit.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import logging
 import math
@@ -28,7 +27,7 @@ from bemlearn.config import save_yaml
 from bemlearn.data import build_datasets, read_trajectory
 from bemlearn.data.validation import check_robot
 from bemlearn.models import predict
-from bemlearn.files import atomic_path, atomic_write_text
+from bemlearn.files import atomic_path, atomic_write_text, file_sha256
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.evaluation import evaluate_bem, held_out_references
 from bemlearn.pipeline.reliability import reliability_figure
@@ -38,14 +37,6 @@ from bemlearn.units import gp_input_units
 __all__ = ["train_run", "file_sha256"]
 
 log = logging.getLogger(__name__)
-
-
-def file_sha256(path: str | Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def _resolve_device(device: str) -> str:

@@ -11,11 +11,11 @@ registry name if any), so that later commands load exactly that model.
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from bemlearn.files import file_sha256
 from bemlearn.robots.mujoco_robot import MujocoRobot
 from bemlearn.robots.robot import Robot
 
@@ -39,14 +39,6 @@ def registered_robots() -> dict[str, Callable[[], Robot]]:
         out.update(app.robots)
     out.update(ROBOTS)
     return out
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 @dataclass(frozen=True)
@@ -83,9 +75,10 @@ class RobotRef:
         path = Path(self.mjcf)
         if not path.is_file():
             raise FileNotFoundError(f"robot {self.name!r}: the run's MJCF {path} no longer exists")
-        if check and self.sha256 and _sha256(path) != self.sha256:
+        actual = file_sha256(path) if check and self.sha256 else None
+        if actual is not None and actual != self.sha256:
             raise ValueError(
-                f"robot {self.name!r}: {path} changed since the run (sha256 {_sha256(path)[:12]}… ≠ recorded "
+                f"robot {self.name!r}: {path} changed since the run (sha256 {actual[:12]}… ≠ recorded "
                 f"{self.sha256[:12]}…); the run's results belong to the old file"
             )
         return MujocoRobot.from_xml(path, name=self.name)
@@ -103,14 +96,14 @@ def resolve_robot(name_or_path: str | Path) -> tuple[Robot, RobotRef]:
         if not path.is_file():
             raise FileNotFoundError(f"robot: MJCF file {path} not found")
         robot = MujocoRobot.from_xml(path)
-        return robot, RobotRef(robot.name, str(path.resolve()), _sha256(path), None)
+        return robot, RobotRef(robot.name, str(path.resolve()), file_sha256(path), None)
     known = registered_robots()
     if key not in known:
         raise ValueError(f"unknown robot {key!r}; registered robots are {sorted(known)}, or give the path of an MJCF (.xml) file")
     robot = known[key]()
     src = getattr(robot, "source", None)
     mjcf = Path(src) if isinstance(robot, MujocoRobot) and src and Path(src).is_file() else None
-    return robot, RobotRef(key, str(mjcf.resolve()) if mjcf else None, _sha256(mjcf) if mjcf else None, key)
+    return robot, RobotRef(key, str(mjcf.resolve()) if mjcf else None, file_sha256(mjcf) if mjcf else None, key)
 
 
 def load(name_or_path: str | Path) -> Robot:
