@@ -111,12 +111,13 @@ def evaluate_bem(state: PredictorState, robot, references: list[CompositeSinusoi
         eq. 13/15 bound at κ = 2: observed and nominal violation rates) and ``reliability``
         (coverage vs nominal level, 50–99 %, band and latent); ``curves`` gains ``band_std``.
         ``design_region``: RMSE and max error over the points whose model BEM lies within
-        ``design_bound`` of the nominal q_u (default: min(0.2, the q_u half range), the region the
-        derived excitation is designed to cover), with their count.
+        ``design_bound`` of the nominal q_u (default: :func:`~bemlearn.pipeline.derive.design_region`,
+        the region the derived excitation is designed to cover), with their count.
     """
     if design_bound is None:
-        lo, hi = robot.qu_range
-        design_bound = min(0.2, 0.5 * (hi - lo))
+        from bemlearn.pipeline.derive import design_region
+
+        design_bound = design_region(robot).value
     t = np.arange(0.0, duration_s, 1.0 / rate_hz)
     errs, lat, pred, per, inside = [], [], [], [], []
     bands, lats = [], []

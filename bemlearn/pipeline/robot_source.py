@@ -9,10 +9,9 @@ unless the config names one under ``model:`` (an MJCF used for the comparison on
 
 from __future__ import annotations
 
-from bemlearn.data.trajectory import TrajectoryMeta
 from bemlearn.robots import RobotRef, resolve_robot
 
-__all__ = ["run_robot", "data_joint_kinds"]
+__all__ = ["run_robot"]
 
 
 def run_robot(config):
@@ -28,7 +27,3 @@ def run_robot(config):
     truth = resolve_robot(config.model)[0] if config.model else None
     return None, RobotRef(name="data", mjcf=None, sha256=None, registry=None), truth
 
-
-def data_joint_kinds(meta: TrajectoryMeta) -> tuple[str, ...]:
-    """Per joint of a trajectory, ``"hinge"`` or ``"slide"`` as the file records it (``meta.joint_kinds``)."""
-    return tuple(meta.joint_kinds)

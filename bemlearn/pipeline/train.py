@@ -77,7 +77,7 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     from torch.utils.tensorboard import SummaryWriter
 
     from bemlearn.pipeline.gp_stage import fit_bem_gp
-    from bemlearn.pipeline.robot_source import data_joint_kinds, run_robot
+    from bemlearn.pipeline.robot_source import run_robot
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -99,7 +99,7 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     log.info("dataset: %d training points, %d validation points; %s", len(train), len(val), ds.report)
     names = train.input_names
     meta = traj.meta
-    kinds = robot.coordinate_kinds if robot is not None else data_joint_kinds(meta)
+    kinds = robot.coordinate_kinds if robot is not None else meta.joint_kinds  # model-free: as the file records them
     units = gp_input_units(names, meta.joint_names, kinds)
     writer = SummaryWriter(str(out / "tb"))
     stage = fit_bem_gp(
