@@ -21,7 +21,7 @@ __all__ = ["robot_chain", "format_robots_bench"]
 
 
 def _configs(robot_path: str, robot, *, n_trials: int, duration_s: float, sim_duration_s: float, workers: int, seed: int):
-    from bemlearn.config import from_dict
+    from bemlearn.config import from_dict, to_dict
     from bemlearn.data.collect import CollectConfig
     from bemlearn.pipeline.config import PipelineConfig
     from bemlearn.pipeline.derive import derive_all
@@ -31,26 +31,18 @@ def _configs(robot_path: str, robot, *, n_trials: int, duration_s: float, sim_du
     D = derive_all(robot)
     col = {k.split(".", 1)[1]: v.value for k, v in D.items() if k.startswith("collect.")}
     col.update(n_trials=n_trials, duration_s=duration_s, workers=workers, seed=seed)
-    ccfg = from_dict(CollectConfig, _plain(col), where=f"derived:{robot_path}:collect")
-    ecfg = from_dict(EvaluationConfig, _plain(D["evaluate"].value), where=f"derived:{robot_path}:evaluate")
+    ccfg = from_dict(CollectConfig, to_dict(col), where=f"derived:{robot_path}:collect")
+    ecfg = from_dict(EvaluationConfig, to_dict(D["evaluate"].value), where=f"derived:{robot_path}:evaluate")
     scfg = SimulateConfig(
         duration_s=sim_duration_s,
         rate_hz=D["simulate.rate_hz"].value,
         physics_timestep=D["simulate.physics_timestep"].value,
-        reference=from_dict(ReferenceConfig, _plain(D["simulate.reference"].value), where="derived:reference"),
+        reference=from_dict(ReferenceConfig, to_dict(D["simulate.reference"].value), where="derived:reference"),
         gains=D["simulate.gains"].value,
-        sensor=from_dict(type(ccfg.sensor), _plain(D["simulate.sensor"].value), where="derived:sensor"),
+        sensor=from_dict(type(ccfg.sensor), to_dict(D["simulate.sensor"].value), where="derived:sensor"),
         fall_window=D["simulate.fall_window"].value,
     )
     return PipelineConfig(robot=robot_path, collect=ccfg, evaluate=ecfg, simulate=scfg), D
-
-
-def _plain(v):
-    if isinstance(v, dict):
-        return {k: _plain(x) for k, x in v.items()}
-    if isinstance(v, tuple):
-        return [_plain(x) for x in v]
-    return v
 
 
 def heldout_bem_errors(state, robot, references, *, bound: float, duration_s: float, rate_hz: float) -> dict:

@@ -10,9 +10,10 @@ the EIC gains, and the closed loop runs at the collection's rate unless told oth
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Any
+
+from bemlearn.config import to_dict
 
 __all__ = ["DERIVED_KEYS", "derive_pipeline_values"]
 
@@ -32,18 +33,8 @@ DERIVED_KEYS.update(f"simulate.sensor.{k}" for k in ("counts_per_rev", "m_per_co
 DERIVED_KEYS.update(f"evaluate.{k}" for k in ("n_sines", "amplitude_max", "amplitude_min", "frequency_hz"))
 
 
-def _plain(v: Any) -> Any:
-    if dataclasses.is_dataclass(v) and not isinstance(v, type):
-        return {f.name: _plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
-    if isinstance(v, dict):
-        return {k: _plain(x) for k, x in v.items()}
-    if isinstance(v, tuple):
-        return [_plain(x) for x in v]
-    return v
-
-
 def _leaves(prefix: str, value: Any, note: str, out: dict) -> None:
-    value = _plain(value)
+    value = to_dict(value)
     if isinstance(value, dict):
         for k, v in value.items():
             _leaves(f"{prefix}.{k}", v, note, out)
@@ -107,11 +98,11 @@ def derive_pipeline_values(robot, config, given: set[str] | frozenset[str] = fro
     for k in ("initial_qa", "initial_qu"):
         _leaves(f"collect.{k}", init.value[k], init.note, out)
     ev = derive.evaluation(robot, sig.value)
-    _leaves("evaluate", {k: v for k, v in _plain(ev.value).items() if k != "n_references"}, ev.note, out)
+    _leaves("evaluate", {k: v for k, v in to_dict(ev.value).items() if k != "n_references"}, ev.note, out)
     _leaves("simulate.rate_hz", rs.rate_hz, srate.note + ("" if _given(given, "simulate.rate_hz") else " (the collection's rate)"), out)
     _leaves("simulate.physics_timestep", rs.timestep if rs.timestep_changed else None, srate.note, out)
     eic = derive.eic_gains(robot, rs)
-    _leaves("simulate.gains", {k: v for k, v in _plain(eic.value).items() if k in ("kp_a", "kd_a", "kp_u", "kd_u")}, eic.note, out)
+    _leaves("simulate.gains", {k: v for k, v in to_dict(eic.value).items() if k in ("kp_a", "kd_a", "kp_u", "kd_u")}, eic.note, out)
     ref = derive.closed_loop_reference(robot, sig.value)
     _leaves("simulate.reference", ref.value, ref.note, out)
     _leaves("simulate.fall_window", fw.value, fw.note, out)
