@@ -43,7 +43,7 @@ class Application:
         add_cli: ``add_cli(subparsers)`` registers the application's top-level commands.
         add_bench: ``add_bench(subparsers)`` registers its ``bemlearn bench`` commands.
         add_robot_commands: ``add_robot_commands(subparsers)`` registers ``bemlearn robot`` commands.
-        run: ``run(config_path, out_dir, *, device, progress, force) -> Path`` runs a config whose
+        run: ``run(config_path, out_dir, *, device, progress) -> Path`` runs a config whose
             top-level ``application:`` key names this application (``bemlearn run``).
     """
 

@@ -37,7 +37,7 @@ def _bench(sub) -> None:
     add_bench(sub)
 
 
-def _run(config_path, out_dir=None, *, device=None, progress=True, **_ignored) -> Path:
+def _run(config_path, out_dir=None, *, device=None, progress=True) -> Path:
     from bemlearn.apps.biped.pipeline import load_biped_config, run_biped_pipeline
 
     if device not in (None, "cpu"):
