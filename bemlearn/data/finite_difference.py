@@ -38,6 +38,11 @@ class CentralDifference:
         """Samples at each trial end that use one-sided stencils: 1."""
         return 1
 
+    def neighbours(self, sample_rate_hz: float) -> tuple:
+        """None: the stencil has no options (its error is the quantization noise it passes
+        through, the input-noise term of the band)."""
+        return ()
+
     def __call__(self, q: np.ndarray, *, sample_rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
         """q̇ and q̈ of one trial.
 

@@ -81,6 +81,23 @@ class SavitzkyGolay:
         """Samples at each trial end estimated from the edge polynomial: (w − 1) / 2."""
         return self.window_samples(sample_rate_hz) // 2
 
+    def neighbours(self, sample_rate_hz: float) -> tuple["SavitzkyGolay", ...]:
+        """The four filters next to this one: window w·2/3 and w·3/2 (odd, in samples) at the same
+        degree, and degree p − 1 and p + 1 at the same window (each only where valid: w > p ≥ 2).
+
+        They are the choices a user would equally have made; the BEM's spread over them is the
+        estimator term of the calibrated band (:mod:`bemlearn.fitting.estimator_sensitivity`).
+        """
+        w, p = self.window_samples(sample_rate_hz), self.polyorder
+        out: list[SavitzkyGolay] = []
+        for wk in (2 * round((w * 2 / 3 - 1) / 2) + 1, 2 * round((w * 3 / 2 - 1) / 2) + 1):
+            if wk != w and wk > p and wk >= 3:
+                out.append(SavitzkyGolay(window=wk, polyorder=p))
+        for pk in (p - 1, p + 1):
+            if 2 <= pk < w:
+                out.append(SavitzkyGolay(window=w, polyorder=pk))
+        return tuple(out)
+
     def __call__(self, q: np.ndarray, *, sample_rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
         """q̇ and q̈ of one trial.
 

@@ -41,7 +41,7 @@ _STATE_TENSORS = tuple(
     f.name for f in dataclasses.fields(PredictorState) if f.name not in ("kind", "input_names", "n_train")
 )
 #: Tensors added after v1 checkpoints were first written (calibrated band); absent → defaults.
-_OPTIONAL_TENSORS = ("std_scale", "input_std")
+_OPTIONAL_TENSORS = ("std_scale", "input_std", "estimator_delta")
 
 
 @dataclass(frozen=True)

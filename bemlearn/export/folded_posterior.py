@@ -26,12 +26,13 @@ The calibrated band (:mod:`bemlearn.models.band`, eq. B1) reuses the same row ex
 with ρ_i = 1 (raw) or a_i (centered), P the linear part of W (first n columns) and
 q_i = W[·, n + i] (the same −½ a_i² or −½ in every row), ∂e_j/∂x_i = ρ_i (P_ji + 2 q_i v_i), so
 
-    h = exp(e) G,              G = [w_j s_i ρ_i P_ji | w_j]  (M + 1, n + 1), sentinel row 0
+    h = exp(e) G,   G = [w_j s_i ρ_i P_ji | w_j | y_std σ_f² δ_jk / √K]  (M + 1, n + 1 + K), sentinel row 0
     g_i = h_i + γ_i v_i h_n,   γ_i = 2 q_i s_i ρ_i           (g_i = s_i ∂μ/∂x_i, rad)
-    σ_band(x) = sqrt(c² max(0, y_std² σ_f² − Σ_i s_i v_i²) + Σ_i g_i²)
+    σ_band(x) = sqrt(c² max(0, y_std² σ_f² − Σ_i s_i v_i²) + Σ_i g_i² + Σ_k h_{n+1+k}²)
 
-(one ``mm`` of the (B, M + 1) row with an (M + 1, n + 1) matrix more than the latent std;
-c = ``std_scale``, s = ``input_std`` of the state; with s = 0 the ``mm`` is skipped).
+(one ``mm`` of the (B, M + 1) row with an (M + 1, n + 1 + K) matrix more than the latent std;
+c = ``std_scale``, s = ``input_std``, δ = ``estimator_delta`` (K columns) of the state; with
+s = 0 and K = 0 the ``mm`` is skipped).
 
 One extra *sentinel* column j = M has zero linear weights, a tiny positive weight 10⁻³⁰⁰ on
 Σ v_i², offset 0 and w = 1 (with 1 taken off y_mean); the factor ignores it (zero row, or a
@@ -154,13 +155,16 @@ class FoldedPosterior(nn.Module):
         # calibrated band (module docstring): G and γ over the n free columns
         s_in = state.input_std[free].to(**f64)
         rho = a[free] if self.centered else torch.ones(n_inputs, **f64)
-        G = torch.zeros(M + 1, n_inputs + 1, **f64)
+        K = state.n_estimators
+        G = torch.zeros(M + 1, n_inputs + 1 + K, **f64)
         wM = gain * state.alpha
         G[:M, :n_inputs] = wM[:, None] * W[:M, :n_inputs] * (s_in * rho)
         G[:M, n_inputs] = wM
+        if K:
+            G[:M, n_inputs + 1:] = (gain / K**0.5) * state.estimator_delta.to(**f64)
         self.register_buffer("G", G)
         self.register_buffer("gamma", 2.0 * W[0, n_inputs:] * s_in * rho if M > 0 else torch.zeros(n_inputs, **f64))
-        self.banded = bool((s_in > 0).any())
+        self.banded = bool((s_in > 0).any()) or K > 0
         self.scale2 = float(state.std_scale) ** 2
 
     def _kernel(self, x: torch.Tensor) -> torch.Tensor:
@@ -228,8 +232,11 @@ class FoldedPosterior(nn.Module):
         var = self._latent_var(k)
         if self.banded:
             h = torch.mm(k, self.G)
-            g = torch.addcmul(h[:, : self.n_inputs], v * h[:, self.n_inputs :], self.gamma)
-            return mean, torch.add(torch.linalg.vecdot(g, g), var, alpha=self.scale2).sqrt_()
+            n = self.n_inputs
+            g = torch.addcmul(h[:, :n], v * h[:, n : n + 1], self.gamma)
+            e = h[:, n + 1 :]
+            extra = torch.linalg.vecdot(g, g) + torch.linalg.vecdot(e, e)
+            return mean, torch.add(extra, var, alpha=self.scale2).sqrt_()
         return mean, var.mul_(self.scale2).sqrt_()
 
     def _mean(self, x: torch.Tensor) -> torch.Tensor:

@@ -1,11 +1,13 @@
-"""The calibrated BEM band: latent std scaled by c plus input noise through the mean's gradient.
+"""The calibrated BEM band: latent std scaled by c, input noise through the mean's gradient,
+and the mean's spread over the neighbouring derivative estimators.
 
-    σ_band(x)² = c² σ(x)² + Σ_{i < n} (s_i ∂μ/∂x_i (x))²                            (B1)
+    σ_band(x)² = c² σ(x)² + Σ_{i < n} (s_i ∂μ/∂x_i (x))² + (1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)²   (B1)
 
 σ the latent posterior std of eq. (12) (physical units), c = ``PredictorState.std_scale``
 (trial-split replica calibration), s = ``PredictorState.input_std`` (Savitzky–Golay
-quantization model, eq. N3 of :mod:`bemlearn.models.input_noise`), ∂μ/∂x of eq. (N2), and
-n the number of columns the caller supplies: 3m for the BEM query x_0^e of eq. (14)
+quantization model, eq. N3 of :mod:`bemlearn.models.input_noise`), ∂μ/∂x of eq. (N2),
+δ = ``PredictorState.estimator_delta`` (eq. E2 of :mod:`bemlearn.fitting.estimator_sensitivity`;
+no term when K = 0), and n the number of columns the caller supplies: 3m for the BEM query x_0^e of eq. (14)
 (q̈_u = q̇_u = 0 are exact there), all d for the full map of eq. (11).  This module is
 the dense reference; the exported predictor folds the same formula
 (:class:`~bemlearn.export.folded_posterior.FoldedPosterior`).
@@ -37,4 +39,9 @@ def band_reference(state: PredictorState, x: torch.Tensor, *, n_inputs: int | No
     var_in = torch.zeros_like(mean)
     if bool((s > 0).any()):
         var_in = ((mean_gradient(state, x) * s) ** 2).sum(-1)
+    if state.n_estimators:
+        xt = (x.to(torch.float64) - state.x_mean) / state.x_std
+        diff = (xt[:, None, :] - state.Z[None, :, :]) / state.lengthscale
+        k = state.outputscale * torch.exp(-0.5 * (diff**2).sum(-1))          # (B, M)
+        var_in = var_in + (state.y_std * (k @ state.estimator_delta)).square().mean(-1)
     return mean, torch.sqrt(state.std_scale**2 * latent**2 + var_in), latent

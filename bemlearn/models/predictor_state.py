@@ -18,14 +18,16 @@ x̃ = (x − x_mean) / x_std is, with k_Z(x̃) = k(x̃, Z) ∈ R^M,
 
 and in physical units μ(x) = y_mean + y_std μ̃(x̃), σ(x) = y_std σ̃(x̃).
 
-The calibrated band (docs/uncertainty.md) adds two fields: ``std_scale`` c (trial-split
-replica calibration, :mod:`bemlearn.fitting.calibration`) and ``input_std`` s (the
-Savitzky–Golay quantization model of each input column, :mod:`bemlearn.models.input_noise`):
+The calibrated band (docs/uncertainty.md) adds three fields: ``std_scale`` c (trial-split
+replica calibration, :mod:`bemlearn.fitting.calibration`), ``input_std`` s (the
+derivative estimator's quantization noise in each input column, :mod:`bemlearn.models.input_noise`)
+and ``estimator_delta`` δ (how the mean weights move under the neighbouring derivative
+estimators, :mod:`bemlearn.fitting.estimator_sensitivity`):
 
-    σ_band(x)² = c² y_std² σ̃²(x̃) + Σ_{i ∈ inputs} (s_i ∂μ/∂x_i)²
+    σ_band(x)² = c² y_std² σ̃²(x̃) + Σ_{i ∈ inputs} (s_i ∂μ/∂x_i)² + (1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)²
 
 over the columns the caller supplies (3m at x_0^e, all d for the full map).  Defaults
-c = 1, s = 0 give σ_band = σ (checkpoints written before these fields).  S need not be
+c = 1, s = 0, K = 0 give σ_band = σ (checkpoints written before these fields).  S need not be
 positive definite (sgpr/svgp); it is symmetric.  The observation noise σ_0² is kept for
 predictive (noisy) variances but is *not* part of σ̃² above.
 
@@ -64,6 +66,8 @@ class PredictorState:
         n_train: number of training points the posterior was conditioned on.
         std_scale: ``()`` c ≥ 1 of the calibrated band (default 1).
         input_std: ``(d,)`` s ≥ 0, noise std of each input column, physical units (default 0).
+        estimator_delta: ``(M, K)`` δ, the mean weights' shift under each of K neighbouring
+            derivative estimators, normalized output units (default K = 0: no estimator term).
     """
 
     kind: GPKind
@@ -81,6 +85,7 @@ class PredictorState:
     n_train: int
     std_scale: torch.Tensor | None = None
     input_std: torch.Tensor | None = None
+    estimator_delta: torch.Tensor | None = None
 
     def __post_init__(self) -> None:
         M, d = self.Z.shape
@@ -88,6 +93,9 @@ class PredictorState:
             object.__setattr__(self, "std_scale", torch.ones((), dtype=self.Z.dtype, device=self.Z.device))
         if self.input_std is None:
             object.__setattr__(self, "input_std", torch.zeros(d, dtype=self.Z.dtype, device=self.Z.device))
+        if self.estimator_delta is None or (self.estimator_delta.ndim == 2 and self.estimator_delta.shape[1] == 0):
+            # the empty default carries no information; it follows Z (e.g. through dataclasses.replace)
+            object.__setattr__(self, "estimator_delta", torch.zeros(M, 0, dtype=self.Z.dtype, device=self.Z.device))
         checks = {
             "alpha": (self.alpha, (M,)),
             "S": (self.S, (M, M)),
@@ -100,6 +108,7 @@ class PredictorState:
             "y_std": (self.y_std, ()),
             "std_scale": (self.std_scale, ()),
             "input_std": (self.input_std, (d,)),
+            "estimator_delta": (self.estimator_delta, (M, int(self.estimator_delta.shape[-1]) if self.estimator_delta.ndim == 2 else "K")),
         }
         for name, (t, shape) in checks.items():
             if tuple(t.shape) != shape:
@@ -114,6 +123,11 @@ class PredictorState:
     @property
     def dim(self) -> int:
         return int(self.Z.shape[1])
+
+    @property
+    def n_estimators(self) -> int:
+        """K, the neighbouring derivative estimators of the band's estimator term (0: none)."""
+        return int(self.estimator_delta.shape[1])
 
     def tensors(self) -> dict[str, torch.Tensor]:
         """All tensor fields by name (for ``torch.save`` / ``weights_only`` loading)."""

@@ -1,12 +1,15 @@
-"""The calibrated BEM band of a training run: c and s of eq. (B1) from the data alone.
+"""The calibrated BEM band of a training run: c, s and δ of eq. (B1) from the data alone.
 
-    σ_band(x)² = c² σ(x)² + Σ_{i ∈ inputs} (s_i ∂μ/∂x_i)²                           (B1)
+    σ_band(x)² = c² σ(x)² + Σ_{i ∈ inputs} (s_i ∂μ/∂x_i)² + (1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)²   (B1)
 
 * s (``PredictorState.input_std``): the derivative estimator's noise gains applied to the
   quantization step detected in each joint's recorded angles (eq. N3,
   :mod:`bemlearn.models.input_noise`); joints without a detectable grid get s = 0;
 * c (``PredictorState.std_scale``): trial-split replica calibration at held-out BEM queries
-  (:mod:`bemlearn.fitting.calibration`).
+  (:mod:`bemlearn.fitting.calibration`);
+* δ (``PredictorState.estimator_delta``): the mean weights' shift when the training rows'
+  derivatives come from each neighbouring estimator (eq. E2,
+  :mod:`bemlearn.fitting.estimator_sensitivity`).
 
 Neither needs a robot model.  :func:`calibrate_band` is called by ``bemlearn train`` after
 the fit; see docs/uncertainty.md for the measurements behind the choice.
@@ -23,6 +26,7 @@ import torch
 from bemlearn.data import build_datasets
 from bemlearn.data.quantization import detect_quantization_step
 from bemlearn.fitting.calibration import calibrate_replicas
+from bemlearn.fitting.estimator_sensitivity import estimator_sensitivity
 from bemlearn.models.input_noise import quantization_input_std
 from bemlearn.models.predictor_state import PredictorState
 
@@ -31,14 +35,16 @@ __all__ = ["calibrate_band"]
 log = logging.getLogger(__name__)
 
 
-def calibrate_band(state: PredictorState, traj, dataset_config, *, n_queries: int = 2000, n_pairs: int = 4,
-                   level: float = 0.95, seed: int = 0) -> tuple[PredictorState, dict]:
-    """``state`` with ``std_scale`` and ``input_std`` set, and a JSON-able summary.
+def calibrate_band(state: PredictorState, traj, dataset_config, *, train_rows: torch.Tensor | None = None,
+                   n_queries: int = 2000, n_pairs: int = 4, level: float = 0.95, seed: int = 0) -> tuple[PredictorState, dict]:
+    """``state`` with ``std_scale``, ``input_std`` and ``estimator_delta`` set, and a JSON-able summary.
 
     Args:
         state: the fitted posterior (input columns as built from ``traj`` by ``dataset_config``).
         traj: the training :class:`~bemlearn.data.trajectory.Trajectory`.
         dataset_config: the :class:`~bemlearn.data.DatasetConfig` the posterior was trained with.
+        train_rows: ``(N,)`` the rows of ``traj`` the posterior was trained on
+            (``BEMDataset.row``); default: drawn again by ``build_datasets(traj, dataset_config)``.
         n_queries: held-out BEM queries x_0^e for the replica calibration.
         n_pairs, level, seed: see :func:`~bemlearn.fitting.calibration.calibrate_replicas`.
     """
@@ -56,7 +62,7 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, n_queries: in
     g = torch.Generator().manual_seed(seed)
     queries = source.x[torch.randperm(len(source), generator=g)[:n_queries]].clone()
     queries[:, -2:] = 0.0                                  # x_0^e: q̈_u = q̇_u = 0 (eq. 14)
-    summary: dict = {"formula": "std² = std_scale² · latent_std² + Σ_i (input_std_i ∂mean/∂x_i)²",
+    summary: dict = {"formula": "std² = std_scale² · latent_std² + Σ_i (input_std_i ∂mean/∂x_i)² + mean_k (y_std k_Z(x)ᵀ estimator_delta_k)²",
                      "quantization_step": steps, "input_std": dict(zip(state.input_names, s.tolist())),
                      "estimator": est.name, "queries_from": "validation trials" if len(pool.val) else "training trials"}
     try:
@@ -69,8 +75,13 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, n_queries: in
         scale = 1.0
         summary["replicas"] = None
     summary["std_scale"] = scale
+    if train_rows is None:
+        train_rows = build_datasets(traj, dataset_config).train.row
+    sens = estimator_sensitivity(state, traj, est, train_rows, queries=queries)
+    summary["estimator_term"] = sens.to_dict()
     summary["seconds"] = time.perf_counter() - t0
-    new = dataclasses.replace(state, std_scale=torch.tensor(scale, dtype=torch.float64), input_std=s.to(torch.float64))
-    log.info("calibrated band: std_scale %.3f, input_std %s (%.2f s)", scale,
-             ", ".join(f"{n} {v:.3g}" for n, v in zip(state.input_names, s.tolist())), summary["seconds"])
+    new = dataclasses.replace(state, std_scale=torch.tensor(scale, dtype=torch.float64), input_std=s.to(torch.float64),
+                              estimator_delta=sens.delta)
+    log.info("calibrated band: std_scale %.3f, input_std %s, %d neighbouring estimators (%.2f s)", scale,
+             ", ".join(f"{n} {v:.3g}" for n, v in zip(state.input_names, s.tolist())), sens.delta.shape[1], summary["seconds"])
     return new, summary
