@@ -47,8 +47,9 @@ F64 = torch.float64
 NAMES = ("qdd_a", "qd_a", "q_a", "qdd_u", "qd_u")
 
 
-def _state(n=120, seed=0, x_mean=None, std_scale=1.3, input_std=(0.4, 0.05, 0.01, 0.3, 0.02)) -> PredictorState:
-    """An exact posterior of a smooth map, fixed hyperparameters, dense solve."""
+def _state(n=120, seed=0, x_mean=None, std_scale=1.3, input_std=(0.4, 0.05, 0.01, 0.3, 0.02), n_estimators=3) -> PredictorState:
+    """An exact posterior of a smooth map, fixed hyperparameters, dense solve; ``n_estimators``
+    random columns of estimator_delta (the estimator term of the band, eq. E2)."""
     g = torch.Generator().manual_seed(seed)
     d = 5
     X = torch.randn(n, d, generator=g, dtype=F64)
@@ -63,7 +64,17 @@ def _state(n=120, seed=0, x_mean=None, std_scale=1.3, input_std=(0.4, 0.05, 0.01
         std_scale=torch.tensor(std_scale, dtype=F64), input_std=torch.tensor(input_std, dtype=F64),
     )
     L = torch.linalg.cholesky(kernel_gram(base))
-    return dataclasses.replace(base, alpha=torch.cholesky_solve(y[:, None], L)[:, 0], S=torch.cholesky_inverse(L))
+    alpha = torch.cholesky_solve(y[:, None], L)[:, 0]
+    delta = 0.05 * alpha.abs().max() * torch.randn(n, n_estimators, generator=g, dtype=F64)
+    return dataclasses.replace(base, alpha=alpha, S=torch.cholesky_inverse(L), estimator_delta=delta)
+
+
+def _estimator_term(state, x):
+    """(1/K) Σ_k (μ_k − μ)², μ_k the mean with weights α + δ_k (dense, eq. E2)."""
+    base = state.predict_reference(x)[0]
+    shifts = [dataclasses.replace(state, alpha=state.alpha + state.estimator_delta[:, k]).predict_reference(x)[0] - base
+              for k in range(state.n_estimators)]
+    return torch.stack(shifts).square().mean(0) if shifts else torch.zeros_like(base)
 
 
 def _meta(state) -> PredictorMetadata:
@@ -99,17 +110,21 @@ def test_band_reference_matches_autograd_formula(n_inputs):
     (grad,) = torch.autograd.grad(mean.sum(), x)
     s = state.input_std.clone()
     s[n_inputs:] = 0
-    dense = torch.sqrt(1.3**2 * latent.detach() ** 2 + ((grad * s) ** 2).sum(1))
+    dense = torch.sqrt(1.3**2 * latent.detach() ** 2 + ((grad * s) ** 2).sum(1) + _estimator_term(state, x.detach()))
     _, band, lat = band_reference(state, x.detach(), n_inputs=n_inputs)
-    torch.testing.assert_close(band, dense, rtol=1e-12, atol=0)
+    torch.testing.assert_close(band, dense, rtol=1e-10, atol=0)
+    no_est = band_reference(dataclasses.replace(state, estimator_delta=None), x.detach(), n_inputs=n_inputs)[1]
+    assert bool((band > no_est).all())  # the estimator term is present and adds variance
     torch.testing.assert_close(lat, latent.detach(), rtol=0, atol=0)
 
 
 @pytest.mark.parametrize("kind", ["exact", "sgpr"])
 @pytest.mark.parametrize("form", ["raw", "centered"])
 @pytest.mark.parametrize("n_inputs", [3, 5])
-def test_folded_band_matches_dense(form, n_inputs, kind):
-    state = _state()
+@pytest.mark.parametrize("terms", ["all", "no estimator term", "estimator term only"])
+def test_folded_band_matches_dense(form, n_inputs, kind, terms):
+    state = _state(n_estimators=0 if terms == "no estimator term" else 3,
+                   input_std=(0.0,) * 5 if terms == "estimator term only" else (0.4, 0.05, 0.01, 0.3, 0.02))
     if kind == "sgpr":  # same S read as a general symmetric matrix: the eigen-factor path, no triangular solve
         state = dataclasses.replace(state, kind="sgpr")
     fp = FoldedPosterior(state, variance_factor(state), n_inputs=n_inputs, form=form)
@@ -159,6 +174,7 @@ def test_metadata_documents_the_band(exported):
     doc = json.loads(scripted.metadata())
     assert doc["uncertainty"]["std_scale"] == pytest.approx(1.3, rel=0, abs=0)
     assert doc["normalization"]["input_std"] == state.input_std.tolist()
+    assert doc["uncertainty"]["n_estimators"] == state.n_estimators == 3
     assert "latent_std" in doc["outputs"] and doc["outputs"]["forward_latent"] == ["mean", "latent_std"]
 
 
@@ -166,18 +182,19 @@ def test_old_checkpoint_without_band_fields_loads_as_latent(tmp_path):
     state = _state()
     path = write_checkpoint(tmp_path, model_state={}, predictor_state=state, metadata=_meta(state))
     data = torch.load(path, weights_only=True)
-    for key in ("std_scale", "input_std"):
+    for key in ("std_scale", "input_std", "estimator_delta"):
         del data["predictor_state"][key]
     data.pop("content_sha256", None)  # a checkpoint from before the band had no content hash either
     torch.save(data, path)
     old = load_checkpoint(path).predictor_state
-    assert float(old.std_scale) == 1.0 and bool((old.input_std == 0).all())
+    assert float(old.std_scale) == 1.0 and bool((old.input_std == 0).all()) and old.n_estimators == 0
     x = _x(state, 20)
     _, std = BEMPredictor(old, _meta(old))(x[:, :3].contiguous())
     _, ref_lat = old.predict_reference(torch.cat([x[:, :3], torch.zeros(20, 2, dtype=F64)], 1))
     torch.testing.assert_close(std, ref_lat, rtol=1e-8, atol=0)
     again = load_checkpoint(write_checkpoint(tmp_path / "new", model_state={}, predictor_state=state, metadata=_meta(state)))
     torch.testing.assert_close(again.predictor_state.input_std, state.input_std, rtol=0, atol=0)
+    torch.testing.assert_close(again.predictor_state.estimator_delta, state.estimator_delta, rtol=0, atol=0)
 
 
 def test_noise_gains_match_closed_forms():

@@ -14,7 +14,10 @@ composite-sinusoid references against the model-based BEM (eq. 9 vs 14):
 * ``(d) conformal, static q_u``: c σ̃ with c the split-conformal 95 % quantile of
   |q_u − μ(x_0^e)| / σ̃(x_0^e) on held-out samples where the pendulum is nearly at rest
   (|q̇_u|, |q̈_u| in their lowest 20 %): a model-free BEM residual proxy;
-* ``(e) replicas``: c σ̃ with c from trial-split replicas (:mod:`bemlearn.fitting.calibration`).
+* ``(e) replicas``: c σ̃ with c from trial-split replicas (:mod:`bemlearn.fitting.calibration`);
+* ``(f) estimator neighbours``: √(σ̃² + σ_est²), σ_est the BEM's spread when the training rows'
+  derivatives come from the neighbouring estimators (:mod:`bemlearn.fitting.estimator_sensitivity`);
+* ``chosen``: (e) + (a') + (f), the band ``bemlearn train`` computes (eq. B1).
 
 (c) heteroscedastic noise is (b): NIGP *is* a heteroscedastic GP whose noise variance is
 ∇μᵀΣ_x∇μ.  Reported per band: coverage of the model BEM by μ ± 2σ, median σ / RMSE(μ), the
@@ -36,6 +39,7 @@ import torch
 
 from bemlearn.bench.uncertainty_cases import BenchCase, cartpole_case, config_case
 from bemlearn.fitting.calibration import gaussian_quantile
+from bemlearn.fitting.estimator_sensitivity import estimator_sensitivity
 from bemlearn.models.band import band_reference
 from bemlearn.models.input_noise import mean_gradient, quantization_input_std
 from bemlearn.pipeline.reliability import reliability_table
@@ -114,8 +118,9 @@ def _score(name, e, std, extra_train_s, extra_query_us, val=None) -> dict:
     return row
 
 
-def _query_costs(state) -> dict[str, float]:
-    """Extra eager-torch cost of a B = 1 query over the folded mean + latent std: scalar scale, gradient."""
+def _query_costs(state, banded=None) -> dict[str, float]:
+    """Extra eager-torch cost of a B = 1 query over the folded mean + latent std: scalar scale, gradient,
+    and (``banded``) the whole calibrated band as the exported ``forward`` computes it."""
     from bemlearn.export.folded_posterior import FoldedPosterior
     from bemlearn.export.variance_factor import variance_factor
 
@@ -138,7 +143,30 @@ def _query_costs(state) -> dict[str, float]:
     grad = t(lambda: (torch.mm(fp._kernel(x), G) ** 2).sum(1) + fp._mean_std(x)[1])
     k = fp._kernel(x)
     only_grad = t(lambda: (torch.mm(k, G) ** 2).sum(1))
-    return {"base_us": base, "scale_us": max(0.0, scaled - base), "gradient_us": only_grad, "gradient_total_us": grad}
+    out = {"base_us": base, "scale_us": max(0.0, scaled - base), "gradient_us": only_grad, "gradient_total_us": grad}
+    if banded is not None:
+        fb = FoldedPosterior(banded, variance_factor(banded), n_inputs=banded.dim - 2)
+        out["band_total_us"] = t(lambda: fb._mean_band(x))
+        out["band_us"] = max(0.0, out["band_total_us"] - base)
+    return out
+
+
+def _oracle_rmse(state, traj, case: BenchCase, tr, x, q) -> float | None:
+    """BEM RMSE of the GP (same hyperparameters, same rows and labels) conditioned on the exact q̇, q̈
+    of the data's ground-truth file (``<stem>.truth<suffix>``), or ``None`` without one: how much of
+    μ's error the derivative estimates cause."""
+    from bemlearn.data.features import gp_inputs
+    from bemlearn.data.trajectory_io import ground_truth_path, read_ground_truth
+    from bemlearn.fitting.calibration import condition_state
+
+    path = ground_truth_path(case.data_path)
+    if not path.is_file():
+        return None
+    truth = read_ground_truth(path)
+    rows = tr.row.numpy()
+    xt = torch.as_tensor(gp_inputs(truth.q[rows], truth.qd[rows], truth.qdd[rows], unactuated_index=traj.meta.unactuated_index))
+    mean = condition_state(state, xt, tr.y).predict_reference(x)[0].numpy()
+    return float(np.sqrt(np.mean((mean - q) ** 2)))
 
 
 def run_case(case: BenchCase, *, progress=print) -> dict:
@@ -216,17 +244,33 @@ def run_case(case: BenchCase, *, progress=print) -> dict:
     c_d = max(1.0, float(np.quantile(scores, 0.95)) / gaussian_quantile(0.95))
     d_s = time.perf_counter() - t0
     rows.append(_score(f"(d) conformal, static-q_u proxy (c = {c_d:.2f})", e, c_d * lat, d_s, costs["scale_us"], val_cov(c_d * lv)))
-    # (e) trial-split replicas, and the chosen band (e) + (a') exactly as `bemlearn train` computes it
+    # (e) trial-split replicas, (f) estimator neighbours, and the chosen band (e) + (a') + (f) exactly as
+    # `bemlearn train` computes it
     t0 = time.perf_counter()
-    banded, summary = calibrate_band(state, traj, cfg.dataset, seed=cfg.dataset.seed)
+    banded, summary = calibrate_band(state, traj, cfg.dataset, train_rows=tr.row, seed=cfg.dataset.seed)
     e_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    estimator_sensitivity(state, traj, est, tr.row)
+    f_s = time.perf_counter() - t0
+    costs = _query_costs(state, banded)
     c = float(banded.std_scale)
-    rows.append(_score(f"(e) trial-split replicas (c = {c:.2f})", e, c * lat, e_s, costs["scale_us"], val_cov(c * lv)))
+    rows.append(_score(f"(e) trial-split replicas (c = {c:.2f})", e, c * lat, e_s - f_s, costs["scale_us"], val_cov(c * lv)))
+    only_f = dataclasses.replace(state, estimator_delta=banded.estimator_delta)
+    rows.append(_score(f"(f) estimator neighbours, K = {banded.n_estimators}", e,
+                       band_reference(only_f, x, n_inputs=state.dim - 2)[1].numpy(), f_s, costs.get("band_us", 0.0),
+                       val_cov(band_reference(only_f, xv)[1].numpy())))
+    no_f = dataclasses.replace(banded, estimator_delta=None)
+    rows.append(_score("(e) + (a')", e, band_reference(no_f, x, n_inputs=state.dim - 2)[1].numpy(), e_s - f_s,
+                       costs["gradient_us"], val_cov(band_reference(no_f, xv)[1].numpy())))
     band = band_reference(banded, x, n_inputs=state.dim - 2)[1].numpy()
     band_v = band_reference(banded, xv)[1].numpy()
-    rows.append(_score(f"chosen: (e) + (a'), √(c²σ̃² + σ_in²) (c = {c:.2f})", e, band, e_s, costs["gradient_us"], val_cov(band_v)))
+    rows.append(_score(f"chosen: (e) + (a') + (f), eq. B1 (c = {c:.2f})", e, band, e_s, costs["band_us"], val_cov(band_v)))
     cal = summary["replicas"] or {}
-    return {"robot": case.name, "fit_s": fit_s, "rmse": rmse, "max_abs": float(np.abs(e).max()), "n_points": int(e.size),
+    oracle = _oracle_rmse(state, traj, case, tr, x, q)
+    if oracle is not None:
+        progress(f"{case.name}: the same GP conditioned on the simulator's exact q̇, q̈ at the same rows: BEM RMSE {oracle:.5f} "
+                 f"(estimated derivatives: {rmse:.5f})")
+    return {"robot": case.name, "oracle_rmse": oracle, "fit_s": fit_s, "rmse": rmse, "max_abs": float(np.abs(e).max()), "n_points": int(e.size),
             "costs": costs, "rows": rows, "calibration": cal, "nigp_input_std": s2.sqrt().tolist(),
             "quantization_input_std": s_q.tolist(), "input_names": list(tr.input_names), "nigp_noise": nigp_noise}
 
@@ -255,7 +299,7 @@ def run_seed_sweep(case: BenchCase, seeds, *, progress=print) -> list[dict]:
         model, lik, _ = train_gp(tr.x_normalized, tr.y_normalized, config=cfg.train)
         st = predictor_state(model, lik, x_mean=tr.x_mean, x_std=tr.x_std, y_mean=tr.y_mean, y_std=tr.y_std,
                              input_names=tr.input_names, n_train=len(tr))
-        st, summary = calibrate_band(st, traj, dcfg, seed=int(seed))
+        st, summary = calibrate_band(st, traj, dcfg, train_rows=tr.row, seed=int(seed))
         ev = evaluate_bem(st, robot, held_out_references(ev_cfg, robot.m), duration_s=ev_cfg.duration_s, rate_hz=ev_cfg.rate_hz)
         row = {"robot": case.name, "seed": int(seed), "rmse": ev["rmse"], "latent": ev["coverage_2sigma_latent"],
                "band": ev["coverage_2sigma_band"], "median_over_rmse": ev["median_band_std_over_rmse"],
@@ -295,7 +339,8 @@ def format_uncertainty_bench(results: list[dict]) -> str:
     """One Markdown table per robot."""
     lines = []
     for r in results:
-        lines += [(f"\n{r['robot']}: BEM RMSE {r['rmse']:.5f}, max {r['max_abs']:.5f} over {r['n_points']} held-out points; "
+        oracle = "" if r.get("oracle_rmse") is None else f" (with the simulator's exact q̇, q̈: {r['oracle_rmse']:.5f})"
+        lines += [(f"\n{r['robot']}: BEM RMSE {r['rmse']:.5f}{oracle}, max {r['max_abs']:.5f} over {r['n_points']} held-out points; "
                    f"fit {r['fit_s']:.1f} s; B = 1 eager query {r['costs']['base_us']:.1f} µs"),
                   ("| band | inside μ ± 2σ | median σ / RMSE | bound κ = 2 violated (nominal) | coverage at 50 / 90 / 99 % |"
                    " held-out q_u inside ±2√(σ²+σ_0²) | extra train (s) | extra query (µs) |"),

@@ -79,22 +79,25 @@ def cartpole_case(workdir: str | Path, *, n_trials: int = 24, progress: bool = F
     gains, 24 × 20 s of excitation collected at 400 Hz (4096-count encoders, 1.53 mm / mrad);
     held-out references of 5–10 cm, 0.1–1 Hz (|φ^e| ≲ 0.4 rad)."""
     from bemlearn.data.collect import collect
-    from bemlearn.data.trajectory_io import write_trajectory
+    from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
     from bemlearn.pipeline.config import PipelineConfig
     from bemlearn.pipeline.evaluation import EvaluationConfig
+    from bemlearn.pipeline.resolve import complete_section
 
     workdir = Path(workdir)
     workdir.mkdir(parents=True, exist_ok=True)
     xml = workdir / "cartpole_uncertainty.xml"
     xml.write_text(CARTPOLE_XML)
-    base = PipelineConfig()
+    base = PipelineConfig(robot=str(xml))
     col = dataclasses.replace(base.collect, n_trials=n_trials, duration_s=20.0, rate_hz=400.0, fall_window=0.6,
                               gains=_lqr_gains(xml, 400.0), gain_scale=(0.7, 1.3), amplitude=(0.01, 0.05),
                               frequency_hz=(0.1, 1.2), initial_qa=(-0.02, 0.02), input_units="N", seed=0)
-    cfg = dataclasses.replace(base, robot=str(xml), collect=col)
+    col = complete_section(str(xml), "collect", col)   # the fields not set above, derived from the model as `run` does
+    cfg = dataclasses.replace(base, collect=col)
     data_path = workdir / "cartpole.npz"
-    if not data_path.is_file():
-        data, _ = collect(str(xml), col, progress=progress)
+    if not data_path.is_file() or not ground_truth_path(data_path).is_file():
+        data, truth = collect(str(xml), col, progress=progress)
         write_trajectory(data, data_path)
-    ev = EvaluationConfig(amplitude_max=0.1, amplitude_min=0.05)
+        write_trajectory(truth, ground_truth_path(data_path))   # exact q̇, q̈: the bench's oracle diagnostic
+    ev = complete_section(str(xml), "evaluate", EvaluationConfig(amplitude_max=0.1, amplitude_min=0.05, frequency_hz=(0.1, 1.0)))
     return BenchCase("cartpole", cfg, data_path, ev)

@@ -227,12 +227,14 @@ def artifact_metadata(meta: PredictorMetadata, state: PredictorState) -> dict[st
             "forward_latent": ["mean", "latent_std"],
             "predict_full_latent": ["mean", "latent_std"],
             "std": "calibrated band: std² = std_scale² · latent_std² + Σ_i (input_std_i · ∂mean/∂x_i)² over the "
-                   "method's input columns (docs/uncertainty.md); observation noise excluded",
+                   "method's input columns + mean_k (mean's shift under neighbouring derivative estimator k)² "
+                   "(docs/uncertainty.md); observation noise excluded",
             "latent_std": "latent posterior std of f (eq. 12), observation noise excluded",
         },
         "uncertainty": {
             "std_scale": float(state.std_scale),
             "input_std": {name: float(v) for name, v in zip(meta.input_names, state.input_std.tolist())},
+            "n_estimators": state.n_estimators,
             "calibration": jsonable(meta.extra.get("uncertainty"), where="metadata.extra.uncertainty"),
         },
         "model": state.kind,

@@ -15,7 +15,7 @@ from __future__ import annotations
 import torch
 
 from bemlearn.export.variance_factor import kernel_gram
-from bemlearn.models.input_noise import mean_gradient
+from bemlearn.models.band import band_extra_variance
 from bemlearn.models.predictor_state import PredictorState
 
 __all__ = ["reference_posterior", "verify_predictor"]
@@ -87,11 +87,8 @@ def verify_predictor(
     for name, x, ref_x, n_in, band in cases:
         mean, std = getattr(predictor, name)(x)
         ref_mean, ref_std, bound = reference_posterior(state, ref_x)
-        if band:  # eq. (B1): c² σ² + Σ_{i < n_in} (s_i ∂μ/∂x_i)²
-            s = state.input_std.clone()
-            s[n_in:] = 0.0
-            var_in = ((mean_gradient(state, ref_x) * s) ** 2).sum(-1)
-            ref_std = (state.std_scale**2 * ref_std.square() + var_in).sqrt()
+        if band:  # eq. (B1): c² σ² + Σ_{i < n_in} (s_i ∂μ/∂x_i)² + the estimator term
+            ref_std = (state.std_scale**2 * ref_std.square() + band_extra_variance(state, ref_x, n_inputs=n_in)).sqrt()
             bound = bound * float(state.std_scale) ** 2
         dm = float((mean - ref_mean).abs().max())
         dv = float(((std.square() - ref_std.square()).abs() / (ref_std.square() + bound / var_rtol)).max())

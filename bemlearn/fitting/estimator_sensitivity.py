@@ -83,8 +83,8 @@ class EstimatorSensitivity:
     Attributes:
         delta: ``(M, K)`` δ_k of (E2), normalized output units (the state's ``estimator_delta``).
         estimators: a description of each neighbour, e.g. ``"savgol(window=49, polyorder=4)"``.
-        rms_shift: per neighbour, the RMS over the queries of y_std k_Zᵀ δ_k, the output's unit
-            (``None`` without queries).
+        rms_shift, median_shift: per neighbour, the RMS and the median over the queries of
+            |y_std k_Zᵀ δ_k|, the output's unit (``None`` without queries).
         trials_kept_base: per neighbour, trials too short for it, whose rows keep the chosen
             estimator's values (their δ contribution is 0).
     """
@@ -93,10 +93,12 @@ class EstimatorSensitivity:
     estimators: tuple[str, ...]
     rms_shift: tuple[float, ...] | None
     trials_kept_base: tuple[int, ...]
+    median_shift: tuple[float, ...] | None = None
 
     def to_dict(self) -> dict:
         """JSON-able summary (for metadata and metrics)."""
         return {"estimators": list(self.estimators), "rms_shift": None if self.rms_shift is None else list(self.rms_shift),
+                "median_shift": None if self.median_shift is None else list(self.median_shift),
                 "trials_kept_base": list(self.trials_kept_base), "n_neighbours": len(self.estimators)}
 
 
@@ -159,11 +161,14 @@ def estimator_sensitivity(state: PredictorState, traj: Trajectory, estimator, ro
         deltas.append(projected_weights(state, xk, y) - a0)
         shorts.append(short)
     delta = torch.stack(deltas, 1)
-    rms = None
+    rms = med = None
     if queries is not None:
         kq = _cross(state, (queries.to(torch.float64) - state.x_mean) / state.x_std).mT      # (Q, M)
         shift = state.y_std * (kq @ delta)
         rms = tuple(float(v) for v in shift.square().mean(0).sqrt())
-    out = EstimatorSensitivity(delta, tuple(_describe(e) for e in neighbours), rms, tuple(shorts))
-    log.info("estimator term: %s", ", ".join(f"{n}: {r:.3g}" for n, r in zip(out.estimators, rms or [float("nan")] * len(neighbours))))
+        med = tuple(float(v) for v in shift.abs().median(0).values)
+    out = EstimatorSensitivity(delta, tuple(_describe(e) for e in neighbours), rms, tuple(shorts), med)
+    if rms is not None:
+        log.info("estimator term, BEM shift at the queries (RMS / median): %s",
+                 ", ".join(f"{n}: {r:.3g} / {m:.3g}" for n, r, m in zip(out.estimators, rms, med)))
     return out

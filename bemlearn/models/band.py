@@ -20,7 +20,7 @@ import torch
 from bemlearn.models.input_noise import mean_gradient
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["band_reference"]
+__all__ = ["band_extra_variance", "band_reference"]
 
 
 def band_reference(state: PredictorState, x: torch.Tensor, *, n_inputs: int | None = None
@@ -30,18 +30,25 @@ def band_reference(state: PredictorState, x: torch.Tensor, *, n_inputs: int | No
     Args:
         n_inputs: columns 0..n−1 carry input noise (default d); the rest are exact.
     """
+    mean, latent = state.predict_reference(x)
+    extra = band_extra_variance(state, x, n_inputs=n_inputs)
+    return mean, torch.sqrt(state.std_scale**2 * latent**2 + extra), latent
+
+
+def band_extra_variance(state: PredictorState, x: torch.Tensor, *, n_inputs: int | None = None) -> torch.Tensor:
+    """The terms of (B1) beyond the scaled latent variance, ``(B,)`` rad², for physical ``x (B, d)``:
+    Σ_{i < n} (s_i ∂μ/∂x_i)² + (1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)²."""
     n = state.dim if n_inputs is None else n_inputs
     if not 1 <= n <= state.dim:
         raise ValueError(f"band_reference: n_inputs: expected 1..{state.dim}, got {n}")
-    mean, latent = state.predict_reference(x)
     s = state.input_std.clone()
     s[n:] = 0.0
-    var_in = torch.zeros_like(mean)
+    var = torch.zeros(x.shape[0], dtype=torch.float64, device=x.device)
     if bool((s > 0).any()):
-        var_in = ((mean_gradient(state, x) * s) ** 2).sum(-1)
+        var = var + ((mean_gradient(state, x) * s) ** 2).sum(-1)
     if state.n_estimators:
         xt = (x.to(torch.float64) - state.x_mean) / state.x_std
         diff = (xt[:, None, :] - state.Z[None, :, :]) / state.lengthscale
         k = state.outputscale * torch.exp(-0.5 * (diff**2).sum(-1))          # (B, M)
-        var_in = var_in + (state.y_std * (k @ state.estimator_delta)).square().mean(-1)
-    return mean, torch.sqrt(state.std_scale**2 * latent**2 + var_in), latent
+        var = var + (state.y_std * (k @ state.estimator_delta)).square().mean(-1)
+    return var

@@ -82,6 +82,19 @@ def write_report(out: str | Path, *, config, resolved, data: dict, train: dict, 
         if (out / "reliability.png").is_file():
             lines += ["Reliability of the band: coverage of the model BEM against the nominal level (50–99 %).", "",
                       "![reliability](reliability.png)", ""]
+    unc = train.get("uncertainty")
+    if unc:
+        est = unc.get("estimator_term") or {}
+        names = est.get("estimators") or []
+        med = est.get("median_shift") or [None] * len(names)
+        lines += ["### The exported std (calibrated band, eq. B1)", "",
+                  f"std² = c² · latent std² + Σ_i (s_i ∂μ/∂x_i)² + mean over the neighbouring derivative estimators of the BEM's "
+                  f"shift²; c = {_f(unc.get('std_scale'), '.3f')} (trial-split replicas); "
+                  + ("s from the quantization steps " + ", ".join(f"{k} {v:.3g} {train.get('units', {}).get(f'q_{k}', 'rad')}" for k, v in (unc.get("quantization_step") or {}).items())
+                     if unc.get("quantization_step") else "no quantization grid detected (s = 0)") + "; "
+                  + (f"{len(names)} neighbouring estimators (median BEM shift at held-out queries, {unit}): "
+                     + ", ".join(f"{n} {_f(m, '.2g')}" for n, m in zip(names, med)) if names else "no estimator term (the estimator has no neighbours)")
+                  + ".", ""]
     lines += ["## Exported predictor", *[f"- `{p.name}`" for p in export], ""]
     if sim:
         qa_unit = "/".join(sorted({v for k, v in train.get("units", {}).items() if k.startswith("q_")})) or "rad"
