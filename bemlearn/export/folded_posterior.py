@@ -28,7 +28,7 @@ q_i = W[·, n + i] (the same −½ a_i² or −½ in every row), ∂e_j/∂x_i =
 
     h = exp(e) G,   G = [w_j s_i ρ_i P_ji | w_j | y_std σ_f² δ_jk / √K]  (M + 1, n + 1 + K), sentinel row 0
     g_i = h_i + γ_i v_i h_n,   γ_i = 2 q_i s_i ρ_i           (g_i = s_i ∂μ/∂x_i, rad)
-    σ_band(x) = sqrt(c² max(0, y_std² σ_f² − Σ_i s_i v_i²) + Σ_i g_i² + Σ_k h_{n+1+k}²)
+    σ_band(x) = sqrt(c² max(0, y_std² σ_f² − Σ_i s_i v_i²) + max(Σ_i g_i², Σ_k h_{n+1+k}²))
 
 (one ``mm`` of the (B, M + 1) row with an (M + 1, n + 1 + K) matrix more than the latent std;
 c = ``std_scale``, s = ``input_std``, δ = ``estimator_delta`` (K columns) of the state; with
@@ -235,7 +235,7 @@ class FoldedPosterior(nn.Module):
             n = self.n_inputs
             g = torch.addcmul(h[:, :n], v * h[:, n : n + 1], self.gamma)
             e = h[:, n + 1 :]
-            extra = torch.linalg.vecdot(g, g) + torch.linalg.vecdot(e, e)
+            extra = torch.maximum(torch.linalg.vecdot(g, g), torch.linalg.vecdot(e, e))
             return mean, torch.add(extra, var, alpha=self.scale2).sqrt_()
         return mean, var.mul_(self.scale2).sqrt_()
 

@@ -24,7 +24,7 @@ derivative estimator's quantization noise in each input column, :mod:`bemlearn.m
 and ``estimator_delta`` δ (how the mean weights move under the neighbouring derivative
 estimators, :mod:`bemlearn.fitting.estimator_sensitivity`):
 
-    σ_band(x)² = c² y_std² σ̃²(x̃) + Σ_{i ∈ inputs} (s_i ∂μ/∂x_i)² + (1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)²
+    σ_band(x)² = c² y_std² σ̃²(x̃) + max(Σ_{i ∈ inputs} (s_i ∂μ/∂x_i)², (1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)²)
 
 over the columns the caller supplies (3m at x_0^e, all d for the full map).  Defaults
 c = 1, s = 0, K = 0 give σ_band = σ (checkpoints written before these fields).  S need not be

@@ -88,8 +88,8 @@ def write_report(out: str | Path, *, config, resolved, data: dict, train: dict, 
         names = est.get("estimators") or []
         med = est.get("median_shift") or [None] * len(names)
         lines += ["### The exported std (calibrated band, eq. B1)", "",
-                  f"std² = c² · latent std² + Σ_i (s_i ∂μ/∂x_i)² + mean over the neighbouring derivative estimators of the BEM's "
-                  f"shift²; c = {_f(unc.get('std_scale'), '.3f')} (trial-split replicas); "
+                  f"std² = c² · latent std² + max(Σ_i (s_i ∂μ/∂x_i)², mean over the neighbouring derivative estimators of the BEM's "
+                  f"shift²); c = {_f(unc.get('std_scale'), '.3f')} (trial-split replicas); "
                   + ("s from the quantization steps " + ", ".join(f"{k} {v:.3g} {train.get('units', {}).get(f'q_{k}', 'rad')}" for k, v in (unc.get("quantization_step") or {}).items())
                      if unc.get("quantization_step") else "no quantization grid detected (s = 0)") + "; "
                   + (f"{len(names)} neighbouring estimators (median BEM shift at held-out queries, {unit}): "

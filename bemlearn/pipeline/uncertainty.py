@@ -1,6 +1,6 @@
 """The calibrated BEM band of a training run: c, s and δ of eq. (B1) from the data alone.
 
-    σ_band(x)² = c² σ(x)² + Σ_{i ∈ inputs} (s_i ∂μ/∂x_i)² + (1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)²   (B1)
+    σ_band(x)² = c² σ(x)² + max(Σ_{i ∈ inputs} (s_i ∂μ/∂x_i)², (1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)²)   (B1)
 
 * s (``PredictorState.input_std``): the derivative estimator's noise gains applied to the
   quantization step detected in each joint's recorded angles (eq. N3,
@@ -62,7 +62,7 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, train_rows: t
     g = torch.Generator().manual_seed(seed)
     queries = source.x[torch.randperm(len(source), generator=g)[:n_queries]].clone()
     queries[:, -2:] = 0.0                                  # x_0^e: q̈_u = q̇_u = 0 (eq. 14)
-    summary: dict = {"formula": "std² = std_scale² · latent_std² + Σ_i (input_std_i ∂mean/∂x_i)² + mean_k (y_std k_Z(x)ᵀ estimator_delta_k)²",
+    summary: dict = {"formula": "std² = std_scale² · latent_std² + max(Σ_i (input_std_i ∂mean/∂x_i)², mean_k (y_std k_Z(x)ᵀ estimator_delta_k)²)",
                      "quantization_step": steps, "input_std": dict(zip(state.input_names, s.tolist())),
                      "estimator": est.name, "queries_from": "validation trials" if len(pool.val) else "training trials"}
     try:
