@@ -12,8 +12,9 @@ traces.  Its methods (the contract of docs/predictor-contract.md):
                      of artifacts written before the calibrated band
     metadata()       JSON string (robot, columns, units, model, provenance)
 
-``std`` is the calibrated band σ_band² = c² σ² + Σ_i (s_i ∂μ/∂x_i)² over the method's input
-columns (:mod:`bemlearn.models.band`, docs/uncertainty.md); c and s are in the metadata.
+``std`` is the calibrated band σ_band² = c² σ² + max(Σ_i (s_i ∂μ/∂x_i)², σ_est²) over the method's
+input columns, σ_est the mean's spread over the neighbouring derivative estimators
+(:mod:`bemlearn.models.band`, docs/uncertainty.md); c, s and the estimators are in the metadata.
 
 Inputs of the wrong rank, width or dtype, an empty batch, and non-finite inputs raise
 ValueError from inside the TorchScript module (``torch.jit.Error`` in Python, message

@@ -17,7 +17,8 @@ angles quantized with step Δ (white, variance Δ²/12), the filter is linear, s
 
 with h₁, h₂ the centre-sample first- and second-derivative coefficients of the filter
 (window w, polynomial order p, sample time 1/f_s).  bemlearn measures (N1) in
-``bemlearn bench uncertainty``; it is not the default band (see docs/uncertainty.md).
+``bemlearn bench uncertainty``; the default band takes the larger of (N1) and the estimator
+term of :mod:`bemlearn.fitting.estimator_sensitivity` (eq. B1 of :mod:`bemlearn.models.band`).
 """
 
 from __future__ import annotations
