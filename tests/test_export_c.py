@@ -4,7 +4,8 @@ Each case is compiled with ``cc -std=c99 -Wall -Werror -O2`` into a shared libra
 through ctypes, one query per call, on random in-range inputs; the reference is the
 TorchScript file of the same posterior: float64 mean within 1e-10 rad, std within 1e-8
 relative (exact, sgpr, svgp; m = 1, 2), for the calibrated band of ``forward`` /
-``predict_full`` (eq. B1, with std_scale c ≠ 1 and nonzero input_std s) and the latent std of
+``predict_full`` (eq. B1, with std_scale c ≠ 1 and nonzero input_std s; also with K = 4 random
+estimator columns δ, with and without input noise) and the latent std of
 ``forward_latent`` / ``predict_full_latent``.  float32 is held to the tolerances the export
 enforces (mean 1e-4 rad, std 1e-2 relative) and to 4× the export's own error estimate.
 """
@@ -34,6 +35,8 @@ N_QUERY = 2000
 #: The band of the tests: c = 1.7 and s_i = 0.5 x_std_i (the gradient term is 18–98 % of the band² somewhere).
 STD_SCALE = 1.7
 INPUT_STD_FRACTION = 0.5
+#: Estimator columns of the band's estimator term in the tests with one (eq. E2; K = 4 in practice).
+N_ESTIMATORS = 4
 
 CASES = {
     "exact-m1": (_exact_case, 300, 1),
@@ -63,6 +66,28 @@ def _banded(state):
     """``state`` with the calibrated band switched on: c = STD_SCALE, s = INPUT_STD_FRACTION · x_std."""
     return dataclasses.replace(state, std_scale=torch.tensor(STD_SCALE, dtype=torch.float64),
                                input_std=INPUT_STD_FRACTION * state.x_std)
+
+
+def _estimator_term(state, x):
+    """(1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)², rad², for physical ``x (B, n)`` (columns n.. held at 0), dense."""
+    x0 = np.zeros((x.shape[0], state.dim))
+    x0[:, : x.shape[1]] = x
+    xt = (torch.from_numpy(x0) - state.x_mean) / state.x_std
+    diff = (xt[:, None, :] - state.Z[None]) / state.lengthscale
+    k = state.outputscale * torch.exp(-0.5 * diff.square().sum(-1))
+    return (state.y_std * (k @ state.estimator_delta)).square().mean(-1).numpy()
+
+
+def _with_estimators(state, m, *, seed=11):
+    """``state`` with N_ESTIMATORS random estimator columns δ (M, K), scaled so that on in-range BEM inputs the
+    estimator term's median equals the median of c² latent² (the state's own c)."""
+    g = torch.Generator().manual_seed(seed)
+    delta = torch.randn(state.n_support, N_ESTIMATORS, generator=g, dtype=torch.float64)
+    x, _, _ = _in_range(state, 500, seed=12, width=3 * m)
+    x0 = torch.cat([torch.from_numpy(x), torch.zeros(len(x), state.dim - 3 * m, dtype=torch.float64)], 1)
+    latent2 = float(state.std_scale) ** 2 * state.predict_reference(x0)[1].square().numpy()
+    term = _estimator_term(dataclasses.replace(state, estimator_delta=delta), x)
+    return dataclasses.replace(state, estimator_delta=delta * float(np.sqrt(np.median(latent2) / np.median(term))))
 
 
 @pytest.fixture(scope="module", params=list(CASES))
@@ -133,7 +158,7 @@ def test_header_metadata_matches_torchscript(case):
     doc = json.loads(lib.metadata_json)
     c = doc.pop("c_export")
     assert doc == json.loads(ts.metadata())
-    assert c["dtype"] == "float64" and c["error_codes"]["BEM_ERR_OUT_OF_RANGE"] == 2
+    assert c["dtype"] == "float64" and c["error_codes"]["BEM_ERR_OUT_OF_RANGE"] == 2 and c["n_estimators"] == 0
     lo, hi = support_box(state.Z, state.x_mean, state.x_std, state.lengthscale)
     assert np.array_equal(c["input_range"]["lo"], lo[: 3 * meta.m]) and np.array_equal(c["input_range"]["full_hi"], hi)
 
@@ -307,3 +332,77 @@ def test_vectorized_exp_matches_libm(tmp_path):
     assert np.array_equal(ours[~np.isfinite(ref)], ref[~np.isfinite(ref)])   # overflow: libm's inf
     for special in (np.nan, np.inf, -np.inf):
         assert np.array_equal(lib.bem_test_exp(special), lib.bem_libm_exp(special), equal_nan=True)
+
+
+ESTIMATOR_CASES = ["exact-m1", "sgpr-m2", "svgp-m1"]
+
+
+@pytest.fixture(scope="module", params=[(name, noise) for name in ESTIMATOR_CASES for noise in (True, False)],
+                ids=lambda p: f"{p[0]}-{'noise' if p[1] else 'no-noise'}")
+def estimator_case(request, tmp_path_factory):
+    """K = 4 estimator columns, with input noise (all three terms of eq. B1) or without (s = 0: banded only
+    through the estimator term)."""
+    name, noise = request.param
+    build, n, m = CASES[name]
+    _, state = build(n, m, seed=7)
+    state = _banded(state) if noise else dataclasses.replace(state, std_scale=torch.tensor(STD_SCALE, dtype=torch.float64))
+    state = _with_estimators(state, m)
+    meta = _metadata(state, m)
+    tmp = tmp_path_factory.mktemp(f"{name}-est")
+    lib, ts = _build(state, meta, tmp)
+    return state, meta, lib, ts, noise, tmp
+
+
+@pytest.mark.parametrize("full", [False, True], ids=["bem", "full"])
+def test_c_band_with_estimator_term_matches_torchscript(estimator_case, full):
+    """bem_forward / bem_predict_full with K = 4 estimator columns against TorchScript's forward / predict_full."""
+    state, meta, lib, ts, noise, _ = estimator_case
+    x, _, _ = _in_range(state, N_QUERY, seed=1, width=state.dim if full else 3 * meta.m)
+    x = np.ascontiguousarray(x)
+    xt = torch.from_numpy(x)
+    band_ref, latent_ref = (ts.predict_full, ts.predict_full_latent) if full else (ts.forward, ts.forward_latent)
+    ref_mean, ref_std = (t.numpy() for t in band_ref(xt))
+    ref_latent = latent_ref(xt)[1].numpy()
+    mean, std, codes = lib.forward(x, full=full)
+    _, latent, _ = lib.forward(x, full=full, latent=True)
+    assert np.all(codes == 0)
+    assert np.abs(mean - ref_mean).max() <= MEAN_ATOL
+    assert np.abs(std / ref_std - 1).max() <= STD_RTOL
+    assert np.abs(latent / ref_latent - 1).max() <= STD_RTOL
+    assert np.array_equal(lib.mean(x, full=full), mean)
+    # the estimator term (dense, independent of the export) is a sizable part of the band² somewhere
+    est_share = _estimator_term(state, x) / ref_std**2
+    assert est_share.max() >= 0.15
+    if not noise:   # s = 0: band² = c² latent² + the estimator term alone
+        np.testing.assert_allclose(std**2, STD_SCALE**2 * latent**2 + _estimator_term(state, x), rtol=1e-8, atol=0)
+
+
+def test_estimator_term_header_and_constants(estimator_case):
+    """N_ESTIMATORS, one shared E array; without input noise no gradient code (BANDED 0), the E term still there."""
+    state, meta, lib, ts, noise, tmp = estimator_case
+    text, header = (tmp / "bem_predictor.c").read_text(), (tmp / "bem_predictor.h").read_text()
+    assert f"#define BEM_N_ESTIMATORS {N_ESTIMATORS}" in header
+    assert f"static const double bem_E[{N_ESTIMATORS * state.n_support}]" in text and "bem_bem_E" not in text
+    assert f"#define BEM_BANDED {int(noise)}" in header and f"#define BEM_FULL_BANDED {int(noise)}" in header
+    assert ("bem_full_P" in text) == noise
+    assert json.loads(lib.metadata_json)["c_export"]["n_estimators"] == N_ESTIMATORS
+
+
+@pytest.mark.parametrize("name", ["sgpr-m2", "exact-m1"])
+def test_float32_with_estimator_term_within_its_stated_error(name, tmp_path):
+    """float32 band with K = 4 estimator columns (BEM and full map) within the tolerances and 4× the estimate."""
+    build, n, m = CASES[name]
+    _, state = build(n, m, seed=7)
+    state = _with_estimators(_banded(state), m)
+    meta = _metadata(state, m)
+    lib, ts = _build(state, meta, tmp_path, prefix="bem32", dtype="float32")
+    est = json.loads(lib.metadata_json)["c_export"]["float32_error"]
+    for full in (False, True):
+        x, _, _ = _in_range(state, N_QUERY, seed=3, width=state.dim if full else 3 * m)
+        x = x.astype(np.float32).astype(np.float64)
+        mean, std, codes = lib.forward(x, full=full)
+        ref_mean, ref_std = (t.numpy() for t in (ts.predict_full if full else ts.forward)(torch.from_numpy(x)))
+        err_mean, err_std = np.abs(mean - ref_mean).max(), np.abs(std / ref_std - 1).max()
+        assert np.all(codes == 0)
+        assert err_mean <= 1e-4 and err_std <= 1e-2
+        assert err_mean <= 4 * est["mean_abs"] + 1e-7 and err_std <= 4 * est["std_rel"] + 1e-6

@@ -11,11 +11,13 @@ x ∈ R^n (n = 3m for the BEM, n = 3m + 2 for the full map of eq. 11)
     sgpr, svgp:  v = G exp(e),  G = y_std σ_f² F           (dense matvec)
 
 and the calibrated band of ``forward`` / ``predict_full`` (eq. B1, :mod:`bemlearn.models.band`)
-from the same kernel row, with h_i = Σ_j P_ij exp(e_j) (P = the FoldedPosterior's gradient
-matrix ``G`` without its last column, which is w) and h_n = Σ_j w_j exp(e_j) = μ − y_mean:
+from the same kernel row, with the FoldedPosterior's band matrix ``G = [P | w | E]`` (columns
+[0, n) the gradient weights P, column n the mean weights w, columns n + 1 .. n + K the
+estimator weights E = y_std σ_f² δ / √K), h_i = Σ_j P_ij exp(e_j), h_n = Σ_j w_j exp(e_j) = μ − y_mean
+and ε_k = Σ_j E_kj exp(e_j) = y_std k_Z(x̃)ᵀ δ_k / √K:
 
     g_i = h_i + γ_i v_i h_n                     (g_i = s_i ∂μ/∂x_i, rad)
-    σ_band(x) = sqrt(c² σ(x)² + Σ_i g_i²),      c² = ``scale2``
+    σ_band(x) = sqrt(c² σ(x)² + Σ_i g_i² + Σ_k ε_k²),      c² = ``scale2``
 
 Only e_j differs between the two C forms:
 
@@ -67,10 +69,14 @@ class CPosterior:
         triangular: exact GP: ``factor`` is the packed lower-triangular L/(y_std σ_f²).
         factor: packed lower triangle ``(M(M+1)/2,)`` (triangular) or dense ``(M, M)`` G.
         signs: ``(M,)`` ±1 of a signed factor, or ``None``.
-        banded: whether any input column has input noise (s_i > 0); else P and γ are zero.
+        banded: whether the band has an input-noise (gradient) term, i.e. some input column has
+            s_i > 0 (then γ_i ≠ 0); else P and γ are zero.  Not ``FoldedPosterior.banded``,
+            which is also true for estimator columns alone.
         P: ``(n, M)`` gradient weights w_j s_i ρ_i W_ji (input-major), rad.
         gamma: ``(n,)`` γ_i = 2 q_i s_i ρ_i of the band's gradient term.
         scale2: c², the square of the band's ``std_scale``.
+        E: ``(K, M)`` estimator weights y_std σ_f² δ_jk / √K (estimator-major), rad; K = 0: no
+            estimator term.
     """
 
     form: Literal["folded", "distance"]
@@ -90,10 +96,16 @@ class CPosterior:
     P: np.ndarray
     gamma: np.ndarray
     scale2: float
+    E: np.ndarray
 
     @property
     def n_inputs(self) -> int:
         return int(self.a.shape[0])
+
+    @property
+    def n_estimators(self) -> int:
+        """K, the band's estimator columns."""
+        return int(self.E.shape[0])
 
     @property
     def n_support(self) -> int:
@@ -114,8 +126,8 @@ def c_posterior(post: FoldedPosterior, *, form: Literal["folded", "distance"] = 
 
     Raises:
         ValueError: ``form="distance"`` on a raw-form posterior, or folded quadratic weights
-            that differ between support points, or a gradient matrix whose last column is not
-            the mean weights (not a FoldedPosterior as documented).
+            that differ between support points, or a band matrix ``G`` whose column n is not
+            the mean weights or whose sentinel row is not zero (not a FoldedPosterior as documented).
     """
     n = post.n_inputs
     W = _np(post.W)
@@ -138,15 +150,18 @@ def c_posterior(post: FoldedPosterior, *, form: Literal["folded", "distance"] = 
     else:
         factor = np.ascontiguousarray(FT[:M, :M].T)  # v = G k, G = (gain F)
     w = _np(post.w)[:M]
-    G = _np(post.G)
-    if not np.array_equal(G[:M, n], w) or np.any(G[M:] != 0):
-        raise ValueError("FoldedPosterior.G: its last column must be the mean weights w and its sentinel row zero")
+    G = _np(post.G)                                 # (M + 1, n + 1 + K): [P | w | E]
+    if G.shape[1] < n + 1 or not np.array_equal(G[:M, n], w) or np.any(G[M:] != 0):
+        raise ValueError(f"FoldedPosterior.G: expected (M + 1, n + 1 + K) = ({M + 1}, {n + 1} + K) with column n the "
+                         f"mean weights w and the sentinel row zero, got shape {G.shape}")
+    gamma, P = _np(post.gamma), np.ascontiguousarray(G[:M, :n].T)
     y0 = float(_np(post.offset)[0]) + float(_np(post.w)[M])   # offset = y_mean − sentinel weight
     return CPosterior(
         form=form, centered=bool(post.centered) or form == "distance", a=_np(post.a), nb=_np(post.nb),
         W=np.ascontiguousarray(lin.T), W2=W2, c=c, w=w, y0=y0, var0=float(post.var0),
         triangular=bool(post.triangular), factor=factor, signs=_np(post.signs) if post.signed else None,
-        banded=bool(post.banded), P=np.ascontiguousarray(G[:M, :n].T), gamma=_np(post.gamma), scale2=float(post.scale2),
+        banded=bool(post.banded) and bool(np.any(gamma != 0) or np.any(P != 0)), P=P, gamma=gamma,
+        scale2=float(post.scale2), E=np.ascontiguousarray(G[:M, n + 1 :].T),
     )
 
 

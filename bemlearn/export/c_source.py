@@ -10,7 +10,9 @@ The C functions evaluate the folded posterior of the TorchScript module (eq. 12,
     <prefix>_predict_full(...)  as ``forward`` for f(x); ``<prefix>_predict_full_latent`` its latent std
 
 The std functions mirror the TorchScript ``forward``, ``forward_latent``, ``predict_full`` and
-``predict_full_latent``; the band's gradient term reads the module's ``G`` and ``gamma``.
+``predict_full_latent``; the band's gradient term reads the module's ``G`` (columns [0, n)) and
+``gamma``, its estimator term the K estimator columns of ``G`` (``<prefix>_E``, one copy for
+the BEM and the full map, K multiply-adds per support point).
 
 float64 uses the folded exponent of the TorchScript module (n multiply-adds and one ``exp``
 per support point, the exp a vectorizable block of :mod:`bemlearn.export.c_exp`); float32 uses the distance form on centered inputs, and is refused, with
@@ -34,7 +36,8 @@ from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.export.c_float32 import Float32Errors, float32_errors, sample_inputs
 from bemlearn.export.c_posterior import RANGE_LENGTHSCALES, CPosterior, c_posterior, support_box
 from bemlearn.export.c_exp import EXP_BLOCK_F64, EXP_BLOCK_LIBM
-from bemlearn.export.c_std_templates import BAND_GRADIENT, DENSE_STD, NO_BAND_GRADIENT, TRIANGULAR_STD
+from bemlearn.export.c_std_templates import (BAND_GRADIENT, DENSE_STD, ESTIMATOR_TERM, NO_BAND_GRADIENT, NO_ESTIMATOR_TERM,
+                                             TRIANGULAR_STD)
 from bemlearn.export.c_templates import DISTANCE_EXPONENTS, FOLDED_EXPONENTS, HEADER, POSTERIOR, SOURCE
 from bemlearn.export.folded_posterior import FoldedPosterior
 from bemlearn.export.metadata import PredictorMetadata
@@ -133,7 +136,7 @@ def _check_float32(predictor: BEMPredictor, state: PredictorState, bem: CPosteri
             f"dtype float32: this {state.kind} posterior cannot be evaluated accurately in float32: on {err.n} in-range "
             f"inputs each of the BEM and the full map the float32 mean is off by up to {err.mean_abs:.2g} rad (tolerance {mean_tol:g}), the std (calibrated "
             f"band) by {err.std_rel:.2g} and the latent std by {err.latent_std_rel:.2g} relative (tolerance "
-            f"{std_rtol:g}).  Why: the mean and the band's gradient terms are sums of terms w_j k_j up to "
+            f"{std_rtol:g}).  Why: the mean and the band's gradient and estimator terms are sums of terms w_j k_j up to "
             f"{err.weight_sum:.3g} rad in total that cancel, each k_j known to ~1e-6 relative in float32, and the "
             "latent std is sqrt(var0 - sum v_i^2), which cancels near the data.  Use dtype float64 (software double "
             "on an FPU without double precision)."
@@ -174,13 +177,14 @@ def c_sources(
     bem, full = _posteriors(predictor, state, dtype)
     n_bem, n_full, M = bem.n_inputs, full.n_inputs, bem.n_support
     if not (np.array_equal(bem.w, full.w) and bem.y0 == full.y0 and np.array_equal(bem.factor, full.factor)
-            and bem.scale2 == full.scale2):
-        raise AssertionError("c_sources: the BEM and full posteriors must share w, y0, the variance factor and c")
+            and bem.scale2 == full.scale2 and np.array_equal(bem.E, full.E)):
+        raise AssertionError("c_sources: the BEM and full posteriors must share w, y0, the variance factor, c and E")
+    K = bem.n_estimators
     lo, hi = support_box(state.Z, state.x_mean, state.x_std, state.lengthscale)
     doc = json.loads(predictor.metadata_json)
     f32 = _check_float32(predictor, state, bem, full, lo, hi, f32_mean_tol, f32_std_rtol) if dtype == "float32" else None
     doc["c_export"] = {
-        "prefix": p, "dtype": dtype, "form": bem.form,
+        "prefix": p, "dtype": dtype, "form": bem.form, "n_estimators": K,
         "error_codes": {f"{P}_{k}": v for k, v in ERROR_CODES.items()},
         "input_range": {"rule": f"support points' box +- {RANGE_LENGTHSCALES:g} lengthscales",
                         "lo": lo[:n_bem].tolist(), "hi": hi[:n_bem].tolist(),
@@ -210,13 +214,15 @@ def c_sources(
         f"static const {real} {p}_scale2 = {_literal(bem.scale2, dtype)};   /* std_scale^2 of the band */\n",
         _array(f"{p}_factor", bem.factor, dtype, real),
         "" if bem.signs is None else _array(f"{p}_signs", bem.signs, dtype, real),
+        _array(f"{p}_E", bem.E, dtype, real) if K else "",   # the band's estimator term (K x M)
     ])
     exp_block = (EXP_BLOCK_F64 if dtype == "float64" else EXP_BLOCK_LIBM).substitute(sub)
     source = SOURCE.substitute(
         sub, version=__version__, constants=constants, exp_block=exp_block,
         exponents="\n".join(exponents.substitute(sub, name=nm, n=n) for nm, n in (("bem", n_bem), ("full", n_full))),
-        std=std + "\n" + "\n".join((BAND_GRADIENT if post.banded else NO_BAND_GRADIENT).substitute(sub, name=nm, n=post.n_inputs)
-                                     for nm, post in (("bem", bem), ("full", full))),
+        std=std + "\n" + (ESTIMATOR_TERM if K else NO_ESTIMATOR_TERM).substitute(sub) + "\n"
+            + "\n".join((BAND_GRADIENT if post.banded else NO_BAND_GRADIENT).substitute(sub, name=nm, n=post.n_inputs)
+                         for nm, post in (("bem", bem), ("full", full))),
         posteriors="\n".join(POSTERIOR.substitute(sub, name=nm, n=n, lo=f"{p}_{pre}input_lo", hi=f"{p}_{pre}input_hi")
                               for nm, n, pre in (("bem", n_bem, ""), ("full", n_full, "full_"))),
     )
@@ -225,7 +231,7 @@ def c_sources(
     header = HEADER.substitute(
         sub, robot=doc["robot"], kind=state.kind, version=__version__, m=metadata.m, n_bem=n_bem, n_full=n_full,
         n_support=M, dtype=dtype, range_ls=f"{RANGE_LENGTHSCALES:g}", banded=int(bem.banded), full_banded=int(full.banded),
-        std_scale=f"{np.sqrt(bem.scale2):.6g}",
+        n_estimators=K, std_scale=f"{np.sqrt(bem.scale2):.6g}",
         bem_columns=", ".join(doc["inputs"]), full_columns=", ".join(doc["full_inputs"]),
         units="; ".join(f"{k} [{units[k]}]" for k in doc["full_inputs"]) + "; mean, std [rad]",
         stack_bytes=size * (M + 2 * BLOCK + n_full) + 1024,

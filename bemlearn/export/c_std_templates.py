@@ -1,15 +1,16 @@
-"""C99 text of the exported predictor's std: latent variance (eq. 12) and the band's gradient term (eq. B1).
+"""C99 text of the exported predictor's std: latent variance (eq. 12), the band's gradient and estimator terms (eq. B1).
 
 Filled by :mod:`c_source` with the placeholders of :mod:`c_templates` (``${p}``, ``${P}``,
 ``$real``), ``${name}`` (``bem`` or ``full``), ``$n`` (its input count) and, for the dense
 factor, ``$signed_term``.  ``${p}_latent_var(k)`` returns max(0, var0 − Σ s_i v_i²) and
 overwrites the kernel row k (exact GP); ``${p}_${name}_gradient2(v, k, h_n)`` returns Σ_i g_i²
-and must run before it.
+and ``${p}_estimator2(k)`` returns Σ_k ε_k² (one function for the BEM and the full map: the
+estimator weights E do not depend on the inputs); both must run before it.
 """
 
 from string import Template
 
-__all__ = ["TRIANGULAR_STD", "DENSE_STD", "BAND_GRADIENT", "NO_BAND_GRADIENT"]
+__all__ = ["TRIANGULAR_STD", "DENSE_STD", "BAND_GRADIENT", "NO_BAND_GRADIENT", "ESTIMATOR_TERM", "NO_ESTIMATOR_TERM"]
 
 # Exact GP: forward substitution (L / gain) v = k in place, L packed row by row; returns the
 # latent variance max(0, var0 − Σ v_i²).
@@ -96,6 +97,37 @@ NO_BAND_GRADIENT = Template(r"""static $real ${p}_${name}_gradient2(const $real 
     (void)v;
     (void)k;
     (void)hn;
+    return 0;
+}
+""")
+
+# Σ_k ε_k² of the band (eq. B1): ε_k = Σ_j E_kj k_j (four partial sums, like the gradient's h_i),
+# E_kj = y_std σ_f² δ_jk / √K, so ε_k = y_std k_Z(x̃)ᵀ δ_k / √K is the mean's shift under estimator k over √K.
+ESTIMATOR_TERM = Template(r"""static $real ${p}_estimator2(const $real *k)
+{
+    $real e, sum = 0, a0, a1, a2, a3;
+    int i, j;
+    for (i = 0; i < ${P}_N_ESTIMATORS; ++i) {
+        const $real *ei = ${p}_E + (size_t)i * ${P}_N_SUPPORT;
+        a0 = a1 = a2 = a3 = 0;
+        for (j = 0; j + 4 <= ${P}_N_SUPPORT; j += 4) {
+            a0 += ei[j] * k[j];
+            a1 += ei[j + 1] * k[j + 1];
+            a2 += ei[j + 2] * k[j + 2];
+            a3 += ei[j + 3] * k[j + 3];
+        }
+        for (; j < ${P}_N_SUPPORT; ++j) a0 += ei[j] * k[j];
+        e = (a0 + a1) + (a2 + a3);
+        sum += e * e;
+    }
+    return sum;
+}
+""")
+
+# No estimator columns (K = 0): no estimator term.
+NO_ESTIMATOR_TERM = Template(r"""static $real ${p}_estimator2(const $real *k)
+{
+    (void)k;
     return 0;
 }
 """)
