@@ -7,7 +7,7 @@ of about 10⁻⁶ · Σ_j |w_j k_j|.  When the weights cancel — an exact GP on
 data has ‖α‖ ≫ |μ| (cond K of 10⁷ and more) — that is far above the model's own accuracy, and
 no reordering of float32 operations removes it (the inputs themselves are only known to ε).
 The std is worse: σ² = var0 − Σ v_i² cancels by var0/σ², so near the data, where σ ≪ √var0,
-float32 loses all its digits.  The calibrated band σ_band² = c² σ² + Σ_i g_i² + Σ_k ε_k² (eq. B1)
+float32 loses all its digits.  The calibrated band σ_band² = c² σ² + max(Σ_i g_i², Σ_k ε_k²) (eq. B1)
 adds the gradient terms g_i = h_i + γ_i u_i h_n, h = P k, h_n = Σ_j w_j k_j, whose rounding is about
 10⁻⁶ · Σ_j |P_ij k_j| + ε|γ_i u_i| Σ_j |w_j k_j| — the same cancellation as the mean's — and the
 estimator terms ε = E k (rounding about 10⁻⁶ · Σ_j |E_kj k_j|); both the band and the latent std
@@ -83,16 +83,17 @@ def _f32_var(post: CPosterior, k: np.ndarray) -> np.ndarray:
 
 
 def _f32_gradient2(post: CPosterior, u: np.ndarray, k: np.ndarray, hn: np.ndarray) -> np.ndarray:
-    """Σ_i g_i² + Σ_k ε_k² of the band from float32 ``u (B, n)``, ``k (B, M)``, ``hn (B,)``, float32 arithmetic."""
-    total = np.zeros(k.shape[0], dtype=F32)
+    """max(Σ_i g_i², Σ_k ε_k²) of the band from float32 ``u (B, n)``, ``k (B, M)``, ``hn (B,)``, float32 arithmetic."""
+    grad = np.zeros(k.shape[0], dtype=F32)
+    est = np.zeros(k.shape[0], dtype=F32)
     if post.banded:
         h = k @ post.P.astype(F32).T                           # (B, n)
         g = h + post.gamma.astype(F32) * (u * hn[:, None])
-        total = total + (g * g).sum(1, dtype=F32)
+        grad = (g * g).sum(1, dtype=F32)
     if post.n_estimators:
         e = k @ post.E.astype(F32).T                           # (B, K)
-        total = total + (e * e).sum(1, dtype=F32)
-    return total
+        est = (e * e).sum(1, dtype=F32)
+    return np.maximum(grad, est)
 
 
 def float32_errors(post: CPosterior, reference: FoldedPosterior, x: np.ndarray) -> Float32Errors:

@@ -17,7 +17,7 @@ estimator weights E = y_std σ_f² δ / √K), h_i = Σ_j P_ij exp(e_j), h_n = �
 and ε_k = Σ_j E_kj exp(e_j) = y_std k_Z(x̃)ᵀ δ_k / √K:
 
     g_i = h_i + γ_i v_i h_n                     (g_i = s_i ∂μ/∂x_i, rad)
-    σ_band(x) = sqrt(c² σ(x)² + Σ_i g_i² + Σ_k ε_k²),      c² = ``scale2``
+    σ_band(x) = sqrt(c² σ(x)² + max(Σ_i g_i², Σ_k ε_k²)),  c² = ``scale2``
 
 Only e_j differs between the two C forms:
 
