@@ -4,7 +4,7 @@ For each model (exact N = 100 … 1000, sgpr/svgp M = 64 … 512; m = 1, d = 5) 
 compiled to an object file with ``cc -std=c99 -O2 -ffunction-sections -fdata-sections -c`` and
 measured with ``size -A``: code (``.text*``), constants (``.rodata*``), split into those the
 mean path reads and the std's constants (the variance factor ``<prefix>_factor``,
-``<prefix>_signs`` and, with input noise, the band's ``_P`` and ``_gamma``; a firmware that
+``<prefix>_signs`` and, with input noise, the band's ``_P`` and ``_gamma`` (and ``_E``, its estimator term); a firmware that
 never calls ``_forward``/``_predict_full`` drops them with ``-Wl,--gc-sections``), and writable
 data (``.data``/``.bss``: none).  The stack per call is gcc's ``-fstack-usage`` frame of
 ``bem_mean`` / ``bem_forward`` (with its evaluator ``bem_bem_eval`` when not inlined) plus the
@@ -104,12 +104,12 @@ def measure_footprints(sizes: dict[str, tuple[int, ...]] = SIZES, dtypes: tuple[
                                     str(Path(tmp, "bem_predictor.c")), "-o", str(obj)], check=True, capture_output=True)
                     sec = _sections(obj)
                     code = sum(v for k, v in sec.items() if k.startswith(".text"))
-                    std = sum(v for k, v in sec.items() if re.match(r"\.rodata\.bem_(factor|signs|bem_P|full_P|bem_gamma|full_gamma)$", k))
+                    std = sum(v for k, v in sec.items() if re.match(r"\.rodata\.bem_(factor|signs|bem_P|full_P|bem_gamma|full_gamma|E)$", k))
                     rodata = sum(v for k, v in sec.items() if k.startswith(".rodata"))
                     data = sum(v for k, v in sec.items() if k.startswith((".data", ".bss")))
                     frames = _stack_frames(obj.with_suffix(".su"))
                     helpers = max(v for k, v in frames.items()
-                                  if k == "bem_latent_var" or k.endswith(("_exponents", "_prepare", "_sum", "_sum_k", "_gradient2")))
+                                  if k == "bem_latent_var" or k.endswith(("_exponents", "_prepare", "_sum", "_sum_k", "_gradient2", "_estimator2")))
                     forward = frames["bem_forward"] + frames.get("bem_bem_eval", 0)   # the evaluator, when not inlined
                     rows.append(Footprint(kind, M, dtype, code, rodata - std, std, data,
                                           stack_mean=frames["bem_mean"] + helpers, stack_forward=forward + helpers))

@@ -9,6 +9,7 @@ monotonic).  The same harness measures the *arithmetic floor* of one query:
     bem_mean:    M exp calls + M (n + 1) multiply-adds      (n = 3m exponent terms and w_j k_j)
     bem_forward_latent: the above + M(M + 1)/2 (exact, triangular solve) or M² (sgpr/svgp) multiply-adds
     bem_forward: the above + n M for the band's gradient term (when the BEM inputs carry input noise)
+                 + K M for its estimator term (K = ``<PREFIX>_N_ESTIMATORS``)
 
 timed as ⌈M/32⌉ blocks of 32 values of the export's own exp block, summed (float64:
 branch-free, vectorized by the compiler; float32: libm ``expf``) on in-range arguments (e ∈ [−20, 0]) and that many
@@ -129,7 +130,7 @@ class CTiming:
             (vectorizable, float64) exp block; fma_ns: one multiply-add (throughput).
         n_exp, n_fma_mean, n_fma_forward: operation counts of one query (forward: with the band).
         forward_latent_ns: median per call of ``<prefix>_forward_latent`` (NaN if not timed).
-        n_fma_band: multiply-adds of the band's gradient term (0 without input noise), part of
+        n_fma_band: multiply-adds of the band's gradient and estimator terms (0 without either), part of
             n_fma_forward.
     """
 
@@ -178,6 +179,8 @@ def time_c_predictor(sources: dict[str, str], x: np.ndarray, *, kind: str, prefi
     n, M = x.shape[1], int(re.search(r"_N_SUPPORT (\d+)", header).group(1))
     n_fma_mean = M * (n + 1)
     n_fma_band = n * M if re.search(rf"#define {prefix.upper()}_BANDED 1\b", header) else 0
+    n_est = re.search(rf"#define {prefix.upper()}_N_ESTIMATORS (\d+)", header)
+    n_fma_band += (int(n_est.group(1)) if n_est else 0) * M       # the estimator term: K multiply-adds per support point
     n_fma_forward = n_fma_mean + (M * (M + 1) // 2 if kind == "exact" else M * M) + n_fma_band
     out = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -435,7 +435,7 @@ def _format_c(result: PredictBenchResult) -> list[str]:
     t0 = result.c_timings[0]
     lines = [f"C export, single queries in a C loop (one thread; floor = {t0.n_exp} exp + {t0.n_fma_mean} multiply-adds "
              f"for the mean, + {t0.n_fma_forward - t0.n_fma_mean} for the std, of which {t0.n_fma_band} for the band's "
-             "gradient term):",
+             "gradient and estimator terms):",
              f"  {'build':20s} {'mean µs':>9s} {'forward µs':>11s} {'fwd_latent µs':>14s} {'floor mean µs':>14s} "
              f"{'mean/floor':>11s} {'libm-exp floor µs':>18s} {'C mean / TS bem_mean':>21s}"]
     for t in result.c_timings:
