@@ -325,6 +325,8 @@ def run_predict_bench(
             "torchscript forward": (ts.forward, x1),
             "torchscript bem_mean": (ts.bem_mean, x1),
         }
+        if hasattr(ts, "forward_latent"):   # the same module's mean + latent std: the forward before the band
+            single["torchscript forward_latent"] = (ts.forward_latent, x1)
         single |= {name: (fn, x1.numpy()) for name, fn in _numpy_baselines(predictor, state).items()}
         steps = ["single", *(["c"] if c else []), *(["pt2"] if pt2 else []), *(["gpytorch"] if gp is not None else []), "batch"]
         for step in tqdm(steps, desc="bench predict", disable=not progress, leave=False):
@@ -472,6 +474,8 @@ def format_predict_bench(result: PredictBenchResult) -> str:
         "",
         f"GPyTorch forward / TorchScript forward:          {ratio('gpytorch forward', 'torchscript forward')}x   (target >= 30)",
         f"TorchScript forward / NumPy folded forward:       {ratio('torchscript forward', 'numpy folded forward')}    (target <= 1.5)",
+        f"TorchScript forward (band) / forward_latent:      {ratio('torchscript forward', 'torchscript forward_latent')}    "
+        "(target <= 1.5: the calibrated band's cost over the latent std)",
         f"TorchScript forward / NumPy textbook forward:     {ratio('torchscript forward', 'numpy textbook forward')}",
         f"TorchScript bem_mean / NumPy folded bem_mean:     {ratio('torchscript bem_mean', 'numpy folded bem_mean')}    (target <= 1; and <= 25 µs)",
         f"TorchScript bem_mean / NumPy textbook bem_mean:   {ratio('torchscript bem_mean', 'numpy textbook bem_mean')}",
