@@ -88,7 +88,7 @@ def test_predict_bench_small_run(posterior):
     expected = {
         "torchscript forward", "torchscript bem_mean", "numpy folded bem_mean", "numpy folded forward",
         "numpy textbook bem_mean", "numpy textbook forward", "gpytorch forward", "gpytorch forward (fast_pred_var)",
-        "torchscript empty call (x -> x)",
+        "torchscript empty call (x -> x)", "torchscript forward_latent",
     }
     assert set(result.latencies) == expected
     assert all(r.n in (30, 3) and r.p99_us >= r.median_us > 0 for r in result.latencies.values())

@@ -158,9 +158,9 @@ def calibrate_replicas(
             rows = torch.as_tensor(np.sort(rng.choice(pool, size=k, replace=False)))
             reps.append(condition_state(state, x[rows], y[rows]).predict_reference(queries))
         (ma, sa), (mb, sb) = reps
-        # where both replicas' latent variance cancels to (numerically) zero — a near-linear fit with a
-        # huge outputscale, κ(K) ~ 1e11 — z is not defined: those queries are left out of the quantile
-        # (their band is the input-noise term alone) and counted
+        # where both replicas' latent variance is (numerically) zero z is not defined: those queries are
+        # left out of the quantile and counted (predict_reference solves with the Cholesky factor, so
+        # this no longer happens merely because K is ill-conditioned, as with the explicit inverse)
         s2 = torch.sqrt(sa**2 + sb**2)
         ok = s2 > 1e-6 * float(state.y_std)
         dropped += int((~ok).sum())

@@ -151,9 +151,30 @@ class PredictorState:
         moved = {k: v.to(device=device, dtype=dtype) for k, v in self.tensors().items()}
         return dataclasses.replace(self, **moved)
 
+    def gram_cholesky(self) -> torch.Tensor | None:
+        """L with L Lᵀ = K_ZZ + σ_0² I (exact kind; computed once per state), or ``None`` for the
+        sparse kinds or when K is not numerically positive definite."""
+        if self.kind != "exact":
+            return None
+        cached = self.__dict__.get("_gram_cholesky")
+        if cached is None:
+            zs = self.Z / self.lengthscale
+            K = self.outputscale * torch.exp(-0.5 * torch.cdist(zs, zs, compute_mode="donot_use_mm_for_euclid_dist").square())
+            K.diagonal().add_(self.noise)
+            L, info = torch.linalg.cholesky_ex(K)
+            cached = (L if int(info) == 0 else None,)
+            object.__setattr__(self, "_gram_cholesky", cached)
+        return cached[0]
+
     # Reference (slow, obvious) evaluation, used by tests as the common ground truth.
     def predict_reference(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Mean and latent std in physical units for ``x``: ``(B, d)`` physical inputs.
+
+        For an exact GP the variance is σ_f² − ‖L⁻¹k‖² with L the Cholesky factor of
+        K = K_ZZ + σ_0² I (a triangular solve, as the exported predictor does), not kᵀ S k with
+        the explicit inverse S: with κ(K) ≳ 10⁹ (near-linear BEMs with a large outputscale) the
+        explicit form loses all digits of the small variances near the data and returns 0.
+        Sparse kinds use S as given.
 
         Returns:
             mean ``(B,)`` rad and std ``(B,)`` rad.
@@ -162,6 +183,11 @@ class PredictorState:
         diff = (xt[:, None, :] - self.Z[None, :, :]) / self.lengthscale
         k = self.outputscale * torch.exp(-0.5 * (diff**2).sum(-1))
         mean = k @ self.alpha
-        var = self.outputscale - ((k @ self.S) * k).sum(-1)
+        L = self.gram_cholesky()
+        if L is not None:
+            v = torch.linalg.solve_triangular(L, k.mT, upper=False)
+            var = self.outputscale - (v * v).sum(0)
+        else:
+            var = self.outputscale - ((k @ self.S) * k).sum(-1)
         std = var.clamp_min(0.0).sqrt()
         return self.y_mean + self.y_std * mean, self.y_std * std
