@@ -129,3 +129,22 @@ def test_training_computes_the_calibrated_band(small):
     ref = band_reference(st, torch.tensor([[2.0, 0.0, 0.1, 0.0, 0.0]], dtype=torch.float64), n_inputs=3)
     torch.testing.assert_close(pred.band_std, ref[1], rtol=0, atol=0)
     assert 0 <= metrics["val_coverage_2sigma_band"] <= 1
+
+
+def test_training_stores_the_estimator_term_and_band_bench_agrees(small):
+    """The band's estimator term (eq. E2) is computed at training (K = 4 Savitzky–Golay neighbours);
+    `bench band` scores the exported band on the run's references exactly as the run's evaluation did."""
+    from bemlearn.bench.band_bench import format_band_bench, run_band_bench
+
+    _, _, out, metrics = small
+    st = load_learned_bem(out).state
+    est = metrics["uncertainty"]["estimator_term"]
+    assert st.n_estimators == 4 == len(est["estimators"]) and all(s > 0 for s in est["rms_shift"])
+    assert float(st.estimator_delta.abs().max()) > 0
+    (res,) = run_band_bench([out], progress=lambda *_: None)
+    b = metrics["bem_heldout"]
+    assert res["rmse"] == pytest.approx(b["rmse"], rel=1e-12)
+    assert res["rows"]["exported band (eq. B1)"]["inside_2sigma"] == pytest.approx(b["coverage_2sigma_band"], abs=0)
+    assert res["rows"]["exported band (eq. B1)"]["median_std_over_rmse"] == pytest.approx(b["median_band_std_over_rmse"], rel=1e-9)
+    assert res["rows"]["latent"]["inside_2sigma"] == pytest.approx(b["coverage_2sigma_latent"], abs=0)
+    assert "exported band (eq. B1)" in format_band_bench([res])

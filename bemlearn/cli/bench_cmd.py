@@ -10,6 +10,7 @@
 * ``bench robots [MJCF …]`` — collect → train → export → held-out BEM → closed loop on MJCF
   robots with model-derived values only (issue 13).
 * ``bench uncertainty`` — candidate BEM bands: coverage, sharpness, bound violations, cost (issue 15).
+* ``bench band RUN…`` — the exported band's terms on trained runs (coverage and sharpness of each).
 * ``bench c-footprint`` — flash/RAM footprint of the C export per model size and kind (issue 17).
 * ``bench sigint CONFIG --data FILE`` — Ctrl-C latency of ``train`` on the 3,000-point exact GP (issue 16);
 * ``bench fuzz`` — bad-input classes fed to every reader and how many end in a named error (issue 16).
@@ -111,6 +112,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     u.add_argument("--seeds", type=int, default=0, help="also refit the chosen band with dataset seeds 1..K (robustness)")
     u.add_argument("--json", type=Path, default=None, help="also write the full results (reliability tables) as JSON")
     u.set_defaults(func=_uncertainty)
+
+    bb = sub.add_parser("band", help="the calibrated band's terms on trained runs: coverage of the model BEM and sharpness",
+                        description="Score the exported band (eq. B1) term by term on each run's held-out references "
+                        "against the model-based BEM; nothing is refitted (see bemlearn/bench/band_bench.py).")
+    bb.add_argument("runs", nargs="+", type=Path, help="run folders of `bemlearn run` / `bemlearn train` (with a robot model)")
+    bb.set_defaults(func=_band)
 
     g = sub.add_parser("sigint", help="Ctrl-C latency of `bemlearn train` (SIGINT → exit, checkpoint left)",
                        description="Start `bemlearn train` in a child process, send SIGINT a few seconds into the fit and "
@@ -263,6 +270,13 @@ def _uncertainty(args: argparse.Namespace) -> int:
         print(format_seed_sweep(sweep))
     if args.json is not None:
         args.json.write_text(json.dumps({"candidates": results, "seeds": sweep}, indent=1, default=float))
+    return 0
+
+
+def _band(args: argparse.Namespace) -> int:
+    from bemlearn.bench.band_bench import format_band_bench, run_band_bench
+
+    print(format_band_bench(run_band_bench(args.runs, progress=print)))
     return 0
 
 
