@@ -136,6 +136,7 @@ def fit_bem_gp(
         model, lik, x_mean=normalization.x_mean, x_std=normalization.x_std, y_mean=normalization.y_mean,
         y_std=normalization.y_std, input_names=names, n_train=int(y.shape[0]),
     )
+    latent_check = None if interrupted else _frozen_latent_check(state, model, lik, xn, dtype, config.device)
     calibration = None
     if calibrate is not None and not interrupted:  # Ctrl-C: write the best checkpoint at once, uncalibrated
         state, calibration = calibrate(state)
@@ -165,7 +166,36 @@ def fit_bem_gp(
             "bemlearn_version": __version__,
             "data_sha256": data_sha256,
             "extra": {"interrupted": interrupted, "robot_ref": dict(robot), **dict(extra or {}),
+                      **({"frozen_latent_check": latent_check} if latent_check is not None else {}),
                       **({"uncertainty": calibration} if calibration is not None else {})},
         },
     )
     return GPStageResult(state, model, lik, fit, hyp, phys_ls, interrupted, path, calibration)
+
+
+def _frozen_latent_check(state: PredictorState, model, lik, xn: torch.Tensor, dtype, device) -> dict | None:
+    """For a sparse kind, the frozen latent std (σ_f² − kᵀ S k with the explicit S the export uses)
+    against the fitted model's own (stable, factored) latent std at up to 256 training inputs with
+    q̈_u = q̇_u = 0.  With an ill-conditioned K_ZZ the explicit form loses its digits (a near-linear BEM
+    with a large outputscale: 0.14 rad against 1.2e-4 rad on a cart-pole); the check warns then.
+    ``None`` for an exact GP (its frozen variance is solved with the Cholesky factor, as exported)."""
+    from bemlearn.models.predict import predict
+
+    if state.kind == "exact":
+        return None
+    g = torch.Generator().manual_seed(0)
+    q = xn[torch.randperm(xn.shape[0], generator=g)[:256]].clone()
+    q[:, -2:] = (0.0 - state.x_mean[-2:].to(q)) / state.x_std[-2:].to(q)      # x_0^e: q̈_u = q̇_u = 0 (eq. 14)
+    _, var = predict(model, lik, q.to(device=device, dtype=dtype))
+    live = state.y_std * var.detach().cpu().to(torch.float64).clamp_min(0.0).sqrt()
+    phys = q.to(torch.float64) * state.x_std + state.x_mean
+    frozen = state.predict_reference(phys)[1]
+    ratio = float((frozen / live.clamp_min(1e-300)).median())
+    out = {"median_frozen_latent_std": float(frozen.median()), "median_model_latent_std": float(live.median()),
+           "median_ratio": ratio, "n_queries": int(q.shape[0])}
+    if not 0.5 <= ratio <= 2.0:
+        log.warning("the frozen %s posterior's latent std (median %.3g) differs from the fitted model's (median %.3g) by a "
+                    "factor %.3g at BEM queries: its explicit variance matrix S has lost its digits (ill-conditioned K_ZZ). "
+                    "The exported latent std is off by about that factor, and the band with it; an exact GP (kind: exact) "
+                    "solves with the Cholesky factor and does not lose them (docs/uncertainty.md).", state.kind, float(frozen.median()), float(live.median()), ratio)
+    return out
