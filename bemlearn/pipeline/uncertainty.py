@@ -11,7 +11,7 @@
   derivatives come from each neighbouring estimator (eq. E2,
   :mod:`bemlearn.fitting.estimator_sensitivity`).
 
-Neither needs a robot model.  :func:`calibrate_band` is called by ``bemlearn train`` after
+None of them needs a robot model.  :func:`calibrate_band` is called by ``bemlearn train`` after
 the fit; see docs/uncertainty.md for the measurements behind the choice.
 """
 
