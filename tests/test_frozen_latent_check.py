@@ -43,6 +43,18 @@ def test_faithful_freeze_agrees(sgpr, caplog):
     assert "lost its digits" not in caplog.text
 
 
+def test_frozen_latent_std_within_1e8_of_the_fitted_model(sgpr):
+    """At every training input (not only the median): the factored freeze (σ_f² − vᵀCv, v = L⁻¹k)
+    against the model's σ_f² − VᵀV + WᵀW, 1e-8 relative in the std (σ̃² ≫ ε σ_f² here)."""
+    from bemlearn.models.predict import predict
+
+    state, model, lik, x = sgpr
+    assert state.factored
+    _, var = predict(model, lik, x)
+    frozen = state.predict_reference(x * state.x_std + state.x_mean)[1] / state.y_std
+    assert float((frozen / var.sqrt() - 1).abs().max()) <= 1e-8
+
+
 def test_frozen_variance_that_lost_its_digits_is_reported(sgpr, caplog):
     state, model, lik, x = sgpr
     # an unfactored S (as frozen before S_chol/S_inner) with kᵀSk too small: frozen latent std too large
