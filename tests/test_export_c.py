@@ -298,8 +298,8 @@ def test_footprint_counts_the_variance_factor_bytes():
     rows = measure_footprints({"exact": (40,), "sgpr": (32,)}, dtypes=("float64", "float32"))
     for r in rows:
         size = 8 if r.dtype == "float64" else 4
-        factor = r.M * (r.M + 1) // 2 if r.kind == "exact" else r.M * r.M
-        assert r.rodata_std == size * factor          # packed triangle (exact) or dense M × M (sgpr)
+        factor = r.M * (r.M + 1) // 2 + (0 if r.kind == "exact" else r.M * r.M)
+        assert r.rodata_std == size * factor          # packed triangle (exact), and the dense M × M C factor (sgpr)
         assert r.data == 0                            # no writable static data: reentrant
         assert r.rodata_mean >= size * r.M * (5 + 2 + 1)   # W (d × M), two offsets c, weights w
 
