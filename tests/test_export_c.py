@@ -3,7 +3,7 @@
 Each case is compiled with ``cc -std=c99 -Wall -Werror -O2`` into a shared library and called
 through ctypes, one query per call, on random in-range inputs; the reference is the
 TorchScript file of the same posterior: float64 mean within 1e-10 rad, std within 1e-8
-relative (exact, sgpr, svgp; m = 1, 2), for the calibrated band of ``forward`` /
+relative (exact, sgpr, svgp, the sparse kinds also with S factored as L⁻ᵀ C L⁻¹; m = 1, 2), for the calibrated band of ``forward`` /
 ``predict_full`` (eq. B1, with std_scale c ≠ 1 and nonzero input_std s; also with K = 4 random
 estimator columns δ, with and without input noise) and the latent std of
 ``forward_latent`` / ``predict_full_latent``.  float32 is held to the tolerances the export
@@ -17,7 +17,7 @@ import json
 import numpy as np
 import pytest
 import torch
-from test_export_parity import _exact_case, _metadata, _sgpr_case, _svgp_case
+from test_export_parity import _exact_case, _metadata, _sgpr_case, _sgpr_factored_case, _svgp_case, _svgp_factored_case
 
 from bemlearn.bench.predict_bench import synthetic_posterior
 from bemlearn.cli.main import main
@@ -45,6 +45,9 @@ CASES = {
     "sgpr-m2": (_sgpr_case, 400, 2),
     "svgp-m1": (_svgp_case, 400, 1),
     "svgp-m2": (_svgp_case, 400, 2),
+    # S factored as L⁻ᵀ C L⁻¹ (triangular solve, then C's eigen-factor)
+    "sgpr-factored-m2": (_sgpr_factored_case, 400, 2),
+    "svgp-factored-m1": (_svgp_factored_case, 400, 1),
 }
 
 
@@ -163,7 +166,7 @@ def test_header_metadata_matches_torchscript(case):
     assert np.array_equal(c["input_range"]["lo"], lo[: 3 * meta.m]) and np.array_equal(c["input_range"]["full_hi"], hi)
 
 
-@pytest.mark.parametrize("name", ["sgpr-m2", "svgp-m1", "exact-m1"])
+@pytest.mark.parametrize("name", ["sgpr-m2", "svgp-m1", "exact-m1", "sgpr-factored-m2"])
 @pytest.mark.parametrize("full", [False, True], ids=["bem", "full"])
 def test_float32_within_its_stated_error(name, full, tmp_path):
     """float32 band and latent std (BEM and full map) within the tolerances and 4× the export's estimate."""
@@ -250,6 +253,22 @@ def test_signed_factor_matches_torchscript(tmp_path):
         assert np.abs(mean - ref_mean).max() <= MEAN_ATOL and np.abs(std / ref_std - 1).max() <= STD_RTOL
 
 
+def test_signed_factored_matches_torchscript(tmp_path):
+    """svgp, factored S = L⁻ᵀ C L⁻¹ with an indefinite C: triangular solve, then the signed inner factor."""
+    _, state = _svgp_factored_case(400, 1, seed=7)
+    C = state.S_inner - 0.5 * torch.eye(state.n_support, dtype=torch.float64)
+    state = dataclasses.replace(_banded(state), S_inner=C)
+    meta = _metadata(state, 1)
+    lib, ts = _build(state, meta, tmp_path)
+    src = (tmp_path / "bem_predictor.c").read_text()
+    assert "bem_signs" in src and "bem_inner" in src
+    x, _, _ = _in_range(state, 500, seed=4, width=3)
+    for latent, ref in ((False, ts.forward), (True, ts.forward_latent)):
+        mean, std, _ = lib.forward(x, latent=latent)
+        ref_mean, ref_std = (t.numpy() for t in ref(torch.from_numpy(x)))
+        assert np.abs(mean - ref_mean).max() <= MEAN_ATOL and np.abs(std / ref_std - 1).max() <= STD_RTOL
+
+
 def test_band_without_input_noise_on_the_bem_columns(tmp_path):
     """c ≠ 1 and input noise only on q̈_u, q̇_u: forward's band is c σ (no gradient code), predict_full's is not."""
     _, state = _exact_case(300, 1, seed=7)
@@ -279,8 +298,8 @@ def test_footprint_counts_the_variance_factor_bytes():
     rows = measure_footprints({"exact": (40,), "sgpr": (32,)}, dtypes=("float64", "float32"))
     for r in rows:
         size = 8 if r.dtype == "float64" else 4
-        factor = r.M * (r.M + 1) // 2 if r.kind == "exact" else r.M * r.M
-        assert r.rodata_std == size * factor          # packed triangle (exact) or dense M × M (sgpr)
+        factor = r.M * (r.M + 1) // 2 + (0 if r.kind == "exact" else r.M * r.M)
+        assert r.rodata_std == size * factor          # packed triangle (exact), and the dense M × M C factor (sgpr)
         assert r.data == 0                            # no writable static data: reentrant
         assert r.rodata_mean >= size * r.M * (5 + 2 + 1)   # W (d × M), two offsets c, weights w
 

@@ -167,12 +167,17 @@ def test_eigen_factor_reproduces_quadratic_form(posterior, shift, signed):
     assert float((std - ref_std).abs().max()) <= 1e-12 * float(state.y_std)
 
 
-def test_variance_factor_requires_one_matrix():
-    with pytest.raises(ValueError, match="exactly one of F and L"):
+def test_variance_factor_requires_a_matrix():
+    with pytest.raises(ValueError, match="give F, L or both"):
         VarianceFactor()
     eye = torch.eye(2, dtype=F64)
     with pytest.raises(ValueError, match="no signs"):
         VarianceFactor(L=eye, signs=torch.ones(2, dtype=F64))
+    # both: a factored sparse S = L⁻ᵀ Fᵀ diag(s) F L⁻¹, kᵀSk = Σ s_i (F L⁻¹ k)_i²
+    L, F = torch.tensor([[2.0, 0.0], [1.0, 1.0]], dtype=F64), torch.tensor([[1.0, 0.5], [0.0, 3.0]], dtype=F64)
+    both = VarianceFactor(L=L, F=F, signs=torch.tensor([1.0, -1.0], dtype=F64))
+    k = torch.tensor([[4.0, 3.0]], dtype=F64)   # L⁻¹k = [2, 1], F L⁻¹k = [2.5, 3]
+    assert both.factored and float(both.quadratic_form(k)) == 2.5**2 - 3.0**2
 
 
 def test_n_inputs_out_of_range(posterior):

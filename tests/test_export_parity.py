@@ -7,6 +7,8 @@ within 1e-8 relative.  GPyTorch's Cholesky is forced (max_cholesky_size) so the 
 exact model is not solved by CG.
 """
 
+import dataclasses
+
 import gpytorch
 import pytest
 import torch
@@ -146,6 +148,29 @@ def _svgp_case(n, m, seed, n_inducing=40):
     return model, _state("svgp", Z, Lzi.T @ q.variational_mean.detach(), S, model.covar_module, lik, norm, names, n)
 
 
+def _sgpr_factored_case(n, m, seed, n_inducing=40):
+    """:func:`_sgpr_case` with S factored: S = L⁻ᵀ (I − B⁻¹) L⁻¹, L = chol(K_ZZ), B = I + AAᵀ."""
+    model, state = _sgpr_case(n, m, seed, n_inducing)
+    X, Z, lik = model.train_inputs[0], state.Z, model.likelihood
+    with torch.no_grad():
+        Kzz, Kzx = model.base(Z).to_dense(), model.base(Z, X).to_dense()
+    eye = torch.eye(n_inducing, dtype=F64)
+    L = torch.linalg.cholesky(Kzz)
+    A = torch.linalg.solve_triangular(L, Kzx, upper=False) / lik.noise.detach().reshape(()).sqrt()
+    C = eye - torch.cholesky_inverse(torch.linalg.cholesky(eye + A @ A.T))
+    return model, dataclasses.replace(state, S_chol=L, S_inner=0.5 * (C + C.T))
+
+
+def _svgp_factored_case(n, m, seed, n_inducing=40):
+    """:func:`_svgp_case` with S factored: S = L⁻ᵀ (I − S_v) L⁻¹, L = chol(K_ZZ)."""
+    model, state = _svgp_case(n, m, seed, n_inducing)
+    with torch.no_grad():
+        Kzz = model.covar_module(state.Z).to_dense()
+    Lv = model.variational_strategy._variational_distribution.chol_variational_covar.detach().tril()
+    C = torch.eye(n_inducing, dtype=F64) - Lv @ Lv.T
+    return model, dataclasses.replace(state, S_chol=torch.linalg.cholesky(Kzz), S_inner=0.5 * (C + C.T))
+
+
 def _metadata(state, m):
     return PredictorMetadata(
         robot="test", joint_names=(*[f"a{i}" for i in range(m)], "u"), actuated_names=tuple(f"a{i}" for i in range(m)),
@@ -172,6 +197,8 @@ CASES = {
     "exact-N1000-above-800": (_exact_case, 1000, 1),
     "sgpr-m2": (_sgpr_case, 400, 2),
     "svgp": (_svgp_case, 400, 1),
+    "sgpr-m2-factored": (_sgpr_factored_case, 400, 2),
+    "svgp-factored": (_svgp_factored_case, 400, 1),
 }
 
 

@@ -3,8 +3,8 @@
 For each model (exact N = 100 … 1000, sgpr/svgp M = 64 … 512; m = 1, d = 5) the C export is
 compiled to an object file with ``cc -std=c99 -O2 -ffunction-sections -fdata-sections -c`` and
 measured with ``size -A``: code (``.text*``), constants (``.rodata*``), split into those the
-mean path reads and the std's constants (the variance factor ``<prefix>_factor``,
-``<prefix>_signs`` and, with input noise, the band's ``_P`` and ``_gamma`` (and ``_E``, its estimator term); a firmware that
+mean path reads and the std's constants (the variance factor ``<prefix>_factor``, the factored
+sparse kinds' inner factor ``<prefix>_inner``, ``<prefix>_signs`` and, with input noise, the band's ``_P`` and ``_gamma`` (and ``_E``, its estimator term); a firmware that
 never calls ``_forward``/``_predict_full`` drops them with ``-Wl,--gc-sections``), and writable
 data (``.data``/``.bss``: none).  The stack per call is gcc's ``-fstack-usage`` frame of
 ``bem_mean`` / ``bem_forward`` (with its evaluator ``bem_bem_eval`` when not inlined) plus the
@@ -61,12 +61,15 @@ class Footprint:
 
 
 def _sparse_state(kind: str, M: int, seed: int = 0):
-    """A synthetic sgpr/svgp posterior: M support points, S = K⁻¹ − K⁻¹ S_u K⁻¹ with S_u = ½ K."""
+    """A synthetic sgpr/svgp posterior: M support points, S = K⁻¹ − K⁻¹ S_u K⁻¹ with S_u = ½ K, held
+    factored as trained sparse posteriors are: S = L⁻ᵀ C L⁻¹, L Lᵀ = K, C = ½ I."""
     state, meta = synthetic_posterior(n_train=M, seed=seed, noise=1e-3)
     K = kernel_gram(state)
-    Ki = torch.cholesky_inverse(torch.linalg.cholesky(K))
+    L = torch.linalg.cholesky(K)
+    Ki = torch.cholesky_inverse(L)
     S = Ki - Ki @ (0.5 * K) @ Ki
-    state = dataclasses.replace(state, kind=kind, S=0.5 * (S + S.T))
+    state = dataclasses.replace(state, kind=kind, S=0.5 * (S + S.T), S_chol=L,
+                                S_inner=0.5 * torch.eye(M, dtype=torch.float64))
     meta = dataclasses.replace(meta, n_inducing=M)
     return state, meta
 
@@ -104,7 +107,7 @@ def measure_footprints(sizes: dict[str, tuple[int, ...]] = SIZES, dtypes: tuple[
                                     str(Path(tmp, "bem_predictor.c")), "-o", str(obj)], check=True, capture_output=True)
                     sec = _sections(obj)
                     code = sum(v for k, v in sec.items() if k.startswith(".text"))
-                    std = sum(v for k, v in sec.items() if re.match(r"\.rodata\.bem_(factor|signs|bem_P|full_P|bem_gamma|full_gamma|E)$", k))
+                    std = sum(v for k, v in sec.items() if re.match(r"\.rodata\.bem_(factor|inner|signs|bem_P|full_P|bem_gamma|full_gamma|E)$", k))
                     rodata = sum(v for k, v in sec.items() if k.startswith(".rodata"))
                     data = sum(v for k, v in sec.items() if k.startswith((".data", ".bss")))
                     frames = _stack_frames(obj.with_suffix(".su"))

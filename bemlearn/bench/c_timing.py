@@ -7,7 +7,8 @@ timed batch, and reports the median over batches of the per-call time (``clock_g
 monotonic).  The same harness measures the *arithmetic floor* of one query:
 
     bem_mean:    M exp calls + M (n + 1) multiply-adds      (n = 3m exponent terms and w_j k_j)
-    bem_forward_latent: the above + M(M + 1)/2 (exact, triangular solve) or M² (sgpr/svgp) multiply-adds
+    bem_forward_latent: the above + M(M + 1)/2 (exact, triangular solve), M(M + 1)/2 + M²
+                 (factored sgpr/svgp) or M² (unfactored sgpr/svgp) multiply-adds
     bem_forward: the above + n M for the band's gradient term (when the BEM inputs carry input noise)
                  + K M for its estimator term (K = ``<PREFIX>_N_ESTIMATORS``)
 
@@ -181,7 +182,9 @@ def time_c_predictor(sources: dict[str, str], x: np.ndarray, *, kind: str, prefi
     n_fma_band = n * M if re.search(rf"#define {prefix.upper()}_BANDED 1\b", header) else 0
     n_est = re.search(rf"#define {prefix.upper()}_N_ESTIMATORS (\d+)", header)
     n_fma_band += (int(n_est.group(1)) if n_est else 0) * M       # the estimator term: K multiply-adds per support point
-    n_fma_forward = n_fma_mean + (M * (M + 1) // 2 if kind == "exact" else M * M) + n_fma_band
+    factored = any(f"{prefix}_inner[" in t for t in sources.values())   # sparse S = L⁻ᵀ C L⁻¹: solve, then C's factor
+    n_fma_var = M * (M + 1) // 2 if kind == "exact" else M * M + (M * (M + 1) // 2 if factored else 0)
+    n_fma_forward = n_fma_mean + n_fma_var + n_fma_band
     out = []
     with tempfile.TemporaryDirectory() as tmp:
         for name, text in sources.items():

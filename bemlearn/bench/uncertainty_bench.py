@@ -73,7 +73,8 @@ def _nigp(state, x, y, g_train):
     xn = (x - state.x_mean) / state.x_std
     yn = (y - state.y_mean) / state.y_std
     probe = dataclasses.replace(state, Z=xn, alpha=torch.zeros(len(xn), dtype=torch.float64),
-                                S=torch.zeros(len(xn), len(xn), dtype=torch.float64), n_train=len(xn))
+                                S=torch.zeros(len(xn), len(xn), dtype=torch.float64), n_train=len(xn),
+                                S_chol=None, S_inner=None)
     Kf = kernel_gram(probe)
     Kf.diagonal().sub_(state.noise)
     gn = g_train / state.y_std                                      # ∂μ̃/∂x (physical x)

@@ -74,7 +74,11 @@ def _f32_var(post: CPosterior, k: np.ndarray) -> np.ndarray:
         rows = np.zeros((M, M), dtype=F32)
         rows[np.tril_indices(M)] = f
         v = solve_triangular(rows, k.T, lower=True, check_finite=False).T    # float32 LAPACK (strsm)
-        sq = v * v
+        if post.inner is not None:     # factored sparse: r = R v, Σ s_i r_i²
+            v = v @ post.inner.astype(F32).T
+            sq = v * v * (post.signs.astype(F32) if post.signs is not None else F32(1))
+        else:
+            sq = v * v
     else:
         v = k @ f.reshape(M, M).T
         sq = v * v * (post.signs.astype(F32) if post.signs is not None else F32(1))

@@ -8,7 +8,9 @@ x ∈ R^n (n = 3m for the BEM, n = 3m + 2 for the full map of eq. 11)
     σ(x) = sqrt(max(0, var0 − Σ_i s_i v_i²)),   var0 = y_std² σ_f²
 
     exact:       v solves (L / (y_std σ_f²)) v = exp(e)   (forward substitution, L L^T = K)
-    sgpr, svgp:  v = G exp(e),  G = y_std σ_f² F           (dense matvec)
+    factored     v as exact (L L^T = K_ZZ + jitter), then r = R v and Σ_i s_i r_i² in place
+    sgpr, svgp:  of Σ_i s_i v_i² (S = L⁻ᵀ Rᵀ diag(s) R L⁻¹, ``inner`` R; never the explicit S)
+    sgpr, svgp:  v = G exp(e),  G = y_std σ_f² F           (dense matvec; unfactored states)
 
 and the calibrated band of ``forward`` / ``predict_full`` (eq. B1, :mod:`bemlearn.models.band`)
 from the same kernel row, with the FoldedPosterior's band matrix ``G = [P | w | E]`` (columns
@@ -66,9 +68,11 @@ class CPosterior:
         w: ``(M,)`` mean weights y_std σ_f² α, rad.
         y0: output offset y_mean, rad.
         var0: prior variance y_std² σ_f², rad².
-        triangular: exact GP: ``factor`` is the packed lower-triangular L/(y_std σ_f²).
+        triangular: exact GP or factored sparse: ``factor`` is the packed lower-triangular L/(y_std σ_f²).
         factor: packed lower triangle ``(M(M+1)/2,)`` (triangular) or dense ``(M, M)`` G.
         signs: ``(M,)`` ±1 of a signed factor, or ``None``.
+        inner: ``(M, M)`` R of a factored sparse state (row-major, applied after the triangular
+            solve), or ``None``.
         banded: whether the band has an input-noise (gradient) term, i.e. some input column has
             s_i > 0 (then γ_i ≠ 0); else P and γ are zero.  Not ``FoldedPosterior.banded``,
             which is also true for estimator columns alone.
@@ -97,6 +101,7 @@ class CPosterior:
     gamma: np.ndarray
     scale2: float
     E: np.ndarray
+    inner: np.ndarray | None = None
 
     @property
     def n_inputs(self) -> int:
@@ -149,6 +154,7 @@ def c_posterior(post: FoldedPosterior, *, form: Literal["folded", "distance"] = 
         factor = Lg[np.tril_indices(M)]             # row-major packed lower triangle
     else:
         factor = np.ascontiguousarray(FT[:M, :M].T)  # v = G k, G = (gain F)
+    inner = np.ascontiguousarray(_np(post.RT)[:M].T) if post.factored else None   # RT = R_extᵀ
     w = _np(post.w)[:M]
     G = _np(post.G)                                 # (M + 1, n + 1 + K): [P | w | E]
     if G.shape[1] < n + 1 or not np.array_equal(G[:M, n], w) or np.any(G[M:] != 0):
@@ -161,7 +167,7 @@ def c_posterior(post: FoldedPosterior, *, form: Literal["folded", "distance"] = 
         W=np.ascontiguousarray(lin.T), W2=W2, c=c, w=w, y0=y0, var0=float(post.var0),
         triangular=bool(post.triangular), factor=factor, signs=_np(post.signs) if post.signed else None,
         banded=bool(post.banded) and bool(np.any(gamma != 0) or np.any(P != 0)), P=P, gamma=gamma,
-        scale2=float(post.scale2), E=np.ascontiguousarray(G[:M, n + 1 :].T),
+        scale2=float(post.scale2), E=np.ascontiguousarray(G[:M, n + 1 :].T), inner=inner,
     )
 
 

@@ -36,8 +36,8 @@ from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.export.c_float32 import Float32Errors, float32_errors, sample_inputs
 from bemlearn.export.c_posterior import RANGE_LENGTHSCALES, CPosterior, c_posterior, support_box
 from bemlearn.export.c_exp import EXP_BLOCK_F64, EXP_BLOCK_LIBM
-from bemlearn.export.c_std_templates import (BAND_GRADIENT, DENSE_STD, ESTIMATOR_TERM, NO_BAND_GRADIENT, NO_ESTIMATOR_TERM,
-                                             TRIANGULAR_STD)
+from bemlearn.export.c_std_templates import (BAND_GRADIENT, DENSE_STD, ESTIMATOR_TERM, FACTORED_STD, NO_BAND_GRADIENT,
+                                             NO_ESTIMATOR_TERM, TRIANGULAR_STD)
 from bemlearn.export.c_templates import DISTANCE_EXPONENTS, FOLDED_EXPONENTS, HEADER, POSTERIOR, SOURCE
 from bemlearn.export.folded_posterior import FoldedPosterior
 from bemlearn.export.metadata import PredictorMetadata
@@ -119,7 +119,11 @@ def _posteriors(predictor: BEMPredictor, state: PredictorState, dtype: CDtype) -
     # (with ``share`` the factor argument only sets the signed / triangular flags)
     ref = predictor.full
     empty = torch.zeros(0, 0, dtype=torch.float64)
-    factor = VarianceFactor(L=empty) if ref.triangular else VarianceFactor(F=empty, signs=ref.signs if ref.signed else None)
+    signs = ref.signs if ref.signed else None
+    if ref.triangular:
+        factor = VarianceFactor(L=empty, F=empty, signs=signs) if ref.factored else VarianceFactor(L=empty)
+    else:
+        factor = VarianceFactor(F=empty, signs=signs)
     full = FoldedPosterior(state, factor, n_inputs=state.dim, share=predictor.full, form="centered")
     bem = FoldedPosterior(state, factor, n_inputs=predictor.n_bem, share=predictor.full, form="centered")
     return c_posterior(bem, form="distance"), c_posterior(full, form="distance")
@@ -177,7 +181,8 @@ def c_sources(
     bem, full = _posteriors(predictor, state, dtype)
     n_bem, n_full, M = bem.n_inputs, full.n_inputs, bem.n_support
     if not (np.array_equal(bem.w, full.w) and bem.y0 == full.y0 and np.array_equal(bem.factor, full.factor)
-            and bem.scale2 == full.scale2 and np.array_equal(bem.E, full.E)):
+            and bem.scale2 == full.scale2 and np.array_equal(bem.E, full.E)
+            and (bem.inner is None) == (full.inner is None) and (bem.inner is None or np.array_equal(bem.inner, full.inner))):
         raise AssertionError("c_sources: the BEM and full posteriors must share w, y0, the variance factor, c and E")
     K = bem.n_estimators
     lo, hi = support_box(state.Z, state.x_mean, state.x_std, state.lengthscale)
@@ -201,10 +206,13 @@ def c_sources(
     share_P = f"{p}_full_P" if bem.banded and full.banded and np.array_equal(bem.P, full.P[:n_bem]) else None
     sub = {"p": p, "P": P, "real": real, "exp": exp, "sqrt": sqrt}
     exponents = DISTANCE_EXPONENTS if bem.form == "distance" else FOLDED_EXPONENTS
-    if bem.triangular:
+    signed_term = "s * s" if bem.signs is None else f"{p}_signs[i] * s * s"
+    if bem.inner is not None:     # factored sparse: triangular solve, then the inner factor R
+        std = FACTORED_STD.substitute(sub, signed_term=signed_term)
+    elif bem.triangular:
         std = TRIANGULAR_STD.substitute(sub)
     else:
-        std = DENSE_STD.substitute(sub, signed_term="s * s" if bem.signs is None else f"{p}_signs[i] * s * s")
+        std = DENSE_STD.substitute(sub, signed_term=signed_term)
     constants = "".join([
         _posterior_constants(p, "full", full, dtype, real, None, None),
         _posterior_constants(p, "bem", bem, dtype, real, share, share_P),
@@ -213,6 +221,7 @@ def c_sources(
         f"static const {real} {p}_var0 = {_literal(bem.var0, dtype)};\n",
         f"static const {real} {p}_scale2 = {_literal(bem.scale2, dtype)};   /* std_scale^2 of the band */\n",
         _array(f"{p}_factor", bem.factor, dtype, real),
+        "" if bem.inner is None else _array(f"{p}_inner", bem.inner, dtype, real),
         "" if bem.signs is None else _array(f"{p}_signs", bem.signs, dtype, real),
         _array(f"{p}_E", bem.E, dtype, real) if K else "",   # the band's estimator term (K x M)
     ])

@@ -40,8 +40,9 @@ _TOP_KEYS = ("format", "kind", "model_state", "predictor_state", "metadata")
 _STATE_TENSORS = tuple(
     f.name for f in dataclasses.fields(PredictorState) if f.name not in ("kind", "input_names", "n_train")
 )
-#: Tensors added after v1 checkpoints were first written (calibrated band); absent → defaults.
-_OPTIONAL_TENSORS = ("std_scale", "input_std", "estimator_delta")
+#: Tensors added after v1 checkpoints were first written (calibrated band; the sparse kinds' factored
+#: S = L⁻ᵀ C L⁻¹); absent → defaults (S used as given).
+_OPTIONAL_TENSORS = ("std_scale", "input_std", "estimator_delta", "S_chol", "S_inner")
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,9 @@ one ``addmv`` for the mean (eq. 12) and one triangular solve or ``mm`` for the v
     σ(x) = sqrt(max(0, y_std² σ_f² − Σ_i s_i v_i²)),   v = (y_std σ_f² F) exp(e)
 
 with F, s from :func:`~bemlearn.export.variance_factor.variance_factor`; for an exact GP
-F = L⁻¹ and v comes from one triangular solve, v (L / (y_std σ_f²))ᵀ = exp(e)ᵀ.  Columns
+F = L⁻¹ and v comes from one triangular solve, v (L / (y_std σ_f²))ᵀ = exp(e)ᵀ.  A factored
+sparse S = L⁻ᵀ C L⁻¹ (C = Rᵀ diag(s) R) takes the same triangular solve and then one ``mm`` with
+Rᵀ: Σ_i s_i (R v)_i² (``RT``, its sentinel row zero), never the explicit S.  Columns
 n..d−1 of the GP input can be held at zero, which gives the BEM input
 x_0^e = [q̈_a, q̇_a, q_a, 0, 0] of eq. (14): their terms are constant and move into the offsets.
 
@@ -81,6 +83,7 @@ class FoldedPosterior(nn.Module):
     centered: bool
     signed: bool
     triangular: bool
+    factored: bool
     banded: bool
     var0: float
     scale2: float
@@ -136,21 +139,27 @@ class FoldedPosterior(nn.Module):
             w = torch.empty(M + 1, **f64)
             w[:M] = gain * state.alpha
             w[M] = 1.0
-            if factor.L is not None:    # exact: v = k̂ (L_ext / gain)⁻ᵀ, upper-triangular solve
+            RT = torch.zeros(0, 0, **f64)
+            if factor.L is not None:    # exact / factored: v = k̂ (L_ext / gain)⁻ᵀ, upper-triangular solve
                 FT = torch.zeros(M + 1, M + 1, **f64)
                 FT[:M, :M] = factor.L.T / gain
                 FT[M, M] = SENTINEL_PIVOT
+                if factor.F is not None:   # factored sparse: then r = v R_extᵀ (sentinel row zero)
+                    RT = torch.zeros(M + 1, M, **f64)
+                    RT[:M] = factor.F.T
             else:                       # v = k̂ (gain F)ᵀ
                 FT = torch.zeros(M + 1, M, **f64)
                 FT[:M] = (gain * factor.F).T
             signs = factor.signs if factor.signs is not None else torch.zeros(0, **f64)
         else:
-            w, FT, signs = share.w, share.FT, share.signs
+            w, FT, RT, signs = share.w, share.FT, share.RT, share.signs
         self.register_buffer("w", w)
         self.register_buffer("FT", FT)
+        self.register_buffer("RT", RT)
         self.register_buffer("signs", signs)
         self.signed = factor.signs is not None
         self.triangular = factor.L is not None
+        self.factored = factor.L is not None and factor.F is not None
         self.var0 = float(state.y_std**2 * state.outputscale)
         # calibrated band (module docstring): G and γ over the n free columns
         s_in = state.input_std[free].to(**f64)
@@ -218,6 +227,8 @@ class FoldedPosterior(nn.Module):
     def _latent_var(self, k: torch.Tensor) -> torch.Tensor:
         if self.triangular:
             v = torch.linalg.solve_triangular(self.FT, k, upper=True, left=False)
+            if self.factored:
+                v = torch.mm(v, self.RT)
         else:
             v = torch.mm(k, self.FT)
         if self.signed:

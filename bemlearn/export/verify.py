@@ -6,8 +6,12 @@ k_j = σ_f² exp(−½ ‖(x̃ − z_j)/ℓ‖²), and
     exact:       μ = y_mean + y_std kᵀα,   σ² = y_std² (σ_f² − kᵀ v),  K v = k solved by Cholesky
                  with two steps of iterative refinement (accurate even when K is ill-conditioned,
                  where kᵀ S k with the explicit inverse S = K⁻¹ loses digits);
+    sgpr, svgp   σ² = y_std² (σ_f² − vᵀ C v), v = L⁻¹ k (triangular solve with ``S_chol``, one
+    (factored):  step of iterative refinement), C = ``S_inner`` used directly (the export uses an
+                 eigen-factor of C); rounding bound 64 M ε ‖C‖₂ σ_f² y_std² (‖v‖² ≤ σ_f²:
+                 kᵀ (K_ZZ + jI)⁻¹ k ≤ k(x, x) for a kernel row);
     sgpr, svgp:  :meth:`PredictorState.predict_reference` (S is given as is), with the variance
-                 compared up to the rounding bound 64 M ε ‖S‖₂ σ_f⁴ y_std² of forming kᵀ S k.
+    (unfactored) compared up to the rounding bound 64 M ε ‖S‖₂ σ_f⁴ y_std² of forming kᵀ S k.
 """
 
 from __future__ import annotations
@@ -25,6 +29,8 @@ _EPS = float(torch.finfo(torch.float64).eps)
 
 def reference_posterior(state: PredictorState, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, float]:
     """Dense μ, σ (rad) for physical ``x: (B, d)`` float64, and the variance rounding bound (rad²)."""
+    if state.factored:
+        return _factored_reference(state, x)
     if state.kind != "exact":
         mean, std = state.predict_reference(x)
         s_norm = float(torch.linalg.matrix_norm(state.S, ord=2))
@@ -40,6 +46,20 @@ def reference_posterior(state: PredictorState, x: torch.Tensor) -> tuple[torch.T
         v = v + torch.cholesky_solve(k.T - K @ v, L)
     var = (state.outputscale - (k.T * v).sum(0)).clamp_min(0.0)
     bound = 64 * _EPS * float(state.outputscale) * float(state.y_std) ** 2
+    return state.y_mean + state.y_std * (k @ state.alpha), state.y_std * var.sqrt(), bound
+
+
+def _factored_reference(state: PredictorState, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, float]:
+    """μ, σ and the rounding bound of a factored sparse state (module docstring)."""
+    xt = (x - state.x_mean) / state.x_std / state.lengthscale
+    zs = state.Z / state.lengthscale
+    k = state.outputscale * torch.exp(-0.5 * torch.cdist(xt, zs, compute_mode="donot_use_mm_for_euclid_dist").square())
+    L, C = state.S_chol, state.S_inner
+    v = torch.linalg.solve_triangular(L, k.T, upper=False)
+    v = v + torch.linalg.solve_triangular(L, k.T - L @ v, upper=False)
+    var = (state.outputscale - (v * (C @ v)).sum(0)).clamp_min(0.0)
+    c_norm = float(torch.linalg.matrix_norm(C, ord=2))
+    bound = 64 * state.n_support * _EPS * c_norm * float(state.outputscale) * float(state.y_std) ** 2
     return state.y_mean + state.y_std * (k @ state.alpha), state.y_std * var.sqrt(), bound
 
 

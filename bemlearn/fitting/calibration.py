@@ -93,7 +93,8 @@ def condition_state(state: PredictorState, x: torch.Tensor, y: torch.Tensor) -> 
     yn = (y.to(torch.float64) - state.y_mean) / state.y_std
     n = xn.shape[0]
     probe = dataclasses.replace(state, kind="exact", Z=xn, alpha=torch.zeros(n, dtype=torch.float64),
-                                S=torch.zeros(n, n, dtype=torch.float64), n_train=n, estimator_delta=None)
+                                S=torch.zeros(n, n, dtype=torch.float64), n_train=n, estimator_delta=None,
+                                S_chol=None, S_inner=None)
     K = kernel_gram(probe)
     L, info = torch.linalg.cholesky_ex(K)
     jitter = 1e-10 * float(state.outputscale)

@@ -2,7 +2,7 @@
 
 from bemlearn.models.band import band_reference
 from bemlearn.models.exact_gp import ExactBEMGP
-from bemlearn.models.freeze import posterior_weights, predictor_state
+from bemlearn.models.freeze import posterior_weights, predictor_state, variance_cholesky_factor
 from bemlearn.models.gp_kinds import GP_KINDS, gp_class, gp_kind_of
 from bemlearn.models.gpdm import GPDM, GPDMObjective, LatentComparison, compare_latents, reconstruct_latent
 from bemlearn.models.input_noise import mean_gradient
@@ -42,4 +42,5 @@ __all__ = [
     "predict",
     "predictor_state",
     "posterior_weights",
+    "variance_cholesky_factor",
 ]

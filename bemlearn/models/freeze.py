@@ -1,4 +1,5 @@
-"""Freeze a trained GP of any kind into a :class:`PredictorState` (μ = k_Zᵀ α, Σ = σ_f² − k_Zᵀ S k_Z)."""
+"""Freeze a trained GP of any kind into a :class:`PredictorState` (μ = k_Zᵀ α, Σ = σ_f² − k_Zᵀ S k_Z;
+sparse kinds also with S factored as L⁻ᵀ C L⁻¹)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from bemlearn.models.sgpr import SGPRBEMGP
 from bemlearn.models.solver import DEFAULT_JITTER, DEFAULT_MAX_TRIES, cholesky_policy, robust_cholesky
 from bemlearn.models.svgp import SVGPBEMGP
 
-__all__ = ["predictor_state", "posterior_weights"]
+__all__ = ["predictor_state", "posterior_weights", "variance_cholesky_factor"]
 
 
 def posterior_weights(
@@ -61,6 +62,39 @@ def posterior_weights(
     raise TypeError(f"model: unsupported GP class {type(model).__name__}")
 
 
+def variance_cholesky_factor(
+    model: torch.nn.Module,
+    likelihood: gpytorch.likelihoods.GaussianLikelihood,
+    *,
+    jitter: float = DEFAULT_JITTER,
+    max_tries: int = DEFAULT_MAX_TRIES,
+) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """L and C of a sparse posterior's S = L⁻ᵀ C L⁻¹ (L Lᵀ = K_ZZ + jitter), or ``None`` (exact).
+
+    sgpr: C = I − B⁻¹ (:meth:`SGPRBEMGP.variance_factor`);  svgp: C = I − S_v.  The latent
+    variance σ_f² − vᵀ C v, v = L⁻¹ k_Z, keeps the digits the explicit S loses when K_ZZ is
+    ill-conditioned (:mod:`bemlearn.models.predictor_state`).
+
+    Returns:
+        ``(M, M)`` lower-triangular L and ``(M, M)`` symmetric C, normalized units; ``None`` for an exact GP.
+    """
+    model.eval()
+    likelihood.eval()
+    with torch.no_grad(), cholesky_policy(jitter=jitter, max_tries=max_tries):
+        if isinstance(model, ExactBEMGP):
+            return None
+        if isinstance(model, SGPRBEMGP):
+            return model.variance_factor()
+        if isinstance(model, SVGPBEMGP):
+            Z = model.variational_strategy.inducing_points
+            eye = torch.eye(Z.shape[0], dtype=Z.dtype, device=Z.device)
+            Kzz = kernel_matrix(model.covar_module, Z, Z) + model.jitter * eye
+            L, _ = robust_cholesky(Kzz, what="SVGP K_ZZ", jitter=jitter, max_tries=max_tries)
+            C = eye - model.variational_strategy.variational_distribution.covariance_matrix
+            return L.detach(), (0.5 * (C + C.mT)).detach()
+    raise TypeError(f"model: unsupported GP class {type(model).__name__}")
+
+
 def predictor_state(
     model: torch.nn.Module,
     likelihood: gpytorch.likelihoods.GaussianLikelihood,
@@ -88,6 +122,12 @@ def predictor_state(
     """
     kind = gp_kind_of(model)
     Z, alpha, S = posterior_weights(model, likelihood)
+    factor = variance_cholesky_factor(model, likelihood)
+    if factor is not None:   # S as the explicit product of the (authoritative) factor
+        L, C = factor
+        Li = torch.linalg.solve_triangular(L, torch.eye(L.shape[0], dtype=L.dtype, device=L.device), upper=False)
+        S = Li.mT @ C @ Li
+        S = 0.5 * (S + S.mT)
     kernel = model.covar_module
     f64 = dict(dtype=torch.float64, device="cpu")
 
@@ -110,4 +150,6 @@ def predictor_state(
         y_std=_t(y_std).reshape(()),
         input_names=tuple(str(n) for n in input_names),
         n_train=int(n_train),
+        S_chol=None if factor is None else _t(factor[0]),
+        S_inner=None if factor is None else _t(factor[1]),
     )

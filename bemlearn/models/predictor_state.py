@@ -16,6 +16,19 @@ x̃ = (x − x_mean) / x_std is, with k_Z(x̃) = k(x̃, Z) ∈ R^M,
     svgp:   Z = inducing points, q(u) = N(μ_u, S_u) (un-whitened),
             α = K_ZZ⁻¹ μ_u,  S = K_ZZ⁻¹ − K_ZZ⁻¹ S_u K_ZZ⁻¹
 
+A sparse S is also held *factored* (``S_chol`` L, ``S_inner`` C; states frozen before these
+fields have only S):
+
+    S = L⁻ᵀ C L⁻¹,   L Lᵀ = K_ZZ + j I (the jitter actually used),   σ̃² = σ_f² − vᵀ C v,  v = L⁻¹ k_Z
+
+    sgpr:  C = I − B⁻¹,  B = I + A Aᵀ, A = L⁻¹ K_ZX / σ_0  (eigenvalues in [0, 1))
+    svgp:  C = I − S_v,  S_v the whitened q(v) covariance  (possibly indefinite)
+
+With κ(K_ZZ) of 10¹⁰ and more (near-linear BEMs, large σ_f²) the explicit S = L⁻ᵀ C L⁻¹ has
+lost the digits of the small variances near the data (kᵀ S k ≈ σ_f² there); v from a
+triangular solve and the well-conditioned C keep them.  When the factor is present it is
+authoritative and S is only its explicit product.
+
 and in physical units μ(x) = y_mean + y_std μ̃(x̃), σ(x) = y_std σ̃(x̃).
 
 The calibrated band (docs/uncertainty.md) adds three fields: ``std_scale`` c (trial-split
@@ -68,6 +81,8 @@ class PredictorState:
         input_std: ``(d,)`` s ≥ 0, noise std of each input column, physical units (default 0).
         estimator_delta: ``(M, K)`` δ, the mean weights' shift under each of K neighbouring
             derivative estimators, normalized output units (default K = 0: no estimator term).
+        S_chol: ``(M, M)`` lower-triangular L, L Lᵀ = K_ZZ + j I (sparse kinds), or ``None``.
+        S_inner: ``(M, M)`` symmetric C with S = L⁻ᵀ C L⁻¹ (given with ``S_chol``), or ``None``.
     """
 
     kind: GPKind
@@ -86,6 +101,8 @@ class PredictorState:
     std_scale: torch.Tensor | None = None
     input_std: torch.Tensor | None = None
     estimator_delta: torch.Tensor | None = None
+    S_chol: torch.Tensor | None = None
+    S_inner: torch.Tensor | None = None
 
     def __post_init__(self) -> None:
         M, d = self.Z.shape
@@ -115,6 +132,27 @@ class PredictorState:
                 raise ValueError(f"PredictorState.{name}: expected shape {shape}, got {tuple(t.shape)}")
         if len(self.input_names) != d:
             raise ValueError(f"PredictorState.input_names: expected {d} names, got {len(self.input_names)}")
+        self._check_factor(M)
+
+    def _check_factor(self, M: int) -> None:
+        """S_chol, S_inner: both or neither, sparse kinds only, (M, M), L lower-triangular with a
+        positive diagonal, C symmetric."""
+        if self.S_chol is None and self.S_inner is None:
+            return
+        if self.S_chol is None or self.S_inner is None:
+            raise ValueError("PredictorState.S_chol, S_inner: give both (S = L⁻ᵀ C L⁻¹) or neither")
+        if self.kind == "exact":
+            raise ValueError("PredictorState.S_chol, S_inner: only for the sparse kinds (sgpr, svgp); an exact "
+                             "posterior solves with the Cholesky factor of K_ZZ + σ_0² I (gram_cholesky)")
+        for name in ("S_chol", "S_inner"):
+            t = getattr(self, name)
+            if tuple(t.shape) != (M, M):
+                raise ValueError(f"PredictorState.{name}: expected shape {(M, M)}, got {tuple(t.shape)}")
+        L, C = self.S_chol, self.S_inner
+        if bool((torch.triu(L, 1) != 0).any()) or not bool((torch.diagonal(L) > 0).all()):
+            raise ValueError("PredictorState.S_chol: expected a lower-triangular Cholesky factor with a positive diagonal")
+        if not bool(torch.equal(C, C.mT)):
+            raise ValueError("PredictorState.S_inner: expected a symmetric matrix (C = Cᵀ exactly)")
 
     @property
     def n_support(self) -> int:
@@ -151,6 +189,11 @@ class PredictorState:
         moved = {k: v.to(device=device, dtype=dtype) for k, v in self.tensors().items()}
         return dataclasses.replace(self, **moved)
 
+    @property
+    def factored(self) -> bool:
+        """Whether S is held as L⁻ᵀ C L⁻¹ (``S_chol``, ``S_inner``; sparse kinds)."""
+        return self.S_chol is not None
+
     def gram_cholesky(self) -> torch.Tensor | None:
         """L with L Lᵀ = K_ZZ + σ_0² I (exact kind; computed once per state), or ``None`` for the
         sparse kinds or when K is not numerically positive definite."""
@@ -174,7 +217,8 @@ class PredictorState:
         K = K_ZZ + σ_0² I (a triangular solve, as the exported predictor does), not kᵀ S k with
         the explicit inverse S: with κ(K) ≳ 10⁹ (near-linear BEMs with a large outputscale) the
         explicit form loses all digits of the small variances near the data and returns 0.
-        Sparse kinds use S as given.
+        Factored sparse states likewise: σ_f² − vᵀ C v with v = L⁻¹ k (``S_chol``, ``S_inner``);
+        sparse states without the factor (frozen before it existed) use S as given.
 
         Returns:
             mean ``(B,)`` rad and std ``(B,)`` rad.
@@ -187,6 +231,9 @@ class PredictorState:
         if L is not None:
             v = torch.linalg.solve_triangular(L, k.mT, upper=False)
             var = self.outputscale - (v * v).sum(0)
+        elif self.S_chol is not None:
+            v = torch.linalg.solve_triangular(self.S_chol, k.mT, upper=False)
+            var = self.outputscale - (v * (self.S_inner @ v)).sum(0)
         else:
             var = self.outputscale - ((k @ self.S) * k).sum(-1)
         std = var.clamp_min(0.0).sqrt()

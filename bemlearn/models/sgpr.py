@@ -154,6 +154,21 @@ class SGPRBEMGP(gpytorch.Module):
         S = Li.mT @ Li - LBiLi.mT @ LBiLi
         return self.inducing_points.detach(), alpha, 0.5 * (S + S.mT)
 
+    def variance_factor(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """L and C of the factored S = L⁻ᵀ C L⁻¹, C = I − B⁻¹ (eigenvalues in [0, 1)).
+
+        σ_f² − vᵀ C v with v = L⁻¹ k_Z equals the forward's σ_f² − VᵀV + WᵀW; unlike the explicit
+        S of :meth:`posterior_weights` it keeps the small variances when K_ZZ is ill-conditioned.
+
+        Returns:
+            ``(M, M)`` lower-triangular L (L Lᵀ = K_ZZ + jitter) and ``(M, M)`` symmetric C.
+        """
+        f = self._posterior()
+        L, LB = f["L"], f["LB"]
+        eye = torch.eye(L.shape[0], dtype=L.dtype, device=L.device)
+        C = eye - torch.cholesky_inverse(LB)
+        return L.detach(), (0.5 * (C + C.mT)).detach()
+
     def whitened_posterior(self) -> tuple[torch.Tensor, torch.Tensor]:
         """The optimal q(u) in whitened form, u = L v: q(v) = N(m, S_v) with m = L_B⁻ᵀ c, S_v = B⁻¹.
 
