@@ -103,6 +103,8 @@ class EstimatorSensitivity:
 
 
 def _describe(est) -> str:
+    if not dataclasses.is_dataclass(est):   # an estimator class of the user's own: its repr
+        return repr(est)
     opts = ", ".join(f"{f.name}={getattr(est, f.name)}" for f in dataclasses.fields(est) if getattr(est, f.name) is not None)
     return f"{est.name}({opts})"
 
