@@ -36,7 +36,7 @@ from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.export.c_float32 import Float32Errors, float32_errors, sample_inputs
 from bemlearn.export.c_posterior import RANGE_LENGTHSCALES, CPosterior, c_posterior, support_box
 from bemlearn.export.c_exp import EXP_BLOCK_F64, EXP_BLOCK_LIBM
-from bemlearn.export.c_std_templates import (BAND_GRADIENT, DENSE_STD, ESTIMATOR_TERM, FACTORED_STD, NO_BAND_GRADIENT,
+from bemlearn.export.c_std_templates import (BAND_GRADIENT, DENSE_STD, ESTIMATOR_TERM, FACTORED_STD, KERNELS, NO_BAND_GRADIENT,
                                              NO_ESTIMATOR_TERM, TRIANGULAR_STD)
 from bemlearn.export.c_templates import DISTANCE_EXPONENTS, FOLDED_EXPONENTS, HEADER, POSTERIOR, SOURCE
 from bemlearn.export.folded_posterior import FoldedPosterior
@@ -229,7 +229,7 @@ def c_sources(
     source = SOURCE.substitute(
         sub, version=__version__, constants=constants, exp_block=exp_block,
         exponents="\n".join(exponents.substitute(sub, name=nm, n=n) for nm, n in (("bem", n_bem), ("full", n_full))),
-        std=std + "\n" + (ESTIMATOR_TERM if K else NO_ESTIMATOR_TERM).substitute(sub) + "\n"
+        std=KERNELS.substitute(sub) + "\n" + std + "\n" + (ESTIMATOR_TERM if K else NO_ESTIMATOR_TERM).substitute(sub) + "\n"
             + "\n".join((BAND_GRADIENT if post.banded else NO_BAND_GRADIENT).substitute(sub, name=nm, n=post.n_inputs)
                          for nm, post in (("bem", bem), ("full", full))),
         posteriors="\n".join(POSTERIOR.substitute(sub, name=nm, n=n, lo=f"{p}_{pre}input_lo", hi=f"{p}_{pre}input_hi")
