@@ -44,7 +44,7 @@ def run_band_bench(runs: list[str | Path], *, progress=print) -> list[dict]:
     """Score the band's terms on each run (module docstring); one dict per run."""
     from bemlearn.export.checkpoint import load_checkpoint
     from bemlearn.pipeline.config import load_pipeline_config
-    from bemlearn.pipeline.evaluation import held_out_references, run_truth_robot
+    from bemlearn.pipeline.evaluation import reference_queries, run_truth_robot
 
     out = []
     for run in runs:
@@ -54,17 +54,8 @@ def run_band_bench(runs: list[str | Path], *, progress=print) -> list[dict]:
         state = load_checkpoint(run).predictor_state
         cfg = load_pipeline_config(run / "config.yaml")
         robot, _ = run_truth_robot(run)
-        ev = cfg.evaluate
-        t = np.arange(0.0, ev.duration_s, 1.0 / ev.rate_hz)
-        xs, qs = [], []
-        for ref in held_out_references(ev, robot.m):
-            qa, qad, qadd = ref.evaluate(t)
-            bem = robot.bem(qa, qad, qadd)
-            ok = bem.valid.numpy()
-            xs.append(np.concatenate([qadd, qad, qa, np.zeros((t.size, 2))], axis=1)[ok])
-            qs.append(bem.qu.numpy()[ok])
-        x = torch.from_numpy(np.concatenate(xs))
-        err = state.predict_reference(x)[0].numpy() - np.concatenate(qs)
+        x, qu = reference_queries(robot, cfg.evaluate)
+        err = state.predict_reference(x)[0].numpy() - qu
         rmse = float(np.sqrt(np.mean(err**2)))
         rows = {name: {"inside_2sigma": float(np.mean(np.abs(err) <= 2 * np.sqrt(v))),
                        "median_std_over_rmse": float(np.median(np.sqrt(v))) / rmse}

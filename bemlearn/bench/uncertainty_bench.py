@@ -48,23 +48,6 @@ from bemlearn.pipeline.uncertainty import calibrate_band
 
 __all__ = ["format_seed_sweep", "format_uncertainty_bench", "run_case", "run_seed_sweep", "run_uncertainty_bench"]
 
-def _references(case: BenchCase, state) -> tuple[torch.Tensor, np.ndarray]:
-    from bemlearn.pipeline.evaluation import held_out_references
-    from bemlearn.robots import load
-
-    robot = load(case.config.robot)
-    ev = case.evaluation
-    t = np.arange(0.0, ev.duration_s, 1.0 / ev.rate_hz)
-    xs, qs = [], []
-    for ref in held_out_references(ev, robot.m):
-        qa, qad, qadd = ref.evaluate(t)
-        bem = robot.bem(qa, qad, qadd)
-        ok = bem.valid.numpy()
-        xs.append(np.concatenate([qadd, qad, qa, np.zeros((t.size, 2))], axis=1)[ok])
-        qs.append(bem.qu.numpy()[ok])
-    return torch.from_numpy(np.concatenate(xs)), np.concatenate(qs)
-
-
 def _nigp(state, x, y, g_train):
     """(b): per-column input variances s² (physical) maximizing the marginal likelihood with
     noise σ_0² + Σ_i s_i² g_i(x_n)² (kernel fixed); returns (s², posterior function)."""
@@ -177,6 +160,8 @@ def run_case(case: BenchCase, *, progress=print) -> dict:
     from bemlearn.data.quantization import detect_quantization_step
     from bemlearn.fitting import train_gp
     from bemlearn.models import predictor_state
+    from bemlearn.pipeline.evaluation import reference_queries
+    from bemlearn.robots import load
 
     cfg = case.config
     traj = read_trajectory(case.data_path, robot=cfg.robot)
@@ -188,7 +173,7 @@ def run_case(case: BenchCase, *, progress=print) -> dict:
     fit_s = time.perf_counter() - t0
     state = predictor_state(model, lik, x_mean=tr.x_mean, x_std=tr.x_std, y_mean=tr.y_mean, y_std=tr.y_std,
                             input_names=tr.input_names, n_train=len(tr))
-    x, q = _references(case, state)
+    x, q = reference_queries(load(cfg.robot), case.evaluation)
     mean, lat = (v.numpy() for v in state.predict_reference(x))
     e = mean - q
     rmse = float(np.sqrt(np.mean(e**2)))

@@ -19,7 +19,7 @@ from bemlearn.models.predictor_state import PredictorState
 from bemlearn.pipeline.reliability import reliability_table
 from bemlearn.robots.reference import CompositeSinusoid
 
-__all__ = ["EvaluationConfig", "held_out_references", "evaluate_bem", "run_truth_robot"]
+__all__ = ["EvaluationConfig", "held_out_references", "reference_queries", "evaluate_bem", "run_truth_robot"]
 
 
 @dataclass(frozen=True)
@@ -67,6 +67,22 @@ def held_out_references(config: EvaluationConfig, m: int) -> list[CompositeSinus
             rows.append((tuple(A), tuple(rng.uniform(*config.frequency_hz, k)), tuple(rng.uniform(0, 2 * math.pi, k))))
         refs.append(CompositeSinusoid(tuple(r[0] for r in rows), tuple(r[1] for r in rows), tuple(r[2] for r in rows), (0.0,) * m))
     return refs
+
+
+def reference_queries(robot, config: EvaluationConfig) -> tuple[torch.Tensor, np.ndarray]:
+    """The BEM queries x_0^e = [q̈_a, q̇_a, q_a, 0, 0] (eq. 14) along the held-out references of
+    ``config``, sampled at ``config.rate_hz`` for ``config.duration_s``, and ``robot``'s model-based
+    BEM there (eq. 9): ``(N, 3m + 2)`` physical inputs and ``(N,)`` q_u in its joint's unit, the
+    points without a model root left out."""
+    t = np.arange(0.0, config.duration_s, 1.0 / config.rate_hz)
+    xs, qs = [], []
+    for ref in held_out_references(config, robot.m):
+        qa, qad, qadd = ref.evaluate(t)
+        bem = robot.bem(qa, qad, qadd)
+        ok = bem.valid.numpy()
+        xs.append(np.concatenate([qadd, qad, qa, np.zeros((t.size, 2))], axis=1)[ok])
+        qs.append(bem.qu.numpy()[ok])
+    return torch.from_numpy(np.concatenate(xs)), np.concatenate(qs)
 
 
 def run_truth_robot(run_dir, *, model=None):
