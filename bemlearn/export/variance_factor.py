@@ -82,12 +82,8 @@ class VarianceFactor:
 
 
 def kernel_gram(state: PredictorState) -> torch.Tensor:
-    """K = K_ZZ + σ_0² I, K_ij = σ_f² exp(−½ ‖(z_i − z_j)/ℓ‖²) (eq. 11); ``(M, M)`` float64."""
-    zs = state.Z / state.lengthscale
-    sq = torch.cdist(zs, zs, compute_mode="donot_use_mm_for_euclid_dist").square()
-    K = state.outputscale * torch.exp(-0.5 * sq)
-    K.diagonal().add_(state.noise)
-    return K
+    """K = K_ZZ + σ_0² I (eq. 11); ``(M, M)`` float64 (:meth:`PredictorState.gram`)."""
+    return state.gram()
 
 
 def condition_number(K: torch.Tensor) -> float:

@@ -27,6 +27,13 @@ __all__ = ["reference_posterior", "verify_predictor"]
 _EPS = float(torch.finfo(torch.float64).eps)
 
 
+def _kernel_row(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
+    """k_j = σ_f² exp(−½ ‖(x̃ − z_j)/ℓ‖²) by explicit differences (``cdist``): ``(B, M)``."""
+    xt = (x - state.x_mean) / state.x_std / state.lengthscale
+    return state.outputscale * torch.exp(-0.5 * torch.cdist(xt, state.Z / state.lengthscale,
+                                                            compute_mode="donot_use_mm_for_euclid_dist").square())
+
+
 def reference_posterior(state: PredictorState, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, float]:
     """Dense μ, σ (rad) for physical ``x: (B, d)`` float64, and the variance rounding bound (rad²)."""
     if state.factored:
@@ -36,9 +43,7 @@ def reference_posterior(state: PredictorState, x: torch.Tensor) -> tuple[torch.T
         s_norm = float(torch.linalg.matrix_norm(state.S, ord=2))
         bound = 64 * state.n_support * _EPS * s_norm * float(state.outputscale) ** 2 * float(state.y_std) ** 2
         return mean, std, bound
-    xt = (x - state.x_mean) / state.x_std / state.lengthscale
-    zs = state.Z / state.lengthscale
-    k = state.outputscale * torch.exp(-0.5 * torch.cdist(xt, zs, compute_mode="donot_use_mm_for_euclid_dist").square())
+    k = _kernel_row(state, x)
     K = kernel_gram(state)
     L = torch.linalg.cholesky(K)
     v = torch.cholesky_solve(k.T, L)
@@ -51,9 +56,7 @@ def reference_posterior(state: PredictorState, x: torch.Tensor) -> tuple[torch.T
 
 def _factored_reference(state: PredictorState, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, float]:
     """μ, σ and the rounding bound of a factored sparse state (module docstring)."""
-    xt = (x - state.x_mean) / state.x_std / state.lengthscale
-    zs = state.Z / state.lengthscale
-    k = state.outputscale * torch.exp(-0.5 * torch.cdist(xt, zs, compute_mode="donot_use_mm_for_euclid_dist").square())
+    k = _kernel_row(state, x)
     L, C = state.S_chol, state.S_inner
     v = torch.linalg.solve_triangular(L, k.T, upper=False)
     v = v + torch.linalg.solve_triangular(L, k.T - L @ v, upper=False)
@@ -69,9 +72,7 @@ def _estimator_rounding(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
     error is up to M ε y_std |k|ᵀ|δ_k|, and its square's up to 2 |shift| times that."""
     if not state.n_estimators:
         return torch.zeros(x.shape[0], dtype=torch.float64)
-    xt = (x - state.x_mean) / state.x_std / state.lengthscale
-    k = state.outputscale * torch.exp(-0.5 * torch.cdist(xt, state.Z / state.lengthscale,
-                                                         compute_mode="donot_use_mm_for_euclid_dist").square())
+    k = _kernel_row(state, x)
     shift = state.y_std * (k @ state.estimator_delta)
     err = state.n_support * _EPS * state.y_std * (k @ state.estimator_delta.abs())
     return (2 * shift.abs() * err + err**2).mean(-1)

@@ -165,8 +165,7 @@ def estimator_sensitivity(state: PredictorState, traj: Trajectory, estimator, ro
     delta = torch.stack(deltas, 1)
     rms = med = None
     if queries is not None:
-        kq = _cross(state, (queries.to(torch.float64) - state.x_mean) / state.x_std).mT      # (Q, M)
-        shift = state.y_std * (kq @ delta)
+        shift = state.y_std * (state.kernel_row(queries.to(torch.float64)) @ delta)      # (Q, K)
         rms = tuple(float(v) for v in shift.square().mean(0).sqrt())
         med = tuple(float(v) for v in shift.abs().median(0).values)
     out = EstimatorSensitivity(delta, tuple(_describe(e) for e in neighbours), rms, tuple(shorts), med)

@@ -55,8 +55,5 @@ def band_extra_variance(state: PredictorState, x: torch.Tensor, *, n_inputs: int
     if bool((s > 0).any()):
         var_in = ((mean_gradient(state, x) * s) ** 2).sum(-1)
     if state.n_estimators:
-        xt = (x.to(torch.float64) - state.x_mean) / state.x_std
-        diff = (xt[:, None, :] - state.Z[None, :, :]) / state.lengthscale
-        k = state.outputscale * torch.exp(-0.5 * (diff**2).sum(-1))          # (B, M)
-        var_est = (state.y_std * (k @ state.estimator_delta)).square().mean(-1)
+        var_est = (state.y_std * (state.kernel_row(x.to(torch.float64)) @ state.estimator_delta)).square().mean(-1)
     return torch.maximum(var_in, var_est)

@@ -194,6 +194,19 @@ class PredictorState:
         """Whether S is held as L⁻ᵀ C L⁻¹ (``S_chol``, ``S_inner``; sparse kinds)."""
         return self.S_chol is not None
 
+    def gram(self) -> torch.Tensor:
+        """K = K_ZZ + σ_0² I, K_ij = σ_f² exp(−½ ‖(z_i − z_j)/ℓ‖²) (eq. 11); ``(M, M)``, normalized units."""
+        zs = self.Z / self.lengthscale
+        K = self.outputscale * torch.exp(-0.5 * torch.cdist(zs, zs, compute_mode="donot_use_mm_for_euclid_dist").square())
+        K.diagonal().add_(self.noise)
+        return K
+
+    def kernel_row(self, x: torch.Tensor) -> torch.Tensor:
+        """k_Z(x̃) = σ_f² exp(−½ ‖(x̃ − z_j)/ℓ‖²): ``(B, M)`` for ``x: (B, d)`` physical inputs."""
+        xt = (x - self.x_mean) / self.x_std
+        diff = (xt[:, None, :] - self.Z[None, :, :]) / self.lengthscale
+        return self.outputscale * torch.exp(-0.5 * (diff**2).sum(-1))
+
     def gram_cholesky(self) -> torch.Tensor | None:
         """L with L Lᵀ = K_ZZ + σ_0² I (exact kind; computed once per state), or ``None`` for the
         sparse kinds or when K is not numerically positive definite."""
@@ -201,10 +214,7 @@ class PredictorState:
             return None
         cached = self.__dict__.get("_gram_cholesky")
         if cached is None:
-            zs = self.Z / self.lengthscale
-            K = self.outputscale * torch.exp(-0.5 * torch.cdist(zs, zs, compute_mode="donot_use_mm_for_euclid_dist").square())
-            K.diagonal().add_(self.noise)
-            L, info = torch.linalg.cholesky_ex(K)
+            L, info = torch.linalg.cholesky_ex(self.gram())
             cached = (L if int(info) == 0 else None,)
             object.__setattr__(self, "_gram_cholesky", cached)
         return cached[0]
@@ -223,9 +233,7 @@ class PredictorState:
         Returns:
             mean ``(B,)`` rad and std ``(B,)`` rad.
         """
-        xt = (x - self.x_mean) / self.x_std
-        diff = (xt[:, None, :] - self.Z[None, :, :]) / self.lengthscale
-        k = self.outputscale * torch.exp(-0.5 * (diff**2).sum(-1))
+        k = self.kernel_row(x)
         mean = k @ self.alpha
         L = self.gram_cholesky()
         if L is not None:
