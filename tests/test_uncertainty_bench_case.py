@@ -6,6 +6,8 @@ This guards the part that broke silently once: the case's config construction.)
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from bemlearn.bench.uncertainty_cases import cartpole_case
 from bemlearn.data import read_trajectory
 
@@ -17,3 +19,15 @@ def test_cartpole_case_writes_its_robot_and_data(tmp_path):
     assert traj.meta.sample_rate_hz == 400.0 and len(traj.trial_ids) == 2
     assert traj.meta.joint_kinds == ("slide", "hinge")
     assert None not in (case.evaluation.n_sines, case.evaluation.frequency_hz)   # every field set or derived
+
+
+def test_bench_uncertainty_refuses_an_existing_json_before_fitting(tmp_path, capsys):
+    from bemlearn.cli.main import main
+
+    out = tmp_path / "results.json"
+    out.write_text("kept")
+    root = Path(__file__).resolve().parents[1]
+    code = main(["bench", "uncertainty", "--config", str(root / "configs/furuta.yaml"), "--data", str(root / "data/furuta_excitation.npz"),
+                 "--no-cartpole", "--json", str(out)])
+    assert code != 0 and "would overwrite" in capsys.readouterr().err
+    assert out.read_text() == "kept"

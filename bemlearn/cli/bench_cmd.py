@@ -111,6 +111,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     u.add_argument("--workdir", type=Path, default=None, help="keep the cart-pole MJCF and data here (default: a temp dir)")
     u.add_argument("--seeds", type=int, default=0, help="also refit the chosen band with dataset seeds 1..K (robustness)")
     u.add_argument("--json", type=Path, default=None, help="also write the full results (reliability tables) as JSON")
+    u.add_argument("--force", action="store_true", help="replace an existing --json file")
     u.set_defaults(func=_uncertainty)
 
     bb = sub.add_parser("band", help="the calibrated band's terms on trained runs: coverage of the model BEM and sharpness",
@@ -259,9 +260,12 @@ def _uncertainty(args: argparse.Namespace) -> int:
     import json
 
     from bemlearn.bench.uncertainty_bench import format_seed_sweep, format_uncertainty_bench, run_uncertainty_bench
+    from bemlearn.files import atomic_write_text, check_outputs
 
     if args.seeds < 0:
         raise ValueError(f"--seeds: expected a non-negative integer, got {args.seeds}")
+    if args.json is not None:   # refused before minutes of fitting, not after
+        check_outputs([args.json], args.force, what="bench uncertainty --json")
     results, sweep = run_uncertainty_bench(config=args.config, data=args.data, cartpole=not args.no_cartpole,
                                            workdir=args.workdir, seeds=args.seeds, progress=print)
     print(format_uncertainty_bench(results))
@@ -269,7 +273,7 @@ def _uncertainty(args: argparse.Namespace) -> int:
         print("\nchosen band over dataset seeds (training draw and trial split):")
         print(format_seed_sweep(sweep))
     if args.json is not None:
-        args.json.write_text(json.dumps({"candidates": results, "seeds": sweep}, indent=1, default=float))
+        atomic_write_text(args.json, json.dumps({"candidates": results, "seeds": sweep}, indent=1, default=float))
     return 0
 
 
