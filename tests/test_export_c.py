@@ -238,6 +238,15 @@ def test_export_c_never_overwrites_without_force(tmp_path, capsys):
     assert "apply to --format c only" in capsys.readouterr().err
 
 
+def _assert_bem_forward_matches(lib, ts, state):
+    """bem_forward and bem_forward_latent (m = 1) against TorchScript on 500 in-range inputs."""
+    x, _, _ = _in_range(state, 500, seed=4, width=3)
+    for latent, ref in ((False, ts.forward), (True, ts.forward_latent)):
+        mean, std, _ = lib.forward(x, latent=latent)
+        ref_mean, ref_std = (t.numpy() for t in ref(torch.from_numpy(x)))
+        assert np.abs(mean - ref_mean).max() <= MEAN_ATOL and np.abs(std / ref_std - 1).max() <= STD_RTOL
+
+
 def test_signed_factor_matches_torchscript(tmp_path):
     """svgp with S_u ⋠ K_ZZ: an indefinite S and the signed factor path."""
     _, state = _svgp_case(400, 1, seed=7)
@@ -246,11 +255,7 @@ def test_signed_factor_matches_torchscript(tmp_path):
     meta = _metadata(state, 1)
     lib, ts = _build(state, meta, tmp_path)
     assert "bem_signs" in (tmp_path / "bem_predictor.c").read_text()
-    x, _, _ = _in_range(state, 500, seed=4, width=3)
-    for latent, ref in ((False, ts.forward), (True, ts.forward_latent)):
-        mean, std, _ = lib.forward(x, latent=latent)
-        ref_mean, ref_std = (t.numpy() for t in ref(torch.from_numpy(x)))
-        assert np.abs(mean - ref_mean).max() <= MEAN_ATOL and np.abs(std / ref_std - 1).max() <= STD_RTOL
+    _assert_bem_forward_matches(lib, ts, state)
 
 
 def test_signed_factored_matches_torchscript(tmp_path):
@@ -262,11 +267,7 @@ def test_signed_factored_matches_torchscript(tmp_path):
     lib, ts = _build(state, meta, tmp_path)
     src = (tmp_path / "bem_predictor.c").read_text()
     assert "bem_signs" in src and "bem_inner" in src
-    x, _, _ = _in_range(state, 500, seed=4, width=3)
-    for latent, ref in ((False, ts.forward), (True, ts.forward_latent)):
-        mean, std, _ = lib.forward(x, latent=latent)
-        ref_mean, ref_std = (t.numpy() for t in ref(torch.from_numpy(x)))
-        assert np.abs(mean - ref_mean).max() <= MEAN_ATOL and np.abs(std / ref_std - 1).max() <= STD_RTOL
+    _assert_bem_forward_matches(lib, ts, state)
 
 
 def test_band_without_input_noise_on_the_bem_columns(tmp_path):
