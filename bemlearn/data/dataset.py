@@ -5,8 +5,13 @@ training and a validation :class:`BEMDataset`:
 
 1. trials shorter than the derivative estimator needs are dropped (or rejected), and
    failed trials optionally dropped (the paper keeps them);
-2. q̇, q̈ are estimated trial by trial (:mod:`bemlearn.data.derivatives`);
-3. optionally the one-sided edge samples of each trial are dropped;
+2. q̇, q̈ are estimated trial by trial (:mod:`bemlearn.data.derivatives`); an estimator
+   that smooths (the default Gaussian, :mod:`bemlearn.data.gaussian_derivative`) also gives
+   the smoothed q, used for the q_a inputs and the q_u label alike (eq. G2), and an option it
+   leaves to the data (its width σ) is chosen from them first
+   (:mod:`bemlearn.data.derivative_choice`);
+3. the edge samples of each trial are dropped where the estimator has no valid estimate there
+   (the Gaussian), or optionally where they are one-sided (``drop_edges``);
 4. samples with |q_u| > ``qu_window`` are dropped (q_u = f(x) is single-valued only
    near upright);
 5. trials are split into training / validation sets (seeded, a fraction held out);
@@ -28,7 +33,8 @@ import numpy as np
 import torch
 
 from bemlearn.data.dataset_types import BEMDataset, GPDatasets
-from bemlearn.data.derivatives import DerivativeEstimator, estimate_derivatives, make_estimator
+from bemlearn.data.derivative_choice import estimate_states, resolve_estimator
+from bemlearn.data.derivatives import DerivativeEstimator, make_estimator
 from bemlearn.data.features import gp_input_names, gp_inputs, gp_output_name
 from bemlearn.data.normalization import Normalization
 from bemlearn.data.trajectory import Trajectory
@@ -44,8 +50,10 @@ class DatasetConfig:
     """How trajectories become GP data (parse with ``bemlearn.config.from_dict``).
 
     Attributes:
-        derivative: derivative estimator name (``"savgol"``, ``"central"``).
-        derivative_options: the estimator's options, e.g. ``{"window_s": 0.2, "polyorder": 4}``.
+        derivative: derivative estimator name (``"gaussian"``, ``"savgol"``, ``"central"``).
+        derivative_options: the estimator's options, e.g. ``{"sigma_s": 0.1}`` (gaussian) or
+            ``{"window_s": 0.3, "polyorder": 4}`` (savgol); an option left out takes the
+            estimator's default (the Gaussian's σ: chosen from the data).
         qu_window: keep samples with |q_u| ≤ qu_window, rad (``None``: keep all).
         n_points: training points drawn at random from the training pool (``None``: all).
         n_val_points: validation points drawn at random (``None``: all).
@@ -57,8 +65,8 @@ class DatasetConfig:
         drop_edges: drop the samples at each trial end whose derivatives are one-sided.
     """
 
-    derivative: str = "savgol"
-    derivative_options: dict[str, Any] = field(default_factory=lambda: {"window_s": 0.3, "polyorder": 4})
+    derivative: str = "gaussian"
+    derivative_options: dict[str, Any] = field(default_factory=dict)
     qu_window: float | None = 0.5
     n_points: int | None = 500
     n_val_points: int | None = None
@@ -82,8 +90,15 @@ class DatasetConfig:
             raise ValueError(f"short_trials: expected 'drop' or 'error', got {self.short_trials!r}")
 
     def estimator(self) -> DerivativeEstimator:
-        """The configured derivative estimator."""
+        """The configured derivative estimator (options left to the data still unset)."""
         return make_estimator(self.derivative, self.derivative_options, where="derivative_options")
+
+    def with_estimator(self, estimator: DerivativeEstimator) -> "DatasetConfig":
+        """This config with ``estimator``'s options written out (e.g. a σ chosen from the data)."""
+        import dataclasses as dc
+
+        opts = {f.name: getattr(estimator, f.name) for f in dc.fields(estimator)} if dc.is_dataclass(estimator) else dict(self.derivative_options)
+        return dc.replace(self, derivative=estimator.name, derivative_options=opts)
 
 
 def split_trials(
@@ -141,8 +156,11 @@ def build_datasets(traj: Trajectory, config: DatasetConfig, *, progress: bool = 
     validate(traj, source="build_datasets", min_trial_samples=1)  # cheap; in-memory trajectories too
     meta = traj.meta
     rate = meta.sample_rate_hz
-    est = config.estimator()
     report: dict[str, Any] = {"trials_total": len(traj.trial_ids), "samples_total": traj.n_samples}
+    est, choice = resolve_estimator(config.estimator(), traj, qu_window=config.qu_window)
+    config = config.with_estimator(est) if choice is not None else config
+    if choice is not None:
+        report["derivative_choice"] = choice.to_dict()
 
     need = est.min_samples(rate)
     short = [s.trial_id for s in traj.trial_slices() if s.n_samples < need]
@@ -159,12 +177,16 @@ def build_datasets(traj: Trajectory, config: DatasetConfig, *, progress: bool = 
         raise ValueError("no trials left to build a dataset from (all were dropped; see the log)")
     traj = traj.select_rows(kept) if len(source_rows) < traj.n_samples else traj
 
-    qd, qdd = estimate_derivatives(traj, est, progress=progress)
-    x_all = gp_inputs(traj.q, qd, qdd, unactuated_index=meta.unactuated_index)
-    y_all = traj.q[:, meta.unactuated_index]
+    q_all, qd, qdd, valid = estimate_states(traj, est)
+    x_all = gp_inputs(q_all, qd, qdd, unactuated_index=meta.unactuated_index)
+    y_all = q_all[:, meta.unactuated_index]
 
-    keep = np.ones(traj.n_samples, dtype=bool)
-    if config.drop_edges:
+    keep = valid.copy()
+    if not valid.all():
+        report["samples_dropped_edges"] = int((~valid).sum())
+        logger.info("dropped %d samples within %d of a trial end (no full %r kernel there)", report["samples_dropped_edges"],
+                    est.edge_samples(rate), est.name)
+    elif config.drop_edges:
         k = est.edge_samples(rate)
         for s in traj.trial_slices():
             keep[s.rows.start:s.rows.start + k] = False
@@ -211,4 +233,5 @@ def build_datasets(traj: Trajectory, config: DatasetConfig, *, progress: bool = 
         "GP dataset: %d training points (%d trials), %d validation points (%d trials), d = %d",
         report["n_train"], len(train_ids), report["n_val"], len(val_ids), len(names),
     )
-    return GPDatasets(train=make(train_rows), val=make(val_rows), report=report)
+    report["estimator"] = repr(est)
+    return GPDatasets(train=make(train_rows), val=make(val_rows), report=report, config=config)

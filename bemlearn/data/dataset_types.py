@@ -129,9 +129,13 @@ class GPDatasets:
         report: counts: ``trials_total``, ``samples_total``, ``trials_dropped_short``,
             ``samples_dropped_short``, ``trials_dropped_failed``, ``samples_dropped_failed``,
             ``samples_dropped_edges`` (with ``drop_edges``), ``samples_outside_window``,
-            ``train_trials``, ``val_trials``, ``train_pool``, ``val_pool``, ``n_train``, ``n_val``.
+            ``train_trials``, ``val_trials``, ``train_pool``, ``val_pool``, ``n_train``, ``n_val``,
+            ``estimator``, and ``derivative_choice`` when an option was chosen from the data.
+        config: the :class:`~bemlearn.data.DatasetConfig` the sets were built with, with every option
+            chosen from the data written out (rebuilding with it gives the same sets).
     """
 
     train: BEMDataset
     val: BEMDataset
     report: dict[str, Any]
+    config: Any = None

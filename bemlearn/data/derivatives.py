@@ -3,6 +3,9 @@
 The GP input of eq. (11) needs q̇ and q̈, which recorded data do not contain.  An
 estimator is chosen by name from :data:`DERIVATIVE_ESTIMATORS`:
 
+- ``"gaussian"`` (the default): :class:`~bemlearn.data.gaussian_derivative.GaussianDerivative`
+  (``sigma_s``, ``truncate``): the derivatives of the Gaussian-smoothed angles, which also
+  smooths the label consistently; σ chosen from the data when not given;
 - ``"central"``: :class:`~bemlearn.data.finite_difference.CentralDifference` (no options);
 - ``"savgol"``: :class:`~bemlearn.data.savitzky_golay.SavitzkyGolay` (``window_s`` or
   ``window``, ``polyorder``).
@@ -22,6 +25,7 @@ from tqdm.auto import tqdm
 
 from bemlearn.config import from_dict
 from bemlearn.data.finite_difference import CentralDifference
+from bemlearn.data.gaussian_derivative import GaussianDerivative
 from bemlearn.data.savitzky_golay import SavitzkyGolay
 from bemlearn.data.trajectory import Trajectory
 
@@ -57,6 +61,7 @@ class DerivativeEstimator(Protocol):
 
 #: Estimator classes by name; each class is also its own (frozen, strict) config.
 DERIVATIVE_ESTIMATORS: dict[str, type] = {
+    GaussianDerivative.name: GaussianDerivative,
     CentralDifference.name: CentralDifference,
     SavitzkyGolay.name: SavitzkyGolay,
 }

@@ -1,0 +1,239 @@
+"""The Gaussian estimator's width σ, chosen from the data's own motion.
+
+A consistent filter (:mod:`bemlearn.data.gaussian_derivative`, eq. G2) keeps the unactuated
+row's relation between the smoothed inputs and the smoothed label at every σ, so σ trades two
+errors that do not bias each other's sign: at small σ the quantization noise in S[q̈]
+(growing as σ^(−5/2)) attenuates the learned slopes (errors in variables); at large σ the
+smoothing takes the motion itself away, the data cover less of the design region and the GP
+has to extrapolate, and the smoothing of products and of the nonlinearity grows.  The rule
+takes as much smoothing as the motion allows:
+
+    σ = the width at which the smoothed label keeps ρ = 93 % of its motion,
+        std(S_σ[q_u] − trial mean) = ρ · std(S_σ₀[q_u] − trial mean)                   (C1)
+
+with σ₀ two samples (std over the rows valid at every σ tried and inside ``qu_window``).  For
+a single sine of frequency f, (C1) is σ = √(−2 ln ρ) / (2πf) ≈ 0.06 / f.  ρ was chosen by
+measurement: on ten robots (six of the project's, four public files) the learned BEM vs the
+model BEM over the design region is within the issue's targets across ρ ∈ [0.9, 0.95] and best
+near 0.93 (docs/derivatives.md; ``bemlearn bench derivatives``).  No model is used.
+
+The result also states how much quantization noise is left in S[q̈] at that σ: the noise std
+δ/√12 · ‖w2‖ of each joint with a detected encoder step δ, as a fraction of the std of S[q̈] in
+the data; above :data:`NOISY` the derivatives are noise-dominated and the learned slopes are
+attenuated (the run's verdict says so).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from bemlearn.data.gaussian_derivative import GaussianDerivative, apply_kernel, gaussian_kernels
+from bemlearn.data.trajectory import Trajectory
+
+__all__ = ["SigmaChoice", "choose_sigma", "resolve_estimator", "estimate_states", "KEPT_MOTION", "NOISY"]
+
+log = logging.getLogger(__name__)
+
+#: ρ of (C1): the share of the label's motion (std) the smoothing keeps.
+KEPT_MOTION = 0.93
+#: Quantization noise in S[q̈] above this fraction of its std in the data: noise-dominated (measured:
+#: 2 % noise cost the learned BEM 1 % of its gain, 7 % cost 11 %; docs/derivatives.md).
+NOISY = 0.04
+#: Ratio between neighbouring widths of the ladder (C1) is evaluated on, interpolated between.
+LADDER_RATIO = 1.25
+#: The ladder's largest σ, s.
+MAX_SIGMA_S = 2.0
+
+
+@dataclass(frozen=True)
+class SigmaChoice:
+    """The result of :func:`choose_sigma`.
+
+    Attributes:
+        sigma_s: the chosen σ, s.
+        ladder: the σ values evaluated, s.
+        kept: the share of the label's motion each keeps (C1).
+        rows: samples (C1) was evaluated on.
+        noise: per joint with a detected encoder step, the quantization noise std in S[q̈] at σ
+            as a fraction of S[q̈]'s std in the data (``{joint: fraction}``).
+        limited: ``None``, or why σ is not where (C1) would put it (``"short trials"``: the
+            trials cannot hold a wider kernel; ``"slow motion"``: the widest σ tried keeps more
+            than ρ).
+        note: one line for logs and reports.
+    """
+
+    sigma_s: float
+    ladder: tuple[float, ...]
+    kept: tuple[float, ...]
+    rows: int
+    noise: dict[str, float]
+    limited: str | None
+    note: str
+
+    @property
+    def noisy(self) -> list[str]:
+        """Joints whose S[q̈] is noise-dominated (noise fraction above :data:`NOISY`)."""
+        return [j for j, v in self.noise.items() if v > NOISY]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able summary."""
+        return {"sigma_s": self.sigma_s, "ladder": list(self.ladder), "kept_motion": list(self.kept), "rows": self.rows,
+                "qdd_noise_fraction": dict(self.noise), "limited": self.limited, "note": self.note,
+                "criterion": f"C1: the smoothed label keeps {KEPT_MOTION:.0%} of its motion (docs/derivatives.md)"}
+
+
+def estimate_states(traj: Trajectory, estimator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """q as the estimator passes it, q̇, q̈ and the validity of each row, trial by trial.
+
+    An estimator with ``smooths = True`` (the Gaussian) returns its smoothed q, which then serves
+    as the GP's q_a inputs and q_u label alike (eq. G2); others return the recorded q.  Rows are
+    invalid within :meth:`edge_samples` of a trial end for estimators with ``edges_valid = False``,
+    and throughout trials shorter than :meth:`min_samples`.
+
+    Returns:
+        ``q, qd, qdd``: ``(T, n)`` each (joint units, per s, per s²; zeros where invalid) and
+        ``valid``: ``(T,)`` bool.
+    """
+    rate = traj.meta.sample_rate_hz
+    q = traj.q.copy()
+    qd = np.zeros_like(q)
+    qdd = np.zeros_like(q)
+    valid = np.ones(traj.n_samples, dtype=bool)
+    need = estimator.min_samples(rate)
+    smooths = bool(getattr(estimator, "smooths", False))
+    edge = 0 if getattr(estimator, "edges_valid", True) else estimator.edge_samples(rate)
+    for s in traj.trial_slices():
+        r = s.rows
+        if s.n_samples < need:
+            valid[r] = False
+            continue
+        if smooths:
+            q[r], qd[r], qdd[r] = estimator.filter(traj.q[r], sample_rate_hz=rate)
+        else:
+            qd[r], qdd[r] = estimator(traj.q[r], sample_rate_hz=rate)
+        if edge:
+            valid[r.start:r.start + edge] = False
+            valid[r.stop - edge:r.stop] = False
+    return q, qd, qdd, valid
+
+
+def _ladder(traj: Trajectory, truncate: float) -> tuple[float, ...]:
+    """σ from two samples up by :data:`LADDER_RATIO` while at least half the samples keep a full kernel."""
+    rate = traj.meta.sample_rate_hz
+    lengths = np.array([s.n_samples for s in traj.trial_slices()], dtype=np.float64)
+    total = lengths.sum()
+    sig = 2.0 / rate
+    out = []
+    while sig <= MAX_SIGMA_S:
+        K = math.ceil(truncate * sig * rate)
+        if np.clip(lengths - 2 * K, 0, None).sum() < 0.5 * total:
+            break
+        out.append(float(f"{sig:.4g}"))
+        sig *= LADDER_RATIO
+    return tuple(out)
+
+
+def _detrended_std(v: np.ndarray, trial: np.ndarray) -> float:
+    ids, inv = np.unique(trial, return_inverse=True)
+    means = np.bincount(inv, weights=v) / np.bincount(inv)
+    return float(np.std(v - means[inv]))
+
+
+def choose_sigma(traj: Trajectory, *, qu_window: float | None = 0.5, truncate: float = 5.0,
+                 kept_motion: float = KEPT_MOTION) -> SigmaChoice:
+    """σ of the Gaussian estimator for ``traj`` by rule (C1) (module docstring).
+
+    Args:
+        traj: the trajectory (uniformly sampled trials).
+        qu_window: rows with |q_u| > this are left out (the dataset's ``qu_window``), rad or m.
+        truncate: the estimator's ``truncate``.
+        kept_motion: ρ of (C1).
+
+    Raises:
+        TrajectoryFormatError: the trials are too short for even a two-sample σ.
+    """
+    from bemlearn.data.quantization import detect_quantization_step
+    from bemlearn.errors import TrajectoryFormatError
+
+    meta = traj.meta
+    rate = meta.sample_rate_hz
+    iu = meta.unactuated_index
+    ladder = _ladder(traj, truncate)
+    where = f"{meta.robot!r} ({traj.n_samples} samples in {len(traj.trial_ids)} trials at {rate:g} Hz)"
+    if not ladder:
+        raise TrajectoryFormatError(
+            f"choose_sigma: the trials of {where} are too short for the Gaussian estimator (a σ of two samples needs "
+            f"trials of more than {4 * math.ceil(2 * truncate)} samples); use dataset.derivative: savgol or central")
+    edge = GaussianDerivative(sigma_s=ladder[-1], truncate=truncate).edge_samples(rate)
+    common = np.zeros(traj.n_samples, dtype=bool)
+    for s in traj.trial_slices():
+        if s.n_samples > 2 * edge:
+            common[s.rows.start + edge:s.rows.stop - edge] = True
+    if qu_window is not None:
+        common &= np.abs(traj.q[:, iu]) <= qu_window
+    rows = np.flatnonzero(common)
+    if rows.size < 10:
+        raise TrajectoryFormatError(f"choose_sigma: {where}: fewer than 10 samples inside |{meta.unactuated}| ≤ "
+                                    f"{qu_window} away from the trial ends; nothing to choose σ from")
+    trial = traj.trial[rows]
+    label = traj.q[:, iu:iu + 1]
+    stds = []
+    for sig in ladder:
+        w0 = gaussian_kernels(sig, rate, truncate)[0]
+        smooth = np.empty_like(label)
+        for s in traj.trial_slices():
+            if s.n_samples > 2 * edge:
+                smooth[s.rows] = apply_kernel(label[s.rows], w0)
+        stds.append(_detrended_std(smooth[rows, 0], trial))
+    kept = tuple(float(v / stds[0]) if stds[0] > 0 else math.nan for v in stds)
+    limited = None
+    if not stds[0] > 0:
+        sigma = ladder[len(ladder) // 2]
+        note = f"σ = {sigma:g} s: {meta.unactuated} does not move in the data; the middle of the ladder is used"
+        limited = "no motion"
+    else:
+        below = [k for k, v in enumerate(kept) if v < kept_motion]
+        if not below:
+            sigma = ladder[-1]
+            limited = "short trials" if ladder[-1] * LADDER_RATIO <= MAX_SIGMA_S else "slow motion"
+            note = (f"σ = {sigma:g} s, the widest the trials allow: it keeps {kept[-1]:.0%} of {meta.unactuated}'s motion "
+                    f"(rule: {kept_motion:.0%})")
+        else:
+            k = below[0]
+            lo, hi = math.log(ladder[k - 1]), math.log(ladder[k])
+            a, b = kept[k - 1], kept[k]
+            sigma = float(f"{math.exp(lo + (hi - lo) * (a - kept_motion) / (a - b)):.4g}")
+            note = f"σ = {sigma:g} s chosen from the data: the smoothed {meta.unactuated} keeps {kept_motion:.0%} of its motion"
+    noise: dict[str, float] = {}
+    w2 = gaussian_kernels(sigma, rate, truncate)[2]
+    est = GaussianDerivative(sigma_s=sigma, truncate=truncate)
+    _, _, qdd, valid = estimate_states(traj, est)
+    ok = valid & (np.abs(traj.q[:, iu]) <= qu_window if qu_window is not None else valid)
+    for j, name in enumerate(meta.joint_names):
+        step = detect_quantization_step(traj.q[:, j])
+        sd = float(np.std(qdd[ok, j])) if ok.any() else 0.0
+        if step is not None and sd > 0:
+            noise[name] = float(step / math.sqrt(12.0) * np.linalg.norm(w2) / sd)
+    noisy = [j for j, v in noise.items() if v > NOISY]
+    if noisy:
+        note += "; q̈ noise-dominated in " + ", ".join(f"{j} ({noise[j]:.0%} of its std)" for j in noisy)
+    log.info("derivatives: %s", note)
+    return SigmaChoice(sigma, ladder, kept, int(rows.size), noise, limited, note)
+
+
+def resolve_estimator(estimator, traj: Trajectory, *, qu_window: float | None = 0.5) -> tuple[Any, SigmaChoice | None]:
+    """``estimator`` with every option it leaves to the data chosen from ``traj``, and how.
+
+    A :class:`~bemlearn.data.gaussian_derivative.GaussianDerivative` without ``sigma_s`` gets the σ
+    of :func:`choose_sigma`; any other estimator is returned as it is (choice ``None``).
+    """
+    if isinstance(estimator, GaussianDerivative) and not estimator.resolved:
+        choice = choose_sigma(traj, qu_window=qu_window, truncate=estimator.truncate)
+        return dataclasses.replace(estimator, sigma_s=choice.sigma_s), choice
+    return estimator, None
