@@ -13,13 +13,14 @@ from bemlearn.config import ConfigError, from_dict
 from bemlearn.data import (
     DatasetConfig,
     build_datasets,
-    estimate_derivatives,
     gp_input_names,
     gp_inputs,
     gp_output_name,
     split_trials,
 )
-from test_data_helpers import make_trajectory
+from bemlearn.data.derivative_choice import estimate_states
+from bemlearn.data.gaussian_derivative import gaussian_kernels
+from test_data_helpers import QSTEP, make_trajectory
 
 BIPED = ("q1", "q2", "q3", "q4", "q5")
 
@@ -63,31 +64,68 @@ def test_dataset_shapes_and_columns(traj):
     assert train.x.shape == (500, 5) and train.y.shape == (500,) and train.x.dtype == torch.float64
     assert train.input_names == ("qdd_theta", "qd_theta", "q_theta", "qdd_alpha", "qd_alpha")
     assert train.output_name == "q_alpha" and train.dim == 5
-    # Each point is x (eq. 11) of its source row, with the configured estimator's derivatives.
-    qd, qdd = estimate_derivatives(traj, cfg.estimator())
-    x_all = gp_inputs(traj.q, qd, qdd, unactuated_index=1)
+    # Each point is x (eq. 11) of its source row, with the estimator the sets were built with (the
+    # default Gaussian, σ chosen from the data: its smoothed q is the q_a input and the q_u label)
+    assert data.config.estimator().resolved and data.report["derivative_choice"]["sigma_s"] == data.config.derivative_options["sigma_s"]
+    q, qd, qdd, valid = estimate_states(traj, data.config.estimator())
+    x_all = gp_inputs(q, qd, qdd, unactuated_index=1)
     for ds in (train, val):
+        assert valid[ds.row.numpy()].all()
         np.testing.assert_array_equal(ds.x.numpy(), x_all[ds.row.numpy()])
-        np.testing.assert_array_equal(ds.y.numpy(), traj.q[ds.row.numpy(), 1])
+        np.testing.assert_array_equal(ds.y.numpy(), q[ds.row.numpy(), 1])
         np.testing.assert_array_equal(ds.trial.numpy(), traj.trial[ds.row.numpy()])
     assert len(np.unique(train.row.numpy())) == 500
-    assert len(val) == data.report["val_pool"] == sum(s.n_samples for s in traj.trial_slices() if s.trial_id in val.trial_ids)
+    assert len(val) == data.report["val_pool"] == int(valid[np.isin(traj.trial, val.trial_ids)].sum())
 
 
 def test_dataset_close_to_ground_truth_inputs():
     """With Savitzky–Golay on quantized data the dataset x is close to the true x (interior)."""
     truth = make_trajectory((800, 900), ground_truth=True, seed=2)
     data = make_trajectory((800, 900), quantize=True, seed=2)
-    ds = build_datasets(data, DatasetConfig(n_points=None, qu_window=None, val_fraction=0.0, drop_edges=True)).train
+    sg = {"derivative": "savgol", "derivative_options": {"window_s": 0.3, "polyorder": 4}}
+    ds = build_datasets(data, DatasetConfig(**sg, n_points=None, qu_window=None, val_fraction=0.0, drop_edges=True)).train
     x_true = gp_inputs(truth.q, truth.qd, truth.qdd, unactuated_index=1)[ds.row.numpy()]
     err = np.abs(ds.x.numpy() - x_true).max(0)
     scale = np.abs(x_true).max(0)
     assert (err < 0.05 * scale).all(), err / scale
 
 
+def test_gaussian_inputs_are_the_smoothed_truth():
+    """Eq. (G1): the Gaussian estimator's q, q̇, q̈ of quantized sines equal the true q, q̇, q̈
+    passed through the same kernel (analytic: each sine scaled by exp(−ω²σ²/2)), to the
+    quantization noise the kernel leaves; the label is the smoothed q_u."""
+    from test_data_helpers import furuta_spec
+
+    data = make_trajectory((900, 1000), quantize=True, seed=2)
+    sigma = 0.05
+    cfg = DatasetConfig(derivative_options={"sigma_s": sigma}, n_points=None, qu_window=None, val_fraction=0.0)
+    ds = build_datasets(data, cfg)
+    assert ds.report["samples_dropped_edges"] == 2 * 2 * int(np.ceil(5 * sigma * 400))
+    spec = furuta_spec()
+    g = np.exp(-0.5 * (spec.omegas * sigma) ** 2)          # the Gaussian's gain at each sine
+    rng = np.random.default_rng(2)                          # the draws make_trajectory made: phases, then inputs
+    truth = []
+    for T in (900, 1000):
+        ph = rng.uniform(0, 2 * np.pi, size=spec.amplitudes.shape)
+        rng.normal(size=(T, 1))
+        t = np.arange(T) / 400.0
+        arg = spec.omegas[None] * t[:, None, None] + ph[None]
+        A, w = (spec.amplitudes * g)[None], spec.omegas[None]
+        truth.append(np.stack([(A * np.sin(arg)).sum(-1), (A * w * np.cos(arg)).sum(-1), (-A * w**2 * np.sin(arg)).sum(-1)]))
+    q, qd, qdd = (np.concatenate([tr[k] for tr in truth]) for k in range(3))
+    rows = ds.train.row.numpy()
+    x_true = gp_inputs(q, qd, qdd, unactuated_index=1)[rows]
+    # the noise the kernel leaves of white quantization noise (step²/12): ‖w_k‖ · step/√12, 6σ
+    w0, w1, w2 = gaussian_kernels(sigma, 400.0)
+    tol = 6 * QSTEP / np.sqrt(12) * np.array([np.linalg.norm(w) for w in (w2, w1, w0, w2, w1)])
+    err = np.abs(ds.train.x.numpy() - x_true).max(0)
+    assert (err < tol + 1e-4 * np.abs(x_true).max(0)).all(), (err, tol)
+    np.testing.assert_allclose(ds.train.y.numpy(), q[rows, 1], atol=6 * QSTEP / np.sqrt(12) * np.linalg.norm(w0) + 1e-6)
+
+
 def test_window_filtering_counts(traj, caplog):
     window = 0.1
-    cfg = DatasetConfig(n_points=None, qu_window=window, val_fraction=0.3, seed=0)
+    cfg = DatasetConfig(derivative="savgol", n_points=None, qu_window=window, val_fraction=0.3, seed=0)
     with caplog.at_level(logging.INFO, logger="bemlearn.data.dataset"):
         data = build_datasets(traj, cfg)
     outside = int((np.abs(traj.q[:, 1]) > window).sum())
@@ -145,7 +183,8 @@ def test_subsampling_is_seeded(traj):
 def test_short_failed_and_edge_samples_are_counted(caplog):
     traj = make_trajectory((300, 60, 300, 250, 70), failed=(3,), seed=5)
     # a 0.2 s Savitzky–Golay window at 400 Hz needs 81 samples (pinned: the default may change)
-    cfg = DatasetConfig(derivative_options={"window_s": 0.2, "polyorder": 4}, n_points=None, qu_window=None, val_fraction=0.0)
+    cfg = DatasetConfig(derivative="savgol", derivative_options={"window_s": 0.2, "polyorder": 4}, n_points=None, qu_window=None,
+                        val_fraction=0.0)
     with caplog.at_level(logging.INFO, logger="bemlearn.data.dataset"):
         data = build_datasets(traj, cfg)
     r = data.report
@@ -169,11 +208,11 @@ def test_config_parsing():
         where="cfg.yaml:dataset",
     )
     assert cfg.estimator().name == "central" and cfg.qu_window == 0.3
-    # default: Savitzky–Golay 0.3 s, order 4 (best learned BEM in `bemlearn bench derivatives`) = 121 samples at 400 Hz
-    assert DatasetConfig().estimator().window_samples(400.0) == 121
+    # default: the Gaussian kernel with σ chosen from the data (docs/derivatives.md)
+    assert DatasetConfig().estimator().name == "gaussian" and not DatasetConfig().estimator().resolved
     with pytest.raises(ConfigError, match=r"cfg\.yaml:dataset: unknown key\(s\) \['window'\]"):
         from_dict(DatasetConfig, {"window": 0.2}, where="cfg.yaml:dataset")
-    with pytest.raises(ConfigError, match=r"valid names are \['central', 'savgol'\]"):
+    with pytest.raises(ConfigError, match=r"valid names are \['central', 'gaussian', 'savgol'\]"):
         from_dict(DatasetConfig, {"derivative": "spline"}, where="cfg.yaml:dataset")
     with pytest.raises(ConfigError, match=r"unknown key\(s\) \['width'\]"):
         from_dict(DatasetConfig, {"derivative_options": {"width": 3}}, where="cfg.yaml:dataset")

@@ -40,8 +40,8 @@ def long_trial():
 
 
 def test_registry_lists_names_on_error():
-    assert set(DERIVATIVE_ESTIMATORS) == {"central", "savgol"}
-    with pytest.raises(ValueError, match=r"unknown derivative estimator 'spline'; valid names are \['central', 'savgol'\]"):
+    assert set(DERIVATIVE_ESTIMATORS) == {"central", "gaussian", "savgol"}
+    with pytest.raises(ValueError, match=r"unknown derivative estimator 'spline'; valid names are \['central', 'gaussian', 'savgol'\]"):
         make_estimator("spline")
     with pytest.raises(ConfigError, match=r"unknown key\(s\) \['width'\]"):
         make_estimator("savgol", {"width": 3})

@@ -22,8 +22,8 @@ biased (docs/derivatives.md).
 Discretely, at samples q_k = q(kh), S[q]_i = Σ_k w0_k q_{i−k} with w0_k = h g_σ(kh) and
 likewise w1 = h g_σ', w2 = h g_σ'' (``scipy.ndimage.convolve1d``), truncated at |t| ≤ r σ
 (r = ``truncate``, 5 by default: the tail beyond it is 6·10⁻⁷ of the kernel's mass) and
-normalised so that constants, ramps and parabolas are reproduced exactly; a sine is then smoothed
-and differentiated to ~5·10⁻⁵ of its smoothed amplitude.
+normalised so that constants and ramps are smoothed to themselves and parabolas differentiated
+exactly; a sine is then smoothed and differentiated to ~5·10⁻⁵ of its smoothed amplitude.
 
 Edges: within ⌈r σ f_s⌉ samples of a trial's ends the kernel would need samples the trial does
 not have; those estimates are not valid (``edges_valid = False``) and
@@ -51,7 +51,8 @@ def gaussian_kernels(sigma_s: float, sample_rate_hz: float, truncate: float = 5.
 
     Index K + k holds the weight of q_{i−k}: ``convolve1d(q, w)`` gives S[q], S[q̇] (per second),
     S[q̈] (per second²).  Normalised so that Σ w0 = 1, Σ w1 (−t) = 1, Σ w2 = 0 and Σ w2 t²/2 = 1
-    (t = kh): a polynomial of degree ≤ 2 is smoothed to itself and differentiated exactly.
+    (t = kh): constants and ramps are smoothed to themselves, and a polynomial of degree ≤ 2 is
+    differentiated exactly (its smoothed value is q + q̈ Σ w0 t²/2, as S of a parabola is).
     """
     h = 1.0 / sample_rate_hz
     K = int(math.ceil(truncate * sigma_s * sample_rate_hz))

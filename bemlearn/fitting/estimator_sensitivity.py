@@ -17,8 +17,9 @@ exact GP, its inducing points otherwise), the projected-process (DTC / SGPR) mea
     α(X) = (σ_0² K_ZZ + K_ZX K_XZ)⁻¹ K_ZX ỹ,        μ̃(x̃) = k_Z(x̃)ᵀ α(X)                (E1)
 
 (Titsias, 2009; for Z = X it is the exact posterior mean K (K + σ_0² I)⁻¹ ỹ).  With X_0 the
-training rows' inputs from the chosen estimator and X_k from its k-th neighbour (same rows,
-same q and q_u), δ_k = α(X_k) − α(X_0) and the estimator variance of the BEM is
+training rows' inputs from the chosen estimator and X_k from its k-th neighbour (same rows; for an
+estimator that smooths, the neighbour's smoothed q and q_u label ỹ_k too), δ_k = α(X_k, ỹ_k) −
+α(X_0, ỹ_0) and the estimator variance of the BEM is
 
     σ_est²(x) = (1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)²                                         (E2)
 
@@ -85,8 +86,9 @@ class EstimatorSensitivity:
         estimators: a description of each neighbour, e.g. ``"savgol(window=49, polyorder=4)"``.
         rms_shift, median_shift: per neighbour, the RMS and the median over the queries of
             |y_std k_Zᵀ δ_k|, the output's unit (``None`` without queries).
-        trials_kept_base: per neighbour, trials too short for it, whose rows keep the chosen
-            estimator's values (their δ contribution is 0).
+        trials_kept_base: per neighbour, the trials with training rows where it has no valid
+            estimate (too short, or within a wider kernel's edge), whose rows keep the chosen
+            estimator's values there (their δ contribution is 0).
     """
 
     delta: torch.Tensor
@@ -124,6 +126,7 @@ def estimator_sensitivity(state: PredictorState, traj: Trajectory, estimator, ro
         :class:`EstimatorSensitivity`; ``delta`` has K = 0 columns for an estimator without
         neighbours (e.g. central differences).
     """
+    from bemlearn.data.derivative_choice import estimate_states
     from bemlearn.data.features import gp_inputs
 
     meta = traj.meta
@@ -133,35 +136,30 @@ def estimator_sensitivity(state: PredictorState, traj: Trajectory, estimator, ro
     M = state.n_support
     if not neighbours:
         return EstimatorSensitivity(torch.zeros(M, 0, dtype=torch.float64), (), None, ())
-    slices = traj.trial_slices()
-    need0 = estimator.min_samples(rate)
-    needed = np.zeros(traj.n_samples, dtype=bool)
-    needed[rows_np] = True
+    iu = meta.unactuated_index
+    q0, qd0, qdd0, valid0 = estimate_states(traj, estimator)
+    if not valid0[rows_np].all():
+        bad = int(rows_np[~valid0[rows_np]][0])
+        raise ValueError(f"estimator_sensitivity: rows: trial {int(traj.trial[bad])} holds training rows (row {bad}) where "
+                         f"the chosen estimator {_describe(estimator)} has no valid estimate (the trial is too short, or the "
+                         "row lies within its edge)")
 
-    def inputs(est) -> tuple[torch.Tensor, int]:
-        qd, qdd = np.zeros_like(traj.q), np.zeros_like(traj.q)
-        short = 0
-        for s in slices:
-            if not needed[s.rows].any():
-                continue
-            use = est if s.n_samples >= est.min_samples(rate) else estimator
-            if use is estimator and est is not estimator:
-                short += 1
-            if s.n_samples < need0:
-                raise ValueError(f"estimator_sensitivity: rows: trial {s.trial_id} holds training rows but is shorter "
-                                 f"than the {need0} samples the chosen estimator needs")
-            qd[s.rows], qdd[s.rows] = use(traj.q[s.rows], sample_rate_hz=rate)
-        x = gp_inputs(traj.q[rows_np], qd[rows_np], qdd[rows_np], unactuated_index=meta.unactuated_index)
-        return torch.as_tensor(x, dtype=torch.float64), short
+    def inputs(q, qd, qdd) -> tuple[torch.Tensor, torch.Tensor]:
+        x = gp_inputs(q[rows_np], qd[rows_np], qdd[rows_np], unactuated_index=iu)
+        return torch.as_tensor(x, dtype=torch.float64), torch.as_tensor(q[rows_np, iu], dtype=torch.float64)
 
-    y = torch.as_tensor(traj.q[rows_np, meta.unactuated_index], dtype=torch.float64)
-    x0, _ = inputs(estimator)
-    a0 = projected_weights(state, x0, y)
+    x0, y0 = inputs(q0, qd0, qdd0)
+    a0 = projected_weights(state, x0, y0)
     deltas, shorts = [], []
     for est in neighbours:
-        xk, short = inputs(est)
-        deltas.append(projected_weights(state, xk, y) - a0)
-        shorts.append(short)
+        # rows where the neighbour has no valid estimate (a trial too short for it, or a wider
+        # kernel's edge) keep the chosen estimator's values: their contribution to δ is 0
+        q, qd, qdd, valid = estimate_states(traj, est)
+        keep0 = ~valid
+        q[keep0], qd[keep0], qdd[keep0] = q0[keep0], qd0[keep0], qdd0[keep0]
+        xk, yk = inputs(q, qd, qdd)
+        deltas.append(projected_weights(state, xk, yk) - a0)
+        shorts.append(len(set(traj.trial[rows_np][keep0[rows_np]].tolist())))
     delta = torch.stack(deltas, 1)
     rms = med = None
     if queries is not None:

@@ -13,10 +13,12 @@ with, for the squared-exponential mean μ(x) = y_mean + y_std Σ_j α_j σ_f² e
 (a weighted sum of the same exponentials as μ).  For Savitzky–Golay derivatives of
 angles quantized with step Δ (white, variance Δ²/12), the filter is linear, so
 
-    s(q) = Δ/√12,   s(q̇) = Δ/√12 ‖h₁‖,   s(q̈) = Δ/√12 ‖h₂‖                          (N3)
+    s(q) = Δ/√12 ‖h₀‖,   s(q̇) = Δ/√12 ‖h₁‖,   s(q̈) = Δ/√12 ‖h₂‖                     (N3)
 
 with h₁, h₂ the centre-sample first- and second-derivative coefficients of the filter
-(window w, polynomial order p, sample time 1/f_s).  bemlearn measures (N1) in
+(window w, polynomial order p, sample time 1/f_s) and h₀ those of the angle it passes on
+(h₀ = the unit impulse, ‖h₀‖ = 1, for Savitzky–Golay, whose q is the recorded one; the
+smoothing kernel for the Gaussian estimator, :mod:`bemlearn.data.gaussian_derivative`).  bemlearn measures (N1) in
 ``bemlearn bench uncertainty``; the default band takes the larger of (N1) and the estimator
 term of :mod:`bemlearn.fitting.estimator_sensitivity` (eq. B1 of :mod:`bemlearn.models.band`).
 """
@@ -30,7 +32,7 @@ import torch
 
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["estimator_noise_gains", "mean_gradient", "propagated_variance", "quantization_input_std", "savgol_noise_std"]
+__all__ = ["estimator_noise_gains", "estimator_noise_gains3", "mean_gradient", "propagated_variance", "quantization_input_std", "savgol_noise_std"]
 
 
 def mean_gradient(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
@@ -61,13 +63,23 @@ def estimator_noise_gains(estimator, sample_rate_hz: float) -> tuple[float, floa
     a zero signal long enough for its interior; the centre responses are its coefficients, so
     white input noise of std σ gives q̇, q̈ noise of std σ‖h₁‖, σ‖h₂‖ (eq. N3).
     """
+    return estimator_noise_gains3(estimator, sample_rate_hz)[1:]
+
+
+def estimator_noise_gains3(estimator, sample_rate_hz: float) -> tuple[float, float, float]:
+    """(‖h₀‖, ‖h₁‖ s⁻¹, ‖h₂‖ s⁻²): as :func:`estimator_noise_gains`, with the gain ‖h₀‖ of the angle
+    the estimator passes on (1 for an estimator that passes the recorded angle, < 1 for one that
+    smooths it, ``smooths = True``)."""
     n = max(estimator.min_samples(sample_rate_hz), 3)
     T = 4 * n + 1
     impulse = np.zeros((T, 1))
     impulse[T // 2] = 1.0
-    qd, qdd = estimator(impulse, sample_rate_hz=sample_rate_hz)
+    if getattr(estimator, "smooths", False):
+        q, qd, qdd = estimator.filter(impulse, sample_rate_hz=sample_rate_hz)
+    else:
+        (qd, qdd), q = estimator(impulse, sample_rate_hz=sample_rate_hz), impulse
     interior = slice(n, T - n)
-    return float(np.linalg.norm(qd[interior])), float(np.linalg.norm(qdd[interior]))
+    return tuple(float(np.linalg.norm(v[interior])) for v in (q, qd, qdd))  # type: ignore[return-value]
 
 
 def quantization_input_std(input_names: tuple[str, ...], steps: dict[str, float], *, estimator,
@@ -79,12 +91,12 @@ def quantization_input_std(input_names: tuple[str, ...], steps: dict[str, float]
             entry (no quantization detected) gets s = 0.
         estimator: the derivative estimator that built the inputs.
     """
-    g1, g2 = estimator_noise_gains(estimator, sample_rate_hz)
+    g0, g1, g2 = estimator_noise_gains3(estimator, sample_rate_hz)
     out = []
     for name in input_names:
         prefix, joint = name.split("_", 1)
         base = steps.get(joint, 0.0) / math.sqrt(12.0)
-        out.append(base * (g2 if prefix == "qdd" else g1 if prefix == "qd" else 1.0))
+        out.append(base * (g2 if prefix == "qdd" else g1 if prefix == "qd" else g0))
     return torch.tensor(out, dtype=torch.float64)
 
 

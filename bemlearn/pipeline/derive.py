@@ -92,7 +92,9 @@ def control_rate(robot, *, preferred_hz: float = 200.0, min_hz: float = 100.0, f
     N = max(1, int(math.floor(1.0 / (preferred_hz * h) + 1e-9)))
     rate = 1.0 / (N * h)
     if rate >= min_hz:
-        return Derived(RateChoice(rate, N, h, False), f"{rate:g} Hz = {N} physics steps of the file's {h:g} s (target ≥ {preferred_hz:g} Hz)")
+        why = (f"≥ {preferred_hz:g} Hz" if rate >= preferred_hz - 1e-9 else
+               f"≥ {min_hz:g} Hz; {preferred_hz:g} Hz is not a whole number of the file's steps, and the file's step is kept")
+        return Derived(RateChoice(rate, N, h, False), f"{rate:g} Hz = {N} physics steps of the file's {h:g} s ({why})")
     N = max(1, int(round(1.0 / (preferred_hz * fine_timestep))))
     rate = 1.0 / (N * fine_timestep)
     note = (f"{rate:g} Hz = {N} physics steps of {fine_timestep:g} s: the file's timestep {h:g} s is coarser than "

@@ -42,21 +42,32 @@ def _leaves(prefix: str, value: Any, note: str, out: dict) -> None:
         out[prefix] = (value, note)
 
 
-def _rate(robot, rate_hz: float | None, timestep: float | None):
-    """The :class:`~bemlearn.pipeline.derive.RateChoice` of a given rate (and physics step), or the derived one."""
-    from bemlearn.pipeline.derive import RateChoice, control_rate
+def _rate(robot, rate_hz: float | None, timestep: float | None, *, section: str = "collect"):
+    """The :class:`~bemlearn.pipeline.derive.RateChoice` of a given rate (and physics step), or the derived one.
+
+    A given rate that is not a whole number of the file's physics steps (and no given step) gets the
+    largest step h' ≤ h_file with 1/(rate·h') whole; a given step must divide the rate's tick.
+    """
+    from bemlearn.errors import ConfigError
+    from bemlearn.pipeline.derive import Derived, RateChoice, control_rate
 
     if rate_hz is None:
         return control_rate(robot)
-    h = float(timestep or robot.model.opt.timestep)
+    h_file = float(robot.model.opt.timestep)
+    h = float(timestep or h_file)
     n = 1.0 / (rate_hz * h)
-    if abs(n - round(n)) > 1e-6 or round(n) < 1:
-        raise ValueError(f"rate_hz = {rate_hz:g} Hz is not a whole number of physics steps of {h:g} s "
-                         f"({n:.4g} steps); give a rate that divides 1/{h:g} s or set physics_timestep")
-    from bemlearn.pipeline.derive import Derived
-
-    return Derived(RateChoice(rate_hz, int(round(n)), h, timestep is not None and not math.isclose(h, robot.model.opt.timestep)),
-                   f"the given {rate_hz:g} Hz")
+    if abs(n - round(n)) <= 1e-6 and round(n) >= 1:
+        return Derived(RateChoice(rate_hz, int(round(n)), h, timestep is not None and not math.isclose(h, h_file)),
+                       f"the given {rate_hz:g} Hz")
+    if timestep is not None:
+        raise ConfigError(f"{section}.rate_hz = {rate_hz:g} Hz is not a whole number of the given {section}.physics_timestep {h:g} s "
+                          f"({n:.4g} steps); give a step that divides 1/{rate_hz:g} s, or leave physics_timestep out "
+                          "to have it derived")
+    N = max(1, math.ceil(1.0 / (rate_hz * h_file) - 1e-9))
+    fine = 1.0 / (rate_hz * N)
+    note = (f"the given {rate_hz:g} Hz; the plant runs {N} physics step(s) of {fine:.6g} s per tick (the file's "
+            f"{h_file:g} s is not a whole fraction of 1/{rate_hz:g} s)")
+    return Derived(RateChoice(rate_hz, N, fine, True), note)
 
 
 def derive_pipeline_values(robot, config, given: set[str] | frozenset[str] = frozenset()) -> dict[str, tuple[Any, str]]:
@@ -76,8 +87,14 @@ def derive_pipeline_values(robot, config, given: set[str] | frozenset[str] = fro
     c, s = config.collect, config.simulate
     given_collect_rate = c.rate_hz if _given(given, "collect.rate_hz") else None
     given_sim_rate = s.rate_hz if _given(given, "simulate.rate_hz") else given_collect_rate
-    crate = _rate(robot, given_collect_rate, c.physics_timestep if _given(given, "collect.physics_timestep") else None)
-    srate = _rate(robot, given_sim_rate, s.physics_timestep if _given(given, "simulate.physics_timestep") else None)
+    given_collect_step = c.physics_timestep if _given(given, "collect.physics_timestep") else None
+    crate = _rate(robot, given_collect_rate, given_collect_step)
+    if _given(given, "simulate.physics_timestep"):
+        srate = _rate(robot, given_sim_rate, s.physics_timestep, section="simulate")
+    elif not _given(given, "simulate.rate_hz"):   # the closed loop follows the collection's rate and step
+        srate = crate
+    else:
+        srate = _rate(robot, given_sim_rate, None, section="simulate")
     rc, rs = crate.value, srate.value
     sig = derive.excitation_signals(robot, rc)
     gains = derive.excitation_gains(robot, rc)

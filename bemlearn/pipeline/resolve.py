@@ -32,7 +32,9 @@ class ResolvedConfig:
 
     Attributes:
         config: the parsed, strict config (every derived value filled in).
-        origins: dotted key (``collect.rate_hz``) → ``"given"``, ``"derived"`` or ``"default"``.
+        origins: dotted key (``collect.rate_hz``) → ``"given"``, ``"derived"`` (from the model),
+            ``"data"`` (chosen from the training data when training, e.g. the Gaussian
+            estimator's σ) or ``"default"``.
         notes: dotted key → one line on how a derived value was obtained.
         source: where the config came from (file path or ``"<dict>"``).
     """
@@ -110,9 +112,18 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
                 _set(raw, key, value)
                 notes[key] = note
         parsed = from_dict(PipelineConfig, raw, where=source)
+    if "dataset.derivative_options" not in notes:
+        est = parsed.dataset.estimator()
+        if not getattr(est, "resolved", True):   # e.g. the Gaussian's σ: chosen from the data at train time
+            from bemlearn.data.derivative_choice import KEPT_MOTION
+
+            notes["dataset.derivative_options"] = (f"{est.name}: sigma_s chosen from the data when training (the width at which "
+                                                   f"the smoothed q_u keeps {KEPT_MOTION:.0%} of its motion; docs/derivatives.md)")
     origins: dict[str, Origin] = {}
     for key in flatten(to_dict(parsed)):
-        if key in given or any(key.startswith(g + ".") for g in given):
+        if key == "dataset.derivative_options" and key in notes and key not in given:
+            origins[key] = "data"
+        elif key in given or any(key.startswith(g + ".") for g in given):
             origins[key] = "given"
         elif key in notes or any(key.startswith(n + ".") for n in notes):
             origins[key] = "derived"
@@ -125,7 +136,8 @@ def format_resolved(resolved: ResolvedConfig) -> str:
     """The resolved config as a table: key, value, origin, and how a derived value was derived."""
     rows = resolved.to_json_dict()
     width = max(len(k) for k in rows)
-    lines = [f"# {resolved.source}: every value with its origin (given / derived from the model / default)"]
+    lines = [f"# {resolved.source}: every value with its origin (given / derived from the model / data: chosen from the "
+             "training data when training / default)"]
     for key, r in rows.items():
         value = json.dumps(r["value"], ensure_ascii=False) if not isinstance(r["value"], str) else r["value"]
         if len(value) > 60:

@@ -107,7 +107,7 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         robot=ref.to_dict(), joint_names=meta.joint_names, unactuated_name=meta.unactuated,
         data_sha256=file_sha256(data_path), extra={"data_file": str(data_path), "dataset_report": ds.report},
         writer=writer, resume=resume, progress=progress,
-        calibrate=lambda st: calibrate_band(st, traj, config.dataset, train_rows=train.row, seed=config.dataset.seed),  # std of eq. (B1)
+        calibrate=lambda st: calibrate_band(st, traj, ds.config, train_rows=train.row, seed=config.dataset.seed),  # std of eq. (B1)
     )
     state, model, lik = stage.state, stage.model, stage.likelihood
     interrupted = stage.interrupted

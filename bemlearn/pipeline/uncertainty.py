@@ -42,7 +42,8 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, train_rows: t
     Args:
         state: the fitted posterior (input columns as built from ``traj`` by ``dataset_config``).
         traj: the training :class:`~bemlearn.data.trajectory.Trajectory`.
-        dataset_config: the :class:`~bemlearn.data.DatasetConfig` the posterior was trained with.
+        dataset_config: the :class:`~bemlearn.data.DatasetConfig` the posterior was trained with
+            (``GPDatasets.config``: with the options chosen from the data written out).
         train_rows: ``(N,)`` the rows of ``traj`` the posterior was trained on
             (``BEMDataset.row``); default: drawn again by ``build_datasets(traj, dataset_config)``.
         n_queries: held-out BEM queries x_0^e for the replica calibration.
@@ -64,7 +65,7 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, train_rows: t
     queries[:, -2:] = 0.0                                  # x_0^e: q̈_u = q̇_u = 0 (eq. 14)
     summary: dict = {"formula": "std² = std_scale² · latent_std² + max(Σ_i (input_std_i ∂mean/∂x_i)², mean_k (y_std k_Z(x)ᵀ estimator_delta_k)²)",
                      "quantization_step": steps, "input_std": dict(zip(state.input_names, s.tolist())),
-                     "estimator": est.name, "queries_from": "validation trials" if len(pool.val) else "training trials"}
+                     "estimator": repr(est), "queries_from": "validation trials" if len(pool.val) else "training trials"}
     try:
         cal = calibrate_replicas(state, pool.train.x, pool.train.y, pool.train.trial, queries,
                                  n_points=state.n_train, n_pairs=n_pairs, level=level, seed=seed)

@@ -1,0 +1,132 @@
+"""Learned vs model-based BEM over the whole design region, not only along a few references.
+
+The held-out references of :mod:`bemlearn.pipeline.evaluation` reach the BEM values their
+amplitudes happen to produce; a bias that grows with |q_u^e| (a slope error) hides there.
+This evaluation looks where a user will use the BEM: every actuated motion whose model BEM
+(eq. 9) lies in the design region |q_u^e − nominal| ≤ d (d = 0.2 rad or the q_u half range,
+:func:`~bemlearn.pipeline.derive.design_region`).
+
+The actuated motions are a scrambled Sobol set (``scipy.stats.qmc``) in the box, per actuated
+coordinate j,
+
+    |q_a,j| ≤ Q_j,    |q̇_a,j| ≤ Q_j ω,    |q̈_a,j| ≤ max(Q_j ω², 1.3 d / |s_a,j|)           (D1)
+
+with Q_j = min(Σ|A| of the held-out references, the joint's half range), ω = 2π × their top
+frequency (``evaluate:``), and s_a,j = ∂q_u^e/∂q̈_a,j at upright (:func:`~bemlearn.robots.scales.bem_slopes`):
+the acceleration range reaches past the design bound whatever the references' amplitudes.  The
+points whose model BEM lies outside the design region (or has no root) are left out.  On them,
+with e = μ(x_0^e) − q_u^e (eq. 14 vs 9):
+
+    RMSE, max |e|, and the gain: the least-squares slope of μ on q_u^e (with an intercept);   (D2)
+
+a gain below 1 is a learned BEM that under-reacts (e.g. derivatives that attenuate q̈), above
+1 one that over-reacts.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from bemlearn.models.band import band_reference
+from bemlearn.models.predictor_state import PredictorState
+
+__all__ = ["DesignGrid", "design_grid", "evaluate_design_region", "least_squares_gain"]
+
+
+@dataclass(frozen=True)
+class DesignGrid:
+    """Queries of (D1) and their model BEM.
+
+    Attributes:
+        x: ``(N, 3m + 2)`` BEM queries x_0^e = [q̈_a, q̇_a, q_a, 0, 0] (joint units per s², per s, units).
+        qu: ``(N,)`` model-based BEM q_u^e (eq. 9), q_u's unit.
+        bound: d, q_u's unit.
+        box: per actuated coordinate, the half widths ``{"q", "qd", "qdd"}`` of (D1).
+        n_drawn: points drawn before leaving out those outside the design region.
+    """
+
+    x: torch.Tensor
+    qu: np.ndarray
+    bound: float
+    box: dict
+    n_drawn: int
+
+
+def design_grid(robot, evaluate_config, *, n_points: int = 4096, seed: int = 0, bound: float | None = None) -> DesignGrid:
+    """The queries of (D1) for ``robot`` (module docstring).
+
+    Args:
+        robot: a robot with a model BEM (``robot.bem``) and :func:`~bemlearn.robots.scales.bem_slopes`.
+        evaluate_config: the run's :class:`~bemlearn.pipeline.evaluation.EvaluationConfig` (derived or
+            given ``amplitude_max`` and ``frequency_hz``).
+        n_points: Sobol points drawn (rounded to a power of two).
+        seed: the Sobol scrambling seed.
+        bound: d (default :func:`~bemlearn.pipeline.derive.design_region`).
+    """
+    from scipy.stats import qmc
+
+    from bemlearn.pipeline.derive import design_region
+    from bemlearn.robots.scales import bem_slopes, qa_half_ranges
+
+    d = float(design_region(robot).value if bound is None else bound)
+    m = robot.m
+    if evaluate_config.amplitude_max is None or evaluate_config.frequency_hz is None:
+        from bemlearn.errors import ConfigError
+
+        raise ConfigError("design_grid: evaluate.amplitude_max and evaluate.frequency_hz are not set; resolve the config "
+                          "first (bemlearn.pipeline.resolve_pipeline_config derives them from the model)")
+    w = 2 * math.pi * float(evaluate_config.frequency_hz[1])
+    s_a = np.abs(bem_slopes(robot)[2])
+    Q = np.minimum(float(evaluate_config.amplitude_max), qa_half_ranges(robot))
+    V = Q * w
+    A = np.maximum(Q * w * w, np.where(s_a > 0, 1.3 * d / np.maximum(s_a, 1e-300), 0.0))
+    k = max(4, int(math.ceil(math.log2(max(n_points, 16)))))
+    u = qmc.Sobol(3 * m, scramble=True, seed=seed).random_base2(k) * 2.0 - 1.0
+    qadd, qad, qa = u[:, :m] * A, u[:, m:2 * m] * V, u[:, 2 * m:] * Q
+    res = robot.bem(torch.from_numpy(qa), torch.from_numpy(qad), torch.from_numpy(qadd))
+    qu = res.qu.numpy()
+    keep = res.valid.numpy() & (np.abs(qu - robot.qu_nominal) <= d)
+    x = np.concatenate([qadd, qad, qa, np.zeros((len(u), 2))], axis=1)[keep]
+    names = robot.actuated_names if hasattr(robot, "actuated_names") else [f"q_a{j}" for j in range(m)]
+    box = {str(nm): {"q": float(Q[j]), "qd": float(V[j]), "qdd": float(A[j])} for j, nm in enumerate(names)}
+    return DesignGrid(torch.from_numpy(np.ascontiguousarray(x)), qu[keep], d, box, len(u))
+
+
+def least_squares_gain(model: np.ndarray, learned: np.ndarray) -> tuple[float, float]:
+    """(slope, intercept) of the least-squares line learned ≈ slope · model + intercept (D2)."""
+    model = np.asarray(model, dtype=np.float64)
+    learned = np.asarray(learned, dtype=np.float64)
+    mc = model - model.mean()
+    den = float(mc @ mc)
+    if not den > 0:
+        return math.nan, math.nan
+    slope = float(mc @ (learned - learned.mean())) / den
+    return slope, float(learned.mean() - slope * model.mean())
+
+
+def evaluate_design_region(state: PredictorState, grid: DesignGrid) -> dict:
+    """(D2) of ``state``'s learned BEM on ``grid``.
+
+    Returns:
+        ``rmse``, ``max_abs`` (q_u's unit), ``gain`` and ``intercept`` of (D2), ``n_points``,
+        ``n_drawn``, ``bound``, ``box``, ``coverage_2sigma_band`` (share of the model BEM inside the
+        exported band's ±2σ), ``worst`` (the query and both BEMs where |e| is largest), and
+        ``curve`` (model, learned: ``(N,)`` arrays, for the figure; not JSON).
+    """
+    if len(grid.qu) == 0:
+        return {"rmse": math.nan, "max_abs": math.nan, "gain": math.nan, "intercept": math.nan, "n_points": 0,
+                "n_drawn": grid.n_drawn, "bound": grid.bound, "box": grid.box, "coverage_2sigma_band": math.nan,
+                "worst": None, "curve": {"model": np.zeros(0), "learned": np.zeros(0)}}
+    mean, band, _ = (v.numpy() for v in band_reference(state, grid.x, n_inputs=state.dim - 2))
+    e = mean - grid.qu
+    gain, icpt = least_squares_gain(grid.qu, mean)
+    i = int(np.argmax(np.abs(e)))
+    return {"rmse": float(np.sqrt(np.mean(e**2))), "max_abs": float(np.abs(e).max()), "gain": gain, "intercept": icpt,
+            "n_points": int(e.size), "n_drawn": grid.n_drawn, "bound": grid.bound, "box": grid.box,
+            "coverage_2sigma_band": float(np.mean(np.abs(e) <= 2 * band)),
+            "worst": {"x0e": [float(v) for v in grid.x[i, :-2]], "model": float(grid.qu[i]), "learned": float(mean[i])},
+            "curve": {"model": grid.qu, "learned": mean, "band": band}}
