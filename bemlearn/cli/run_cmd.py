@@ -12,12 +12,17 @@ def add_parser(sub) -> None:
         "run",
         help="the main job: collect → train → export → simulate → report",
         description="Collect excitation data in MuJoCo, train the BEM GP, export the TorchScript predictor, run the EIC "
-        "closed loop with the learned, model-based and zero BEM, and write RUN_DIR/report.md.",
+        "closed loop with the learned, model-based and zero BEM, and write RUN_DIR/report.md. Every run ends with a "
+        "verdict (ok, degraded or unusable, with its reasons), printed last and in metrics.json; the exit status is 0 "
+        "for ok and degraded, 3 for unusable (4 for degraded with --strict). A robot its model says cannot be balanced "
+        "over the design region stops after the model checks, with the verdict written.",
     )
     p.add_argument("config", type=Path, help="pipeline YAML; `robot: path/to/robot.xml` alone is enough")
     p.add_argument("--out", type=Path, help="run folder (default: a new runs/<robot>-<timestamp>)")
     p.add_argument("--force", action="store_true", help="write into a non-empty --out folder, replacing its files")
     p.add_argument("--device", choices=["cpu", "cuda"], help="GP training device (default: the config's train.device)")
+    p.add_argument("--strict", action="store_true",
+                   help="exit non-zero (4) for a degraded verdict too (default: 0 for ok and degraded, 3 for unusable)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_run)
     s = sub.add_parser(
@@ -64,7 +69,24 @@ def _run(args) -> int:
             out = run_pipeline(resolved, args.out, device=args.device, progress=not args.no_progress)
     print((out / "report.md").read_text())
     print(f"\nrun folder: {out}")
-    return 0
+    return _print_verdict(out, strict=args.strict)
+
+
+def _print_verdict(out: Path, *, strict: bool) -> int:
+    """Print the run's verdict as the last line; its exit status (:meth:`Verdict.exit_status`)."""
+    import json
+
+    from bemlearn.pipeline.verdict import Finding, Verdict
+
+    path = out / "metrics.json"
+    if not path.is_file():
+        return 0
+    v = json.loads(path.read_text()).get("verdict")
+    if not v:
+        return 0
+    verdict = Verdict(v["status"], tuple(Finding(f["severity"], f["check"], f["reason"]) for f in v.get("findings", [])))
+    print(verdict.summary())
+    return verdict.exit_status(strict=strict)
 
 
 def _simulate(args) -> int:

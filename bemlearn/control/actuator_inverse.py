@@ -58,8 +58,9 @@ class MujocoActuatorInverse:
         self.limited = model.actuator_ctrllimited.astype(bool)
         self.limit = np.where(self.limited, np.maximum(np.abs(self.lo), np.abs(self.hi)), np.inf)
 
-    def command(self, tau_a: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """``tau_a (m,)`` generalized forces (N·m or N), ``q, qd (n,)`` → ``ctrl (nu,)`` clipped."""
+    def command(self, tau_a: np.ndarray, q: np.ndarray, qd: np.ndarray, *, clip: bool = True) -> np.ndarray:
+        """``tau_a (m,)`` generalized forces (N·m or N), ``q, qd (n,)`` → ``ctrl (nu,)``, clipped to the
+        ``ctrlrange`` unless ``clip=False``."""
         qj, qdj = self.Tinv @ q, self.Tinv @ qd
         length = self.gear * qj[self.cols]
         velocity = self.gear * qdj[self.cols]
@@ -67,4 +68,4 @@ class MujocoActuatorInverse:
         gain = self.gainprm[:, 0] + np.where(self.affine_gain, self.gainprm[:, 1] * length + self.gainprm[:, 2] * velocity, 0.0)
         bias = self.biasprm[:, 0] + self.biasprm[:, 1] * length + self.biasprm[:, 2] * velocity
         ctrl = (f - bias) / gain
-        return np.where(self.limited, np.clip(ctrl, self.lo, self.hi), ctrl)
+        return np.where(self.limited, np.clip(ctrl, self.lo, self.hi), ctrl) if clip else ctrl

@@ -5,6 +5,12 @@ of trials the fit never saw, the RMSE of μ(x_i) − q_u,i and the fraction of q
 μ ± 2σ_pred, σ_pred² = σ²(x_i) + σ_0² (latent variance of eq. 12 plus the noise of eq. 11),
 per trial and overall.
 
+(c) Whether the data resolve the BEM at all (:func:`bem_resolution`): at the training points'
+actuated motions x_0^e (eq. 14) the learned BEM's spread std(μ) is compared with the exported
+band's median σ (eq. B1); per actuated input i, the learned slope ḡ_i = mean ∂μ/∂x_i, the data's
+amplitude a_i = std(x_i) and the factor 2 σ_band / (|ḡ_i| a_i) by which the amplitude would have to
+grow for the input's own share of the BEM to exceed the band's ±2σ.
+
 (b) The learned BEM on slices (eq. 14): μ(x_0^e) and μ ± 2σ_pred against q̈_a of one actuated
 joint, x_0^e = [q̈_a, q̇_a, q_a, 0, 0], at a few (q̇_a, q_a) taken from the training data's
 quantiles (other actuated joints at their medians).  For each slice the training points
@@ -30,7 +36,7 @@ from bemlearn.units import joint_unit
 from bemlearn.models.learned_bem import LearnedBEM
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["SliceSpec", "bem_slice_figure", "bem_slices", "heldout_prediction"]
+__all__ = ["SliceSpec", "bem_slice_figure", "bem_slices", "heldout_prediction", "bem_resolution"]
 
 
 def _state(model: PredictorState | LearnedBEM) -> PredictorState:
@@ -58,7 +64,8 @@ def _check_names(state: PredictorState, dataset: BEMDataset) -> None:
         )
 
 
-def heldout_prediction(model: PredictorState | LearnedBEM, heldout: BEMDataset, *, kappa: float = 2.0) -> dict[str, Any]:
+def heldout_prediction(model: PredictorState | LearnedBEM, heldout: BEMDataset, *, kappa: float = 2.0,
+                       train: BEMDataset | None = None) -> dict[str, Any]:
     """(a) of the module docstring: q_u predicted from f(x) on held-out points.
 
     Args:
@@ -66,10 +73,13 @@ def heldout_prediction(model: PredictorState | LearnedBEM, heldout: BEMDataset, 
         heldout: points of trials not used for fitting (e.g. ``build_datasets(...).val``):
             x (N, d) physical units, y (N,) q_u in rad (or m).
         kappa: half-width of the band in σ_pred (2 → ±2σ).
+        train: the training points; with them each trial also states the share of its samples
+            outside the training data's range in some input (``beyond_training``).
 
     Returns:
         ``{"rmse", "max_abs", "coverage", "n_points", "kappa", "unit", "per_trial": {id: {"rmse",
-        "coverage", "n_points"}}}``; coverage is the fraction of q_u inside μ ± κ σ_pred.
+        "coverage", "n_points", "failed", "beyond_training"}}}``; coverage is the fraction of q_u
+        inside μ ± κ σ_pred; ``failed``: the trial fell (as the data file records).
     """
     state = _state(model)
     _check_names(state, heldout)
@@ -80,14 +90,20 @@ def heldout_prediction(model: PredictorState | LearnedBEM, heldout: BEMDataset, 
     err = mean - y
     inside = np.abs(err) <= kappa * pred
     trial = heldout.trial.numpy()
+    meta = heldout.meta
+    beyond = None
+    if train is not None and len(train):
+        xt = train.x.numpy()
+        xv = heldout.x.numpy()
+        beyond = np.any((xv < xt.min(0)) | (xv > xt.max(0)), axis=1)
     per = {}
     for tid in np.unique(trial):
         sel = trial == tid
         per[int(tid)] = {
             "rmse": float(np.sqrt(np.mean(err[sel] ** 2))), "coverage": float(inside[sel].mean()),
-            "n_points": int(sel.sum()),
+            "n_points": int(sel.sum()), "failed": bool(meta.trial_failed.get(int(tid), False)),
+            "beyond_training": None if beyond is None else float(beyond[sel].mean()),
         }
-    meta = heldout.meta
     return {
         "rmse": float(np.sqrt(np.mean(err**2))),
         "max_abs": float(np.abs(err).max()),
@@ -223,3 +239,38 @@ def bem_slice_figure(result: dict[str, Any], path: str | Path | None = None, *, 
     if path is not None:
         fig.savefig(path, dpi=110)
     return fig
+
+
+def bem_resolution(model: PredictorState | LearnedBEM, train: BEMDataset, *, max_points: int = 2000) -> dict[str, Any]:
+    """(c) of the module docstring: does the BEM vary over the data by more than its own band?
+
+    Returns:
+        ``{"spread", "band_std", "ratio", "unit", "inputs": [{"input", "slope", "amplitude", "unit",
+        "share", "factor"}]}`` with ``spread`` = std of μ(x_0^e) over the training motions, ``band_std``
+        the median exported σ there, ``ratio`` = spread / band_std, and per actuated input (largest
+        share first) the mean slope, the data's amplitude (std), the share |slope| · amplitude of
+        the BEM it explains and ``factor`` (``None`` where the learned slope is 0).
+    """
+    from bemlearn.models.band import band_reference
+    from bemlearn.models.input_noise import mean_gradient
+
+    state = _state(model)
+    _check_names(state, train)
+    x = train.x.to(torch.float64)[:max_points].clone()
+    x[:, -2:] = 0.0                                           # x_0^e = [q̈_a, q̇_a, q_a, 0, 0] (eq. 14)
+    mean, band, _ = band_reference(state, x, n_inputs=state.dim - 2)
+    grad = mean_gradient(state, x).mean(0).numpy()
+    amp = train.x.to(torch.float64).std(0, correction=0).numpy()
+    spread, bstd = float(mean.std(correction=0)), float(band.median())
+    meta = train.meta
+    unit = joint_unit(meta.kind_of(meta.unactuated))
+    inputs = []
+    for i, name in enumerate(state.input_names[:-2]):
+        prefix, joint = name.split("_", 1)
+        share = abs(float(grad[i])) * float(amp[i])
+        inputs.append({"input": name, "slope": float(grad[i]), "amplitude": float(amp[i]),
+                       "unit": joint_unit(meta.kind_of(joint), {"q": 0, "qd": 1, "qdd": 2}[prefix]),
+                       "share": share, "factor": (2.0 * bstd / share) if share > 0 else None})
+    inputs.sort(key=lambda r: -r["share"])
+    return {"spread": spread, "band_std": bstd, "ratio": spread / bstd if bstd > 0 else float("inf"), "unit": unit,
+            "inputs": inputs}

@@ -34,7 +34,7 @@ import torch
 from bemlearn.models.band import band_reference
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["DesignGrid", "design_grid", "evaluate_design_region", "least_squares_gain"]
+__all__ = ["DesignGrid", "design_grid", "evaluate_design_region", "least_squares_gain", "design_region_figure"]
 
 
 @dataclass(frozen=True)
@@ -130,3 +130,33 @@ def evaluate_design_region(state: PredictorState, grid: DesignGrid) -> dict:
             "coverage_2sigma_band": float(np.mean(np.abs(e) <= 2 * band)),
             "worst": {"x0e": [float(v) for v in grid.x[i, :-2]], "model": float(grid.qu[i]), "learned": float(mean[i])},
             "curve": {"model": grid.qu, "learned": mean, "band": band}}
+
+
+def design_region_figure(curve: dict, result: dict, qu_name: str, unit: str = "rad"):
+    """Learned vs model BEM over the design region: μ(x_0^e) against q_u^e with ±2σ of the band
+    and the identity line (left), and the error against q_u^e (right)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    model, learned, band = curve["model"], curve["learned"], curve.get("band")
+    order = np.argsort(model)
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4.2))
+    d = result["bound"]
+    ax[0].plot([-d, d], [-d, d], "k", lw=1, label="identity (learned = model)")
+    ax[0].scatter(model, learned, s=3, c="C1", alpha=0.5, label=f"learned μ(x₀ᵉ), {result['n_points']} motions")
+    if band is not None and len(model):
+        ax[0].fill_between(model[order], (learned - 2 * band)[order], (learned + 2 * band)[order], color="C1", alpha=0.15,
+                           label="±2σ (calibrated band)")
+    ax[0].set_xlabel(f"model-based BEM q_u^e (eq. 9), {unit}")
+    ax[0].set_ylabel(f"learned BEM (eq. 14), {unit}")
+    ax[0].set_title(f"{qu_name}: gain {result['gain']:.3f}, RMSE {result['rmse']:.4f} {unit}", fontsize=10)
+    ax[0].legend(fontsize=8)
+    ax[1].scatter(model, learned - model, s=3, c="C3", alpha=0.5)
+    ax[1].axhline(0.0, color="k", lw=0.8)
+    ax[1].set_xlabel(f"model-based BEM q_u^e, {unit}")
+    ax[1].set_ylabel(f"learned − model, {unit}")
+    ax[1].set_title(f"max |error| {result['max_abs']:.4f} {unit} over |q_u^e| ≤ {d:g}", fontsize=10)
+    fig.tight_layout()
+    return fig

@@ -35,7 +35,9 @@ class EvaluationConfig:
         frequency_hz: (min, max) component frequency, Hz (``null``: derived).
         duration_s: evaluated time per reference, s.
         rate_hz: evaluation grid, Hz.
-        seed: seed of the references (independent of training data).
+        seed: seed of the references and of the design-region points (independent of training data).
+        design_points: points drawn in the design region's box of actuated motions (learned vs model BEM
+            over the whole design region, :mod:`bemlearn.pipeline.design_evaluation`); 0 turns it off.
     """
 
     n_references: int = 5
@@ -46,6 +48,7 @@ class EvaluationConfig:
     duration_s: float = 20.0
     rate_hz: float = 100.0
     seed: int = 12345
+    design_points: int = 4096
 
 
 def held_out_references(config: EvaluationConfig, m: int) -> list[CompositeSinusoid]:

@@ -15,21 +15,57 @@ def _pct(v) -> str:
     return f"{100 * v:.1f}%" if isinstance(v, (int, float)) else "—"
 
 
-def write_report(out: str | Path, *, config, resolved, data: dict, train: dict, export: list[Path], sim: dict) -> Path:
+def _verdict_lines(train: dict) -> list[str]:
+    v = train.get("verdict")
+    if not v:
+        return []
+    lines = [f"## Verdict: {v['status']}", ""]
+    if v["reasons"]:
+        lines += [f"- **{f['severity']}**: {f['reason']}" for f in v.get("findings", [])] or [f"- {r}" for r in v["reasons"]]
+    else:
+        lines += ["Every check passed: " + ", ".join(v.get("checked", [])) + " (limits in `bemlearn.pipeline.verdict`)."]
+    return lines + [""]
+
+
+def _feasibility_lines(train: dict) -> list[str]:
+    checks = train.get("feasibility") or []
+    if not checks:
+        return []
+    return ["## Model checks (before collecting)", "", "| check | value | pass when | passed | finding |", "| --- | --- | --- | --- | --- |",
+            *[f"| {c['name']} | {_f(c['value'], '.3g')} | {'<' if c.get('strict') else '≤'} {_f(c['limit'], '.3g')} | "
+              f"{'yes' if c['passed'] else '**no**'} | {_cell(c['text'])} |" for c in checks], ""]
+
+
+def _cell(text: str) -> str:
+    """``text`` safe inside a Markdown table cell."""
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def write_report(out: str | Path, *, config, resolved, data: dict | None, train: dict, export: list[Path], sim: dict) -> Path:
     """Write ``out/report.md`` from the stages' metrics; returns its path.
 
     Args:
         config: the resolved :class:`~bemlearn.pipeline.config.PipelineConfig`.
         resolved: its :class:`~bemlearn.pipeline.resolve.ResolvedConfig` (origins of the values).
-        data, train, sim: the metrics of the data, training and closed-loop stages.
+        data, train, sim: the metrics of the data, training and closed-loop stages (``data`` is
+            ``None`` for a run stopped after its model checks).
         export: the predictor files written.
     """
+    from bemlearn.files import atomic_write_text
+
     out = Path(out)
     unit = train.get("output_unit", "rad")
     robot = train.get("robot", {})
     qu = train.get("unactuated")
     title = robot.get("registry") or robot.get("name") or "data"
-    lines = [f"# bemlearn run: {title}" + (" (model-free)" if config.robot is None else ""), ""]
+    lines = [f"# bemlearn run: {title}" + (" (model-free)" if config.robot is None else ""), "", *_verdict_lines(train)]
+    if data is None:          # stopped after the model checks: nothing was collected or learned
+        lines += [f"Robot: `{config.robot}`. The run stopped after its model checks: the robot cannot be balanced over "
+                  "the design region as configured, so no data were collected and no BEM was learned.", "",
+                  *_feasibility_lines(train)]
+        path = out / "report.md"
+        atomic_write_text(path, "\n".join(lines))
+        return path
     if robot.get("mjcf"):
         lines += [f"Robot: `{robot['mjcf']}` (sha256 `{robot['sha256'][:16]}…`)" + (f", registry name `{robot['registry']}`" if robot.get("registry") else "") + ".", ""]
     elif config.robot is None:
@@ -39,9 +75,20 @@ def write_report(out: str | Path, *, config, resolved, data: dict, train: dict, 
     if derived:
         lines += ["Values derived from the model (not given in the config; `config_resolved.json` and "
                   "`bemlearn config show` list each with how it was derived): " + ", ".join(f"`{k}`" for k in derived) + ".", ""]
+    lines += _feasibility_lines(train)
     src = "collected in MuJoCo (excitation, Section IV-A)" if data["collected"] else f"read from `{data['file']}`"
+    ds = train.get("dataset") or {}
+    choice = ds.get("derivative_choice")
+    deriv = "derivatives estimated from the positions only"
+    if choice:
+        noise = choice.get("qdd_noise_fraction") or {}
+        deriv = (f"q, q̇, q̈ and the label q_u from one Gaussian kernel (docs/derivatives.md): {choice['note']}"
+                 + (" (quantization noise left in q̈: " + ", ".join(f"{j} {100 * v:.1f} %" for j, v in noise.items()) + " of its spread)"
+                    if noise else ""))
+    elif ds.get("estimator"):
+        deriv = f"derivatives estimated from the positions only, by {ds['estimator']}"
     lines += ["## Data", f"{data['trials']} trials ({data['failed']} fell, kept up to the fall), {data['samples']} samples at "
-              f"{data['rate_hz']:g} Hz, {src}; derivatives estimated from the positions only.", ""]
+              f"{data['rate_hz']:g} Hz, {src}; {deriv}.", ""]
     fit = train.get("fit", {})
     lines += ["## Learned BEM (eq. 11–14)",
               f"{config.train.kind} GP on {train['n_train']} points: fit {fit.get('stop_reason')} in {_f(fit.get('seconds'), '.1f')} s"
@@ -52,15 +99,25 @@ def write_report(out: str | Path, *, config, resolved, data: dict, train: dict, 
                   f"Held-out trials ({len(h['per_trial'])} trials, {h['n_points']} samples the fit never saw): q_u predicted "
                   f"from f(x) (eq. 11) with RMSE {_f(h['rmse'], '.5f')} {unit} (max {_f(h['max_abs'], '.4f')} {unit}); "
                   f"{_pct(h['coverage'])} of the samples lie inside the predictive ±2σ.", "",
-                  "| held-out trial | RMSE (" + unit + ") | inside ±2σ | samples |", "| --- | --- | --- | --- |",
-                  *[f"| {t} | {_f(r['rmse'], '.5f')} | {_pct(r['coverage'])} | {r['n_points']} |" for t, r in h["per_trial"].items()], ""]
+                  "| held-out trial | RMSE (" + unit + ") | inside ±2σ | samples | note |", "| --- | --- | --- | --- | --- |",
+                  *[f"| {t} | {_f(r['rmse'], '.5f')} | {_pct(r['coverage'])} | {r['n_points']} | {_trial_note(r, h)} |"
+                    for t, r in h["per_trial"].items()], ""]
     sl = train.get("bem_slices")
     if sl is not None:
         sm = sl["summary"]
+        cov, ext = sm["std_pred_mean_covered"], sm["std_pred_mean_extrapolated"]
+        where = (f"Mean predictive σ where covered {_f(cov, '.4f')} {unit}" if _finite(cov) else
+                 "No slice has enough training points near it to call any part covered")
+        where += f", where extrapolated {_f(ext, '.4f')} {unit}." if _finite(ext) else "."
         lines += [f"The learned BEM μ(x₀ᵉ) ± 2σ on {sm['n_slices']} slices through the data (grey: beyond the q̈_a the "
-                  f"training data cover near the slice, i.e. extrapolation). Mean predictive σ where covered "
-                  f"{_f(sm['std_pred_mean_covered'], '.4f')} {unit}, where extrapolated {_f(sm['std_pred_mean_extrapolated'], '.4f')} {unit}.",
-                  "", "![BEM slices](bem_slices.png)", ""]
+                  f"training data cover near the slice, i.e. extrapolation). {where}", "", "![BEM slices](bem_slices.png)", ""]
+    res = train.get("resolution")
+    if res is not None:
+        top = res["inputs"][:3]
+        lines += [f"Over the data's actuated motions the learned BEM varies by {_f(res['spread'], '.3g')} {unit} (std), "
+                  f"{_f(res['ratio'], '.1f')}× the exported band's median σ ({_f(res['band_std'], '.3g')} {unit}). The inputs that "
+                  "move it most: " + ", ".join(f"{w['input']} (slope {_f(w['slope'], '.3g')} {unit} per {w['unit']}, data ±"
+                                                f"{_f(w['amplitude'], '.3g')} {w['unit']})" for w in top) + ".", ""]
     b = train.get("bem_heldout")
     if b is not None:
         lines += ["### Against the model-based BEM (eq. 9)", "", "| held-out references: learned vs model-based BEM | value |", "| --- | --- |",
@@ -79,6 +136,18 @@ def write_report(out: str | Path, *, config, resolved, data: dict, train: dict, 
                       f"| median band σ / RMSE | {_f(b['median_band_std_over_rmse'], '.2f')} |",
                       f"| eq. (13)/(15) bound at κ = {v['kappa']:g}: violated / nominal | {_pct(v['observed'])} / {_pct(v['nominal'])} |"]
         lines += ["", "![learned vs model BEM](bem_validation.png)", ""]
+    dr = train.get("bem_design_region")
+    if dr is not None and dr.get("n_points"):
+        box = "; ".join(f"{j}: |q| ≤ {_f(v['q'], '.3g')}, |q̇| ≤ {_f(v['qd'], '.3g')}, |q̈| ≤ {_f(v['qdd'], '.3g')}" for j, v in dr["box"].items())
+        lines += [f"### Over the whole design region (|q_u^e| ≤ {dr['bound']:g} {unit})", "",
+                  f"{dr['n_points']} actuated motions of a Sobol set in the box {box} (joint units; the points whose model BEM "
+                  "lies in the design region): learned μ(x₀ᵉ) vs the model-based BEM.", "",
+                  "| learned vs model BEM, design region | value | target |", "| --- | --- | --- |",
+                  f"| gain (least-squares slope of learned on model) | {_f(dr['gain'], '.3f')} | 0.95–1.05 |",
+                  f"| RMSE ({unit}) | {_f(dr['rmse'], '.5f')} | ≤ {0.05 * dr['bound']:.3g} |",
+                  f"| max error ({unit}) | {_f(dr['max_abs'], '.5f')} | ≤ {0.2 * dr['bound']:.3g} |",
+                  f"| inside ±2σ, calibrated band | {_pct(dr['coverage_2sigma_band'])} | ≥ 80 % |", "",
+                  "![design region](design_region.png)", ""]
         if (out / "reliability.png").is_file():
             lines += ["Reliability of the band: coverage of the model BEM against the nominal level (50–99 %).", "",
                       "![reliability](reliability.png)", ""]
@@ -103,7 +172,7 @@ def write_report(out: str | Path, *, config, resolved, data: dict, train: dict, 
                   f"max \\|u\\| ({data.get('input_units', 'actuator units')}) | BEM values held | real-time factor |",
                   "| --- | --- | --- | --- | --- | --- | --- | --- |"]
         for name, m in sim.items():
-            outcome = "fell" if m["fell"] else "diverged (q_a left the reference)" if m.get("diverged") else "stayed up"
+            outcome = f"fell at {m['duration_s']:.2f} s" if m["fell"] else "diverged (q_a left the reference)" if m.get("diverged") else "stayed up"
             lines.append(f"| {name} | {outcome} | {_f(m['duration_s'], '.1f')} | {_f(m['tracking_rmse'])} | {_f(m['qu_max'], '.3f')} | "
                          f"{_f(m['u_max'], '.2f')} | {m.get('bem_rejected', 0)} | {_f(m['real_time_factor'], '.1f')} |")
         if "predictor" in sim and "lemma1" in sim["predictor"]:
@@ -114,5 +183,23 @@ def write_report(out: str | Path, *, config, resolved, data: dict, train: dict, 
         for name in sim:
             lines += [f"### BEM source: {name}", "", f"![fig2 {name}](simulate/fig2_{name}.png)", ""]
     path = out / "report.md"
-    path.write_text("\n".join(lines))
+    atomic_write_text(path, "\n".join(lines))
     return path
+
+
+def _finite(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and v == v and abs(v) != float("inf")
+
+
+def _trial_note(r: dict, held: dict) -> str:
+    """Why a held-out trial's error stands out: it fell, or its motions leave the training data."""
+    notes = []
+    if r.get("failed"):
+        notes.append("fell (its last, fastest motions are in the set)")
+    b = r.get("beyond_training")
+    if b:
+        notes.append(f"{100 * b:.0f} % of its samples beyond the training data's range")
+    others = [t["rmse"] for t in held["per_trial"].values() if t is not r]
+    if others and r["rmse"] > 5 * (sorted(others)[len(others) // 2]) and not notes:
+        notes.append("error well above the other trials'")
+    return "; ".join(notes) or "—"

@@ -9,7 +9,13 @@ a model unless ``model:`` names one.
 The run folder holds ``config.yaml`` (the resolved config), ``config_resolved.json`` (every
 value with its origin), ``data.npz`` (+ ``data.truth.npz``) when collected, the training run
 (``checkpoint.pt``, ``metrics.json``, ``tb/``), the predictors, ``simulate/`` and ``report.md``.
-``metrics.json`` gains ``closed_loop.<source>.{fell, tracking_rmse, ...}`` per BEM source.
+``metrics.json`` gains ``closed_loop.<source>.{fell, diverged, tracking_rmse, ...}`` per BEM source
+and ``verdict`` (:mod:`bemlearn.pipeline.verdict`): ``ok``, ``degraded`` or ``unusable`` with its
+reasons, also the first lines of ``report.md``.
+
+Before collecting, a robot run checks from the model that the robot can be balanced over the
+design region (:mod:`bemlearn.pipeline.feasibility`); when it cannot, the run stops there with an
+``unusable`` verdict in ``metrics.json`` and ``report.md``.
 """
 
 from __future__ import annotations
@@ -20,9 +26,10 @@ import time
 from pathlib import Path
 
 from bemlearn.config import save_yaml
-from bemlearn.files import new_run_dir
+from bemlearn.files import atomic_write_text, new_run_dir
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.resolve import ResolvedConfig, resolve_pipeline_config
+from bemlearn.pipeline.verdict import judge_run
 
 __all__ = ["run_pipeline"]
 
@@ -44,9 +51,20 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
     out = Path(out_dir) if out_dir else new_run_dir(Path(cfg.robot or cfg.data or "run").stem)
     out.mkdir(parents=True, exist_ok=True)
     save_yaml(cfg, out / "config.yaml")
-    (out / "config_resolved.json").write_text(json.dumps(resolved.to_json_dict(), indent=2, ensure_ascii=False))
+    atomic_write_text(out / "config_resolved.json", json.dumps(resolved.to_json_dict(), indent=2, ensure_ascii=False))
     t0 = time.perf_counter()
     stages = 5 if cfg.robot else 3
+    feasibility: list = []
+    if cfg.robot:
+        from bemlearn.pipeline.feasibility import model_feasibility
+        from bemlearn.robots import MujocoRobot, load
+
+        robot = load(cfg.robot)
+        if isinstance(robot, MujocoRobot):
+            feasibility = [c.to_dict() for c in model_feasibility(robot, cfg)]
+            stop = [c for c in feasibility if not c["passed"] and c["severity"] == "unusable"]
+            if stop:
+                return _stop_after_preflight(out, cfg, resolved, feasibility, t0)
     if cfg.data is None:
         log.info("[1/%d] collecting excitation data", stages)
         data, truth = collect(cfg.robot, cfg.collect, progress=progress)
@@ -67,13 +85,41 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
     if cfg.robot:
         log.info("[4/%d] closed-loop simulation", stages)
         sim = simulate_stage(cfg, out, predictor=out / "bem_predictor.pt", progress=progress)
-        train["closed_loop"] = {src: {k: m[k] for k in ("fell", "tracking_rmse", "tracking_max", "qu_max", "u_max", "duration_s") if k in m}
+        train["closed_loop"] = {src: {k: m[k] for k in ("fell", "diverged", "tracking_rmse", "tracking_max", "qu_max", "u_max",
+                                                         "duration_s", "lemma1") if k in m}
                                 for src, m in sim.items()}
-        (out / "metrics.json").write_text(json.dumps(train, indent=2, default=float))
+    train["data"] = data_info
+    train["feasibility"] = feasibility
+    train["verdict"] = judge_run(train).to_dict()
+    atomic_write_text(out / "metrics.json", json.dumps(train, indent=2, default=float))
+    _record_data_choices(out, resolved, train)
     log.info("[%d/%d] report", stages, stages)
     report = write_report(out, config=cfg, resolved=resolved, data=data_info, train=train, export=files, sim=sim)
     log.info("done in %.0f s: %s", time.perf_counter() - t0, report)
     return out
+
+
+def _stop_after_preflight(out: Path, cfg: PipelineConfig, resolved: ResolvedConfig, feasibility: list, t0: float) -> Path:
+    """Write the verdict of a robot its model says cannot be balanced (metrics.json, report.md); no data."""
+    from bemlearn.pipeline.report import write_report
+
+    metrics = {"robot": {"name": Path(str(cfg.robot)).stem, "source": str(cfg.robot)}, "feasibility": feasibility,
+               "stopped_after": "preflight"}
+    metrics["verdict"] = judge_run(metrics).to_dict()
+    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
+    write_report(out, config=cfg, resolved=resolved, data=None, train=metrics, export=[], sim={})
+    log.warning("stopped after the model checks (%.1f s): %s", time.perf_counter() - t0, "; ".join(metrics["verdict"]["reasons"]))
+    return out
+
+
+def _record_data_choices(out: Path, resolved: ResolvedConfig, metrics: dict) -> None:
+    """Add the values chosen from the data when training (e.g. the Gaussian σ) to config_resolved.json."""
+    choice = (metrics.get("dataset") or {}).get("derivative_choice")
+    if not choice:
+        return
+    rows = resolved.to_json_dict()
+    rows["dataset.derivative_options.sigma_s"] = {"value": choice["sigma_s"], "origin": "data", "note": choice["note"]}
+    atomic_write_text(out / "config_resolved.json", json.dumps(rows, indent=2, ensure_ascii=False))
 
 
 def _as_dict(config: PipelineConfig) -> dict:

@@ -138,12 +138,13 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     metrics["uncertainty"] = stage.calibration
     # data-only evaluation (no model): held-out trials' q_u from f(x), and the BEM on slices with the
     # region the data cover marked, so that extrapolation is visible
-    from bemlearn.pipeline.data_evaluation import bem_slice_figure, bem_slices, heldout_prediction
+    from bemlearn.pipeline.data_evaluation import bem_resolution, bem_slice_figure, bem_slices, heldout_prediction
 
     if len(val):
-        held = heldout_prediction(state, val)
+        held = heldout_prediction(state, val, train=train)
         metrics["data_heldout"] = {k: v for k, v in held.items() if k != "per_trial"}
         metrics["data_heldout"]["per_trial"] = {str(k): v for k, v in held["per_trial"].items()}
+    metrics["resolution"] = bem_resolution(state, train)   # do the data resolve the BEM at all (model-free)?
     slices = bem_slices(state, train)
     metrics["bem_slices"] = {"summary": slices["summary"],
                              "slices": [{k: v for k, v in sl.items() if not hasattr(v, "shape")} for sl in slices["slices"]]}
@@ -163,7 +164,22 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         writer.add_figure("bem/learned_vs_model", fig, 0)
         with atomic_path(out / "bem_validation.png") as tmp:
             fig.savefig(tmp, dpi=110)
+        if ecfg.design_points > 0:   # over the whole design region (D1, D2), not only along the references
+            from bemlearn.pipeline.design_evaluation import design_grid, design_region_figure, evaluate_design_region
+
+            dr = evaluate_design_region(state, design_grid(truth_robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed))
+            curve = dr.pop("curve")
+            metrics["bem_design_region"] = dr
+            for k in ("rmse", "max_abs", "gain"):
+                writer.add_scalar(f"bem/design_region_{k}", dr[k], 0)
+            fig = design_region_figure(curve, dr, meta.unactuated, units[f"qd_{meta.unactuated}"].removesuffix("/s"))
+            writer.add_figure("bem/design_region", fig, 0)
+            with atomic_path(out / "design_region.png") as tmp:
+                fig.savefig(tmp, dpi=110)
     writer.close()
+    from bemlearn.pipeline.verdict import judge_run
+
+    metrics["verdict"] = judge_run(metrics).to_dict()        # what training alone can tell; a run adds the rest
     atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
     if interrupted:
         raise KeyboardInterrupt

@@ -1,0 +1,160 @@
+"""Can the robot be balanced over the design region at all?  Checked from the model, before collecting.
+
+Three checks, each a number with a limit, from the robot's model and the resolved config:
+
+* **hold** — the effort to hold the BEM at the edge of the design region, |q_u^e − nominal| = d.
+  The linearised BEM q_u^e ≈ s_p q_a + s_a q̈_a (:func:`~bemlearn.robots.scales.bem_slopes`) offers
+  two ways per actuated coordinate j: a pose q_a,j = ±d/s_p,j at rest (within the joint range) or
+  an acceleration q̈_a,j = ±d/s_a,j.  For each, with q_u at the model BEM there and q̇ = 0,
+  q̈_u = 0, the actuated rows of the inverse dynamics (eq. 2a) give τ_a, MuJoCo's actuator model
+  gives the ``ctrl`` (and force) it takes (:class:`~bemlearn.control.actuator_inverse.MujocoActuatorInverse`),
+  and the effort is max_i |ctrl_i| / ctrl limit_i (and |f_i| / force limit_i).  The robot can hold
+  the design region when for each sign some way needs an effort ≤ 1.
+* **eic** (one actuated coordinate) — the spectral abscissa of the EIC loop linearised at upright
+  with the config's gains (:func:`~bemlearn.control.eic_linear.eic_linear_abscissa`); ≥ 0 means the
+  closed loop of eq. (3), (8) cannot balance the robot near upright.
+* **excitation** — the peak ``ctrl`` of the excitation LQR (``collect.gains``, when derived) for a
+  d/4 error of q_u, as a multiple of the ctrlrange (:func:`~bemlearn.control.lqr.discrete_lqr`):
+  above 1 the excitation saturates and trials fall.
+
+``hold`` or ``eic`` failing makes the run *unusable*: ``bemlearn run`` stops after its preflight
+and writes the verdict; ``excitation`` failing makes it *degraded*.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+__all__ = ["FeasibilityCheck", "model_feasibility", "hold_effort"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class FeasibilityCheck:
+    """One model check: ``value`` against ``limit`` (passes when value ≤ limit, or < limit when ``strict``)."""
+
+    name: str
+    value: float
+    limit: float
+    severity: str          # "unusable" | "degraded": what a failure makes the run
+    text: str              # one sentence, with the number
+    strict: bool = False
+
+    @property
+    def passed(self) -> bool:
+        if not np.isfinite(self.value):
+            return False
+        return bool(self.value < self.limit if self.strict else self.value <= self.limit)
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "value": self.value, "limit": self.limit, "strict": self.strict, "passed": self.passed,
+                "severity": self.severity, "text": self.text}
+
+
+def _effort(robot, inv, q: np.ndarray, qdd: np.ndarray) -> float:
+    """max over actuators of |ctrl|/ctrl limit and |force|/force limit to realise (q, q̇ = 0, q̈)."""
+    qt = torch.from_numpy(q[None])
+    z = torch.zeros_like(qt)
+    tau = (robot.mass_matrix(qt)[0].numpy() @ qdd + (robot.bias(qt, z) - robot.passive(qt, z))[0].numpy())
+    tau_a = tau[list(robot.actuated_index)]
+    ctrl = inv.command(tau_a, q, np.zeros_like(q), clip=False)
+    force = inv.B_pinv @ tau_a
+    model = robot.model
+    out = float(np.max(np.abs(ctrl) / inv.limit)) if inv.limited.any() else 0.0
+    flim = model.actuator_forcelimited.astype(bool)
+    if flim.any():
+        fmax = np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1]))
+        out = max(out, float(np.max(np.abs(force[flim]) / fmax[flim])))
+    return out
+
+
+def hold_effort(robot, bound: float) -> tuple[float, str]:
+    """The smallest effort (multiple of the actuator limits) that holds the BEM at ±``bound``, the
+    worse of the two signs, and how (module docstring); ``inf`` when no way is found."""
+    from bemlearn.control.actuator_inverse import MujocoActuatorInverse
+    from bemlearn.robots.scales import bem_slopes, qa_half_ranges
+
+    inv = MujocoActuatorInverse(robot)
+    sp, _, sa = bem_slopes(robot)
+    half = qa_half_ranges(robot)
+    names = list(robot.actuated_names)
+    iu, ia = robot.unactuated_index, list(robot.actuated_index)
+    worst, how = 0.0, ""
+    for sign in (1.0, -1.0):
+        best, best_how = math.inf, "no pose or acceleration of the actuated joints moves the BEM there"
+        for j in range(robot.m):
+            for kind, slope in (("pose", sp[j]), ("acceleration", sa[j])):
+                if not abs(slope) > 1e-9:
+                    continue
+                amount = sign * bound / slope
+                qa = np.zeros(robot.m)
+                qadd = np.zeros(robot.m)
+                if kind == "pose":
+                    if abs(amount) > half[j]:
+                        continue
+                    qa[j] = amount
+                else:
+                    qadd[j] = amount
+                res = robot.bem(torch.from_numpy(qa[None]), torch.zeros(1, robot.m, dtype=torch.float64), torch.from_numpy(qadd[None]))
+                if not bool(res.valid[0]):
+                    continue
+                q = np.zeros(robot.n)
+                q[ia] = qa
+                q[iu] = float(res.qu[0])
+                qdd = np.zeros(robot.n)
+                qdd[ia] = qadd
+                e = _effort(robot, inv, q, qdd)
+                if e < best:
+                    unit = "" if kind == "pose" else "/s²"
+                    best, best_how = e, f"{names[j]} {kind} {amount:+.3g} {'rad' if robot.coordinate_kinds[ia[j]] == 'hinge' else 'm'}{unit}"
+        if best >= worst:
+            worst, how = best, best_how
+    return worst, how
+
+
+def model_feasibility(robot, config) -> list[FeasibilityCheck]:
+    """The checks of the module docstring for ``robot`` (a MujocoRobot) and the resolved ``config``."""
+    from bemlearn.pipeline.derive import design_region
+
+    d = float(design_region(robot).value)
+    out: list[FeasibilityCheck] = []
+    qu_unit = "rad" if robot.coordinate_kinds[robot.unactuated_index] == "hinge" else "m"
+    try:
+        effort, how = hold_effort(robot, d)
+        out.append(FeasibilityCheck(
+            "hold", effort, 1.0, "unusable",
+            f"holding {robot.unactuated_name} {d:g} {qu_unit} from its nominal value (the design region's edge) takes {effort:.2f}× the "
+            f"actuator limits at best ({how})" if math.isfinite(effort) else
+            f"no pose or acceleration of the actuated joints holds {robot.unactuated_name} {d:g} {qu_unit} from its nominal value"))
+    except (ValueError, RuntimeError) as exc:   # an actuator model the inverse does not cover: no verdict from it
+        log.info("feasibility: hold check skipped (%s)", exc)
+    if robot.m == 1 and config.simulate.gains is not None:
+        from bemlearn.control.eic_linear import eic_linear_abscissa
+
+        ab = eic_linear_abscissa(robot, config.simulate.gains)
+        out.append(FeasibilityCheck(
+            "eic", ab, 0.0, "unusable",
+            f"the EIC loop (eq. 3, 8) with the gains {_gains(config.simulate.gains)} is unstable in its linearisation at "
+            f"upright (max Re λ = {ab:+.3g} 1/s)" if ab >= 0 else
+            f"the EIC loop linearised at upright is stable (max Re λ = {ab:+.3g} 1/s)", strict=True))
+    if config.collect.gains is not None and config.collect.rate_hz is not None:
+        from bemlearn.control.lqr import discrete_lqr
+
+        res = discrete_lqr(robot, rate_hz=config.collect.rate_hz, timestep=config.collect.physics_timestep, design_qu=d, qu0=d / 4)
+        K = np.asarray(config.collect.gains, dtype=np.float64).reshape(res.K.shape)
+        if np.allclose(K, res.K, rtol=1e-4, atol=1e-9):      # the derived gains: their peak is the LQR's
+            out.append(FeasibilityCheck(
+                "excitation", res.u_peak, 1.0, "degraded",
+                f"the excitation LQR needs {res.u_peak:.2f}× the ctrlrange for a {d / 4:g} {qu_unit} error of "
+                f"{robot.unactuated_name}" + (" (its trials will saturate and fall)" if res.u_peak > 1 else "")))
+    return out
+
+
+def _gains(g) -> str:
+    return "(" + ", ".join(f"{k} {getattr(g, k):.3g}" for k in ("kp_a", "kd_a", "kp_u", "kd_u")) + ")"

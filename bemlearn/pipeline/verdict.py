@@ -1,0 +1,178 @@
+"""The verdict of a run: ``ok``, ``degraded`` or ``unusable``, with a short reason for each finding.
+
+A run's numbers are only as good as what it can stand behind.  :func:`judge_run` reads the
+run's own metrics (``metrics.json``) and states, from checks with fixed limits (d is the design
+bound, 0.2 rad for most robots):
+
+========================  ==========================================  ======================
+check                     degraded when                               unusable when
+========================  ==========================================  ======================
+model (preflight)         the excitation LQR saturates (> 1× ctrl)    the actuators cannot hold
+                                                                      |q_u^e| = d, or the EIC
+                                                                      is unstable at upright
+excitation trials         more than half fell                         all fell
+derivatives               S[q̈] noise > 4 % of its std                 —
+fit                       did not converge (max_iter, numerical)      —
+learned vs model BEM      gain ∉ [0.95, 1.05], RMSE > 0.05 d or       gain ∉ [0.5, 2] or
+over the design region    max > 0.2 d; band covers < 80 %             RMSE > 0.25 d
+data resolve the BEM      its spread over the data < 4 × band σ       < 2 × band σ
+closed loop               learned BEM's loop diverged                 learned BEM's loop fell
+Lemma 1                   learned ΔΓ vs Ḣ_u correlation < 0.9          —
+========================  ==========================================  ======================
+
+The status is the worst finding's; ``reasons`` lists one sentence per finding, worst first.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["Finding", "Verdict", "judge_run", "GAIN_RANGE", "EXIT_UNUSABLE", "EXIT_DEGRADED_STRICT"]
+
+#: Targets of the learned vs model BEM over the design region (issue 21).
+GAIN_RANGE = (0.95, 1.05)
+RMSE_OF_BOUND = 0.05           # RMSE ≤ 0.05 d (0.01 rad at d = 0.2 rad)
+MAX_OF_BOUND = 0.2             # max ≤ 0.2 d (0.04 rad)
+#: ``bemlearn run``'s exit status for an unusable run, and for a degraded one under ``--strict``.
+EXIT_UNUSABLE = 3
+EXIT_DEGRADED_STRICT = 4
+
+_RANK = {"ok": 0, "degraded": 1, "unusable": 2}
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One check that did not pass: its severity, a key and a sentence with the numbers."""
+
+    severity: str
+    check: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The verdict of a run (module docstring)."""
+
+    status: str
+    findings: tuple[Finding, ...] = field(default_factory=tuple)
+    checked: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def reasons(self) -> list[str]:
+        return [f.reason for f in self.findings]
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"status", "reasons", "findings": [{severity, check, reason}], "checked": [...]}``."""
+        return {"status": self.status, "reasons": self.reasons,
+                "findings": [{"severity": f.severity, "check": f.check, "reason": f.reason} for f in self.findings],
+                "checked": list(self.checked)}
+
+    def exit_status(self, *, strict: bool = False) -> int:
+        """0 for ok (and degraded unless ``strict``), :data:`EXIT_UNUSABLE`, :data:`EXIT_DEGRADED_STRICT`."""
+        if self.status == "unusable":
+            return EXIT_UNUSABLE
+        return EXIT_DEGRADED_STRICT if strict and self.status == "degraded" else 0
+
+    def summary(self) -> str:
+        """One line: ``Verdict: degraded — reason; reason``."""
+        return f"Verdict: {self.status}" + (" — " + "; ".join(self.reasons) if self.findings else "")
+
+
+def _finite(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def judge_run(metrics: dict[str, Any]) -> Verdict:
+    """The verdict of a run from its metrics (``metrics.json``; keys a run lacks are not checked).
+
+    Reads ``feasibility`` (model checks of :mod:`bemlearn.pipeline.feasibility`), ``data`` (trials,
+    failed), ``dataset.derivative_choice``, ``fit``, ``bem_design_region`` (with its ``bound``),
+    ``resolution``, ``closed_loop`` and ``closed_loop.predictor.lemma1``.
+    """
+    found: list[Finding] = []
+    checked: list[str] = []
+
+    def add(sev: str, check: str, reason: str) -> None:
+        found.append(Finding(sev, check, reason))
+
+    for c in metrics.get("feasibility") or []:
+        checked.append(f"model:{c['name']}")
+        if not c["passed"]:
+            add(c["severity"], f"model:{c['name']}", c["text"])
+    data = metrics.get("data")
+    if data and data.get("collected") and data.get("trials"):
+        checked.append("excitation")
+        n, f = int(data["trials"]), int(data.get("failed", 0))
+        if f == n:
+            add("unusable", "excitation", f"all {n} excitation trials fell: no data from balanced motion")
+        elif f > n / 2:
+            add("degraded", "excitation", f"{f} of {n} excitation trials fell: the data come mostly from falling trials")
+    choice = (metrics.get("dataset") or {}).get("derivative_choice")
+    if choice:
+        checked.append("derivatives")
+        noisy = {j: v for j, v in (choice.get("qdd_noise_fraction") or {}).items() if v > 0.04}
+        if noisy:
+            add("degraded", "derivatives", "the estimated accelerations are noise-dominated ("
+                + ", ".join(f"{j}: quantization noise {100 * v:.0f} % of q̈'s spread" for j, v in noisy.items())
+                + "): the learned slopes are attenuated; log at a higher rate or with a finer encoder")
+    fit = metrics.get("fit")
+    if fit:
+        checked.append("fit")
+        stop = fit.get("stop_reason")
+        if stop in ("max_iter", "epochs"):
+            add("degraded", "fit", f"the GP fit stopped at its iteration limit ({fit.get('steps')} evaluations) before "
+                "converging: raise train.max_iter")
+        elif stop not in (None, "converged"):
+            add("degraded", "fit", f"the GP fit ended by {stop}: its hyperparameters are the best found before that")
+    dr = metrics.get("bem_design_region")
+    if dr and dr.get("n_points"):
+        checked.append("design_region")
+        d, unit = dr["bound"], metrics.get("output_unit", "rad")
+        gain, rmse, mx = dr.get("gain"), dr.get("rmse"), dr.get("max_abs")
+        bad = []
+        if _finite(gain) and not GAIN_RANGE[0] <= gain <= GAIN_RANGE[1]:
+            bad.append(f"gain {gain:.3f} (target {GAIN_RANGE[0]}–{GAIN_RANGE[1]})")
+        if _finite(rmse) and rmse > RMSE_OF_BOUND * d:
+            bad.append(f"RMSE {rmse:.4f} {unit} (target ≤ {RMSE_OF_BOUND * d:.3g})")
+        if _finite(mx) and mx > MAX_OF_BOUND * d:
+            bad.append(f"max {mx:.4f} {unit} (target ≤ {MAX_OF_BOUND * d:.3g})")
+        if bad:
+            severe = (_finite(gain) and not 0.5 <= gain <= 2.0) or (_finite(rmse) and rmse > 0.25 * d)
+            add("unusable" if severe else "degraded", "design_region",
+                f"learned vs model BEM over |q_u^e| ≤ {d:g} {unit}: " + ", ".join(bad))
+        cov = dr.get("coverage_2sigma_band")
+        if _finite(cov) and cov < 0.8:
+            add("degraded", "band", f"the exported ±2σ band holds only {100 * cov:.0f} % of the model BEM over the design region")
+    res = metrics.get("resolution")
+    if res and _finite(res.get("ratio")):
+        checked.append("resolution")
+        r = res["ratio"]
+        if r < 4.0:
+            text = (f"the data {'do not' if r < 2 else 'barely'} resolve the BEM: over the data's actuated motions it varies by "
+                    f"{res['spread']:.3g} {res.get('unit', 'rad')} (std), {r:.1f}× its band σ ({res['band_std']:.3g})")
+            weak = [w for w in res.get("inputs", []) if w.get("factor") is not None and w["factor"] > 1.0]
+            if weak:
+                text += "; " + ", ".join(f"{w['input']} moves ±{w['amplitude']:.3g} {w['unit']}, about {w['factor']:.1f}× that would resolve its slope"
+                                         for w in weak[:3])
+            add("unusable" if r < 2 else "degraded", "resolution", text)
+    loops = metrics.get("closed_loop") or {}
+    if "predictor" in loops:
+        checked.append("closed_loop")
+        p, mdl = loops["predictor"], loops.get("model", {})
+        if p.get("fell"):
+            both = mdl.get("fell")
+            add("unusable", "closed_loop", f"the closed loop with the learned BEM fell at {p.get('duration_s', math.nan):.2f} s"
+                + (" (so did the model BEM's: the EIC cannot balance this robot with these gains)" if both else ""))
+        elif p.get("diverged"):
+            add("degraded", "closed_loop", "the closed loop with the learned BEM stayed up but its actuated joints left the reference")
+        lem = p.get("lemma1")
+        if lem and _finite(lem.get("r_learned_vs_hdot")):
+            checked.append("lemma1")
+            r = lem["r_learned_vs_hdot"]
+            if r < 0.9:
+                add("degraded", "lemma1", f"Lemma 1 (eq. 10) does not hold for the learned BEM: learned ΔΓ vs Ḣ_u correlation {r:.2f}")
+    found.sort(key=lambda f: -_RANK[f.severity])
+    status = max((f.severity for f in found), key=_RANK.__getitem__, default="ok")
+    return Verdict(status, tuple(found), tuple(checked))
