@@ -149,9 +149,11 @@ def run_import(args: argparse.Namespace) -> int:
     traj = import_logs(args.raw, imap)
     write_trajectory(traj, args.out)
     info = traj.meta.extra["import"]
+    filled = (f"{info['filled_samples']} grid samples more than ½ step from any stamp" if info.get("resample") else
+              f"{info['filled_samples']} dropped samples interpolated")
     print(f"wrote {args.out} ({traj.n_samples} samples, {len(traj.meta.trial_failed)} trials at "
-          f"{traj.meta.sample_rate_hz:g} Hz; {info['filled_samples']} dropped samples interpolated, "
-          f"{info['split_gaps']} trials split at gaps, {info['dropped_pieces']} short pieces dropped)")
+          f"{traj.meta.sample_rate_hz:g} Hz; {filled}, {info['split_gaps']} trials split at gaps, "
+          f"{info['dropped_pieces']} short pieces dropped)")
     for line in import_notes(info):
         print(line)
     print(format_summary(args.out, traj.summary()))
