@@ -194,8 +194,9 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
                 if splits else "")
         raise TrajectoryFormatError(f"{tables[0].path}: no trial with at least {min_trial_samples} samples{hint}")
     if filled_total or splits or dropped:
-        logger.info("import: %d dropped samples interpolated, %d trials split at gaps, %d short pieces dropped",
-                    filled_total, splits, dropped)
+        logger.info("import: %d %s, %d trials split at gaps, %d short pieces dropped", filled_total,
+                    "grid samples more than ½ step from any stamp" if resampling else "dropped samples interpolated",
+                    splits, dropped)
     v = np.concatenate(parts["v"])
     n, m = len(imap.joints), len(imap.inputs)
     snapped = (_snap_filled_joints(v, np.concatenate(parts["filled"]), logged_steps)
@@ -253,8 +254,8 @@ def _resample_summary(reports: list[ResampleReport], rate: float, samples: int, 
         "tolerance_steps": imap.time.max_jitter, "largest_step_s": largest,
         "largest_overrun_s": max(0.0, largest - 1.0 / rate), "stamp_rate_hz": stamp_rate,
     }
-    logger.info("resampled (time.resample: linear) onto %g Hz: %d logged samples -> %d; %d (%.1f %%) stamps more than "
-                "%g step off the grid moved; largest overrun %.4g ms (a step of %.4g ms); the stamps average %.6g Hz",
+    logger.info("resampled (time.resample: linear) onto %g Hz: %d logged samples -> %d; %d (%.1f %%) had moved more than "
+                "%g step off the grid; largest overrun %.4g ms (a step of %.4g ms); the stamps average %.6g Hz",
                 rate, stamps, samples, moved, 100.0 * moved / max(stamps, 1), imap.time.max_jitter,
                 info["largest_overrun_s"] * 1e3, largest * 1e3, stamp_rate)
     quantized = [f"{j.name} (step {_step_text(st)})" for j, st in zip(imap.joints, steps) if st is not None]
