@@ -18,6 +18,7 @@ from bemlearn.cli.main import main
 from bemlearn.config import ConfigError, from_dict, to_dict
 from bemlearn.data import TrajectoryFormatError, detect_quantization_step, read_trajectory, write_trajectory
 from bemlearn.data.import_map import ImportMap, load_import_map
+from bemlearn.data.log_table import detect_delimiter
 from bemlearn.data.log_import import import_logs
 from bemlearn.data.rig_logs import RigLogStyle, log_columns, rig_log_map, write_rig_logs
 
@@ -191,6 +192,26 @@ def test_error_hints_name_the_map_key_that_fixes_them(tmp_path):
         import_logs([dup], imap_of({**PLAIN, "joints": [PLAIN["joints"][0], dict(PLAIN["joints"][1], column="theta")]}))
     fixed = {**PLAIN, "columns": ["t", "theta", "alpha", "u"]}
     assert import_logs([dup], imap_of(fixed)).n_samples == 60
+
+
+def test_detect_delimiter():
+    assert detect_delimiter("f", ["t;a;b", "0.1;2;3"], header=True) == ";"
+    assert detect_delimiter("f", ["0.1\t2\t3", "0.2\t2\t4"], header=False) == "\t"
+    assert detect_delimiter("f", ["0.1   2 3", " 0.2 2\t4"], header=False) == "whitespace"
+    assert detect_delimiter("f", ["t, a, b", "0.1, 2, 3"], header=True) == ","
+    assert detect_delimiter("f", ["t,a,b", "s,rad,V"], header=True) == ","  # a units row: named when it fails to parse
+    with pytest.raises(TrajectoryFormatError, match=r"f: the field separator is ambiguous: comma and whitespace each split line 1 "
+                       r"\('a,b c'\) .*set delimiter: in the map"):
+        detect_delimiter("f", ["a,b c"], header=True)
+    with pytest.raises(TrajectoryFormatError, match=r"f: cannot tell how the fields are separated: .* line 3 \('1\|2'\)"):
+        detect_delimiter("f", ["1|2", "3|4"], header=False, first_line=3)
+
+
+def test_a_units_row_is_named(tmp_path):
+    path = tmp_path / "units.csv"
+    path.write_text("t,theta,alpha,u\nms,rad,rad,V\n" + "\n".join(f"{2.0 * i},{0.1 * i},{0.2 * i},{i}" for i in range(50)) + "\n")
+    with pytest.raises(TrajectoryFormatError, match=r"units\.csv: column 't', row 0 \(line 2\): 'ms' is not a number"):
+        import_logs([path], imap_of(PLAIN))
 
 
 def test_time_error_hints(tmp_path):

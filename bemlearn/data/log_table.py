@@ -133,7 +133,9 @@ def detect_delimiter(path: Path | str, lines: Sequence[str], *, header: bool, fi
     Each of comma, semicolon, tab and whitespace (:data:`~bemlearn.data.import_map.DELIMITERS`)
     is tried: it fits when it splits every line into the same number (≥ 2) of fields and
     every field of the data lines (all lines when ``header`` is false, all but the first
-    otherwise) is a number.  Tab and whitespace splitting alike count as one (tab).
+    otherwise) is a number.  Tab and whitespace splitting alike count as one (tab).  When
+    none fits, the one separator that splits the lines into the same number of fields is
+    taken (a first data line that is not numbers then fails to parse, naming its cell).
 
     Args:
         path: the file (for messages).
@@ -170,7 +172,13 @@ def detect_delimiter(path: Path | str, lines: Sequence[str], *, header: bool, fi
                 f"is the header, set header: true (columns: then renames its fields); if it is a preamble, mark it "
                 f"with comment:"
             )
-    if not fits:
+    if not fits:  # a first data line that is not numbers (a units row?): the one separator that splits alike
+        loose = {c: [_split(line, c) for line in lines] for c in DELIMITERS}
+        loose = {c: f for c, f in loose.items() if len(f[0]) >= 2 and all(len(x) == len(f[0]) for x in f)}
+        if "\t" in loose and loose.get(WHITESPACE) == loose["\t"]:
+            del loose[WHITESPACE]
+        if len(loose) == 1 and len(lines) > 1:
+            return next(iter(loose))
         raise TrajectoryFormatError(
             f"{path}: cannot tell how the fields are separated: neither comma, semicolon, tab nor whitespace splits "
             f"{shown}{' and the line after it' if len(lines) > 1 else ''} into the same number (≥ 2) of "
