@@ -155,7 +155,6 @@ def _oracle_rmse(state, traj, case: BenchCase, tr, x, q) -> float | None:
 def run_case(case: BenchCase, *, progress=print) -> dict:
     """Fit, evaluate and score every candidate band on one robot (module docstring)."""
     from bemlearn.data import build_datasets, read_trajectory
-    from bemlearn.data.quantization import detect_quantization_step
     from bemlearn.fitting import train_gp
     from bemlearn.models import predictor_state
     from bemlearn.pipeline.evaluation import reference_queries
@@ -199,7 +198,7 @@ def run_case(case: BenchCase, *, progress=print) -> dict:
             _score("predictive √(σ̃²+σ_0²)", e, np.sqrt(lat**2 + noise_sd**2), 0.0, costs["scale_us"], val_cov(np.sqrt(lv**2 + noise_sd**2)))]
     # (a) noisy-input, Savitzky–Golay quantization model
     t0 = time.perf_counter()
-    steps = {n: detect_quantization_step(traj.q[:, j]) for j, n in enumerate(traj.meta.joint_names)}
+    steps = traj.quantization_steps()  # the logged values' step, also for a resampled import
     s_q = quantization_input_std(tr.input_names, {n: v for n, v in steps.items() if v is not None}, estimator=est,
                                  sample_rate_hz=traj.meta.sample_rate_hz)
     a_s = time.perf_counter() - t0

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from bemlearn.data.quantization import counts_per_revolution
+from bemlearn.errors import OutputExistsError
 from bemlearn.data.trajectory_io import SUFFIXES, read_trajectory, write_trajectory
 from bemlearn.data.validation import JITTER_RTOL, MIN_TRIAL_SAMPLES, RATE_RTOL
 
@@ -89,7 +90,8 @@ def format_summary(path: Path | str, s: dict[str, Any]) -> str:
     for joint, rng in s["angle_ranges_rad"].items():
         unit = " m" if kinds.get(joint) == "slide" else ""
         lines.append(f"  {joint:<12} [{rng[0]:+.6g}, {rng[1]:+.6g}]{unit}" if rng else f"  {joint:<12} -")
-    lines.append("quantization step (rad, m for slides):" if slides else "quantization step (rad):")
+    before = " — detected in the logged values, before resampling" if s.get("resampled") else ""
+    lines.append(("quantization step (rad, m for slides)" if slides else "quantization step (rad)") + before + ":")
     for joint, step in s["quantization_step_rad"].items():
         if step is None:
             lines.append(f"  {joint:<12} none detected")
@@ -140,15 +142,43 @@ def run_import(args: argparse.Namespace) -> int:
     if args.out.suffix.lower() not in SUFFIXES:
         raise ValueError(f"{args.out}: unsupported output suffix {args.out.suffix!r}; expected one of {list(SUFFIXES)}")
     if args.out.exists() and not args.force:
-        raise ValueError(f"{args.out}: already exists (use --force to overwrite)")
+        raise OutputExistsError(f"{args.out}: already exists (use --force to overwrite)")
     if any(args.out.resolve() == p.resolve() for p in args.raw):
         raise ValueError(f"{args.out}: output is one of the input files")
     imap = load_import_map(args.map)
     traj = import_logs(args.raw, imap)
     write_trajectory(traj, args.out)
     info = traj.meta.extra["import"]
+    filled = (f"{info['filled_samples']} grid samples more than ½ step from any stamp" if info.get("resample") else
+              f"{info['filled_samples']} dropped samples interpolated")
     print(f"wrote {args.out} ({traj.n_samples} samples, {len(traj.meta.trial_failed)} trials at "
-          f"{traj.meta.sample_rate_hz:g} Hz; {info['filled_samples']} dropped samples interpolated, "
-          f"{info['split_gaps']} trials split at gaps, {info['dropped_pieces']} short pieces dropped)")
+          f"{traj.meta.sample_rate_hz:g} Hz; {filled}, {info['split_gaps']} trials split at gaps, "
+          f"{info['dropped_pieces']} short pieces dropped)")
+    for line in import_notes(info):
+        print(line)
     print(format_summary(args.out, traj.summary()))
     return 0
+
+
+def import_notes(info: dict[str, Any]) -> list[str]:
+    """The import's lines about resampling and cut last lines (``meta.extra["import"]``), for the user."""
+    lines = []
+    res = info.get("resample")
+    if res:
+        share = 100.0 * res["moved"] / max(res["stamps"], 1)
+        lines.append(
+            f"resampled (time.resample: linear) onto {res['rate_hz']:g} Hz: {res['stamps']} logged samples -> "
+            f"{res['samples']}; {res['moved']} ({share:.1f} %) had moved more than {res['tolerance_steps']:g} step off "
+            f"the grid; largest overrun {res['largest_overrun_s'] * 1e3:.4g} ms (a step of {res['largest_step_s'] * 1e3:.4g} ms); "
+            f"the stamps average {res['stamp_rate_hz']:.6g} Hz"
+        )
+        steps = {k: v for k, v in info.get("quantization_step", {}).items() if v is not None}
+        if steps and res["moved"]:
+            lines.append(
+                "warning: the interpolated angles of " + ", ".join(steps) + " leave their encoder grid; the steps detected "
+                "before resampling are kept in the file (meta.extra['import']['quantization_step']) and shown below"
+            )
+    for cut in info.get("cut_last_lines", []):
+        lines.append(f"warning: {cut['file']}: line {cut['line']}, the last (no line end), looks cut mid-write "
+                     f"({cut['reason']}): not imported")
+    return lines

@@ -10,6 +10,9 @@ Example (format: ``docs/log-import.md``)::
       - {name: voltage, column: plant_input, unit: V}
     trials: per_file                      # or {column: episode}
     keep: [target_theta, feedforward]
+    delimiter: whitespace                 # optional: ",", ";", "\t", whitespace; default: detected
+    header: false                         # optional: the file has no header line ...
+    columns: [t, theta, alpha, plant_input, target_theta, feedforward]   # ... so name its columns
 
 A joint's value is  q = sign · scale(unit) · raw + offset,  with scale(rad) = 1,
 scale(deg) = π/180, scale(counts:N) = 2π/N (hinges, q in rad) and scale(m) = 1,
@@ -25,10 +28,16 @@ from typing import Literal
 
 from bemlearn.config import ConfigError, from_dict, load_yaml
 
-__all__ = ["TIME_UNITS", "ImportMap", "InputMap", "JointMap", "TimeMap", "TrialsByColumn", "load_import_map"]
+__all__ = ["DELIMITERS", "TIME_UNITS", "WHITESPACE", "ImportMap", "delimiter_name", "InputMap", "JointMap", "TimeMap", "TrialsByColumn",
+           "load_import_map"]
 
 #: Seconds per unit of the time column.
 TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
+#: ``delimiter: whitespace``: fields separated by any run of spaces and tabs.
+WHITESPACE = "whitespace"
+#: The delimiters tried, in this order, when the map gives none (:func:`bemlearn.data.log_table.detect_delimiter`).
+DELIMITERS: tuple[str, ...] = (",", ";", "\t", WHITESPACE)
+_DELIMITER_NAMES = {",": "comma", ";": "semicolon", "\t": "tab", WHITESPACE: "whitespace"}
 _JOINT_UNITS: dict[str, tuple[str, float]] = {"rad": ("hinge", 1.0), "deg": ("hinge", math.pi / 180.0),
                                               "m": ("slide", 1.0), "mm": ("slide", 1e-3)}
 
@@ -43,9 +52,16 @@ class TimeMap:
         rate_hz: nominal sample rate, Hz (``None`` with a time column: 1 / median step, rounded
             to an integer Hz when within 0.1 %).
         max_jitter: largest accepted |t − grid time| of a sample, fraction of a step (< 0.5).
+            With ``resample: linear``: the distance beyond which a stamp counts as *moved*.
         max_fill: longest run of missing samples (dropped by the logger) filled by linear
             interpolation; longer gaps split the trial (or fail with ``on_gap: error``).
+            With ``resample: linear``: a step between two stamps of more than
+            ``max_fill + 1.5`` nominal steps is such a gap.
         on_gap: ``"split"`` or ``"error"`` for a gap longer than ``max_fill`` samples.
+        resample: ``"none"`` (default: each sample keeps its logged value on its grid point,
+            :func:`~bemlearn.data.resample.place_on_grid`) or ``"linear"``: every channel is
+            linearly interpolated onto t₀ + k/f_s within each trial, for a logger whose loop
+            overruns or whose clock drifts (:func:`~bemlearn.data.resample.resample_linear`).
     """
 
     column: str | None = None
@@ -54,10 +70,13 @@ class TimeMap:
     max_jitter: float = 0.25
     max_fill: int = 2
     on_gap: Literal["split", "error"] = "split"
+    resample: Literal["none", "linear"] = "none"
 
     def __post_init__(self) -> None:
         if self.column is None and self.rate_hz is None:
             raise ValueError("give a time column (time.column) or the sample rate (time.rate_hz)")
+        if self.column is None and self.resample != "none":
+            raise ValueError("resample: linear needs the time stamps (time.column) to interpolate from")
         if self.rate_hz is not None and not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
             raise ValueError(f"rate_hz: expected a positive number of Hz, got {self.rate_hz!r}")
         if not 0 < self.max_jitter < 0.5:
@@ -137,8 +156,16 @@ class ImportMap:
         trials: ``"per_file"`` (each file one trial) or ``{column: <name>}``.
         keep: other columns carried along as extra channels (``Trajectory.channel(name)``).
         robot: the robot's name written to the file's metadata.
-        delimiter: the field separator (``","``, ``";"``, ``"\\t"``).
+        delimiter: the field separator: ``","``, ``";"``, ``"\\t"`` (or ``tab``), another single
+            character, or ``whitespace`` (any run of spaces and tabs); ``None`` (default):
+            detected per file from its first lines (:func:`bemlearn.data.log_table.detect_delimiter`).
         comment: lines starting with this before the header (and anywhere) are skipped.
+        header: the file's first line (after comments) names the columns.  ``False``: the
+            file starts with data, and ``columns`` names its columns.
+        columns: the file's columns in order, one name per field.  Required with
+            ``header: false``; with ``header: true`` they replace the header's names (the
+            header line is skipped, its field count must match).  Each file's lines must have
+            exactly this many fields.
     """
 
     time: TimeMap
@@ -147,8 +174,10 @@ class ImportMap:
     trials: Literal["per_file"] | TrialsByColumn = "per_file"
     keep: tuple[str, ...] = ()
     robot: str = "rig"
-    delimiter: str = ","
+    delimiter: str | None = None
     comment: str = "#"
+    header: bool = True
+    columns: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         if len(self.joints) < 2:
@@ -163,10 +192,28 @@ class ImportMap:
             raise ValueError(
                 f"inputs: expected {len(self.joints) - 1} inputs (n − 1 for {len(self.joints)} joints), got {len(self.inputs)}"
             )
-        if len(self.delimiter) != 1 or self.delimiter in "\n\r\"'":
-            raise ValueError(f"delimiter: expected one character, got {self.delimiter!r}")
+        if self.delimiter == "tab":
+            object.__setattr__(self, "delimiter", "\t")
+        if self.delimiter is not None and self.delimiter != WHITESPACE and (
+            len(self.delimiter) != 1 or self.delimiter in "\n\r\"' " or self.delimiter == self.comment
+        ):
+            hint = (" (for fields separated by spaces write delimiter: whitespace)" if self.delimiter.strip() == "" else
+                    ' (a tab is written "\\t" in double quotes, or tab)' if self.delimiter == "\\t" else "")
+            raise ValueError(f"delimiter: expected one character (',', ';', '\\t', …), tab or whitespace, got {self.delimiter!r}{hint}")
         if len(set(self.keep)) != len(self.keep):
             raise ValueError(f"keep: duplicate columns {list(self.keep)}")
+        if self.columns is None:
+            if not self.header:
+                raise ValueError("header: false needs columns: [name, …] naming the file's columns in order")
+            return
+        if not self.columns or any(not c.strip() for c in self.columns):
+            raise ValueError(f"columns: expected a list of non-empty names, got {list(self.columns)}")
+        dup = sorted({c for c in self.columns if self.columns.count(c) > 1})
+        if dup:
+            raise ValueError(f"columns: duplicate names {dup}")
+        for col, key in self.used_columns().items():
+            if col not in self.columns:
+                raise ValueError(f"{key}: {col!r} is not one of columns: {list(self.columns)}")
 
     @property
     def unactuated(self) -> str:
@@ -176,7 +223,7 @@ class ImportMap:
     def trial_column(self) -> str | None:
         return self.trials.column if isinstance(self.trials, TrialsByColumn) else None
 
-    def columns(self) -> dict[str, str]:
+    def used_columns(self) -> dict[str, str]:
         """Every column the map reads → the map key that names it (for error messages)."""
         cols: dict[str, str] = {}
         if self.time.column is not None:
@@ -190,6 +237,11 @@ class ImportMap:
         for i, c in enumerate(self.keep):
             cols.setdefault(c, f"keep[{i}]")
         return cols
+
+
+def delimiter_name(delimiter: str) -> str:
+    """``"comma"``, ``"semicolon"``, ``"tab"``, ``"whitespace"`` or the character itself (messages)."""
+    return _DELIMITER_NAMES.get(delimiter, repr(delimiter))
 
 
 def load_import_map(path: str | Path) -> ImportMap:

@@ -3,9 +3,14 @@
 Each file is read by :func:`~bemlearn.data.log_table.read_log_table`.  Joints are converted to rad / m
 (:class:`~bemlearn.data.import_map.JointMap`), trials are cut (per file or by an episode
 column), each trial is placed on its nominal time grid (:mod:`bemlearn.data.resample`), and
-kept columns become the trajectory's extra channels.  Samples the logger dropped
-(filled by interpolation) are rounded back onto a joint's encoder grid when its measured
-samples lie on one (:func:`~bemlearn.data.quantization.detect_quantization_step`).  Every error names the file, the
+kept columns become the trajectory's extra channels.  Each joint's encoder step is detected
+in the logged values (:func:`~bemlearn.data.quantization.detect_quantization_step`) and
+stored in ``meta.extra["import"]["quantization_step"]`` (read back by
+:meth:`~bemlearn.data.trajectory.Trajectory.quantization_steps`).  Samples the logger dropped
+(filled by interpolation) are rounded back onto that grid.  With ``time.resample: linear``
+every channel is interpolated onto the grid instead
+(:func:`~bemlearn.data.resample.resample_linear`): the angles leave their encoder grid, and
+the stored step is the one detected before resampling.  Every error names the file, the
 column and the row (0-based data row and 1-based file line).
 """
 
@@ -19,11 +24,11 @@ import numpy as np
 
 from bemlearn._version import __version__
 from bemlearn.config import to_dict
-from bemlearn.data.import_map import TIME_UNITS, ImportMap
+from bemlearn.data.import_map import TIME_UNITS, ImportMap, delimiter_name
 from bemlearn.units import q_unit_label
 from bemlearn.data.log_table import LogTable, check_finite, read_log_table
-from bemlearn.data.quantization import detect_quantization_step, snap_to_grid
-from bemlearn.data.resample import GridSegment, place_on_grid
+from bemlearn.data.quantization import counts_per_revolution, detect_quantization_step, snap_to_grid
+from bemlearn.data.resample import GridSegment, ResampleReport, place_on_grid, resample_linear
 from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, TrajectoryMeta
 from bemlearn.data.validation import MIN_TRIAL_SAMPLES
 
@@ -56,21 +61,37 @@ def _trial_blocks(table: LogTable, imap: ImportMap) -> list[tuple[int, int, int 
     return blocks
 
 
-def _snap_filled_joints(v: np.ndarray, filled: np.ndarray, n: int) -> dict[int, float]:
-    """Round interpolated joint samples onto the joint's encoder grid when the measured ones lie on one.
+def _snap_filled_joints(v: np.ndarray, filled: np.ndarray, steps: list[float | None]) -> dict[int, float]:
+    """Round interpolated joint samples onto the joint's encoder grid (``steps``: detected in the logged values).
 
-    Modifies ``v`` (T, ·) in place; returns joint column → detected step.
+    Modifies ``v`` (T, ·) in place; returns joint column → step for the joints snapped.
     """
     out = {}
-    for c in range(n):
-        step = detect_quantization_step(v[~filled, c])
+    for c, step in enumerate(steps):
         if step is not None:
             v[filled, c] = snap_to_grid(v[filled, c], step, v[~filled, c])
             out[c] = step
     return out
 
 
+def _logged_steps(tables: list[LogTable], imap: ImportMap) -> list[float | None]:
+    """Each joint's encoder step in the logged values (all files, in rad / m), or ``None``."""
+    out = []
+    for j in imap.joints:
+        scale = j.sign * j.kind_and_scale()[1]
+        out.append(detect_quantization_step(np.concatenate([t.columns[j.column] for t in tables]) * scale + j.offset))
+    return out
+
+
+def _step_text(step: float | None) -> str:
+    if step is None:
+        return "none"
+    counts = counts_per_revolution(step)
+    return f"{step:.6g}" + (f" (2π/{counts})" if counts else "")
+
+
 def _sample_rate(tables: list[LogTable], imap: ImportMap) -> float:
+    """The map's ``time.rate_hz``, or 1 / the median step over all files (rounded to a whole Hz within 0.1 %)."""
     if imap.time.rate_hz is not None:
         return float(imap.time.rate_hz)
     scale = TIME_UNITS[imap.time.unit]
@@ -81,7 +102,9 @@ def _sample_rate(tables: list[LogTable], imap: ImportMap) -> float:
             steps.append(d[d > 0])
     allsteps = np.concatenate(steps) if steps else np.zeros(0)
     if len(allsteps) == 0:
-        raise TrajectoryFormatError(f"{tables[0].path}: cannot estimate the sample rate (no increasing time steps)")
+        raise TrajectoryFormatError(
+            f"{tables[0].path}: cannot estimate the sample rate (no increasing time steps); set time.rate_hz in the map"
+        )
     rate = 1.0 / float(np.median(allsteps))
     if abs(rate - round(rate)) <= 1e-3 * rate:
         rate = float(round(rate))
@@ -93,15 +116,20 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
     """One trajectory from a logger's files (module docstring; map format ``docs/log-import.md``).
 
     Args:
-        paths: the CSV files, in trial order (``per_file``: file i is trial i).
+        paths: the log files, in trial order (``per_file``: file i is trial i).
         imap: the column map.
         min_trial_samples: segments shorter than this (after splitting at long gaps) are
             dropped, counted and logged.
 
     Returns:
         The trajectory: q (T, n) rad / m by joint kind, u (T, n − 1) in the inputs' units,
-        the kept columns as channels, every trial on its nominal grid; provenance (files,
-        per-trial source rows, filled samples, splits) in ``meta.extra["import"]``.
+        the kept columns as channels, every trial on its nominal grid.  ``meta.extra["import"]``
+        holds the provenance: files and their delimiters, per-trial source rows, filled
+        samples, splits, last lines left out as cut mid-write (``cut_last_lines``), each
+        joint's encoder step detected in the logged values (``quantization_step``, rad or m,
+        ``None`` where none) and, with ``time.resample: linear``, ``resample``: ``{"method",
+        "rate_hz", "stamps", "samples", "moved", "tolerance_steps", "largest_step_s",
+        "largest_overrun_s", "stamp_rate_hz"}``.
 
     Raises:
         TrajectoryFormatError: naming file, column and row (see :func:`read_log_table`,
@@ -114,11 +142,13 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
     for table in tables:
         check_finite(table, value_cols + ([imap.time.column] if imap.time.column else []))
     rate = _sample_rate(tables, imap)
+    resampling = imap.time.resample == "linear"
+    logged_steps = _logged_steps(tables, imap)
     scales = [j.sign * j.kind_and_scale()[1] for j in imap.joints]
     offsets = [j.offset for j in imap.joints] + [0.0] * (len(imap.inputs) + len(imap.keep))
     mult = np.asarray(scales + [1.0] * (len(imap.inputs) + len(imap.keep)))
     parts: dict[str, list[np.ndarray]] = {"t": [], "trial": [], "v": [], "filled": []}
-    trials_info, failed = [], {}
+    trials_info, failed, reports = [], {}, []
     filled_total = splits = dropped = 0
     tcol = imap.time.column
     for table in tables:
@@ -127,10 +157,18 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
         for a, b, episode in _trial_blocks(table, imap):
             if tcol is not None:
                 t = table.columns[tcol][a:b] * TIME_UNITS[imap.time.unit]
-                segs = place_on_grid(
-                    t, values[a:b], rate_hz=rate, max_jitter=imap.time.max_jitter, max_fill=imap.time.max_fill,
-                    on_gap=imap.time.on_gap, where=lambda i, a=a, table=table: table.where(tcol, a + i),
-                )
+                where = lambda i, a=a, table=table: table.where(tcol, a + i)  # noqa: E731
+                if resampling:
+                    segs, report = resample_linear(
+                        t, values[a:b], rate_hz=rate, max_fill=imap.time.max_fill, on_gap=imap.time.on_gap,
+                        tolerance=imap.time.max_jitter, where=where,
+                    )
+                    reports.append(report)
+                else:
+                    segs = place_on_grid(
+                        t, values[a:b], rate_hz=rate, max_jitter=imap.time.max_jitter, max_fill=imap.time.max_fill,
+                        on_gap=imap.time.on_gap, where=where,
+                    )
             else:
                 segs = [GridSegment(np.arange(b - a) / rate, values[a:b], np.zeros(b - a, dtype=bool), 0)]
             splits += len(segs) - 1
@@ -152,13 +190,18 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
                     "episode": episode, "samples": len(seg.t), "filled_samples": int(seg.filled.sum()),
                 })
     if not trials_info:
-        raise TrajectoryFormatError(f"{tables[0].path}: no trial with at least {min_trial_samples} samples")
+        hint = (" (every trial was split at gaps into shorter pieces: raise time.max_fill to bridge them)"
+                if splits else "")
+        raise TrajectoryFormatError(f"{tables[0].path}: no trial with at least {min_trial_samples} samples{hint}")
     if filled_total or splits or dropped:
-        logger.info("import: %d dropped samples interpolated, %d trials split at gaps, %d short pieces dropped",
-                    filled_total, splits, dropped)
+        logger.info("import: %d %s, %d trials split at gaps, %d short pieces dropped", filled_total,
+                    "grid samples more than ½ step from any stamp" if resampling else "dropped samples interpolated",
+                    splits, dropped)
     v = np.concatenate(parts["v"])
     n, m = len(imap.joints), len(imap.inputs)
-    snapped = _snap_filled_joints(v, np.concatenate(parts["filled"]), n) if filled_total else {}
+    snapped = (_snap_filled_joints(v, np.concatenate(parts["filled"]), logged_steps)
+               if filled_total and not resampling else {})
+    resample_info = _resample_summary(reports, rate, len(v), tables, imap, logged_steps) if resampling else None
     kinds = tuple(j.kind_and_scale()[0] for j in imap.joints)
     u_units = [u.unit for u in imap.inputs]
     meta = TrajectoryMeta(
@@ -175,8 +218,12 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
             "generator": f"bemlearn {__version__} data import",
             "map": to_dict(imap),
             "files": [str(p) for p in paths],
+            "delimiters": [delimiter_name(t.delimiter) for t in tables],
             "filled_samples": filled_total, "split_gaps": splits, "dropped_pieces": dropped,
             "filled_snapped_to_grid": {imap.joints[c].name: step for c, step in snapped.items()},
+            "quantization_step": {j.name: step for j, step in zip(imap.joints, logged_steps)},
+            "resample": resample_info,
+            "cut_last_lines": [{"file": str(t.path), **t.cut_line} for t in tables if t.cut_line is not None],
             "trials": trials_info,
         }},
     )
@@ -184,3 +231,35 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
         t=np.concatenate(parts["t"]), trial=np.concatenate(parts["trial"]), q=v[:, :n], u=v[:, n:n + m],
         meta=meta, channels=v[:, n + m:],
     )
+
+
+def _resample_summary(reports: list[ResampleReport], rate: float, samples: int, tables: list[LogTable],
+                      imap: ImportMap, steps: list[float | None]) -> dict:
+    """``meta.extra["import"]["resample"]`` and the log lines of a ``time.resample: linear`` import."""
+    scale = TIME_UNITS[imap.time.unit]
+    stamps = sum(r.stamps for r in reports)
+    moved = sum(r.moved for r in reports)
+    largest = max((r.largest_step_s for r in reports), default=0.0)
+    duration = 0.0
+    intervals = 0
+    for table in tables:
+        for a, b, _ in _trial_blocks(table, imap):
+            if b - a > 1:
+                t = table.columns[imap.time.column]
+                duration += float(t[b - 1] - t[a]) * scale
+                intervals += b - a - 1
+    stamp_rate = intervals / duration if duration > 0 else rate
+    info = {
+        "method": "linear", "rate_hz": rate, "stamps": stamps, "samples": samples, "moved": moved,
+        "tolerance_steps": imap.time.max_jitter, "largest_step_s": largest,
+        "largest_overrun_s": max(0.0, largest - 1.0 / rate), "stamp_rate_hz": stamp_rate,
+    }
+    logger.info("resampled (time.resample: linear) onto %g Hz: %d logged samples -> %d; %d (%.1f %%) had moved more than "
+                "%g step off the grid; largest overrun %.4g ms (a step of %.4g ms); the stamps average %.6g Hz",
+                rate, stamps, samples, moved, 100.0 * moved / max(stamps, 1), imap.time.max_jitter,
+                info["largest_overrun_s"] * 1e3, largest * 1e3, stamp_rate)
+    quantized = [f"{j.name} (step {_step_text(st)})" for j, st in zip(imap.joints, steps) if st is not None]
+    if quantized and moved:
+        logger.warning("time.resample: linear: the interpolated angles of %s leave their encoder grid; the step detected "
+                       "before resampling is kept in meta.extra['import']['quantization_step']", ", ".join(quantized))
+    return info

@@ -349,6 +349,27 @@ class Trajectory:
         """A new trajectory holding only the given trials (rows keep their order)."""
         return self.select_rows(np.isin(self.trial, np.fromiter(trial_ids, dtype=np.int64)))
 
+    def quantization_steps(self) -> dict[str, float | None]:
+        """Each joint's encoder step δ (rad, m for slides), ``None`` where the angles lie on no grid.
+
+        A file written by ``bemlearn data import`` carries the step detected in the *logged*
+        values (``meta.extra["import"]["quantization_step"]``); it is used as stored, since
+        after ``time.resample: linear`` the interpolated angles no longer lie on their
+        encoder's grid.  Otherwise the step is detected in ``q``
+        (:func:`~bemlearn.data.quantization.detect_quantization_step`).
+        """
+        imported = self.meta.extra.get("import")
+        stored = imported.get("quantization_step") if isinstance(imported, dict) else None
+        stored = stored if isinstance(stored, dict) else {}
+        out: dict[str, float | None] = {}
+        for i, name in enumerate(self.meta.joint_names):
+            step = stored.get(name, "detect")
+            if step is None or (isinstance(step, (int, float)) and not isinstance(step, bool) and math.isfinite(step) and step > 0):
+                out[name] = None if step is None else float(step)
+            else:
+                out[name] = detect_quantization_step(self.q[:, i])
+        return out
+
     def summary(self) -> dict[str, Any]:
         """A JSON-serializable overview: robot, joints, trials, samples, rate, failures, ranges, quantization."""
         slices = self.trial_slices()
@@ -358,7 +379,9 @@ class Trajectory:
             name: [float(self.q[:, i].min()), float(self.q[:, i].max())] if self.n_samples else None
             for i, name in enumerate(self.meta.joint_names)
         }
-        steps = {name: detect_quantization_step(self.q[:, i]) for i, name in enumerate(self.meta.joint_names)}
+        steps = self.quantization_steps()
+        imported = self.meta.extra.get("import")
+        resampled = isinstance(imported, dict) and isinstance(imported.get("resample"), dict)
         return {
             "robot": self.meta.robot,
             "joints": list(self.meta.joint_names),
@@ -376,6 +399,7 @@ class Trajectory:
             ),
             "angle_ranges_rad": ranges,
             "quantization_step_rad": steps,
+            "resampled": resampled,
             "ground_truth": self.has_ground_truth,
             "joint_kinds": dict(zip(self.meta.joint_names, self.meta.joint_kinds)),
             "channels": list(self.meta.channel_names),
