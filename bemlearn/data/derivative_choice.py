@@ -158,7 +158,6 @@ def choose_sigma(traj: Trajectory, *, qu_window: float | None = 0.5, truncate: f
     Raises:
         TrajectoryFormatError: the trials are too short for even a two-sample σ.
     """
-    from bemlearn.data.quantization import detect_quantization_step
     from bemlearn.errors import TrajectoryFormatError
 
     meta = traj.meta
@@ -215,8 +214,9 @@ def choose_sigma(traj: Trajectory, *, qu_window: float | None = 0.5, truncate: f
     est = GaussianDerivative(sigma_s=sigma, truncate=truncate)
     _, _, qdd, valid = estimate_states(traj, est)
     ok = valid & (np.abs(traj.q[:, iu]) <= qu_window if qu_window is not None else valid)
+    steps = traj.quantization_steps()       # detected, or recorded by an import before resampling
     for j, name in enumerate(meta.joint_names):
-        step = detect_quantization_step(traj.q[:, j])
+        step = steps.get(name)
         sd = float(np.std(qdd[ok, j])) if ok.any() else 0.0
         if step is not None and sd > 0:
             noise[name] = float(step / math.sqrt(12.0) * np.linalg.norm(w2) / sd)

@@ -24,7 +24,6 @@ import time
 import torch
 
 from bemlearn.data import build_datasets
-from bemlearn.data.quantization import detect_quantization_step
 from bemlearn.fitting.calibration import calibrate_replicas
 from bemlearn.fitting.estimator_sensitivity import estimator_sensitivity
 from bemlearn.models.input_noise import quantization_input_std
@@ -51,11 +50,8 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, train_rows: t
     """
     t0 = time.perf_counter()
     meta = traj.meta
-    steps = {}
-    for j, name in enumerate(meta.joint_names):
-        step = detect_quantization_step(traj.q[:, j])
-        if step is not None:
-            steps[name] = step
+    # the encoder steps (detected in the angles, or as an import recorded them before resampling)
+    steps = {k: v for k, v in traj.quantization_steps().items() if v is not None}
     est = dataset_config.estimator()
     s = quantization_input_std(state.input_names, steps, estimator=est, sample_rate_hz=meta.sample_rate_hz)
     pool = build_datasets(traj, dataclasses.replace(dataset_config, n_points=None, n_val_points=None))
