@@ -69,8 +69,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("--duration", type=float, default=60.0, help="simulated seconds per run")
     s.add_argument("--no-mismatch", action="store_true")
     s.set_defaults(func=_sim)
-    d = sub.add_parser("derivatives", help="derivative estimators vs ground truth and their effect on the learned BEM")
-    d.add_argument("config", type=Path, help="pipeline YAML naming the robot")
+    d = sub.add_parser("derivatives", help="derivative estimators vs ground truth and their effect on the learned BEM "
+                       "(design region and held-out references; first row: the exact-derivative oracle)")
+    d.add_argument("config", type=Path, help="pipeline YAML naming the robot (a run folder's config.yaml works)")
     d.add_argument("--data", type=Path, required=True, help="trajectory file with its <stem>.truth file beside it")
     d.add_argument("--no-gp", action="store_true", help="only the derivative errors")
     d.set_defaults(func=_derivatives)
@@ -195,10 +196,10 @@ def _derivatives(args: argparse.Namespace) -> int:
     from bemlearn.bench.derivatives_bench import run_derivatives_bench
     from bemlearn.pipeline.config import load_pipeline_config
 
+    from bemlearn.bench.derivatives_bench import TABLE_HEAD
+
     cfg = load_pipeline_config(args.config)
-    head = "| estimator | options | q̇ RMS θ / α (rad/s) | q̈ RMS θ / α (rad/s²) |"
-    if not args.no_gp:
-        head += " BEM RMSE (rad) | BEM max (rad) | inside ±2σ (latent) |"
+    head = TABLE_HEAD[0] + ("" if args.no_gp else TABLE_HEAD[1])
     print(head)
     print("|" + " --- |" * (head.count("|") - 1))
     run_derivatives_bench(cfg, args.data, with_gp=not args.no_gp, progress=print)

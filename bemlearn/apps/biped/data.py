@@ -91,14 +91,18 @@ def walking_gp_data(data: Trajectory, truth: Trajectory | None, config: WalkData
     Returns:
         ``X (N, 14)`` [rad/s², rad/s, rad, rad/s², rad/s], ``y (N,)`` rad, and a report of counts.
     """
-    from bemlearn.data import estimate_derivatives, gp_inputs, make_estimator
+    from bemlearn.data import gp_inputs, make_estimator
+    from bemlearn.data.derivative_choice import estimate_states, resolve_estimator
 
     if data.meta.joint_names != ("q1", "q2", "q3", "q4", "q5") or data.meta.unactuated != "q1":
         raise ValueError(f"walking_gp_data: expected biped joints q1..q5, q1 unactuated; got {data.meta.joint_names}")
     est = make_estimator(config.derivative, config.derivative_options, where="dataset.derivative_options")
+    est, choice = resolve_estimator(est, data, qu_window=config.qu_window)   # e.g. the Gaussian's σ, from the steps
     need = max(est.min_samples(data.meta.sample_rate_hz), config.skip_after_impact + config.skip_before_impact + 1)
     keep = [s.trial_id for s in data.trial_slices() if s.n_samples >= need]
-    report = {"steps": len(data.trial_ids), "steps_too_short": len(data.trial_ids) - len(keep)}
+    report = {"steps": len(data.trial_ids), "steps_too_short": len(data.trial_ids) - len(keep), "estimator": repr(est)}
+    if choice is not None:
+        report["derivative_choice"] = choice.to_dict()
     if report["steps_too_short"]:
         log.info("walking_gp_data: %d of %d steps shorter than %d samples left out", report["steps_too_short"],
                  report["steps"], need)
@@ -108,11 +112,14 @@ def walking_gp_data(data: Trajectory, truth: Trajectory | None, config: WalkData
             raise ValueError("dataset.derivatives = truth needs the ground-truth trajectory")
         truth = truth.select_trials(keep)
         q, qd, qdd = truth.q, truth.qd, truth.qdd
-    else:
-        q, (qd, qdd) = data.q, estimate_derivatives(data, est)
+    else:   # an estimator that smooths gives the smoothed q too (inputs and label alike, eq. G2)
+        q, qd, qdd, valid = estimate_states(data, est)
     X = gp_inputs(q, qd, qdd, unactuated_index=0)
     rows = np.concatenate([np.arange(s.rows.start + config.skip_after_impact, s.rows.stop - config.skip_before_impact)
                            for s in data.trial_slices()])
+    if config.derivatives != "truth":
+        report["invalid_edge_samples"] = int((~valid[rows]).sum())
+        rows = rows[valid[rows]]
     inside = np.abs(q[rows, 0]) <= config.qu_window
     report["outside_qu_window"] = int((~inside).sum())
     rows = rows[inside]

@@ -1,0 +1,161 @@
+"""The run's verdict: the documented limits (bemlearn.pipeline.verdict), the model checks before
+collecting (bemlearn.pipeline.feasibility), the design-region evaluation and `bemlearn run`'s
+exit status and files for a robot that cannot be balanced."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from bemlearn.pipeline.design_evaluation import design_grid, evaluate_design_region, least_squares_gain
+from bemlearn.pipeline.verdict import EXIT_DEGRADED_STRICT, EXIT_UNUSABLE, judge_run
+
+ROBOTS = Path(__file__).resolve().parent / "robots"
+
+
+def _design(gain=1.0, rmse=0.001, mx=0.004, cov=1.0, bound=0.2):
+    return {"bem_design_region": {"n_points": 100, "bound": bound, "gain": gain, "rmse": rmse, "max_abs": mx,
+                                  "coverage_2sigma_band": cov}}
+
+
+@pytest.mark.parametrize("metrics, status, check", [
+    (_design(), "ok", None),
+    (_design(gain=0.951), "ok", None),
+    (_design(gain=0.949), "degraded", "design_region"),        # the issue's gain target [0.95, 1.05]
+    (_design(gain=1.06), "degraded", "design_region"),
+    (_design(rmse=0.0101), "degraded", "design_region"),       # RMSE ≤ 0.01 rad at d = 0.2 rad
+    (_design(mx=0.041), "degraded", "design_region"),          # max ≤ 0.04 rad
+    (_design(gain=0.45), "unusable", "design_region"),
+    (_design(rmse=0.051), "unusable", "design_region"),
+    (_design(cov=0.7), "degraded", "band"),
+    ({"data": {"collected": True, "trials": 24, "failed": 12}}, "ok", None),
+    ({"data": {"collected": True, "trials": 24, "failed": 13}}, "degraded", "excitation"),
+    ({"data": {"collected": True, "trials": 24, "failed": 24}}, "unusable", "excitation"),
+    ({"data": {"collected": False, "trials": 24, "failed": 0}}, "ok", None),
+    ({"fit": {"stop_reason": "max_iter", "steps": 100}}, "degraded", "fit"),
+    ({"fit": {"stop_reason": "converged", "steps": 40}}, "ok", None),
+    ({"resolution": {"ratio": 1.5, "spread": 0.001, "band_std": 0.0007, "inputs": []}}, "unusable", "resolution"),
+    ({"resolution": {"ratio": 3.0, "spread": 0.002, "band_std": 0.0007, "inputs": []}}, "degraded", "resolution"),
+    ({"resolution": {"ratio": 40.0, "spread": 0.03, "band_std": 0.0007, "inputs": []}}, "ok", None),
+    ({"closed_loop": {"predictor": {"fell": True, "duration_s": 0.9}, "model": {"fell": True}}}, "unusable", "closed_loop"),
+    ({"closed_loop": {"predictor": {"fell": False, "diverged": True}}}, "degraded", "closed_loop"),
+    ({"closed_loop": {"predictor": {"fell": False, "diverged": False, "lemma1": {"r_learned_vs_hdot": -0.79}}}},
+     "degraded", "lemma1"),
+    ({"dataset": {"derivative_choice": {"qdd_noise_fraction": {"pole": 0.07}}}}, "degraded", "derivatives"),
+    ({"feasibility": [{"name": "eic", "passed": False, "severity": "unusable", "text": "unstable"}]}, "unusable", "model:eic"),
+])
+def test_limits_of_the_documented_table(metrics, status, check):
+    v = judge_run(metrics)
+    assert v.status == status, v.to_dict()
+    assert (check is None) == (not v.findings)
+    if check is not None:
+        assert v.findings[0].check == check and v.reasons[0]
+        assert v.to_dict()["status"] == status and v.to_dict()["reasons"] == v.reasons
+
+
+def test_worst_first_and_exit_status():
+    v = judge_run({**_design(gain=0.9), "fit": {"stop_reason": "max_iter", "steps": 100},
+                   "closed_loop": {"predictor": {"fell": True, "duration_s": 1.0}}})
+    assert v.status == "unusable" and [f.severity for f in v.findings][0] == "unusable"
+    assert v.exit_status() == EXIT_UNUSABLE == 3
+    d = judge_run(_design(gain=0.9))
+    assert d.exit_status() == 0 and d.exit_status(strict=True) == EXIT_DEGRADED_STRICT != 0
+    assert judge_run({}).exit_status(strict=True) == 0 and judge_run({}).summary() == "Verdict: ok"
+
+
+def test_least_squares_gain_matches_polyfit():
+    rng = np.random.default_rng(0)
+    model = rng.uniform(-0.2, 0.2, 500)
+    learned = 0.93 * model + 0.01 + rng.normal(0, 0.002, 500)
+    slope, icpt = least_squares_gain(model, learned)
+    ref = np.polyfit(model, learned, 1)
+    assert abs(slope - ref[0]) < 1e-12 and abs(icpt - ref[1]) < 1e-12
+
+
+@pytest.fixture(scope="module")
+def cartpole_state():
+    """A GP fitted to the cart-pole's exact model BEM on random x_0^e (learned = model up to the fit)."""
+    from bemlearn.data.normalization import Normalization
+    from bemlearn.fitting import build_gp, fit_gp
+    from bemlearn.fitting.gp_config import GPConfig
+    from bemlearn.models import predictor_state
+    from bemlearn.robots import load
+
+    robot = load(str(ROBOTS / "cartpole.xml"))
+    rng = np.random.default_rng(1)
+    n = 300
+    qa, qad, qadd = rng.uniform(-0.3, 0.3, (n, 1)), rng.uniform(-1, 1, (n, 1)), rng.uniform(-3, 3, (n, 1))
+    qu = robot.bem(torch.from_numpy(qa), torch.from_numpy(qad), torch.from_numpy(qadd)).qu
+    x = torch.from_numpy(np.concatenate([qadd, qad, qa, np.zeros((n, 2))], 1))
+    x[:, -2:] = torch.from_numpy(rng.normal(0, 1e-3, (n, 2)))          # the q̈_u, q̇_u columns need some spread
+    names = ("qdd_slider", "qd_slider", "q_slider", "qdd_hinge", "qd_hinge")
+    norm = Normalization.fit(x, qu, names=names)
+    cfg = GPConfig(kind="exact", seed=0)
+    xn, yn = norm.normalize_x(x), norm.normalize_y(qu)
+    model, lik = build_gp(xn, yn, config=cfg)
+    fit_gp(model, lik, xn, yn, config=cfg, progress=False)
+    st = predictor_state(model.eval(), lik.eval(), x_mean=norm.x_mean, x_std=norm.x_std, y_mean=norm.y_mean, y_std=norm.y_std,
+                         input_names=names, n_train=n)
+    return robot, st
+
+
+def test_design_region_of_a_faithful_and_a_scaled_bem(cartpole_state):
+    from bemlearn.pipeline.evaluation import EvaluationConfig
+
+    robot, st = cartpole_state
+    ecfg = EvaluationConfig(n_sines=(2, 3), amplitude_max=0.3, amplitude_min=0.15, frequency_hz=(0.1, 0.8))
+    grid = design_grid(robot, ecfg, n_points=1024, seed=0)
+    assert len(grid.qu) > 200 and np.all(np.abs(grid.qu - robot.qu_nominal) <= grid.bound) and grid.bound == 0.2
+    # the acceleration range reaches past the design bound: 1.3 d / |s_a|, s_a ≈ 1/g for a cart-pole
+    assert grid.box["slider"]["qdd"] > 1.3 * 0.2 * 9.81 * 0.9
+    good = evaluate_design_region(st, grid)
+    assert abs(good["gain"] - 1.0) < 0.02 and good["rmse"] < 0.005, good
+    # a BEM whose deviation from y_mean is scaled by 0.8: gain 0.8 × the faithful one's (μ is linear in α)
+    scaled = evaluate_design_region(dataclasses.replace(st, alpha=0.8 * st.alpha), grid)
+    expected, _ = least_squares_gain(grid.qu, float(st.y_mean) + 0.8 * (good["curve"]["learned"] - float(st.y_mean)))
+    assert abs(scaled["gain"] - expected) < 1e-9 and abs(scaled["gain"] - 0.8 * good["gain"]) < 0.01
+    assert judge_run({"bem_design_region": scaled}).status == "degraded"
+
+
+def test_model_checks_flag_the_acrobot_and_pass_the_cartpole():
+    from bemlearn.pipeline.feasibility import model_feasibility
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
+    from bemlearn.robots import load
+
+    bad = resolve_pipeline_config({"robot": str(ROBOTS / "acrobot.xml")}).config
+    checks = {c.name: c for c in model_feasibility(load(bad.robot), bad)}
+    assert not checks["eic"].passed and checks["eic"].value > 0 and checks["eic"].severity == "unusable"
+    good = resolve_pipeline_config({"robot": str(ROBOTS / "cartpole.xml")}).config
+    checks = {c.name: c for c in model_feasibility(load(good.robot), good)}
+    assert all(c.passed for c in checks.values()) and set(checks) == {"hold", "eic", "excitation"}
+    # holding 0.2 rad on a cart-pole takes the cart's mass times g·tan(0.2) (plus the pole's): an independent figure
+    assert 0.0 < checks["hold"].value < 1.0
+
+
+def test_run_of_a_robot_that_cannot_be_balanced_stops_after_the_model_checks(tmp_path):
+    cfg = tmp_path / "acro.yaml"
+    cfg.write_text(f"robot: {ROBOTS / 'acrobot.xml'}\n")
+    out = tmp_path / "run"
+    t0 = time.perf_counter()
+    p = subprocess.run([sys.executable, "-m", "bemlearn", "run", str(cfg), "--out", str(out), "--no-progress"],
+                       capture_output=True, text=True, timeout=120)
+    elapsed = time.perf_counter() - t0
+    assert p.returncode == 3, p.stderr[-2000:]
+    assert elapsed < 30.0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["verdict"]["status"] == "unusable" and metrics["stopped_after"] == "preflight"
+    assert any("unstable in its linearisation" in r for r in metrics["verdict"]["reasons"])
+    report = (out / "report.md").read_text()
+    assert report.splitlines()[2] == "## Verdict: unusable"
+    assert p.stdout.strip().splitlines()[-1].startswith("Verdict: unusable")
+    assert not (out / "data.npz").exists() and not (out / "checkpoint.pt").exists()
+    assert math.isfinite(metrics["feasibility"][0]["value"])
