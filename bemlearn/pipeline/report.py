@@ -90,9 +90,12 @@ def write_report(out: str | Path, *, config, resolved, data: dict | None, train:
     lines += ["## Data", f"{data['trials']} trials ({data['failed']} fell, kept up to the fall), {data['samples']} samples at "
               f"{data['rate_hz']:g} Hz, {src}; {deriv}.", ""]
     fit = train.get("fit", {})
+    stop = fit.get("stop_reason")
+    how = {"converged": "converged", "max_iter": "stopped at its iteration limit without converging",
+           "epochs": "stopped after its epochs without converging"}.get(stop, f"ended by {stop}")
     lines += ["## Learned BEM (eq. 11–14)",
-              f"{config.train.kind} GP on {train['n_train']} points: fit {fit.get('stop_reason')} in {_f(fit.get('seconds'), '.1f')} s"
-              + (" (interrupted)" if train.get("interrupted") else "") + ".", ""]
+              f"{config.train.kind} GP on {train['n_train']} points: the fit {how} after {fit.get('steps', '—')} evaluations "
+              f"in {_f(fit.get('seconds'), '.1f')} s" + (" (interrupted)" if train.get("interrupted") else "") + ".", ""]
     h = train.get("data_heldout")
     if h is not None:
         lines += ["### From the data alone (no model)", "",
