@@ -7,6 +7,7 @@ import math
 import signal
 
 import pytest
+import numpy as np
 import torch
 
 from bemlearn import interrupts
@@ -85,3 +86,23 @@ def test_second_sigint_exits_at_once():
                        second_after_s=0.5, timeout_s=300)
     assert r["returncode"] in (130, -signal.SIGINT), r
     assert r["after_second_s"] is None or r["after_second_s"] < 1.0, r  # None: it had already exited
+
+
+def test_lbfgs_restarts_from_the_best_point_after_a_numerical_failure():
+    """One failed evaluation (a line-search trial far out) restarts L-BFGS from the best point: the fit
+    still converges to the minimum of (x − 1)² + 0.1 x⁴ (x* from the cubic 0.4 x³ + 2x − 2 = 0)."""
+    from bemlearn.fitting.optimize import minimize
+
+    x = torch.nn.Parameter(torch.tensor([4.0], dtype=torch.float64))
+    calls = {"n": 0}
+
+    def loss():
+        calls["n"] += 1
+        if calls["n"] == 3:
+            return x.sum() * float("nan")
+        return ((x - 1) ** 2).sum() + 0.1 * (x**4).sum()
+
+    final, evals, stop, _ = minimize(loss, [x], optimizer="lbfgs", max_iter=100, lr=1.0, tol=1e-12, metrics_fn=dict)
+    root = [r.real for r in np.roots([0.4, 0.0, 2.0, -2.0]) if abs(r.imag) < 1e-12][0]
+    assert stop == "converged" and calls["n"] > 3
+    assert abs(float(x) - root) < 1e-6

@@ -48,7 +48,7 @@ def _design(gain=1.0, rmse=0.001, mx=0.004, cov=1.0, bound=0.2):
     ({"resolution": {"ratio": 40.0, "spread": 0.03, "band_std": 0.0007, "inputs": []}}, "ok", None),
     ({"closed_loop": {"predictor": {"fell": True, "duration_s": 0.9}, "model": {"fell": True}}}, "unusable", "closed_loop"),
     ({"closed_loop": {"predictor": {"fell": False, "diverged": True}}}, "degraded", "closed_loop"),
-    ({"closed_loop": {"predictor": {"fell": False, "diverged": False, "lemma1": {"r_learned_vs_hdot": -0.79}}}},
+    ({"closed_loop": {"predictor": {"fell": False, "diverged": False, "lemma1": {"r_learned_vs_model_delta_gamma": -0.79, "r_learned_vs_hdot": -0.79}}}},
      "degraded", "lemma1"),
     ({"dataset": {"derivative_choice": {"qdd_noise_fraction": {"pole": 0.07}}}}, "degraded", "derivatives"),
     ({"feasibility": [{"name": "eic", "passed": False, "severity": "unusable", "text": "unstable"}]}, "unusable", "model:eic"),

@@ -28,7 +28,8 @@ class GPConfig:
         optimizer: ``"lbfgs"`` or ``"adam"`` for exact and sgpr (svgp always uses natural gradients
             for q(v) and Adam for θ, Z).
         max_iter: L-BFGS iterations (≤ 1.5 · max_iter loss evaluations) or Adam steps; ``None``:
-            100 for exact, 30 for sgpr (each sgpr evaluation costs O(fit_subset · M²)).
+            300 for exact (a bound, not a cost: fits stop when they converge), 30 for sgpr (each sgpr
+            evaluation costs O(fit_subset · M²)).
         lr: learning rate; ``None`` picks the default of the optimizer: 1.0 for L-BFGS (initial
             step), 0.05 for Adam on exact/sgpr, 0.003 for the svgp hyperparameters.
         ngd_lr: svgp natural-gradient step size for q(v).
@@ -87,7 +88,7 @@ class GPConfig:
         """:attr:`max_iter`, or the kind's default when it is ``None``."""
         if self.max_iter is not None:
             return self.max_iter
-        return 30 if self.kind == "sgpr" else 100
+        return 30 if self.kind == "sgpr" else 300
 
     @property
     def resolved_lr(self) -> float:

@@ -1,8 +1,10 @@
 """Full-batch minimization loops (L-BFGS, Adam) with callbacks, progress bar and failure recovery.
 
 An evaluation whose loss is not finite, or whose Cholesky fails even after jitter, restores
-the best parameters evaluated so far and stops the fit with a logged warning; it never
-leaves NaN parameters behind.
+the best parameters evaluated so far; L-BFGS then restarts from them with a fresh curvature
+history (a line-search trial far out, such as an overflowing lengthscale, is the usual cause),
+up to three times, and otherwise the fit stops with a logged warning.  It never leaves NaN
+parameters behind.
 """
 
 from __future__ import annotations
@@ -124,10 +126,27 @@ def minimize(
     with interruptible():
         try:
             if optimizer == "lbfgs":
-                opt.step(closure)
-                n_iter = opt.state[opt._params[0]].get("n_iter", 0)
-                if n_iter < max_iter and state["evals"] < max_eval:
-                    stop = "converged"
+                # a line-search trial far out (e.g. an overflowing lengthscale) fails numerically:
+                # restart from the best point with a fresh curvature history, up to 3 times
+                for restart in range(4):
+                    try:
+                        opt.step(closure)
+                    except NumericalFailure as exc:
+                        if restart == 3 or state["evals"] >= max_eval or not math.isfinite(state["best"]):
+                            raise
+                        logger.info("%s: numerical failure after %d evaluations (%s); restarting L-BFGS from the best "
+                                    "parameters", desc, state["evals"], exc)
+                        with torch.no_grad():
+                            for p, b in zip(params, best_params):
+                                p.copy_(b)
+                        left = max_eval - state["evals"]
+                        opt = torch.optim.LBFGS(params, lr=lr, max_iter=max(1, int(left / 1.5)), max_eval=left, history_size=50,
+                                                line_search_fn="strong_wolfe", tolerance_grad=1e-9, tolerance_change=tol)
+                        continue
+                    n_iter = opt.state[opt._params[0]].get("n_iter", 0)
+                    if n_iter < opt.defaults["max_iter"] and state["evals"] < max_eval:
+                        stop = "converged"
+                    break
             else:
                 for _ in range(max_iter):
                     opt.step(closure)

@@ -17,7 +17,8 @@ learned vs model BEM      gain ∉ [0.95, 1.05], RMSE > 0.05 d or       gain ∉
 over the design region    max > 0.2 d; band covers < 80 %             RMSE > 0.25 d
 data resolve the BEM      its spread over the data < 4 × band σ       < 2 × band σ
 closed loop               learned BEM's loop diverged                 learned BEM's loop fell
-Lemma 1                   learned ΔΓ vs Ḣ_u correlation < 0.9          —
+Lemma 1                   learned ΔΓ vs the model's ΔΓ = Ḣ_u + b_u q̇_u^e  —
+                          correlation < 0.9
 ========================  ==========================================  ======================
 
 The status is the worst finding's; ``reasons`` lists one sentence per finding, worst first.
@@ -121,7 +122,7 @@ def judge_run(metrics: dict[str, Any]) -> Verdict:
     if fit:
         checked.append("fit")
         stop = fit.get("stop_reason")
-        if stop in ("max_iter", "epochs"):
+        if stop == "max_iter":
             add("degraded", "fit", f"the GP fit stopped at its iteration limit ({fit.get('steps')} evaluations) before "
                 "converging: raise train.max_iter")
         elif stop not in (None, "converged"):
@@ -168,11 +169,12 @@ def judge_run(metrics: dict[str, Any]) -> Verdict:
         elif p.get("diverged"):
             add("degraded", "closed_loop", "the closed loop with the learned BEM stayed up but its actuated joints left the reference")
         lem = p.get("lemma1")
-        if lem and _finite(lem.get("r_learned_vs_hdot")):
+        if lem and _finite(lem.get("r_learned_vs_model_delta_gamma")):
             checked.append("lemma1")
-            r = lem["r_learned_vs_hdot"]
+            r = lem["r_learned_vs_model_delta_gamma"]
             if r < 0.9:
-                add("degraded", "lemma1", f"Lemma 1 (eq. 10) does not hold for the learned BEM: learned ΔΓ vs Ḣ_u correlation {r:.2f}")
+                add("degraded", "lemma1", f"Lemma 1 (eq. 10) does not hold for the learned BEM: its ΔΓ correlates with the model's "
+                    f"ΔΓ = Ḣ_u + b_u q̇_u^e at r = {r:.2f}")
     found.sort(key=lambda f: -_RANK[f.severity])
     status = max((f.severity for f in found), key=_RANK.__getitem__, default="ok")
     return Verdict(status, tuple(found), tuple(checked))
