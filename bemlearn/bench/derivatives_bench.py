@@ -88,7 +88,8 @@ def derivative_errors(data, truth, name: str, options: dict, *, qu_window: float
     rate = data.meta.sample_rate_hz
     long_enough = [s.trial_id for s in data.trial_slices() if s.n_samples >= est.min_samples(rate)]
     data, truth = data.select_trials(long_enough), truth.select_trials(long_enough)  # as the dataset's short_trials="drop"
-    _, qd, qdd, valid = estimate_states(data, est)
+    within = None if qu_window is None else np.abs(data.q[:, data.meta.unactuated_index]) <= qu_window
+    _, qd, qdd, valid = estimate_states(data, est, within=within)
     ref_qd, ref_qdd = truth.qd, truth.qdd
     if getattr(est, "smooths", False):      # against the truth through the same kernel: S[q̇], S[q̈] (eq. G1)
         from bemlearn.data.gaussian_derivative import apply_kernel, gaussian_kernels

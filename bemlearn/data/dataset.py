@@ -177,15 +177,20 @@ def build_datasets(traj: Trajectory, config: DatasetConfig, *, progress: bool = 
         raise ValueError("no trials left to build a dataset from (all were dropped; see the log)")
     traj = traj.select_rows(kept) if len(source_rows) < traj.n_samples else traj
 
-    q_all, qd, qdd, valid = estimate_states(traj, est)
+    raw_inside = None if config.qu_window is None else np.abs(traj.q[:, meta.unactuated_index]) <= config.qu_window
+    q_all, qd, qdd, valid = estimate_states(traj, est, within=raw_inside)
     x_all = gp_inputs(q_all, qd, qdd, unactuated_index=meta.unactuated_index)
     y_all = q_all[:, meta.unactuated_index]
 
     keep = valid.copy()
-    if not valid.all():
-        report["samples_dropped_edges"] = int((~valid).sum())
-        logger.info("dropped %d samples within %d of a trial end (no full %r kernel there)", report["samples_dropped_edges"],
-                    est.edge_samples(rate), est.name)
+    if getattr(est, "smooths", False):
+        # the trials were cut to their runs inside the window before smoothing (no motion outside it
+        # is smoothed in); count the rows outside as outside, the runs' ends as edges
+        outside = np.zeros_like(valid) if raw_inside is None else ~raw_inside
+        report["samples_dropped_edges"] = int((~valid & ~outside).sum())
+        logger.info("dropped %d samples within %d of the end of a trial or of a run inside the |%s| window (no full %r "
+                    "kernel there)", report["samples_dropped_edges"], est.edge_samples(rate), meta.unactuated, est.name)
+        keep = valid | outside          # the window below removes the outside rows and counts them
     elif config.drop_edges:
         k = est.edge_samples(rate)
         for s in traj.trial_slices():
@@ -193,7 +198,8 @@ def build_datasets(traj: Trajectory, config: DatasetConfig, *, progress: bool = 
             keep[max(s.rows.stop - k, s.rows.start):s.rows.stop] = False
         report["samples_dropped_edges"] = int((~keep).sum())
         logger.info("dropped %d edge samples (%d at each trial end)", report["samples_dropped_edges"], k)
-    inside = np.ones_like(keep) if config.qu_window is None else np.abs(y_all) <= config.qu_window
+    inside = np.ones_like(keep) if config.qu_window is None else (raw_inside if getattr(est, "smooths", False)
+                                                                  else np.abs(y_all) <= config.qu_window)
     report["samples_outside_window"] = int((keep & ~inside).sum())
     if config.qu_window is not None:
         logger.info(

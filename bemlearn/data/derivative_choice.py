@@ -88,13 +88,22 @@ class SigmaChoice:
                 "criterion": f"C1: the smoothed label keeps {KEPT_MOTION:.0%} of its motion (docs/derivatives.md)"}
 
 
-def estimate_states(traj: Trajectory, estimator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def estimate_states(traj: Trajectory, estimator, *, within: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """q as the estimator passes it, q̇, q̈ and the validity of each row, trial by trial.
 
     An estimator with ``smooths = True`` (the Gaussian) returns its smoothed q, which then serves
     as the GP's q_a inputs and q_u label alike (eq. G2); others return the recorded q.  Rows are
     invalid within :meth:`edge_samples` of a trial end for estimators with ``edges_valid = False``,
     and throughout trials shorter than :meth:`min_samples`.
+
+    Args:
+        traj: the trajectory.
+        estimator: a derivative estimator.
+        within: ``(T,)`` bool, the rows to use (e.g. |q_u| inside the dataset's window).  For an
+            estimator that smooths, each run of consecutive ``True`` rows of a trial is filtered as
+            a trial of its own, so that no motion outside them (a swing-up, a fall) is smoothed into
+            them; rows outside are invalid.  Other estimators work on whole trials.
 
     Returns:
         ``q, qd, qdd``: ``(T, n)`` each (joint units, per s, per s²; zeros where invalid) and
@@ -104,29 +113,38 @@ def estimate_states(traj: Trajectory, estimator) -> tuple[np.ndarray, np.ndarray
     q = traj.q.copy()
     qd = np.zeros_like(q)
     qdd = np.zeros_like(q)
-    valid = np.ones(traj.n_samples, dtype=bool)
+    valid = np.zeros(traj.n_samples, dtype=bool)
     need = estimator.min_samples(rate)
     smooths = bool(getattr(estimator, "smooths", False))
     edge = 0 if getattr(estimator, "edges_valid", True) else estimator.edge_samples(rate)
-    for s in traj.trial_slices():
-        r = s.rows
-        if s.n_samples < need:
-            valid[r] = False
+    for r in _segments(traj, within if smooths else None):
+        if r.stop - r.start < need:
             continue
         if smooths:
             q[r], qd[r], qdd[r] = estimator.filter(traj.q[r], sample_rate_hz=rate)
         else:
             qd[r], qdd[r] = estimator(traj.q[r], sample_rate_hz=rate)
-        if edge:
-            valid[r.start:r.start + edge] = False
-            valid[r.stop - edge:r.stop] = False
+        valid[r.start + edge:r.stop - edge] = True
     return q, qd, qdd, valid
 
 
-def _ladder(traj: Trajectory, truncate: float) -> tuple[float, ...]:
+def _segments(traj: Trajectory, within: np.ndarray | None) -> list[slice]:
+    """The row slices filtered as one: each trial, or each run of ``within`` rows inside a trial."""
+    out = []
+    for s in traj.trial_slices():
+        if within is None:
+            out.append(s.rows)
+            continue
+        w = np.asarray(within[s.rows], dtype=np.int8)
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], w, [0]])))
+        out.extend(slice(s.rows.start + int(a), s.rows.start + int(b)) for a, b in zip(edges[::2], edges[1::2]))
+    return out
+
+
+def _ladder(traj: Trajectory, truncate: float, within: np.ndarray | None = None) -> tuple[float, ...]:
     """σ from two samples up by :data:`LADDER_RATIO` while at least half the samples keep a full kernel."""
     rate = traj.meta.sample_rate_hz
-    lengths = np.array([s.n_samples for s in traj.trial_slices()], dtype=np.float64)
+    lengths = np.array([r.stop - r.start for r in _segments(traj, within)], dtype=np.float64)
     total = lengths.sum()
     sig = 2.0 / rate
     out = []
@@ -163,19 +181,19 @@ def choose_sigma(traj: Trajectory, *, qu_window: float | None = 0.5, truncate: f
     meta = traj.meta
     rate = meta.sample_rate_hz
     iu = meta.unactuated_index
-    ladder = _ladder(traj, truncate)
+    within = np.abs(traj.q[:, iu]) <= qu_window if qu_window is not None else None
+    ladder = _ladder(traj, truncate, within)
     where = f"{meta.robot!r} ({traj.n_samples} samples in {len(traj.trial_ids)} trials at {rate:g} Hz)"
     if not ladder:
         raise TrajectoryFormatError(
             f"choose_sigma: the trials of {where} are too short for the Gaussian estimator (a σ of two samples needs "
             f"trials of more than {4 * math.ceil(2 * truncate)} samples); use dataset.derivative: savgol or central")
     edge = GaussianDerivative(sigma_s=ladder[-1], truncate=truncate).edge_samples(rate)
+    segments = _segments(traj, within)
     common = np.zeros(traj.n_samples, dtype=bool)
-    for s in traj.trial_slices():
-        if s.n_samples > 2 * edge:
-            common[s.rows.start + edge:s.rows.stop - edge] = True
-    if qu_window is not None:
-        common &= np.abs(traj.q[:, iu]) <= qu_window
+    for r in segments:
+        if r.stop - r.start > 2 * edge:
+            common[r.start + edge:r.stop - edge] = True
     rows = np.flatnonzero(common)
     if rows.size < 10:
         raise TrajectoryFormatError(f"choose_sigma: {where}: fewer than 10 samples inside |{meta.unactuated}| ≤ "
@@ -186,9 +204,9 @@ def choose_sigma(traj: Trajectory, *, qu_window: float | None = 0.5, truncate: f
     for sig in ladder:
         w0 = gaussian_kernels(sig, rate, truncate)[0]
         smooth = np.empty_like(label)
-        for s in traj.trial_slices():
-            if s.n_samples > 2 * edge:
-                smooth[s.rows] = apply_kernel(label[s.rows], w0)
+        for r in segments:
+            if r.stop - r.start > 2 * edge:
+                smooth[r] = apply_kernel(label[r], w0)
         stds.append(_detrended_std(smooth[rows, 0], trial))
     kept = tuple(float(v / stds[0]) if stds[0] > 0 else math.nan for v in stds)
     limited = None
@@ -212,8 +230,7 @@ def choose_sigma(traj: Trajectory, *, qu_window: float | None = 0.5, truncate: f
     noise: dict[str, float] = {}
     w2 = gaussian_kernels(sigma, rate, truncate)[2]
     est = GaussianDerivative(sigma_s=sigma, truncate=truncate)
-    _, _, qdd, valid = estimate_states(traj, est)
-    ok = valid & (np.abs(traj.q[:, iu]) <= qu_window if qu_window is not None else valid)
+    _, _, qdd, ok = estimate_states(traj, est, within=within)
     steps = traj.quantization_steps()       # detected, or recorded by an import before resampling
     for j, name in enumerate(meta.joint_names):
         step = steps.get(name)

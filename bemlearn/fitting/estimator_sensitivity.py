@@ -112,7 +112,7 @@ def _describe(est) -> str:
 
 
 def estimator_sensitivity(state: PredictorState, traj: Trajectory, estimator, rows: torch.Tensor, *,
-                          queries: torch.Tensor | None = None) -> EstimatorSensitivity:
+                          queries: torch.Tensor | None = None, qu_window: float | None = None) -> EstimatorSensitivity:
     """δ of (E2) for the training rows ``rows`` of ``traj`` (module docstring).
 
     Args:
@@ -121,6 +121,8 @@ def estimator_sensitivity(state: PredictorState, traj: Trajectory, estimator, ro
         estimator: the derivative estimator that built them (its ``neighbours`` are used).
         rows: ``(N,)`` row indices in ``traj`` of the training points.
         queries: ``(Q, d)`` physical inputs at which to report each neighbour's RMS shift.
+        qu_window: the dataset's window on |q_u|: an estimator that smooths filters the runs inside
+            it separately, as :func:`~bemlearn.data.build_datasets` does.
 
     Returns:
         :class:`EstimatorSensitivity`; ``delta`` has K = 0 columns for an estimator without
@@ -137,7 +139,8 @@ def estimator_sensitivity(state: PredictorState, traj: Trajectory, estimator, ro
     if not neighbours:
         return EstimatorSensitivity(torch.zeros(M, 0, dtype=torch.float64), (), None, ())
     iu = meta.unactuated_index
-    q0, qd0, qdd0, valid0 = estimate_states(traj, estimator)
+    within = None if qu_window is None else np.abs(traj.q[:, iu]) <= qu_window
+    q0, qd0, qdd0, valid0 = estimate_states(traj, estimator, within=within)
     if not valid0[rows_np].all():
         bad = int(rows_np[~valid0[rows_np]][0])
         raise ValueError(f"estimator_sensitivity: rows: trial {int(traj.trial[bad])} holds training rows (row {bad}) where "
@@ -154,7 +157,7 @@ def estimator_sensitivity(state: PredictorState, traj: Trajectory, estimator, ro
     for est in neighbours:
         # rows where the neighbour has no valid estimate (a trial too short for it, or a wider
         # kernel's edge) keep the chosen estimator's values: their contribution to δ is 0
-        q, qd, qdd, valid = estimate_states(traj, est)
+        q, qd, qdd, valid = estimate_states(traj, est, within=within)
         keep0 = ~valid
         q[keep0], qd[keep0], qdd[keep0] = q0[keep0], qd0[keep0], qdd0[keep0]
         xk, yk = inputs(q, qd, qdd)

@@ -10,7 +10,7 @@ import torch
 
 from bemlearn.models.exact_gp import ExactBEMGP
 from bemlearn.models.gp_kinds import gp_kind_of
-from bemlearn.models.kernels import kernel_matrix
+from bemlearn.models.kernels import kernel_matrix, se_gram
 from bemlearn.models.predictor_state import PredictorState
 from bemlearn.models.sgpr import SGPRBEMGP
 from bemlearn.models.solver import DEFAULT_JITTER, DEFAULT_MAX_TRIES, cholesky_policy, robust_cholesky
@@ -39,7 +39,10 @@ def posterior_weights(
     with torch.no_grad(), cholesky_policy(jitter=jitter, max_tries=max_tries):
         if isinstance(model, ExactBEMGP):
             X, Y = model.train_inputs[0], model.train_targets
-            K = kernel_matrix(model.covar_module, X, X)
+            kern = model.covar_module
+            # the Gram matrix exactly as the frozen state rebuilds it (PredictorState.gram): with κ(K) ~ 1e8
+            # (near-noise-free labels) GPyTorch's ‖a‖² + ‖b‖² − 2aᵀb distances would differ from it by far more than ε
+            K = se_gram(X, kern.base_kernel.lengthscale.reshape(-1), kern.outputscale.reshape(()))
             K = K + likelihood.noise.squeeze() * torch.eye(X.shape[0], dtype=K.dtype, device=K.device)
             L, _ = robust_cholesky(K, what="exact GP K_XX + σ_0² I", jitter=jitter, max_tries=max_tries)
             alpha = torch.cholesky_solve(Y[:, None], L).squeeze(-1)

@@ -13,7 +13,7 @@ import gpytorch
 import torch
 from gpytorch.constraints import GreaterThan, Positive
 
-__all__ = ["ard_se_kernel", "gaussian_likelihood", "kernel_matrix", "se_cross_covariance"]
+__all__ = ["ard_se_kernel", "gaussian_likelihood", "kernel_matrix", "se_cross_covariance", "se_gram"]
 
 
 def ard_se_kernel(dim: int, *, dtype: torch.dtype = torch.float64) -> gpytorch.kernels.ScaleKernel:
@@ -59,6 +59,14 @@ def kernel_matrix(kernel: gpytorch.kernels.Kernel, x1: torch.Tensor, x2: torch.T
     """
     with gpytorch.settings.lazily_evaluate_kernels(False):
         return kernel(x1, x2).to_dense()
+
+
+def se_gram(z: torch.Tensor, lengthscale: torch.Tensor, outputscale: torch.Tensor) -> torch.Tensor:
+    """K_ij = σ_f² exp(−½ ‖(z_i − z_j)/ℓ‖²) (eq. 11), ``(M, M)`` for ``z (M, d)`` normalized inputs, with the
+    differences formed directly (no ‖a‖² + ‖b‖² − 2aᵀb cancellation): the Gram matrix every frozen
+    exact posterior, its checks and its exports share (:meth:`PredictorState.gram`)."""
+    zs = z / lengthscale
+    return outputscale * torch.exp(-0.5 * torch.cdist(zs, zs, compute_mode="donot_use_mm_for_euclid_dist").square())
 
 
 def se_cross_covariance(

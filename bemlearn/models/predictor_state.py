@@ -196,8 +196,9 @@ class PredictorState:
 
     def gram(self) -> torch.Tensor:
         """K = K_ZZ + σ_0² I, K_ij = σ_f² exp(−½ ‖(z_i − z_j)/ℓ‖²) (eq. 11); ``(M, M)``, normalized units."""
-        zs = self.Z / self.lengthscale
-        K = self.outputscale * torch.exp(-0.5 * torch.cdist(zs, zs, compute_mode="donot_use_mm_for_euclid_dist").square())
+        from bemlearn.models.kernels import se_gram
+
+        K = se_gram(self.Z, self.lengthscale, self.outputscale)
         K.diagonal().add_(self.noise)
         return K
 

@@ -24,6 +24,7 @@ import time
 import torch
 
 from bemlearn.data import build_datasets
+from bemlearn.data.derivative_choice import resolve_estimator
 from bemlearn.fitting.calibration import calibrate_replicas
 from bemlearn.fitting.estimator_sensitivity import estimator_sensitivity
 from bemlearn.models.input_noise import quantization_input_std
@@ -52,7 +53,9 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, train_rows: t
     meta = traj.meta
     # the encoder steps (detected in the angles, or as an import recorded them before resampling)
     steps = {k: v for k, v in traj.quantization_steps().items() if v is not None}
-    est = dataset_config.estimator()
+    est, choice = resolve_estimator(dataset_config.estimator(), traj, qu_window=dataset_config.qu_window)
+    if choice is not None:    # an option left to the data (the Gaussian's σ): the same choice build_datasets makes
+        dataset_config = dataset_config.with_estimator(est)
     s = quantization_input_std(state.input_names, steps, estimator=est, sample_rate_hz=meta.sample_rate_hz)
     pool = build_datasets(traj, dataclasses.replace(dataset_config, n_points=None, n_val_points=None))
     source = pool.val if len(pool.val) else pool.train
@@ -74,7 +77,7 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, train_rows: t
     summary["std_scale"] = scale
     if train_rows is None:
         train_rows = build_datasets(traj, dataset_config).train.row
-    sens = estimator_sensitivity(state, traj, est, train_rows, queries=queries)
+    sens = estimator_sensitivity(state, traj, est, train_rows, queries=queries, qu_window=dataset_config.qu_window)
     summary["estimator_term"] = sens.to_dict()
     summary["seconds"] = time.perf_counter() - t0
     new = dataclasses.replace(state, std_scale=torch.tensor(scale, dtype=torch.float64), input_std=s.to(torch.float64),

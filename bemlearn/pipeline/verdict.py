@@ -15,7 +15,10 @@ derivatives               S[q̈] noise > 4 % of its std                 —
 fit                       did not converge (max_iter, numerical)      —
 learned vs model BEM      gain ∉ [0.95, 1.05], RMSE > 0.05 d or       gain ∉ [0.5, 2] or
 over the design region    max > 0.2 d; band covers < 80 %             RMSE > 0.25 d
-data resolve the BEM      its spread over the data < 4 × band σ       < 2 × band σ
+data resolve the BEM      its spread over the data < 4 × the larger    < 2 × that scale
+                          of band σ and the held-out trials' median
+                          q_u error
+held-out trials           < 80 % inside the predictive ±2σ            —
 closed loop               learned BEM's loop diverged                 learned BEM's loop fell
 Lemma 1                   learned ΔΓ vs the model's ΔΓ = Ḣ_u + b_u q̇_u^e  —
                           correlation < 0.9
@@ -147,17 +150,34 @@ def judge_run(metrics: dict[str, Any]) -> Verdict:
         if _finite(cov) and cov < 0.8:
             add("degraded", "band", f"the exported ±2σ band holds only {100 * cov:.0f} % of the model BEM over the design region")
     res = metrics.get("resolution")
-    if res and _finite(res.get("ratio")):
+    held = metrics.get("data_heldout")
+    if res and _finite(res.get("spread")):
         checked.append("resolution")
-        r = res["ratio"]
+        # the uncertainty the data leave on the BEM: the exported band's σ, or, if larger, the error of f on
+        # trials the fit never saw (median over them; a fit that memorises its trials has a small band)
+        scale, what = res["band_std"], "its band's σ"
+        per = [t["rmse"] for t in ((held or {}).get("per_trial") or {}).values() if _finite(t.get("rmse"))]
+        if per:
+            med = sorted(per)[len(per) // 2] if len(per) % 2 else 0.5 * sum(sorted(per)[len(per) // 2 - 1:len(per) // 2 + 1])
+            if med > scale:
+                scale, what = med, "the held-out trials' median q_u error"
+        r = res["spread"] / scale if scale > 0 else math.inf
         if r < 4.0:
+            unit = res.get("unit", "rad")
             text = (f"the data {'do not' if r < 2 else 'barely'} resolve the BEM: over the data's actuated motions it varies by "
-                    f"{res['spread']:.3g} {res.get('unit', 'rad')} (std), {r:.1f}× its band σ ({res['band_std']:.3g})")
-            weak = [w for w in res.get("inputs", []) if w.get("factor") is not None and w["factor"] > 1.0]
+                    f"{res['spread']:.3g} {unit} (std), {r:.1f}× {what} ({scale:.3g} {unit})")
+            weak = [(w, 2 * scale / w["share"]) for w in res.get("inputs", []) if w.get("share")]
+            weak = [(w, f) for w, f in weak if f > 1.0][:3]
             if weak:
-                text += "; " + ", ".join(f"{w['input']} moves ±{w['amplitude']:.3g} {w['unit']}, about {w['factor']:.1f}× that would resolve its slope"
-                                         for w in weak[:3])
+                text += "; at the learned slopes, " + ", ".join(
+                    f"{w['input']} (±{w['amplitude']:.3g} {w['unit']} in the data) would need about {f:.1f}× that amplitude"
+                    for w, f in weak) + " to move the BEM by more than ±2× that uncertainty"
             add("unusable" if r < 2 else "degraded", "resolution", text)
+    if held and _finite(held.get("coverage")):
+        checked.append("heldout")
+        if held["coverage"] < 0.8:
+            add("degraded", "heldout", f"only {100 * held['coverage']:.0f} % of the held-out trials' q_u lie inside the predictive "
+                "±2σ: the GP is overconfident away from its training trials")
     loops = metrics.get("closed_loop") or {}
     if "predictor" in loops:
         checked.append("closed_loop")
