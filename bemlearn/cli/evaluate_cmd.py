@@ -14,7 +14,8 @@ def add_parser(sub) -> None:
         help="compare a trained run's learned BEM with the model-based BEM on held-out references",
         description="Evaluate μ(x₀ᵉ) (eq. 14) against the model-based BEM (eq. 9) of the robot the run recorded "
         "(its MJCF path and sha256; a changed file is an error) on the run's held-out references (the resolved "
-        "config's 'evaluate' section): RMSE, max error, fraction inside ±2σ; writes RUN_DIR/evaluation.json and "
+        "config's 'evaluate' section): RMSE, max error, fraction inside ±2σ; and over the whole design region "
+        "(|q_u^e| ≤ 0.2 rad on a Sobol set of actuated motions): RMSE, max and gain; writes RUN_DIR/evaluation.json and "
         "evaluation.png.",
     )
     p.add_argument("run_dir", type=Path)
@@ -56,6 +57,12 @@ def run(args) -> int:
     refs = held_out_references(ecfg, robot.m)
     ev = evaluate_bem(ck.predictor_state, robot, refs, duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
     ev["robot"] = ref
+    if ecfg.design_points > 0:
+        from bemlearn.pipeline.design_evaluation import design_grid, evaluate_design_region
+
+        dr = evaluate_design_region(ck.predictor_state, design_grid(robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed))
+        dr.pop("curve")
+        ev["bem_design_region"] = dr   # over the whole design region (D1, D2); ev["design_region"] is along the references
     c = ev.pop("curves")
     unit = ck.metadata.units.get(f"qd_{ck.metadata.unactuated_name}", "rad/s").removesuffix("/s")
     fig, ax = plt.subplots(figsize=(9, 3.5))
@@ -81,5 +88,9 @@ def run(args) -> int:
         print(f"calibrated band (exported std): inside ±2σ {100 * ev['coverage_2sigma_band']:.1f}%, median σ / RMSE "
               f"{ev['median_band_std_over_rmse']:.2f}; eq. (13)/(15) bound at κ = 2 violated {100 * v['observed']:.1f}% "
               f"(nominal {100 * v['nominal']:.1f}%)")
+    if "bem_design_region" in ev:
+        dr = ev["bem_design_region"]
+        print(f"design region |q_u^e| ≤ {dr['bound']:g} {unit} ({dr['n_points']} actuated motions): RMSE {dr['rmse']:.5f}, "
+              f"max {dr['max_abs']:.5f} {unit}, gain {dr['gain']:.3f} (least-squares slope of learned on model)")
     print(f"wrote {out / 'evaluation.json'} and {out / 'evaluation.png'}")
     return 0
