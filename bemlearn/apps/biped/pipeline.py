@@ -54,7 +54,8 @@ def run_biped_pipeline(config: BipedConfig, out_dir: str | Path | None = None, *
     """Run every stage (module docstring) into ``out_dir`` (default ``runs/biped-<timestamp>``); returns it."""
     from bemlearn.data import ground_truth_path, write_trajectory
     from bemlearn.apps.biped.gpdm_study import fit_gpdm_logged, human_gait_sequences, latent_study
-    from bemlearn.apps.biped.report import write_biped_report
+    from bemlearn.apps.biped.report import biped_verdict, write_biped_report
+    from bemlearn.files import atomic_write_text
     from bemlearn.apps.biped.walker import simulate_walk, walk_trajectories
 
     out = Path(out_dir) if out_dir else Path("runs") / time.strftime("biped-%Y%m%d-%H%M%S")
@@ -106,7 +107,8 @@ def run_biped_pipeline(config: BipedConfig, out_dir: str | Path | None = None, *
     log.info("[6/6] report")
     metrics = {"data": info, "learned": learned, "study": study, "seconds": time.perf_counter() - t0,
                "loop": {k: {m: v for m, v in w.metrics.items()} for k, w in loop.items()}}
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=float))
+    metrics["verdict"] = biped_verdict(metrics)
+    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
     write_biped_report(out, metrics, config)
     log.info("biped pipeline done in %.0f s: %s", metrics["seconds"], out / "report.md")
     return out

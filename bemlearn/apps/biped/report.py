@@ -18,13 +18,52 @@ def _vec(c) -> str:
     return "[" + ", ".join(f"{v:.2f}" for v in c) + "]"
 
 
+def biped_verdict(metrics: dict) -> dict:
+    """The verdict of a biped run (the core's :class:`~bemlearn.pipeline.verdict.Verdict`, JSON form): the
+    torso BEM target (≤ 0.02 rad on held-out walks), the fit, the training walks, the walks with the predictor."""
+    from bemlearn.pipeline.verdict import Finding, Verdict
+
+    found, checked = [], []
+    d = metrics["data"]
+    checked.append("excitation")
+    if d["walks"] and d["fell"] == d["walks"]:
+        found.append(Finding("unusable", "excitation", f"all {d['walks']} training walks fell"))
+    elif d["fell"] > d["walks"] / 2:
+        found.append(Finding("degraded", "excitation", f"{d['fell']} of {d['walks']} training walks fell"))
+    gp = metrics["learned"].get("gp")
+    if gp:
+        checked += ["fit", "torso_bem"]
+        stop = gp["fit"]["fit"].get("stop_reason")
+        if stop not in (None, "converged"):
+            found.append(Finding("degraded", "fit", f"the torso GP fit ended by {stop} ({gp['fit']['fit'].get('steps')} evaluations)"))
+        above = [f"{gait} gait {h['rmse']:.3f} rad" for gait, h in gp["heldout"].items() if h["rmse"] > 0.02]
+        if above:
+            found.append(Finding("degraded", "torso_bem", "learned vs model torso BEM on held-out walks above the 0.02 rad "
+                                 "target: " + ", ".join(above)))
+    for gait, m in metrics["loop"].items():
+        checked.append(f"walk:{gait}")
+        if m.get("fell"):
+            found.append(Finding("unusable", f"walk:{gait}", f"the {gait} gait with the exported predictor in the loop fell "
+                                 f"after {m.get('steps')} steps"))
+    found.sort(key=lambda f: f.severity != "unusable")
+    status = "unusable" if any(f.severity == "unusable" for f in found) else "degraded" if found else "ok"
+    return Verdict(status, tuple(found), tuple(checked)).to_dict()
+
+
 def write_biped_report(out: str | Path, metrics: dict, config) -> Path:
     """Write ``out/report.md`` from :func:`~bemlearn.apps.biped.pipeline.run_biped_pipeline`'s metrics; returns its path."""
     out = Path(out)
     d, st = metrics["data"], metrics["study"]
     ev = config.evaluate
+    v = metrics.get("verdict")
+    head = []
+    if v:
+        head = [f"## Verdict: {v['status']}", ""]
+        head += [f"- **{f['severity']}**: {f['reason']}" for f in v["findings"]] or [
+            "Every check passed: " + ", ".join(v["checked"]) + "."]
+        head += [""]
     lines = [
-        "# bemlearn run: biped (Section IV-B)", "",
+        "# bemlearn run: biped (Section IV-B)", "", *head,
         "## Training data (walks)",
         f"{d['walks']} walks ({d['fell']} fell, kept up to the fall), {d['steps']} steps, {d['samples']} samples at "
         f"{d['rate_hz']:g} Hz; quantized encoder angles (stance-relative q1..q5, one trial per step), excitation "
@@ -83,6 +122,8 @@ def write_biped_report(out: str | Path, metrics: dict, config) -> Path:
               f"Run time {metrics['seconds']:.0f} s. Files: `data.npz` (+ `.truth.npz`), `gp/` (checkpoint, "
               "`bem_predictor.pt`, TensorBoard), `walk_<gait>.npz`, `gpdm/{robot,human}/` (c, latents, TensorBoard), "
               "`metrics.json`.", ""]
+    from bemlearn.files import atomic_write_text
+
     path = out / "report.md"
-    path.write_text("\n".join(lines))
+    atomic_write_text(path, "\n".join(lines))
     return path
