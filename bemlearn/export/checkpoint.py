@@ -157,10 +157,9 @@ def load_checkpoint(run_dir_or_file: str | os.PathLike[str]) -> Checkpoint:
             file and the key.
     """
     path = _checkpoint_path(run_dir_or_file)
-    try:
-        data = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises many types for a corrupt or foreign file
-        raise CheckpointError(f"{path}: cannot be read as a bemlearn checkpoint ({type(exc).__name__}: {exc})") from exc
+    from bemlearn.safe_load import torch_load_weights
+
+    data = torch_load_weights(path, where=path, what="a bemlearn checkpoint")  # weights_only: a pickled callable is refused
     if not isinstance(data, dict):
         raise CheckpointError(f"{path}: expected a dict with keys {list(_TOP_KEYS)}, got {type(data).__name__}")
     missing = [k for k in _TOP_KEYS if k not in data]

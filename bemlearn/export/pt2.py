@@ -185,16 +185,17 @@ class Pt2Predictor:
 
 
 def load_pt2_predictor(path: str | os.PathLike[str]) -> Pt2Predictor:
-    """Load a ``.pt2`` written by :func:`save_pt2`."""
-    from torch.export.pt2_archive._package import load_pt2
+    """Load a ``.pt2`` written by :func:`save_pt2`, refusing archives that would run pickled code
+    or native libraries (:func:`bemlearn.safe_load.read_pt2_archive`).
+
+    Raises:
+        FileNotFoundError: no such file.
+        CheckpointError: a foreign or tampered archive, or not a bemlearn predictor.
+    """
+    from bemlearn.safe_load import read_pt2_archive
 
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such .pt2 predictor file")
-    try:
-        contents = load_pt2(path)
-    except Exception as exc:  # torch raises several types for foreign archives
-        raise CheckpointError(f"{path}: not a torch.export .pt2 archive ({type(exc).__name__}: {exc})") from exc
+    contents = read_pt2_archive(path)
     missing = [k for k in PT2_PROGRAMS if k not in contents.exported_programs and k not in _OPTIONAL_PROGRAMS]
     meta = contents.extra_files.get(PT2_METADATA_FILE)
     if missing or not meta:

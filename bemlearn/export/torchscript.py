@@ -58,16 +58,17 @@ def save_torchscript(predictor: BEMPredictor, path: str | os.PathLike[str], *, f
 
 
 def load_torchscript(path: str | os.PathLike[str]) -> torch.jit.ScriptModule:
-    """``torch.jit.load(path)`` with a clear error for a missing or foreign file."""
+    """``torch.jit.load(path)`` with a clear error for a missing, foreign or tampered file (:mod:`bemlearn.safe_load`).
+
+    Raises:
+        FileNotFoundError: no such file.
+        CheckpointError: not a TorchScript file, or not a bemlearn predictor.
+    """
+    from bemlearn.safe_load import load_script_module
+
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such TorchScript predictor file")
     extra = {METADATA_FILE: ""}
-    try:
-        with _quiet_jit():
-            module = torch.jit.load(str(path), map_location="cpu", _extra_files=extra)
-    except Exception as exc:  # torch raises RuntimeError and others for foreign or truncated files
-        raise CheckpointError(f"{path}: not a TorchScript file ({type(exc).__name__}: {exc})") from exc
+    module = load_script_module(path, extra)  # C++ loader: no Python unpickling (bemlearn.safe_load)
     missing = [m for m in EXPORTED_METHODS if not hasattr(module, m) and m not in LATENT_METHODS]
     if missing or not extra[METADATA_FILE]:
         raise CheckpointError(f"{path}: not a bemlearn BEM predictor (missing {missing or [METADATA_FILE]})")
