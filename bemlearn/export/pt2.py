@@ -141,7 +141,8 @@ class Pt2Predictor:
         except RuntimeError as exc:  # the program's own finite check: entries too large to evaluate
             if "BEMPredictor." in str(exc):
                 raise PredictorInputError(
-                    f"BEMPredictor.{method}: x has finite entries too large to evaluate (magnitude above ~1e140)"
+                    f"BEMPredictor.{method}: x has finite entries too large to evaluate: the kernel cannot be evaluated in "
+                    "float64 (||(x - x_mean) / (x_std * lengthscale)|| above 1e150)"
                 ) from None
             raise
 
@@ -173,11 +174,13 @@ class Pt2Predictor:
     def forward_latent(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(μ(x_0^e), latent σ(x_0^e)) (eq. 12, 14); archives without the program return ``forward``
         (written before the calibrated band, when ``std`` was the latent std)."""
-        return self._forward(x) if self._forward_latent is None else self._forward_latent(x)
+        program = self._forward if self._forward_latent is None else self._forward_latent
+        return self._call(program, x, "forward_latent", False)
 
     def predict_full_latent(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(mean, latent std) of f(x) (eq. 11, 12); see :meth:`forward_latent` for old archives."""
-        return self._predict_full(x) if self._predict_full_latent is None else self._predict_full_latent(x)
+        program = self._predict_full if self._predict_full_latent is None else self._predict_full_latent
+        return self._call(program, x, "predict_full_latent", True)
 
     def metadata(self) -> str:
         """The metadata JSON document."""
