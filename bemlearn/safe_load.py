@@ -125,8 +125,9 @@ def check_pt2_archive(data: bytes, *, where: str | os.PathLike[str]) -> None:
                 torch_load_weights(zf.read(name), where=f"{where}: {rel}", what="torch.export sample inputs")
 
 
-def read_pt2_archive(path: str | os.PathLike[str]):
-    """``torch.export``'s ``load_pt2`` of the bytes of ``path`` after :func:`check_pt2_archive` passed on them.
+def read_pt2_archive(source: str | os.PathLike[str] | bytes, *, where: str | os.PathLike[str] | None = None):
+    """``torch.export``'s ``load_pt2`` of the bytes of ``source`` (a path, or the archive's bytes) after
+    :func:`check_pt2_archive` passed on them.
 
     Raises:
         FileNotFoundError: no such file.
@@ -134,10 +135,13 @@ def read_pt2_archive(path: str | os.PathLike[str]):
     """
     from torch.export.pt2_archive._package import load_pt2
 
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such .pt2 predictor file")
-    data = path.read_bytes()
+    if isinstance(source, bytes):
+        data, path = source, where or "<.pt2 bytes>"
+    else:
+        path = Path(source)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such .pt2 predictor file")
+        data = path.read_bytes()
     check_pt2_archive(data, where=path)
     try:
         return load_pt2(io.BytesIO(data))
@@ -145,8 +149,10 @@ def read_pt2_archive(path: str | os.PathLike[str]):
         raise CheckpointError(f"{path}: not a torch.export .pt2 archive ({type(exc).__name__}: {str(exc)[:300]})") from exc
 
 
-def load_script_module(path: str | os.PathLike[str], extra_files: dict[str, Any] | None = None):
-    """``torch.jit.load(path, map_location="cpu")`` (C++ only: no Python unpickling) with named errors.
+def load_script_module(source: str | os.PathLike[str] | bytes, extra_files: dict[str, Any] | None = None, *,
+                       where: str | os.PathLike[str] | None = None):
+    """``torch.jit.load(source, map_location="cpu")`` (C++ only: no Python unpickling) with named errors;
+    ``source`` is a path or the bytes of a TorchScript file (``where`` names it in errors).
 
     Raises:
         FileNotFoundError: no such file.
@@ -157,13 +163,17 @@ def load_script_module(path: str | os.PathLike[str], extra_files: dict[str, Any]
 
     import torch
 
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such TorchScript predictor file")
+    if isinstance(source, bytes):
+        path, f = where or "<TorchScript bytes>", io.BytesIO(source)
+    else:
+        path = Path(source)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such TorchScript predictor file")
+        f = str(path)
     try:
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", message=r".*torch\.jit\..* is deprecated", category=DeprecationWarning)
-            return torch.jit.load(str(path), map_location="cpu", _extra_files=extra_files if extra_files is not None else {})
+            return torch.jit.load(f, map_location="cpu", _extra_files=extra_files if extra_files is not None else {})
     except Exception as exc:  # torch raises RuntimeError and others for foreign or truncated files
         raise CheckpointError(f"{path}: not a TorchScript file ({type(exc).__name__}: {str(exc)[:300]})") from exc
 

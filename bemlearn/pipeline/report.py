@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from bemlearn.files import atomic_write_text
+
 __all__ = ["write_report"]
 
 
@@ -114,5 +116,5 @@ def write_report(out: str | Path, *, config, resolved, data: dict, train: dict, 
         for name in sim:
             lines += [f"### BEM source: {name}", "", f"![fig2 {name}](simulate/fig2_{name}.png)", ""]
     path = out / "report.md"
-    path.write_text("\n".join(lines))
+    atomic_write_text(path, "\n".join(lines))
     return path

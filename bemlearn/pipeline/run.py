@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from bemlearn.config import save_yaml
-from bemlearn.files import new_run_dir
+from bemlearn.files import atomic_write_text, new_run_dir
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.resolve import ResolvedConfig, resolve_pipeline_config
 
@@ -44,7 +44,7 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
     out = Path(out_dir) if out_dir else new_run_dir(Path(cfg.robot or cfg.data or "run").stem)
     out.mkdir(parents=True, exist_ok=True)
     save_yaml(cfg, out / "config.yaml")
-    (out / "config_resolved.json").write_text(json.dumps(resolved.to_json_dict(), indent=2, ensure_ascii=False))
+    atomic_write_text(out / "config_resolved.json", json.dumps(resolved.to_json_dict(), indent=2, ensure_ascii=False))
     t0 = time.perf_counter()
     stages = 5 if cfg.robot else 3
     if cfg.data is None:
@@ -69,7 +69,7 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
         sim = simulate_stage(cfg, out, predictor=out / "bem_predictor.pt", progress=progress)
         train["closed_loop"] = {src: {k: m[k] for k in ("fell", "tracking_rmse", "tracking_max", "qu_max", "u_max", "duration_s") if k in m}
                                 for src, m in sim.items()}
-        (out / "metrics.json").write_text(json.dumps(train, indent=2, default=float))
+        atomic_write_text(out / "metrics.json", json.dumps(train, indent=2, default=float))
     log.info("[%d/%d] report", stages, stages)
     report = write_report(out, config=cfg, resolved=resolved, data=data_info, train=train, export=files, sim=sim)
     log.info("done in %.0f s: %s", time.perf_counter() - t0, report)

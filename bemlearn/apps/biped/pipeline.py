@@ -106,7 +106,9 @@ def run_biped_pipeline(config: BipedConfig, out_dir: str | Path | None = None, *
     log.info("[6/6] report")
     metrics = {"data": info, "learned": learned, "study": study, "seconds": time.perf_counter() - t0,
                "loop": {k: {m: v for m, v in w.metrics.items()} for k, w in loop.items()}}
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=float))
+    from bemlearn.files import atomic_write_text
+
+    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
     write_biped_report(out, metrics, config)
     log.info("biped pipeline done in %.0f s: %s", metrics["seconds"], out / "report.md")
     return out

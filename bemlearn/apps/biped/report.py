@@ -83,6 +83,8 @@ def write_biped_report(out: str | Path, metrics: dict, config) -> Path:
               f"Run time {metrics['seconds']:.0f} s. Files: `data.npz` (+ `.truth.npz`), `gp/` (checkpoint, "
               "`bem_predictor.pt`, TensorBoard), `walk_<gait>.npz`, `gpdm/{robot,human}/` (c, latents, TensorBoard), "
               "`metrics.json`.", ""]
+    from bemlearn.files import atomic_write_text
+
     path = out / "report.md"
-    path.write_text("\n".join(lines))
+    atomic_write_text(path, "\n".join(lines))
     return path
