@@ -121,10 +121,18 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
         shutil.rmtree(tmp_dir, ignore_errors=True)
 
 
+def _write_data(path: Path, data: bytes) -> None:
+    """The one primitive that writes bytes bemlearn holds in memory to a (temporary) file, synced."""
+    with open(path, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically (see :func:`atomic_path`); returns ``path``."""
     with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
+        _write_data(tmp, data)
     return Path(path)
 
 
@@ -184,10 +192,7 @@ def atomic_write_files(files: Mapping[str | os.PathLike[str], bytes]) -> list[Pa
             tmp_dir = path.parent / f".{path.name}.tmp-{os.getpid()}-{time.monotonic_ns() % 10**9}"
             tmp_dir.mkdir()
             staged.append((path, tmp_dir))
-            with open(tmp_dir / path.name, "wb") as fh:
-                fh.write(data)
-                fh.flush()
-                os.fsync(fh.fileno())
+            _write_data(tmp_dir / path.name, data)
         for path, tmp_dir in staged:
             current = path
             os.replace(tmp_dir / path.name, path)

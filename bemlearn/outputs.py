@@ -39,7 +39,7 @@ import os
 import shutil
 import sys
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
 from bemlearn.errors import EnvironmentProblem, OutputBusyError, OutputExistsError
@@ -173,14 +173,19 @@ def _lock_name(entry: str) -> str:
 
 @contextlib.contextmanager
 def folder_lock(folder: str | os.PathLike[str], *, entries: Sequence[str] | None = None,
-                record: dict | None = None) -> Iterator[list[dict]]:
-    """Lock ``folder`` for writing ``entries`` (``None``: the whole folder) for the block; yields the
-    records killed commands left in the locks taken (to recover from, module docstring) and a
-    function ``update(**changes)`` that adds to this command's record.
+                record: dict | None = None) -> Iterator[tuple[str | None, Callable[..., None]]]:
+    """Lock ``folder`` for writing ``entries`` (``None``: the whole folder) for the block, after undoing
+    what killed commands left half-done there (module docstring).
 
     A whole-folder claim holds ``.bemlearn-lock`` exclusively; a claim of entries holds it shared
     and one ``.bemlearn-lock-<entry>`` per entry exclusively, so two commands writing different
-    files of one folder run side by side, and nothing runs beside a whole-folder claim.
+    files of one folder run side by side, and nothing runs beside a whole-folder claim.  A
+    killed whole-folder claimer's snapshot is restored under an exclusive lock only.
+
+    Yields:
+        ``(incomplete, update)``: the description of a killed command whose half-written new
+        folder this is (else ``None``), and ``update(**changes)``, which adds to this command's
+        record in its lock files (e.g. the snapshot's name).
 
     Raises:
         OutputBusyError: another command holds a conflicting lock (the message names it).
@@ -188,28 +193,52 @@ def folder_lock(folder: str | os.PathLike[str], *, entries: Sequence[str] | None
     folder = Path(folder)
     mine = {"pid": os.getpid(), "command": " ".join(["bemlearn", *sys.argv[1:]])[:500], "started": time.time(),
             **(record or {})}
+    main_lock = folder / LOCK_NAME
     with contextlib.ExitStack() as stack:
-        stale = stack.enter_context(_locked(folder / LOCK_NAME, exclusive=entries is None, folder=folder, record=mine))
-        records = [stale] if stale else []
-        if entries is None:   # nobody else writes here now: every record left beside is a killed command's
+        stale = stack.enter_context(_locked(main_lock, exclusive=entries is None, folder=folder, record=mine))
+        incomplete = None
+        if entries is None:   # nobody else writes here now: every record left is a killed command's
+            incomplete = _recover(folder, stale, None)
             for leftover in sorted(folder.glob(f"{LOCK_NAME}-*")):
                 with _locked(leftover, exclusive=True, folder=folder, record=None) as rec:
-                    if rec:
-                        records.append(rec)
+                    _recover(folder, rec, rec.get("entries") if rec else None)
         else:
+            _recover_shared(folder, main_lock)
             for entry in sorted(set(entries)):
                 rec = stack.enter_context(_locked(folder / _lock_name(entry), exclusive=True, folder=folder, record=mine))
-                if rec and rec not in records:
-                    records.append(rec)
+                if rec and rec.get("entries") is not None:
+                    _recover(folder, rec, [e for e in rec["entries"] if e in entries])
 
         def update(**changes) -> None:
-            """Record ``changes`` (e.g. the snapshot's name) in every lock file this claim holds."""
             mine.update(changes)
             for held in _held.values():
                 if held[3] is mine and held[2]:
                     _write_record(held[0], mine)
 
-        yield records, update
+        yield incomplete, update
+
+
+def _recover_shared(folder: Path, main_lock: Path) -> None:
+    """Under a shared lock: restore a killed whole-folder claimer's snapshot if no other command uses the
+    folder (the lock is upgraded to exclusive for it, and shared again after)."""
+    held = _held.get(os.path.realpath(main_lock))
+    if held is None or held[2] or fcntl is None:
+        return
+    fd = held[0]
+    rec = _read_record(fd)
+    if not rec or not rec.get("backup"):
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:   # other commands write entries here now: leave it to a whole-folder claim
+        return
+    try:
+        rec = _read_record(fd)
+        if rec and rec.get("backup"):
+            _recover(folder, rec, None)
+            os.ftruncate(fd, 0)
+    finally:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
 
 
 def _entries(folder: Path, entries: Sequence[str] | None) -> list[str]:
@@ -270,23 +299,19 @@ def _restore(folder: Path, entries: Sequence[str] | None, backup: Path) -> None:
             shutil.rmtree(backup, ignore_errors=True)
 
 
-def _recover(folder: Path, stale: list[dict], entries: Sequence[str] | None) -> str | None:
-    """Undo what killed commands left half-done in ``folder`` (module docstring), for the outputs claimed
-    (``entries``, ``None``: all); returns the description of a killed command whose half-written new
-    folder this is, else ``None``."""
-    incomplete = None
-    for rec in stale:
-        backup = str(rec.get("backup") or "")
-        names = rec.get("entries")
-        if entries is not None:
-            names = [e for e in (names or entries) if e in entries]
-        if backup.startswith(BACKUP_PREFIX) and "/" not in backup and (folder / backup).is_dir():
-            _restore(folder, names, folder / backup)
-            log.warning("%s: %s did not finish (killed?); its outputs were restored from the snapshot it had taken",
-                        folder, _describe(rec))
-        elif rec.get("created"):
-            incomplete = _describe(rec)
-    return incomplete
+def _recover(folder: Path, rec: dict | None, entries: Sequence[str] | None) -> str | None:
+    """Undo what the killed command of record ``rec`` left half-done in ``folder``: restore its snapshot
+    of ``entries`` (``None``: the whole folder).  Returns the description of a killed command whose
+    half-written new folder this is, else ``None``."""
+    if not rec:
+        return None
+    backup = str(rec.get("backup") or "")
+    if backup.startswith(BACKUP_PREFIX) and "/" not in backup and (folder / backup).is_dir():
+        _restore(folder, entries, folder / backup)
+        log.warning("%s: %s did not finish (killed?); its outputs were restored from the snapshot it had taken",
+                    folder, _describe(rec))
+        return None
+    return _describe(rec) if rec.get("created") else None
 
 
 def _rewritten(out: Path, name: str, backup: Path | None) -> bool:
@@ -373,9 +398,8 @@ def claim_outputs(
         except OSError as exc:
             raise (write_problem(out, exc) or exc) from None
     lock = folder_lock(out, entries=entries, record={"created": created, "entries": None if entries is None else list(entries)})
-    stale, update = lock.__enter__()   # OutputBusyError: another command got the folder (even one we created): it is theirs
+    incomplete, update = lock.__enter__()   # OutputBusyError: another command got the folder (even one we created): theirs
     try:
-        incomplete = _recover(out, stale, entries)
         existing = [] if created else _entries(out, entries)
         if existing and not (force or resume):
             shown = ", ".join(str(out / n) for n in existing[:8]) + (f" and {len(existing) - 8} more" if len(existing) > 8 else "")

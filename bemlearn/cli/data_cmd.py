@@ -148,9 +148,9 @@ def run_import(args: argparse.Namespace) -> int:
         raise ValueError(f"{args.out}: already exists (use --force to overwrite)")
     if any(args.out.resolve() == p.resolve() for p in args.raw):
         raise ValueError(f"{args.out}: output is one of the input files")
-    imap = load_import_map(args.map)
-    # the output folder is checked writable and locked before the logs are read
+    # the output folder is checked writable and locked before the map and the logs are read
     with claim_outputs(args.out.parent, entries=[args.out.name], force=args.force, what="data import"):
+        imap = load_import_map(args.map)
         traj = import_logs(args.raw, imap)
         write_trajectory(traj, args.out)
     info = traj.meta.extra["import"]
