@@ -27,6 +27,7 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
+from bemlearn.config import Limit, config_limits
 from bemlearn.data.dataset_types import BEMDataset, GPDatasets
 from bemlearn.data.derivatives import DerivativeEstimator, estimate_derivatives, make_estimator
 from bemlearn.data.features import gp_input_names, gp_inputs, gp_output_name
@@ -84,6 +85,10 @@ class DatasetConfig:
     def estimator(self) -> DerivativeEstimator:
         """The configured derivative estimator."""
         return make_estimator(self.derivative, self.derivative_options, where="derivative_options")
+
+
+# (the lower bounds of qu_window, n_points, n_val_points and val_fraction are checked by __post_init__)
+config_limits(DatasetConfig, n_points=Limit(le=10**8), n_val_points=Limit(le=10**8), seed=Limit(ge=0))
 
 
 def split_trials(
