@@ -154,7 +154,8 @@ def test_a_recursive_alias_is_refused(tmp_path, capsys):
     (('timestep="0.00125"', 'timestep="-0.001"'), "expected a positive, finite physics step"),
     (('gravity="0 0 -9.81"', 'gravity="0 0 nan"'), "gravity"),
 ])
-def test_a_robot_file_whose_physics_makes_no_sense_is_refused(tmp_path, capsys, edit, message):
+def test_a_robot_file_whose_physics_makes_no_sense_is_refused(tmp_path, capsys, monkeypatch, edit, message):
+    monkeypatch.chdir(tmp_path)   # MuJoCo writes its NaN warning to ./MUJOCO_LOG.TXT
     xml = FURUTA_XML.read_text()
     assert edit[0] in xml
     (tmp_path / "r.xml").write_text(xml.replace(edit[0], edit[1]))
