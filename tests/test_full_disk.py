@@ -70,7 +70,7 @@ def test_export_on_a_full_disk_exits_cleanly(tmpfs, checkpoint):
     run.mkdir()
     shutil.copy(checkpoint, run / "checkpoint.pt")
     _fill(tmpfs, 60_000)   # less than the predictor needs
-    res = subprocess.run([sys.executable, "-m", "bemlearn", "export", str(run), "--format", "both"],
+    res = subprocess.run([sys.executable, "-m", "bemlearn", "export", str(run)],
                          capture_output=True, text=True, cwd=ROOT)
     assert res.returncode == 2, res.stderr[-3000:]
     assert "no space left on device" in res.stderr and "Traceback" not in res.stderr and "terminate" not in res.stderr
@@ -129,10 +129,10 @@ def test_a_failing_write_keeps_the_old_predictor(checkpoint, tmp_path, monkeypat
         raise OSError(errno.ENOSPC, "No space left on device", str(path))
 
     monkeypatch.setattr("bemlearn.files._write_data", full)
-    assert main(["export", str(run), "--force", "--format", "both"]) == 2
+    assert main(["export", str(run), "--force"]) == 2
     err = capsys.readouterr().err
     assert f"cannot write {run / 'bem_predictor.pt'}: no space left on device (ENOSPC)" in err, err
-    assert (run / "bem_predictor.pt").read_bytes() == before and not (run / "bem_predictor.pt2").exists()
+    assert (run / "bem_predictor.pt").read_bytes() == before
     assert not _leftovers(run)
 
 
