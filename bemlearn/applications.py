@@ -45,6 +45,8 @@ class Application:
         add_robot_commands: ``add_robot_commands(subparsers)`` registers ``bemlearn robot`` commands.
         run: ``run(config_path, out_dir, *, device, progress) -> Path`` runs a config whose
             top-level ``application:`` key names this application (``bemlearn run``).
+        parse_config: ``parse_config(config_path)`` parses and validates such a config strictly
+            (raising :class:`~bemlearn.errors.ConfigError`); the preflight of every command calls it.
     """
 
     name: str
@@ -54,6 +56,7 @@ class Application:
     add_bench: Callable[[Any], None] | None = None
     add_robot_commands: Callable[[Any], None] | None = None
     run: Callable[..., Path] | None = None
+    parse_config: Callable[[Any], Any] | None = None
 
 
 _APPS: dict[str, Application] = {}

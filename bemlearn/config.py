@@ -5,6 +5,19 @@ Every component defines its own dataclass next to the component (e.g.
 mapping into such a dataclass, rejecting unknown keys and wrongly typed values with an
 error that names the offending key path, and how to write the resolved config back.
 
+One validating parse (:func:`from_dict`) holds every value to:
+
+- its type (``int``, ``float``, ``Literal`` names, tuples of a fixed length, ...);
+- **finite numbers**: NaN and ±inf are never a config value; integers fit in 64 bits;
+- the **limits** a component declares next to its dataclass with :func:`config_limits`
+  (:class:`Limit`: bounds, ordered (min, max) pairs, list lengths), e.g. ``n_trials ≥ 1``,
+  ``mass_scale > 0``; rules between fields stay in the dataclass's ``__post_init__``.
+
+:func:`load_yaml` reads YAML strictly: a duplicated key is an error, as is a document whose
+aliases expand to more than :data:`MAX_NODES` values (a "billion laughs" of a few hundred
+bytes), and ``1e-3`` is a number (YAML 1.2) rather than a string.  Error messages quote a
+bounded prefix of a value (:func:`show_value`), never a whole expansion.
+
 Example::
 
     cfg = from_dict(MyConfig, {"rate_hz": 400}, where="configs/furuta.yaml:collect")
@@ -13,8 +26,12 @@ Example::
 from __future__ import annotations
 
 import dataclasses
+import math
+import re
+import reprlib
 import types
 import typing
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -23,9 +40,83 @@ import yaml
 from bemlearn.errors import ConfigError
 from bemlearn.files import atomic_write_text
 
-__all__ = ["ConfigError", "from_dict", "to_dict", "load_yaml", "save_yaml", "replace_path"]
+__all__ = ["ConfigError", "from_dict", "to_dict", "load_yaml", "save_yaml", "replace_path", "Limit", "config_limits",
+           "show_value", "MAX_NODES", "MAX_CONFIG_BYTES"]
 
 T = TypeVar("T")
+
+#: Values (mapping entries, list items, scalars) a YAML document may expand to, aliases counted each time used.
+MAX_NODES = 100_000
+#: Largest config file read.
+MAX_CONFIG_BYTES = 4 << 20
+#: Largest integer magnitude a config value may have (it must fit numpy's int64).
+MAX_INT = 2**63 - 1
+
+_SHOW = reprlib.Repr()
+_SHOW.maxstring, _SHOW.maxother, _SHOW.maxlist, _SHOW.maxtuple, _SHOW.maxdict, _SHOW.maxlevel = 60, 60, 6, 6, 4, 2
+_SHOW.maxlong = 40
+
+
+def show_value(value: Any) -> str:
+    """A bounded ``repr`` of ``value`` for error messages: at most 200 characters (long strings, lists and
+    nestings are cut with ``...``; the full value is never formatted)."""
+    text = _SHOW.repr(value)
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+@dataclass(frozen=True)
+class Limit:
+    """What a numeric config value (or each entry of a list of numbers) must satisfy.
+
+    Attributes:
+        ge, gt, le, lt: bounds (``None``: none).
+        ordered: the value is a (min, max) pair with min ≤ max.
+        min_len: at least this many entries (lists).
+        unit: the value's unit, for messages.
+    """
+
+    ge: float | None = None
+    gt: float | None = None
+    le: float | None = None
+    lt: float | None = None
+    ordered: bool = False
+    min_len: int | None = None
+    unit: str = ""
+
+    def describe(self) -> str:
+        num = lambda v: str(int(v)) if float(v).is_integer() and abs(v) < 1e16 else f"{v:g}"  # noqa: E731
+        parts = [f"{op} {num(v)}" for op, v in (("≥", self.ge), (">", self.gt), ("≤", self.le), ("<", self.lt)) if v is not None]
+        return " and ".join(parts) + (f" {self.unit}" if self.unit and parts else "")
+
+    def check(self, value: Any, where: str) -> None:
+        """Raise :class:`ConfigError` naming ``where`` if ``value`` (a number or a list of numbers) breaks the limit."""
+        if value is None:
+            return
+        items = list(value) if isinstance(value, (list, tuple)) else [value]
+        if self.min_len is not None and isinstance(value, (list, tuple)) and len(items) < self.min_len:
+            raise ConfigError(f"{where}: expected at least {self.min_len} entries, got {len(items)}")
+        for i, v in enumerate(items):
+            if not isinstance(v, (int, float)) or isinstance(v, bool):
+                continue
+            bad = ((self.ge is not None and not v >= self.ge) or (self.gt is not None and not v > self.gt)
+                   or (self.le is not None and not v <= self.le) or (self.lt is not None and not v < self.lt))
+            if bad:
+                at = f"{where}[{i}]" if isinstance(value, (list, tuple)) else where
+                raise ConfigError(f"{at}: expected a number {self.describe()}, got {show_value(v)}")
+        if self.ordered and isinstance(value, (list, tuple)) and len(items) == 2 and items[0] > items[1]:
+            raise ConfigError(f"{where}: expected (min, max) with min ≤ max, got {show_value(list(items))}")
+
+
+#: Limits declared by the components: dataclass → field name → :class:`Limit`.
+LIMITS: dict[type, dict[str, Limit]] = {}
+
+
+def config_limits(cls: type, **limits: Limit) -> None:
+    """Declare the :class:`Limit` of fields of the config dataclass ``cls`` (checked by :func:`from_dict`)."""
+    unknown = sorted(set(limits) - {f.name for f in dataclasses.fields(cls)})
+    if unknown:
+        raise TypeError(f"config_limits({cls.__name__}): no field(s) {unknown}")
+    LIMITS.setdefault(cls, {}).update(limits)
 
 
 def _type_name(tp: Any) -> str:
@@ -48,18 +139,18 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
                 return _coerce(value, arg, where)
             except ConfigError as exc:  # try the next alternative
                 errors.append(str(exc))
-        raise ConfigError(f"{where}: expected {_type_name(tp)}, got {value!r}")
+        raise ConfigError(errors[0] if len(errors) == 1 else f"{where}: expected {_type_name(tp)}, got {show_value(value)}")
     if origin is typing.Literal:
         if value not in args:
-            raise ConfigError(f"{where}: expected one of {list(args)}, got {value!r}")
+            raise ConfigError(f"{where}: expected one of {list(args)}, got {show_value(value)}")
         return value
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
-            raise ConfigError(f"{where}: expected a mapping for {tp.__name__}, got {value!r}")
+            raise ConfigError(f"{where}: expected a mapping for {tp.__name__}, got {show_value(value)}")
         return from_dict(tp, value, where=where)
     if origin in (tuple,):
         if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"{where}: expected a list, got {value!r}")
+            raise ConfigError(f"{where}: expected a list, got {show_value(value)}")
         if len(args) == 2 and args[1] is Ellipsis:
             return tuple(_coerce(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
         if args and len(args) != len(value):
@@ -67,31 +158,37 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
         return tuple(_coerce(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
     if origin in (list,):
         if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"{where}: expected a list, got {value!r}")
+            raise ConfigError(f"{where}: expected a list, got {show_value(value)}")
         return [_coerce(v, args[0], f"{where}[{i}]") for i, v in enumerate(value)] if args else list(value)
     if origin in (dict,):
         if not isinstance(value, dict):
-            raise ConfigError(f"{where}: expected a mapping, got {value!r}")
+            raise ConfigError(f"{where}: expected a mapping, got {show_value(value)}")
         return {k: _coerce(v, args[1], f"{where}.{k}") for k, v in value.items()} if args else dict(value)
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{where}: expected a number, got {value!r}")
+            raise ConfigError(f"{where}: expected a number, got {show_value(value)}")
+        if isinstance(value, int) and abs(value) > MAX_INT:
+            raise ConfigError(f"{where}: expected a finite number of at most 64 bits, got {show_value(value)}")
+        if not math.isfinite(value):
+            raise ConfigError(f"{where}: expected a finite number, got {value}")
         return float(value)
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{where}: expected an integer, got {value!r}")
+            raise ConfigError(f"{where}: expected an integer, got {show_value(value)}")
+        if abs(value) > MAX_INT:
+            raise ConfigError(f"{where}: expected an integer of at most 64 bits (|n| < 2⁶³), got {show_value(value)}")
         return value
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError(f"{where}: expected true or false, got {value!r}")
+            raise ConfigError(f"{where}: expected true or false, got {show_value(value)}")
         return value
     if tp is str:
         if not isinstance(value, str):
-            raise ConfigError(f"{where}: expected a string, got {value!r}")
+            raise ConfigError(f"{where}: expected a string, got {show_value(value)}")
         return value
     if tp is type(None):
         if value is not None:
-            raise ConfigError(f"{where}: expected null, got {value!r}")
+            raise ConfigError(f"{where}: expected null, got {show_value(value)}")
         return None
     raise ConfigError(f"{where}: unsupported config type {_type_name(tp)}")
 
@@ -109,26 +206,30 @@ def from_dict(cls: type[T], data: dict[str, Any] | None, *, where: str = "config
     """
     data = {} if data is None else data
     if not isinstance(data, dict):
-        raise ConfigError(f"{where}: expected a mapping, got {data!r}")
+        raise ConfigError(f"{where}: expected a mapping, got {show_value(data)}")
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     unknown = sorted(set(data) - set(fields))
     if unknown:
         raise ConfigError(
-            f"{where}: unknown key(s) {unknown}; valid keys are {sorted(fields)}"
+            f"{where}: unknown key(s) {show_value(unknown)}; valid keys are {sorted(fields)}"
         )
     kwargs = {}
+    limits = LIMITS.get(cls, {})
     for name, field in fields.items():
         if name in data:
             kwargs[name] = _coerce(data[name], hints[name], f"{where}.{name}")
+            if name in limits:
+                limits[name].check(kwargs[name], f"{where}.{name}")
         elif field.default is dataclasses.MISSING and field.default_factory is dataclasses.MISSING:
             raise ConfigError(f"{where}: missing required key {name!r}")
     try:
         return cls(**kwargs)
     except (TypeError, ValueError) as exc:
-        if isinstance(exc, ConfigError):
+        msg = str(exc)[:500]
+        if isinstance(exc, ConfigError) and msg.startswith(where.split(".")[0]):
             raise
-        raise ConfigError(f"{where}: {exc}") from exc
+        raise ConfigError(f"{where}: {msg}") from exc
 
 
 def to_dict(obj: Any) -> Any:
@@ -144,17 +245,96 @@ def to_dict(obj: Any) -> Any:
     return obj
 
 
+class _StrictYAMLError(yaml.YAMLError):
+    """A document :class:`_StrictLoader` refuses (the message says why, with the line)."""
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses duplicate keys and documents expanding to more than
+    :data:`MAX_NODES` values, and reads ``1e-3`` / ``1E6`` as numbers (YAML 1.2)."""
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            seen: dict[Any, int] = {}
+            for key_node, _ in node.value:
+                if not isinstance(key_node, yaml.ScalarNode) or key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key = self.construct_object(key_node)
+                line = key_node.start_mark.line + 1
+                if key in seen:
+                    raise _StrictYAMLError(f"line {line}: duplicate key {show_value(key)} (first at line {seen[key]}); "
+                                           "each key may appear once in a mapping")
+                seen[key] = line
+        return super().construct_mapping(node, deep=deep)
+
+    def get_single_data(self):
+        node = self.get_single_node()
+        if node is None:
+            return None
+        _check_expansion(node)
+        return self.construct_document(node)
+
+
+_StrictLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
+
+
+def _check_expansion(root: yaml.Node) -> None:
+    """Refuse a node graph whose aliases expand to more than :data:`MAX_NODES` values, or that refers to itself."""
+    size: dict[int, int] = {}
+    state: dict[int, int] = {}   # 1: being counted, 2: counted
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, children_done = stack.pop()
+        key = id(node)
+        children = ([n for pair in node.value for n in pair] if isinstance(node, yaml.MappingNode)
+                    else list(node.value) if isinstance(node, yaml.SequenceNode) else [])
+        if children_done:
+            size[key] = min(MAX_NODES + 1, 1 + sum(size[id(c)] for c in children))
+            state[key] = 2
+            if size[key] > MAX_NODES:
+                raise _StrictYAMLError(f"line {node.start_mark.line + 1}: the document expands to more than {MAX_NODES} "
+                                       "values through its aliases (&anchor / *alias); a config is far smaller")
+            continue
+        if state.get(key) == 2:
+            continue
+        if state.get(key) == 1:
+            raise _StrictYAMLError(f"line {node.start_mark.line + 1}: an alias refers to a value that contains it (recursive)")
+        state[key] = 1
+        stack.append((node, True))
+        for c in children:
+            if state.get(id(c)) == 1:
+                raise _StrictYAMLError(f"line {c.start_mark.line + 1}: an alias refers to a value that contains it (recursive)")
+            if state.get(id(c)) != 2:
+                stack.append((c, False))
+
+
 def load_yaml(path: str | Path) -> dict[str, Any]:
-    """Read a YAML mapping, with a clear error for a missing or malformed file."""
+    """Read a YAML mapping strictly (module docstring), with a clear error for a missing or malformed file.
+
+    Raises:
+        ConfigError: naming the file (and the line): missing, larger than :data:`MAX_CONFIG_BYTES`,
+            not UTF-8, not YAML, a duplicate key, aliases expanding beyond :data:`MAX_NODES`
+            values, or not a mapping.
+    """
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"{path}: config file not found")
+    with open(path, "rb") as fh:
+        raw = fh.read(MAX_CONFIG_BYTES + 1)
+    if len(raw) > MAX_CONFIG_BYTES:
+        raise ConfigError(f"{path}: larger than {MAX_CONFIG_BYTES >> 20} MiB; expected a YAML config")
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        data = yaml.load(raw.decode("utf-8"), Loader=_StrictLoader)  # noqa: S506 - a SafeLoader subclass
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not a UTF-8 text file (byte {exc.start}); expected a YAML config") from None
+    except _StrictYAMLError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
+        raise ConfigError(f"{path}: not valid YAML: {str(exc)[:1000]}") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: nested too deeply; expected a YAML config") from None
     if data is None:
         return {}
     if not isinstance(data, dict):

@@ -15,6 +15,7 @@ __all__ = [
     "RobotModelError",
     "CheckpointError",
     "OutputExistsError",
+    "OutputBusyError",
     "PredictorInputError",
     "StalePredictorError",
     "EnvironmentProblem",
@@ -43,6 +44,10 @@ class CheckpointError(BemlearnError, ValueError):
 
 class OutputExistsError(BemlearnError, FileExistsError):
     """A command would replace existing outputs; the message lists them and says ``use --force``."""
+
+
+class OutputBusyError(OutputExistsError):
+    """Another bemlearn command is writing the same output folder right now; the message names it."""
 
 
 class PredictorInputError(BemlearnError, ValueError):

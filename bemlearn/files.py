@@ -8,20 +8,27 @@
 - :func:`check_outputs` refuses to replace existing files unless ``force``
   (:class:`~bemlearn.errors.OutputExistsError` listing them and saying ``use --force``).
 - :func:`new_run_dir` names a new timestamped run folder ``runs/<name>-YYYYmmdd-HHMMSS``
-  that does not exist yet; :func:`created_dir` creates a folder and removes it again if the
-  command that created it fails.
+  that does not exist yet (``create=True`` creates it exclusively, so two commands never
+  share it); :func:`created_dir` creates a folder and removes it again if the command that
+  created it fails.  Commands claim their outputs with :func:`bemlearn.outputs.claim_outputs`.
+- A write that fails because the disk is full or read-only (``ENOSPC``, ``EDQUOT``,
+  ``EROFS``, ``EACCES``, ``EFBIG``, ``EIO``) becomes one :class:`~bemlearn.errors.EnvironmentProblem`
+  naming the file, with no temporary left behind (:func:`write_problem`).
+  :func:`atomic_write_files` writes a set of files all or none (each temporary written and
+  synced first, then renamed), after :func:`check_free_space` found room for all of them.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import logging
 import os
 import shutil
 import tempfile
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 
 from bemlearn.errors import EnvironmentProblem, OutputExistsError
@@ -36,7 +43,31 @@ __all__ = [
     "new_run_dir",
     "created_dir",
     "check_writable",
+    "check_free_space",
+    "atomic_write_files",
+    "write_problem",
+    "INTERNAL_PREFIX",
 ]
+
+#: Names bemlearn keeps inside an output folder for itself (lock file, backups): never an output.
+INTERNAL_PREFIX = ".bemlearn-"
+
+#: ``errno`` values of a write that failed because of the machine, not the program.
+WRITE_ERRNOS = {errno.ENOSPC: "no space left on device", errno.EROFS: "read-only file system",
+                errno.EACCES: "permission denied", errno.EPERM: "operation not permitted",
+                errno.EFBIG: "file too large", errno.EIO: "input/output error"}
+if hasattr(errno, "EDQUOT"):
+    WRITE_ERRNOS[errno.EDQUOT] = "disk quota exceeded"
+
+
+def write_problem(path: str | os.PathLike[str], exc: OSError) -> EnvironmentProblem | None:
+    """The :class:`EnvironmentProblem` for a write of ``path`` that failed with ``exc``, or ``None``
+    when ``exc`` is not a full / read-only / unwritable disk (a bug or a missing file stays itself)."""
+    if exc.errno not in WRITE_ERRNOS:
+        return None
+    name = errno.errorcode.get(exc.errno, str(exc.errno))
+    return EnvironmentProblem(f"cannot write {path}: {WRITE_ERRNOS[exc.errno]} ({name}); "
+                              f"nothing was written there and no temporary file was left")
 
 log = logging.getLogger(__name__)
 
@@ -66,9 +97,12 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     created.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     tmp_dir = path.parent / f".{path.name}.tmp-{os.getpid()}-{time.monotonic_ns() % 10**9}"
-    tmp_dir.mkdir()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp_dir.mkdir()
+    except OSError as exc:
+        raise (write_problem(path, exc) or exc) from None
     tmp = tmp_dir / path.name
     try:
         yield tmp
@@ -78,14 +112,27 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
             os.fsync(fh.fileno())
         os.replace(tmp, path)
         _fsync_dir(path.parent)
+    except OSError as exc:  # a full or read-only disk: one clear error (the temporary is removed below)
+        problem = write_problem(path, exc)
+        if problem is None:
+            raise
+        raise problem from None
     finally:
         shutil.rmtree(tmp_dir, ignore_errors=True)
+
+
+def _write_data(path: Path, data: bytes) -> None:
+    """The one primitive that writes bytes bemlearn holds in memory to a (temporary) file, synced."""
+    with open(path, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically (see :func:`atomic_path`); returns ``path``."""
     with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
+        _write_data(tmp, data)
     return Path(path)
 
 
@@ -94,12 +141,77 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def check_free_space(sizes: Mapping[str | os.PathLike[str], int], *, margin: int = 1 << 16) -> None:
+    """Fail before writing when the file systems of ``sizes``' paths lack room for them.
+
+    Args:
+        sizes: path → bytes it will take (paths on one file system are added up).
+        margin: bytes kept free besides (metadata, the rename).
+
+    Raises:
+        EnvironmentProblem: naming the paths, the bytes needed and the bytes free.
+    """
+    need: dict[int, list] = {}
+    for path, size in sizes.items():
+        probe = Path(path).parent
+        while not probe.exists() and probe.parent != probe:
+            probe = probe.parent
+        try:
+            dev = os.stat(probe).st_dev
+        except OSError:
+            continue
+        entry = need.setdefault(dev, [probe, 0, []])
+        entry[1] += int(size)
+        entry[2].append(str(path))
+    for probe, total, paths in need.values():
+        try:
+            free = shutil.disk_usage(probe).free
+        except OSError:  # pragma: no cover - no statvfs: the write itself will tell
+            continue
+        if free < total + margin:
+            raise EnvironmentProblem(f"cannot write {', '.join(paths)}: {total / 2**20:.1f} MiB needed, {free / 2**20:.1f} MiB "
+                                     f"free on the disk of {probe} (no space left on device); nothing was written")
+
+
+def atomic_write_files(files: Mapping[str | os.PathLike[str], bytes]) -> list[Path]:
+    """Write several files all or none: room is checked (:func:`check_free_space`), every temporary
+    is written and synced, and only then are they renamed over their targets; returns the paths.
+
+    Raises:
+        EnvironmentProblem: no room, or a full / read-only disk during the writes (nothing replaced,
+            no temporary left).
+    """
+    items = [(Path(p), data) for p, data in files.items()]
+    check_free_space({p: len(d) for p, d in items})
+    staged: list[tuple[Path, Path]] = []    # (target, temporary folder)
+    current = items[0][0] if items else Path(".")
+    try:
+        for path, data in items:
+            current = path
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp_dir = path.parent / f".{path.name}.tmp-{os.getpid()}-{time.monotonic_ns() % 10**9}"
+            tmp_dir.mkdir()
+            staged.append((path, tmp_dir))
+            _write_data(tmp_dir / path.name, data)
+        for path, tmp_dir in staged:
+            current = path
+            os.replace(tmp_dir / path.name, path)
+        for folder in {p.parent for p, _ in items}:
+            _fsync_dir(folder)
+    except OSError as exc:
+        raise (write_problem(current, exc) or exc) from None
+    finally:
+        for _, tmp_dir in staged:
+            shutil.rmtree(tmp_dir, ignore_errors=True)
+    return [p for p, _ in items]
+
+
 def existing_outputs(paths: Iterable[str | os.PathLike[str]]) -> list[Path]:
-    """The entries of ``paths`` that exist (files, or folders that are not empty)."""
+    """The entries of ``paths`` that exist (files, or folders holding more than bemlearn's own lock and backups)."""
     found = []
     for p in map(Path, paths):
         if p.is_dir():
-            if any(p.iterdir()):
+            if any(not c.name.startswith(INTERNAL_PREFIX) for c in p.iterdir()):
                 found.append(p)
         elif p.exists() or p.is_symlink():
             found.append(p)
@@ -130,18 +242,35 @@ def file_sha256(path: str | os.PathLike[str]) -> str:
     return h.hexdigest()
 
 
-def new_run_dir(name: str, *, root: str | os.PathLike[str] = "runs", now: float | None = None) -> Path:
+def new_run_dir(name: str, *, root: str | os.PathLike[str] = "runs", now: float | None = None, create: bool = False) -> Path:
     """``<root>/<name>-YYYYmmdd-HHMMSS`` that does not exist yet (``-2``, ``-3``, … appended if it does).
 
-    The folder is not created (see :func:`created_dir`).
+    With ``create`` the folder is created, exclusively (``mkdir`` fails on an existing folder,
+    atomically): two commands started in the same second get two folders.  Without it the
+    folder is not created (see :func:`created_dir`).
     """
     stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(now))
     base = Path(root) / f"{name}-{stamp}"
     path, k = base, 1
-    while path.exists():
+    if create:
+        try:
+            Path(root).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise (write_problem(root, exc) or exc) from None
+    while True:
+        if not create:
+            if not path.exists():
+                return path
+        else:
+            try:
+                path.mkdir()
+                return path
+            except FileExistsError:
+                pass
+            except OSError as exc:
+                raise (write_problem(path, exc) or exc) from None
         k += 1
         path = base.with_name(f"{base.name}-{k}")
-    return path
 
 
 def check_writable(folder: str | os.PathLike[str], *, what: str = "--out") -> None:

@@ -229,7 +229,8 @@ def test_export_c_never_overwrites_without_force(tmp_path, capsys):
         export_c(run, out)
     assert paths[1].read_text() == "/* edited */"
     assert main(["export", str(run), "--format", "c", "--out", str(out)]) == 2
-    assert "already exist" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "would overwrite" in err and "bem_predictor.c" in err and "use --force" in err
     assert main(["export", str(run), "--format", "c", "--out", str(out), "--force", "--dtype", "float64"]) == 0
     assert paths[1].read_text().startswith("/* bem_predictor.c")
     assert sorted(p.name for p in out.iterdir()) == ["bem_predictor.c", "bem_predictor.h"]   # no temporary files left

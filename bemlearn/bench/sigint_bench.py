@@ -1,15 +1,17 @@
-"""Ctrl-C latency of ``bemlearn train`` (``bemlearn bench sigint``).
+"""Ctrl-C (and SIGTERM) latency of ``bemlearn train`` (``bemlearn bench sigint``).
 
 Starts ``python -m bemlearn train`` in a child process on the shipped data with
 ``dataset.n_points`` training points, waits until the fit has run for ``delay_s`` seconds
-(after the ``dataset:`` log line), sends SIGINT and times until the process exits.  Checks
-that it exited with status 130 and left a loadable checkpoint marked ``interrupted``.
+(after the ``dataset:`` log line), sends SIGINT (or ``signum``, e.g. SIGTERM) and times until
+the process exits.  Checks that it exited with status 128 + signum (130 for SIGINT, 143 for
+SIGTERM) and left a loadable checkpoint marked ``interrupted``.
 With ``twice=True`` a second SIGINT follows the first after ``second_after_s`` and the time
 to exit after the second one is reported (it must end the process at once).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -28,7 +30,7 @@ def _reader(stream, lines: list[str], started: threading.Event, stamps: dict[str
     for line in iter(stream.readline, ""):
         lines.append(line)
         for key, marker in (("stopped", "keeping the best parameters"), ("checkpoint", "wrote checkpoint"),
-                            ("reported", "bemlearn train: interrupted")):
+                            ("reported", "bemlearn train: interrupted"), ("reported", "bemlearn train: terminated")):
             if marker in line and key not in stamps:
                 stamps[key] = time.perf_counter()
         if "dataset:" in line:
@@ -48,8 +50,13 @@ def measure_sigint(
     second_after_s: float = 0.2,
     timeout_s: float = 600.0,
     threads: int = 1,
+    signum: int = signal.SIGINT,
+    workdir: str | os.PathLike[str] | None = None,
 ) -> dict:
-    """One measurement (module docstring); returns latencies in seconds and what was left behind."""
+    """One measurement (module docstring); returns latencies in seconds and what was left behind.
+
+    ``workdir`` keeps the config (``config.yaml``) and the run folder (``run/``) there instead
+    of in a temporary folder (e.g. to ``train --resume`` from the interrupted checkpoint)."""
     from bemlearn.export.checkpoint import load_checkpoint
 
     cfg = yaml.safe_load(Path(config).read_text())
@@ -57,7 +64,7 @@ def measure_sigint(
     cfg.setdefault("train", {}).update(kind=kind, max_iter=max_iter, tol=0.0)
     if kind != "exact":  # the sparse fit of `bemlearn bench train`: M = 512 inducing points
         cfg["train"]["n_inducing"] = 512
-    with tempfile.TemporaryDirectory(prefix="bemlearn-sigint-") as tmp:
+    with (contextlib.nullcontext(str(workdir)) if workdir is not None else tempfile.TemporaryDirectory(prefix="bemlearn-sigint-")) as tmp:
         cfg_path = Path(tmp) / "config.yaml"
         cfg_path.write_text(yaml.safe_dump(cfg, sort_keys=False))
         out = Path(tmp) / "run"
@@ -76,12 +83,12 @@ def measure_sigint(
         if proc.poll() is not None:
             raise RuntimeError(f"bench sigint: the fit ended before the signal; raise max_iter ({''.join(lines)[-2000:]})")
         t0 = time.perf_counter()
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(signum)
         t_second = None
         if twice:
             time.sleep(second_after_s)
             if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
+                proc.send_signal(signum)
                 t_second = time.perf_counter()
         try:
             rc = proc.wait(timeout_s)

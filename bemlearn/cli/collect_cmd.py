@@ -32,21 +32,25 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     from bemlearn.data.collect import collect
     from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
-    from bemlearn.files import new_run_dir
+    from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.config import load_pipeline_config
     from bemlearn.pipeline.preflight import preflight
 
-    if args.out is None:
-        args.out = new_run_dir("collect") / "data.npz"
-    if args.out.suffix.lower() not in (".npz", ".csv"):
+    target = args.out or Path("data.npz")   # without --out: data.npz in a new runs/collect-<timestamp>
+    if target.suffix.lower() not in (".npz", ".csv"):
         raise ValueError(f"--out: expected a .npz or .csv file name, got {args.out}")
-    preflight(config=args.config, outputs=[args.out, ground_truth_path(args.out)], out_dir=args.out.parent, force=args.force)
+    names = (target.name, ground_truth_path(target).name)
+    preflight(config=args.config, outputs=[args.out, ground_truth_path(args.out)] if args.out else [],
+              out_dir=args.out.parent if args.out else Path("runs"), force=args.force)
     cfg = load_pipeline_config(args.config)
     overrides = {k: v for k, v in (("n_trials", args.trials), ("seed", args.seed), ("workers", args.workers)) if v is not None}
     ccfg = dataclasses.replace(cfg.collect, **overrides)
-    data, truth = collect(cfg.robot, ccfg, progress=not args.no_progress)
-    write_trajectory(data, args.out)
-    gt = write_trajectory(truth, ground_truth_path(args.out))
+    with claim_outputs(args.out.parent if args.out else None, entries=names, default_name="collect", force=args.force,
+                       what="collect") as folder:   # the data file and its ground truth: both or neither
+        args.out = folder / target.name
+        data, truth = collect(cfg.robot, ccfg, progress=not args.no_progress)
+        write_trajectory(data, args.out)
+        gt = write_trajectory(truth, ground_truth_path(args.out))
     n_failed = sum(data.meta.trial_failed.values())
     print(f"wrote {args.out}: {len(data.meta.trial_failed)} trials ({n_failed} fell), {data.n_samples} samples at {ccfg.rate_hz:g} Hz")
     print(f"wrote {gt}: ground truth (true q, q̇, q̈) for evaluation")

@@ -124,13 +124,16 @@ def run_convert(args: argparse.Namespace) -> int:
             f"{args.output}: unsupported output suffix {args.output.suffix!r}; expected one of {list(SUFFIXES)}"
         )
     from bemlearn.files import check_outputs
+    from bemlearn.outputs import claim_outputs
 
     check_outputs([args.output], args.force, what="data convert")
     if args.output.resolve() == args.input.resolve():
         raise ValueError(f"{args.output}: output is the input file")
     limits = {"min_trial_samples": args.min_trial_samples, "rate_rtol": args.rate_rtol, "jitter_rtol": args.jitter_rtol}
-    traj = read_trajectory(args.input, **limits)
-    write_trajectory(traj, args.output, **limits)
+    # the output folder is checked writable and locked before the input is read
+    with claim_outputs(args.output.parent, entries=[args.output.name], force=args.force, what="data convert"):
+        traj = read_trajectory(args.input, **limits)
+        write_trajectory(traj, args.output, **limits)
     print(f"wrote {args.output} ({traj.n_samples} samples, {len(traj.meta.trial_failed)} trials)")
     return 0
 
@@ -141,13 +144,17 @@ def run_import(args: argparse.Namespace) -> int:
 
     if args.out.suffix.lower() not in SUFFIXES:
         raise ValueError(f"{args.out}: unsupported output suffix {args.out.suffix!r}; expected one of {list(SUFFIXES)}")
+    from bemlearn.outputs import claim_outputs
+
     if args.out.exists() and not args.force:
         raise OutputExistsError(f"{args.out}: already exists (use --force to overwrite)")
     if any(args.out.resolve() == p.resolve() for p in args.raw):
         raise ValueError(f"{args.out}: output is one of the input files")
-    imap = load_import_map(args.map)
-    traj = import_logs(args.raw, imap)
-    write_trajectory(traj, args.out)
+    # the output folder is checked writable and locked before the map and the logs are read
+    with claim_outputs(args.out.parent, entries=[args.out.name], force=args.force, what="data import"):
+        imap = load_import_map(args.map)
+        traj = import_logs(args.raw, imap)
+        write_trajectory(traj, args.out)
     info = traj.meta.extra["import"]
     filled = (f"{info['filled_samples']} grid samples more than ½ step from any stamp" if info.get("resample") else
               f"{info['filled_samples']} dropped samples interpolated")

@@ -27,6 +27,21 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    from bemlearn.export.checkpoint import load_checkpoint
+    from bemlearn.export.staleness import check_run_predictors
+    from bemlearn.files import check_outputs
+    from bemlearn.outputs import claim_outputs
+
+    ck = load_checkpoint(args.run_dir)
+    check_run_predictors(ck.path.parent)
+    names = ("evaluation.json", "evaluation.png")
+    check_outputs([ck.path.parent / n for n in names], args.force, what="evaluate")
+    with claim_outputs(ck.path.parent, entries=names, force=args.force, what="evaluate"):  # both files or neither
+        return _evaluate(args, ck)
+
+
+def _evaluate(args, ck) -> int:
+    """The evaluation of checkpoint ``ck`` (claimed by :func:`run`) into its run folder."""
     import dataclasses
 
     import matplotlib
@@ -35,16 +50,10 @@ def run(args) -> int:
     import matplotlib.pyplot as plt
 
     from bemlearn.config import from_dict, load_yaml
-    from bemlearn.export.checkpoint import load_checkpoint
+    from bemlearn.files import atomic_path, atomic_write_text
     from bemlearn.pipeline.evaluation import EvaluationConfig, evaluate_bem, held_out_references, run_truth_robot
     from bemlearn.pipeline.resolve import complete_section
 
-    from bemlearn.export.staleness import check_run_predictors
-    from bemlearn.files import atomic_path, atomic_write_text, check_outputs
-
-    ck = load_checkpoint(args.run_dir)
-    check_run_predictors(ck.path.parent)
-    check_outputs([ck.path.parent / "evaluation.json", ck.path.parent / "evaluation.png"], args.force, what="evaluate")
     out = ck.path.parent
     robot, ref = run_truth_robot(out, model=args.model)
     cfg_path = out / "config.yaml"

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from bemlearn.export.export_run import export_run
+from bemlearn.export.export_run import export_run, export_targets
 
 __all__ = ["add_parser", "run"]
 
@@ -49,13 +49,15 @@ def _add_c_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _run_c(args: argparse.Namespace) -> int:
     from bemlearn.export.c_export import export_c
+    from bemlearn.export.c_source import check_prefix
+    from bemlearn.outputs import claim_outputs
 
     if args.out is None:
         raise ValueError("--format c: give the output folder with --out DIR")
-    try:
-        paths = export_c(args.run_dir, args.out, prefix=args.prefix, dtype=args.dtype, force=args.force)
-    except FileExistsError as exc:
-        raise ValueError(str(exc)) from exc
+    names = [f"{check_prefix(args.prefix)}_predictor.h", f"{args.prefix}_predictor.c"]
+    # the folder is checked writable and locked before the work; both files or neither
+    with claim_outputs(args.out, entries=names, force=args.force, what="export") as out:
+        paths = export_c(args.run_dir, out, prefix=args.prefix, dtype=args.dtype, force=args.force)
     for path in paths:
         print(f"wrote {path}")
     return 0
@@ -66,6 +68,12 @@ def run(args: argparse.Namespace) -> int:
         return _run_c(args)
     if args.prefix != "bem" or args.dtype != "float64":
         raise ValueError("--prefix and --dtype apply to --format c only")
-    for path in export_run(args.run_dir, out=args.out, fmt=args.fmt, verify=not args.no_verify, force=args.force):
+    from bemlearn.outputs import claim_outputs
+
+    targets = export_targets(args.run_dir, out=args.out, fmt=args.fmt)
+    # the folder is checked writable and locked before the work; all files or none
+    with claim_outputs(targets[0].parent, entries=[p.name for p in targets], force=args.force, what="export"):
+        written = export_run(args.run_dir, out=args.out, fmt=args.fmt, verify=not args.no_verify, force=args.force)
+    for path in written:
         print(f"wrote {path}")
     return 0

@@ -11,13 +11,14 @@ import argparse
 import importlib
 import logging
 import os
+import signal
 import sys
 
 from bemlearn._version import __version__
 from bemlearn.applications import applications
 from bemlearn.config import ConfigError
 from bemlearn.errors import BemlearnError
-from bemlearn.interrupts import sigint_handling
+from bemlearn.interrupts import exit_status, interrupt_signal, sigint_handling
 
 __all__ = ["main", "build_parser"]
 
@@ -62,21 +63,29 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 0
+    received = None
     try:
-        with sigint_handling():  # Ctrl-C: stop soon keeping the best state; twice: exit at once
-            return int(args.func(args) or 0)
+        # Ctrl-C or SIGTERM: stop soon keeping the best state; a second signal: exit at once
+        with sigint_handling():
+            try:
+                return int(args.func(args) or 0)
+            except KeyboardInterrupt:
+                received = interrupt_signal()
+                raise
     except (BemlearnError, ConfigError, ValueError, FileNotFoundError, KeyError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         print(f"bemlearn {args.command}: error: {msg}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"bemlearn {args.command}: interrupted", file=sys.stderr)
+        status = exit_status(received)
+        what = "interrupted" if received in (None, signal.SIGINT) else f"terminated ({received.name})"
+        print(f"bemlearn {args.command}: {what}", file=sys.stderr)
         if argv is None:  # the real command line: outputs are written and closed, skip the slow teardown
             logging.shutdown()
             sys.stdout.flush()
             sys.stderr.flush()
-            os._exit(130)
-        return 130
+            os._exit(status)
+        return status
 
 
 if __name__ == "__main__":  # pragma: no cover

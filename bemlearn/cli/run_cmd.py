@@ -43,7 +43,7 @@ def add_parser(sub) -> None:
 
 def _run(args) -> int:
     from bemlearn.applications import get_application
-    from bemlearn.files import created_dir, new_run_dir
+    from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.preflight import preflight
 
     raw = preflight(config=args.config, device=args.device)
@@ -58,15 +58,16 @@ def _run(args) -> int:
 
         resolved = resolve_pipeline_config(args.config)  # strict parse and model-derived values, before any folder exists
     stem = Path(str(raw["robot"])).stem if "robot" in raw else Path(str(raw.get("data", "run"))).stem
-    args.out = args.out or new_run_dir(stem)
-    preflight(out_dir=args.out, outputs=[args.out], force=args.force)
-    with created_dir(args.out, keep_on_interrupt=["data.npz", "checkpoint.pt"]):
+    preflight(out_dir=args.out or Path("runs"), outputs=[args.out] if args.out else [], force=args.force)
+    # claimed: created exclusively and locked; a failed --force puts the folder back as it was
+    with claim_outputs(args.out, default_name=stem, force=args.force, keep_on_interrupt=["data.npz", "checkpoint.pt"],
+                       what="run") as claimed:
         if app is not None:
-            out = app.run(args.config, args.out, device=args.device, progress=not args.no_progress)
+            out = app.run(args.config, claimed, device=args.device, progress=not args.no_progress)
         else:
             from bemlearn.pipeline.run import run_pipeline
 
-            out = run_pipeline(resolved, args.out, device=args.device, progress=not args.no_progress)
+            out = run_pipeline(resolved, claimed, device=args.device, progress=not args.no_progress)
     print((out / "report.md").read_text())
     print(f"\nrun folder: {out}")
     return _print_verdict(out, strict=args.strict)
@@ -91,13 +92,12 @@ def _print_verdict(out: Path, *, strict: bool) -> int:
 
 def _simulate(args) -> int:
     from bemlearn.export.staleness import check_predictor_matches
-    from bemlearn.files import created_dir, new_run_dir
+    from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.preflight import preflight
     from bemlearn.pipeline.resolve import resolve_pipeline_config
     from bemlearn.pipeline.simulate import simulate_stage
 
-    args.out = args.out or new_run_dir("simulate")
-    preflight(config=args.config, out_dir=args.out, outputs=[args.out / "simulate"], force=args.force)
+    preflight(config=args.config, out_dir=args.out or Path("runs"), outputs=[args.out / "simulate"] if args.out else [], force=args.force)
     cfg = resolve_pipeline_config(args.config).config
     if cfg.robot is None:
         raise ValueError(f"{args.config}: simulate needs a robot (a model to simulate); the config names only data")
@@ -108,7 +108,8 @@ def _simulate(args) -> int:
         from bemlearn.sim.render import require_offscreen_backend
 
         require_offscreen_backend()
-    with created_dir(args.out, keep_on_interrupt=[]):
+    with claim_outputs(args.out, entries=["simulate", "tb/simulate"], default_name="simulate", force=args.force,
+                       what="simulate") as args.out:
         return _simulate_into(args, cfg, simulate_stage)
 
 

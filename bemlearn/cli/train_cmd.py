@@ -27,8 +27,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    from bemlearn.export.staleness import remove_stale_predictors
-    from bemlearn.files import created_dir, new_run_dir
+    from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.config import load_pipeline_config
     from bemlearn.pipeline.preflight import preflight
     from bemlearn.pipeline.train import train_run
@@ -41,17 +40,20 @@ def run(args) -> int:
                          f"(collect one with `bemlearn collect {args.config} --out FILE`)")
     if not data.is_file():
         raise FileNotFoundError(f"--data: trajectory file {data} not found (collect one with `bemlearn collect {args.config} --out {data}`)")
-    out = args.out or new_run_dir("train")
-    if args.resume and not (out / "checkpoint.pt").is_file():
-        raise FileNotFoundError(f"--resume: no checkpoint in {out}")
-    preflight(data=data, out_dir=out, outputs=[] if args.resume else [out], force=args.force)
-    try:
-        with created_dir(out, keep_on_interrupt=["checkpoint.pt"]):
+    if args.resume and args.out is None:
+        raise ValueError("--resume: give the run folder to continue with --out RUN")
+    if args.resume and not (args.out / "checkpoint.pt").is_file():
+        raise FileNotFoundError(f"--resume: no checkpoint in {args.out}")
+    preflight(data=data, out_dir=args.out or Path("runs"), outputs=[] if args.resume or args.out is None else [args.out], force=args.force)
+    # the run folder is claimed (created exclusively, locked); a failed --force / --resume puts it back as it was
+    with claim_outputs(args.out, default_name="train", force=args.force, resume=args.resume,
+                       keep_on_interrupt=["checkpoint.pt"], what="train") as out:
+        try:
             m = train_run(cfg, data, out, device=args.device, resume=args.resume, progress=not args.no_progress, threads=args.threads)
-    finally:
-        if out.is_dir() and (args.force or args.resume):
-            for p in remove_stale_predictors(out):
-                print(f"removed {p}: exported from the previous checkpoint (re-export with `bemlearn export {out}`)")
+        except KeyboardInterrupt:  # an interrupted checkpoint is kept: the old predictors no longer match it
+            _remove_stale(out, args)
+            raise
+        _remove_stale(out, args)
     unit = m["output_unit"]
     print(f"run folder: {out}")
     print(f"fit: {m['fit'].get('stop_reason')} in {m['fit'].get('seconds', float('nan')):.1f} s on {m['n_train']} points")
@@ -69,3 +71,12 @@ def run(args) -> int:
               f"{b['median_band_std_over_rmse']:.2f}; eq. (13)/(15) bound at κ = 2 violated {100 * v['observed']:.1f}% "
               f"(nominal {100 * v['nominal']:.1f}%)")
     return 0
+
+
+def _remove_stale(out: Path, args) -> None:
+    """``--force`` / ``--resume``: remove the predictors exported from the checkpoint this run replaced."""
+    from bemlearn.export.staleness import remove_stale_predictors
+
+    if (args.force or args.resume) and (out / "checkpoint.pt").is_file():
+        for p in remove_stale_predictors(out):
+            print(f"removed {p}: exported from the previous checkpoint (re-export with `bemlearn export {out}`)")

@@ -28,13 +28,12 @@ class PredictorBEM:
     name = "predictor"
 
     def __init__(self, path: str | Path, *, robot=None) -> None:
+        from bemlearn.safe_load import load_script_module
+
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"BEM predictor file {path} not found (run `bemlearn export RUN_DIR` first)")
-        try:
-            self.module = torch.jit.load(str(path), map_location="cpu")
-        except RuntimeError as exc:
-            raise ValueError(f"{path}: not a TorchScript BEM predictor: {exc}") from exc
+        self.module = load_script_module(path)  # CheckpointError (a ValueError) for a foreign or tampered file
         self.meta = json.loads(self.module.metadata())
         if robot is not None:
             if self.meta.get("robot") != robot.name or int(self.meta.get("m", -1)) != robot.m:

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bemlearn.config import Limit, config_limits
 from bemlearn.robots.reference import CompositeSinusoid
 
 __all__ = ["EICGains", "EICController"]
@@ -67,6 +68,10 @@ class EICGains:
     kd_u: float | None = None
     deriv_step: float = 0.01
     momentum_correction: bool = True
+
+
+config_limits(EICGains, kp_a=Limit(ge=0, unit="1/s^2"), kd_a=Limit(ge=0, unit="1/s"), kp_u=Limit(ge=0, unit="1/s^2"),
+              kd_u=Limit(ge=0, unit="1/s"), deriv_step=Limit(gt=0, le=1, unit="s"))
 
 
 class EICController:

@@ -178,11 +178,11 @@ def simulate_trial(robot, config: CollectConfig, trial_id: int, seed_seq: np.ran
 _WORKER_ROBOT = None
 
 
-def _worker_init(robot_name: str) -> None:
+def _worker_init(robot_name: str, parent_pid: int) -> None:
     global _WORKER_ROBOT
-    import signal
+    from bemlearn.child_processes import die_with_parent
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and ends the workers
+    die_with_parent(parent_pid)  # ends with the parent whatever ends it (SIGTERM, kill -9); ignores Ctrl-C
     _WORKER_ROBOT = _robot_and_model(robot_name)
 
 
@@ -218,7 +218,7 @@ def collect(robot_name: str, config: CollectConfig, *, progress: bool = True) ->
         import multiprocessing as mp
 
         ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
-        pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init, initargs=(robot_name,))
+        pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init, initargs=(robot_name, os.getpid()))
         try:
             for res in pool.map(_worker_run, jobs, chunksize=1):
                 results.append(res)

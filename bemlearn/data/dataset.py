@@ -32,6 +32,7 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
+from bemlearn.config import Limit, config_limits
 from bemlearn.data.dataset_types import BEMDataset, GPDatasets
 from bemlearn.data.derivative_choice import estimate_states, resolve_estimator
 from bemlearn.data.derivatives import DerivativeEstimator, make_estimator
@@ -99,6 +100,10 @@ class DatasetConfig:
 
         opts = {f.name: getattr(estimator, f.name) for f in dc.fields(estimator)} if dc.is_dataclass(estimator) else dict(self.derivative_options)
         return dc.replace(self, derivative=estimator.name, derivative_options=opts)
+
+
+# (the lower bounds of qu_window, n_points, n_val_points and val_fraction are checked by __post_init__)
+config_limits(DatasetConfig, n_points=Limit(le=10**8), n_val_points=Limit(le=10**8), seed=Limit(ge=0))
 
 
 def split_trials(

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bemlearn.config import Limit, config_limits
+
 __all__ = ["SensorConfig", "Encoder", "FilteredDifferentiator"]
 
 
@@ -49,6 +51,10 @@ class SensorConfig:
     def step(self) -> float:
         """Quantization step, rad (0 when disabled)."""
         return 2 * math.pi / self.counts_per_rev if self.counts_per_rev else 0.0
+
+
+config_limits(SensorConfig, counts_per_rev=Limit(ge=0, le=2**31), noise_std=Limit(ge=0, unit="rad"),
+              velocity_cutoff=Limit(gt=0, unit="rad/s"), m_per_count=Limit(ge=0, unit="m"))
 
 
 class Encoder:

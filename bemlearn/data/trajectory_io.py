@@ -21,6 +21,7 @@ import numpy as np
 
 from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, TrajectoryMeta
 from bemlearn.files import atomic_path
+from bemlearn.safe_load import open_npz
 from bemlearn.data.validation import JITTER_RTOL, MIN_TRIAL_SAMPLES, RATE_RTOL, RobotLike, column_names, validate
 
 __all__ = ["read_trajectory", "read_ground_truth", "write_trajectory", "ground_truth_path", "CSV_MAGIC", "SUFFIXES"]
@@ -158,7 +159,7 @@ def _write_npz(traj: Trajectory, path: Path) -> None:
 
 def _read_npz(path: Path) -> Trajectory:
     try:
-        with np.load(path, allow_pickle=False) as npz:
+        with open_npz(path) as npz:  # allow_pickle=False: object arrays are refused
             arrays = {k: npz[k] for k in npz.files}
     except (zipfile.BadZipFile, OSError, ValueError, EOFError, zlib.error) as exc:
         raise TrajectoryFormatError(f"{path}: not a readable NPZ file ({exc})") from None

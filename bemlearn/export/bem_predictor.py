@@ -107,10 +107,12 @@ class BEMPredictor(nn.Module):
             return "BEMPredictor.{}: x[{}, {}] is {}; inputs must be finite ({} non-finite entries)".format(
                 method, r, c, float(x[r, c]), bad.size(0)
             )
-        return "BEMPredictor.{}: x has finite entries too large to evaluate (magnitude above ~1e140)".format(method)
+        return ("BEMPredictor.{}: x has finite entries too large to evaluate: the kernel cannot be evaluated in float64 "
+                "(||(x - x_mean) / (x_std * lengthscale)|| above 1e150)").format(method)
 
     def _check_finite(self, mean: torch.Tensor, x: torch.Tensor, method: str) -> None:
-        # A non-finite x always makes the mean non-finite (sentinel column, see FoldedPosterior),
+        # A non-finite x, or one too far from the data for float64 (||u|| > 1e150), always makes the mean
+        # non-finite (sentinel column, see FoldedPosterior),
         # so one reduction of the (B,) mean replaces a pass over x.
         if torch.jit.is_scripting():
             total = float(mean) if mean.size(0) == 1 else float(mean.sum())

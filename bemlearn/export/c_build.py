@@ -19,8 +19,8 @@ __all__ = ["find_cc", "compile_shared", "CPredictorLibrary", "PORTABLE_FLAGS", "
 
 #: Recommended, portable build flags (no -march, no -ffast-math: results independent of the CPU).
 PORTABLE_FLAGS = ("-std=c99", "-O2")
-#: Warnings the tests demand (issue 17).
-STRICT_FLAGS = ("-std=c99", "-Wall", "-Werror")
+#: Warnings the tests demand (issue 17; -Wextra -pedantic: issue 22, what docs/c-export.md promises).
+STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror")
 
 
 def find_cc() -> str | None:

@@ -161,7 +161,7 @@ def c_posterior(post: FoldedPosterior, *, form: Literal["folded", "distance"] = 
         raise ValueError(f"FoldedPosterior.G: expected (M + 1, n + 1 + K) = ({M + 1}, {n + 1} + K) with column n the "
                          f"mean weights w and the sentinel row zero, got shape {G.shape}")
     gamma, P = _np(post.gamma), np.ascontiguousarray(G[:M, :n].T)
-    y0 = float(_np(post.offset)[0]) + float(_np(post.w)[M])   # offset = y_mean − sentinel weight
+    y0 = float(_np(post.offset)[0])                 # = y_mean: the sentinel adds exactly 0 to evaluable inputs
     return CPosterior(
         form=form, centered=bool(post.centered) or form == "distance", a=_np(post.a), nb=_np(post.nb),
         W=np.ascontiguousarray(lin.T), W2=W2, c=c, w=w, y0=y0, var0=float(post.var0),

@@ -39,12 +39,12 @@ from bemlearn.export.c_exp import EXP_BLOCK_F64, EXP_BLOCK_LIBM
 from bemlearn.export.c_std_templates import (BAND_GRADIENT, DENSE_STD, ESTIMATOR_TERM, FACTORED_STD, KERNELS, NO_BAND_GRADIENT,
                                              NO_ESTIMATOR_TERM, TRIANGULAR_STD)
 from bemlearn.export.c_templates import DISTANCE_EXPONENTS, FOLDED_EXPONENTS, HEADER, POSTERIOR, SOURCE
-from bemlearn.export.folded_posterior import FoldedPosterior
+from bemlearn.export.folded_posterior import SENTINEL_BOUND, FoldedPosterior
 from bemlearn.export.metadata import PredictorMetadata
 from bemlearn.export.variance_factor import VarianceFactor
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["c_sources", "check_prefix", "CDtype", "ERROR_CODES", "BLOCK", "F32_MEAN_TOL", "F32_STD_RTOL"]
+__all__ = ["c_sources", "check_prefix", "machine_independent", "CDtype", "ERROR_CODES", "BLOCK", "F32_MEAN_TOL", "F32_STD_RTOL"]
 
 CDtype = Literal["float64", "float32"]
 
@@ -83,11 +83,29 @@ def _array(name: str, values: np.ndarray, dtype: CDtype, real: str) -> str:
     return f"static const {real} {name}[{len(items)}] = {{\n    " + ",\n    ".join(lines) + "\n};\n"
 
 
-def _c_string(text: str, width: int = 96) -> str:
-    """``text`` (ASCII) as adjacent C string literals; ``?`` escaped against trigraphs."""
-    def esc(chunk: str) -> str:
-        return chunk.replace("\\", "\\\\").replace('"', '\\"').replace("?", "\\?")
-    return "\n".join(f'    "{esc(text[i : i + width])}"' for i in range(0, len(text), width)) or '    ""'
+def _c_chars(text: str, per_line: int = 24) -> str:
+    """``text`` (ASCII) as the NUL-terminated initializer of a ``char`` array: its character codes,
+    ``per_line`` a line (no string literal, whose length C99 only guarantees up to 4095 characters)."""
+    codes = [str(b) for b in text.encode("ascii")] + ["0"]
+    return ",\n".join("    " + ", ".join(codes[i : i + per_line]) for i in range(0, len(codes), per_line))
+
+
+_ABS_PATH = re.compile(r"(?<![\w.~:/-])(?:/|[A-Za-z]:[\\/]|~/)(?:[^\s\"'/\\]+[\\/])+([^\s\"'/\\]+)")
+
+
+def machine_independent(doc):
+    """``doc`` (JSON-like) with every absolute file path (``/home/me/data.npz``, ``C:\\x\\y.xml``,
+    ``~/r.xml``), alone or inside a text, reduced to its file name: an exported header carries nothing
+    of the machine that exported it."""
+    if isinstance(doc, dict):
+        return {k: machine_independent(v) for k, v in doc.items()}
+    if isinstance(doc, list):
+        return [machine_independent(v) for v in doc]
+    if isinstance(doc, str):
+        if re.fullmatch(r"(?:/|[A-Za-z]:[\\/]|~/)[^\n]*", doc):     # the whole value is a path
+            return re.split(r"[\\/]", doc.rstrip("/\\"))[-1]
+        return _ABS_PATH.sub(lambda m: m.group(1), doc)
+    return doc
 
 
 def _posterior_constants(p: str, name: str, post: CPosterior, dtype: CDtype, real: str, share_W: str | None,
@@ -232,7 +250,8 @@ def c_sources(
         std=KERNELS.substitute(sub) + "\n" + std + "\n" + (ESTIMATOR_TERM if K else NO_ESTIMATOR_TERM).substitute(sub) + "\n"
             + "\n".join((BAND_GRADIENT if post.banded else NO_BAND_GRADIENT).substitute(sub, name=nm, n=post.n_inputs)
                          for nm, post in (("bem", bem), ("full", full))),
-        posteriors="\n".join(POSTERIOR.substitute(sub, name=nm, n=n, lo=f"{p}_{pre}input_lo", hi=f"{p}_{pre}input_hi")
+        posteriors="\n".join(POSTERIOR.substitute(sub, name=nm, n=n, lo=f"{p}_{pre}input_lo", hi=f"{p}_{pre}input_hi",
+                                                   beyond=f"!(s >= {-0.5 * SENTINEL_BOUND!r}) ? 2 : 0" if dtype == "float64" else "0")
                               for nm, n, pre in (("bem", n_bem, ""), ("full", n_full, "full_"))),
     )
     units = doc["units"]
@@ -246,7 +265,7 @@ def c_sources(
         stack_bytes=size * (M + 2 * BLOCK + n_full) + 1024,
         bem_lo=", ".join(_literal(v, dtype) for v in lo[:n_bem]), bem_hi=", ".join(_literal(v, dtype) for v in hi[:n_bem]),
         full_lo=", ".join(_literal(v, dtype) for v in lo), full_hi=", ".join(_literal(v, dtype) for v in hi),
-        metadata=_c_string(json.dumps(doc, allow_nan=False, ensure_ascii=True, separators=(",", ":"))),
+        metadata=_c_chars(json.dumps(machine_independent(doc), allow_nan=False, ensure_ascii=True, separators=(",", ":"))),
     )
     return {f"{p}_predictor.h": _ascii(header), f"{p}_predictor.c": _ascii(source)}
 

@@ -16,7 +16,8 @@ HEADER = Template(r"""/* ${p}_predictor.h: learned balance equilibrium manifold 
  * (reentrant).  Contract: docs/c-export.md.
  *
  *   $real ${p}_mean(const $real *x)        x = [$bem_columns]
- *       BEM mean mu(x_0^e) in rad (eq. 14); NAN if an entry of x is not finite; no range check.
+ *       BEM mean mu(x_0^e) in rad (eq. 14); NAN if an entry of x is not finite or (float64) x is so far
+ *       from the data that the kernel cannot be evaluated, ||(x - x_mean) / (x_std l)|| > 1e150; no range check.
  *   int ${p}_forward(const $real *x, $real *mean, $real *std)
  *       mean and the calibrated band std (eq. 14, B1), rad; returns ${P}_OK or an error code below:
  *       std^2 = std_scale^2 latent_std^2 + sum_i (input_std_i dmean/dx_i)^2 over the 3m inputs
@@ -25,7 +26,7 @@ HEADER = Template(r"""/* ${p}_predictor.h: learned balance equilibrium manifold 
  *   int ${p}_forward_latent(const $real *x, $real *mean, $real *std)
  *       as ${p}_forward with the latent posterior std of f (eq. 12) instead of the band.
  *   $real ${p}_full_mean(const $real *x)   x = [$full_columns]
- *       mean of the full map f(x) (eq. 11); NAN if an entry of x is not finite.
+ *       mean of the full map f(x) (eq. 11); NAN as for ${p}_mean.
  *   int ${p}_predict_full(const $real *x, $real *mean, $real *std)   as ${p}_forward for f(x),
  *       the band's gradient term over all 3m + 2 inputs.
  *   int ${p}_predict_full_latent(const $real *x, $real *mean, $real *std)   its latent std.
@@ -68,9 +69,13 @@ static const $real ${p}_input_hi[$n_bem] = {$bem_hi};
 static const $real ${p}_full_input_lo[$n_full] = {$full_lo};
 static const $real ${p}_full_input_hi[$n_full] = {$full_hi};
 
-/* Metadata (robot, columns, units, model, hyperparameters, data hash, bemlearn version), JSON. */
-static const char ${p}_metadata_json[] =
-$metadata;
+/* Metadata (robot, columns, units, model, hyperparameters, data hash, bemlearn version), JSON,
+ * NUL-terminated; ${p}_metadata() returns it.  Written as character codes: a string literal this
+ * long would exceed the 4095 characters C99 compilers must support (-pedantic).  File paths in it
+ * are reduced to their file names. */
+static const char ${p}_metadata_json[] = {
+$metadata
+};
 
 $real ${p}_mean(const $real *x);
 int ${p}_forward(const $real *x, $real *mean, $real *std);
@@ -208,7 +213,9 @@ DISTANCE_EXPONENTS = Template(r"""static void ${p}_${name}_exponents(const $real
 """)
 
 # One posterior (BEM or full map): v, q of the query, then the mean alone (k = NULL) or the
-# mean with the kernel row kept in k for the std.
+# mean with the kernel row kept in k for the std.  prepare returns 1 for a non-finite x and
+# 2 (float64) when q = -||u||^2 / 2 < -5e299, i.e. ||u|| > 1e150: beyond, the kernel cannot be
+# evaluated in float64 (the TorchScript module's sentinel rule, bemlearn.export.folded_posterior).
 POSTERIOR = Template(r"""static int ${p}_${name}_prepare(const $real *x, $real *v, $real *q)
 {
     int i;
@@ -219,7 +226,7 @@ POSTERIOR = Template(r"""static int ${p}_${name}_prepare(const $real *x, $real *
         s += ${p}_${name}_W2[i] * v[i] * v[i];
     }
     *q = s;
-    return 0;
+    return $beyond;
 }
 
 /* mean only (the control-loop path) */
@@ -277,7 +284,10 @@ static int ${p}_${name}_eval(const $real *x, $real *mean, $real *std, int band)
         *mean = *std = ($real)NAN;
         return code;
     }
-    ${p}_${name}_prepare(x, v, &q);
+    if (${p}_${name}_prepare(x, v, &q)) {  /* ||u|| > 1e150: the kernel cannot be evaluated */
+        *mean = *std = ($real)NAN;
+        return ${P}_ERR_OUT_OF_RANGE;
+    }
     acc = ${p}_${name}_sum_k(v, q, k);
     *mean = ${p}_y0 + acc;                /* bit for bit ${p}_${name}_sum's mean */
     if (band) {                           /* before latent_var, which overwrites k; the larger of the two terms (eq. B1) */

@@ -14,6 +14,7 @@ Export reads only ``predictor_state`` and ``metadata``; ``model_state`` is for r
 from __future__ import annotations
 
 import dataclasses
+import io
 import logging
 import os
 from dataclasses import dataclass
@@ -26,7 +27,7 @@ from bemlearn.config import ConfigError
 from bemlearn.errors import CheckpointError
 from bemlearn.export.metadata import PredictorMetadata, artifact_metadata
 from bemlearn.models.learned_bem import LearnedBEM
-from bemlearn.files import atomic_path
+from bemlearn.files import atomic_write_files
 from bemlearn.models.predictor_state import GPKind, PredictorState
 
 __all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_NAME", "Checkpoint", "load_checkpoint", "load_learned_bem", "write_checkpoint"]
@@ -157,10 +158,9 @@ def load_checkpoint(run_dir_or_file: str | os.PathLike[str]) -> Checkpoint:
             file and the key.
     """
     path = _checkpoint_path(run_dir_or_file)
-    try:
-        data = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises many types for a corrupt or foreign file
-        raise CheckpointError(f"{path}: cannot be read as a bemlearn checkpoint ({type(exc).__name__}: {exc})") from exc
+    from bemlearn.safe_load import torch_load_weights
+
+    data = torch_load_weights(path, where=path, what="a bemlearn checkpoint")  # weights_only: a pickled callable is refused
     if not isinstance(data, dict):
         raise CheckpointError(f"{path}: expected a dict with keys {list(_TOP_KEYS)}, got {type(data).__name__}")
     missing = [k for k in _TOP_KEYS if k not in data]
@@ -223,8 +223,9 @@ def write_checkpoint(
     }
     _parse_state(data["predictor_state"], predictor_state.kind, "predictor_state")
     data["content_sha256"] = _content_sha256(data)
-    with atomic_path(path) as tmp:
-        torch.save(data, tmp)
+    buf = io.BytesIO()   # in memory: torch's C++ file writer aborts the process on a full disk
+    torch.save(data, buf)
+    atomic_write_files({path: buf.getvalue()})
     if read_back:
         load_checkpoint(path)
     log.info("wrote checkpoint %s (%s GP)", path, predictor_state.kind)

@@ -2,10 +2,12 @@
 
 ``export_run(RUN_DIR)`` reads ``RUN_DIR/checkpoint.pt``, builds the
 :class:`~bemlearn.export.bem_predictor.BEMPredictor`, writes ``RUN_DIR/bem_predictor.pt``
-(TorchScript) and/or ``RUN_DIR/bem_predictor.pt2`` (torch.export), loads each file back and
-compares it on random inputs with a slow dense evaluation of eq. (12)
-(:func:`~bemlearn.export.verify.verify_predictor`), so a file that does not reproduce the
-model is never left behind.
+(TorchScript) and/or ``RUN_DIR/bem_predictor.pt2`` (torch.export): each is serialized in
+memory, loaded back from those bytes and compared on random inputs with a slow dense
+evaluation of eq. (12) (:func:`~bemlearn.export.verify.verify_predictor`), and only then are
+the files written, all or none, after checking the disk has room for them
+(:func:`~bemlearn.files.atomic_write_files`): a file that does not reproduce the model is never
+written, and a full or read-only disk is one clear error with nothing left behind.
 """
 
 from __future__ import annotations
@@ -18,18 +20,33 @@ from typing import Literal
 
 from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.export.checkpoint import load_checkpoint
-from bemlearn.export.pt2 import load_pt2_predictor, save_pt2
-from bemlearn.export.torchscript import load_torchscript, save_torchscript
+from bemlearn.export.pt2 import load_pt2_predictor, pt2_bytes
+from bemlearn.export.torchscript import load_torchscript, torchscript_bytes
 from bemlearn.export.staleness import file_sha256
 from bemlearn.export.verify import verify_predictor
-from bemlearn.files import check_outputs
+from bemlearn.files import atomic_write_files, check_outputs, check_writable
 
-__all__ = ["export_run", "ExportFormat", "DEFAULT_NAME"]
+__all__ = ["export_run", "export_targets", "ExportFormat", "DEFAULT_NAME"]
 
 log = logging.getLogger(__name__)
 
 ExportFormat = Literal["torchscript", "pt2", "both"]
 DEFAULT_NAME = "bem_predictor"
+
+
+def export_targets(run_dir_or_file: str | os.PathLike[str], *, out: str | os.PathLike[str] | None = None,
+                   fmt: ExportFormat = "torchscript") -> list[Path]:
+    """The files :func:`export_run` writes for these arguments (TorchScript first)."""
+    if fmt not in ("torchscript", "pt2", "both"):
+        raise ValueError(f"fmt: expected 'torchscript', 'pt2' or 'both', got {fmt!r}")
+    src = Path(run_dir_or_file)
+    base = Path(out) if out is not None else (src if src.is_dir() else src.parent) / f"{DEFAULT_NAME}.pt"
+    targets = []
+    if fmt in ("torchscript", "both"):
+        targets.append(base)
+    if fmt in ("pt2", "both"):
+        targets.append(base if (out is not None and fmt == "pt2") else base.with_suffix(".pt2"))
+    return targets
 
 
 def export_run(
@@ -57,29 +74,26 @@ def export_run(
     Returns:
         The files written.
     """
-    if fmt not in ("torchscript", "pt2", "both"):
-        raise ValueError(f"fmt: expected 'torchscript', 'pt2' or 'both', got {fmt!r}")
+    paths = export_targets(run_dir_or_file, out=out, fmt=fmt)
     ckpt = load_checkpoint(run_dir_or_file)
     state = ckpt.predictor_state
     meta = ckpt.metadata
     meta = dataclasses.replace(meta, extra={**meta.extra, "checkpoint_sha256": file_sha256(ckpt.path)})
     predictor = BEMPredictor(state, meta)
-    base = Path(out) if out is not None else ckpt.path.parent / f"{DEFAULT_NAME}.pt"
-    targets = []
-    if fmt in ("torchscript", "both"):
-        targets.append((base, save_torchscript, load_torchscript))
-    if fmt in ("pt2", "both"):
-        targets.append((base if (out is not None and fmt == "pt2") else base.with_suffix(".pt2"), save_pt2, load_pt2_predictor))
-    check_outputs([t[0] for t in targets], force, what="export")
-    written = []
-    for path, save, load in targets:
-        save(predictor, path)
+    kinds = {"torchscript": ["torchscript"], "pt2": ["pt2"], "both": ["torchscript", "pt2"]}[fmt]
+    tools = {"torchscript": (torchscript_bytes, load_torchscript), "pt2": (pt2_bytes, load_pt2_predictor)}
+    targets = [(p, *tools[kind]) for p, kind in zip(paths, kinds)]
+    check_outputs(paths, force, what="export")
+    for folder in {p.parent for p in paths}:
+        check_writable(folder, what="export")
+    files = {}
+    for path, serialize, load in targets:   # serialized and checked in memory: nothing is written unless all pass
+        data = serialize(predictor)
         if verify:
-            try:
-                dm, ds = verify_predictor(load(path), state, where=str(path))
-            except Exception:
-                path.unlink(missing_ok=True)
-                raise
+            dm, ds = verify_predictor(load(data, where=path), state, where=str(path))
             log.info("%s: max |Δmean| %.2g rad, max rel |Δvar| %.2g vs the dense posterior", path, dm, ds)
-        written.append(path)
+        files[path] = data
+    written = atomic_write_files(files)   # room checked first; all files or none
+    for path in written:
+        log.info("wrote BEM predictor %s", path)
     return written

@@ -36,11 +36,16 @@ q_i = W[·, n + i] (the same −½ a_i² or −½ in every row), ∂e_j/∂x_i =
 c = ``std_scale``, s = ``input_std``, δ = ``estimator_delta`` (K columns) of the state; with
 s = 0 and K = 0 the ``mm`` is skipped).
 
-One extra *sentinel* column j = M has zero linear weights, a tiny positive weight 10⁻³⁰⁰ on
-Σ v_i², offset 0 and w = 1 (with 1 taken off y_mean); the factor ignores it (zero row, or a
-10³⁰⁰ diagonal entry in the triangular case).  For finite |v| < 10¹⁴² its exp is exactly 1
-and it changes nothing (beyond one rounding of 1 ± y_mean); a NaN or ±inf input makes it NaN
-or +inf, so a non-finite input always shows up in μ and one check of μ replaces a pass over x.
+One extra *sentinel* column j = M guards the range in which float64 can evaluate the kernel:
+its exponent is e_M = ‖u‖² − 10³⁰⁰ (zero linear weights; quadratic weights 1 on u∘u in the
+centered form, a∘a on x∘x in the raw one, where u ≈ a∘x far from the data), its mean weight
+w_M = 10⁻³⁰⁰, and the factor ignores it (zero row, or a 10³⁰⁰ diagonal entry in the triangular
+case).  Since 10³⁰⁰ swamps every rounding, exp(e_M) is exactly 0 while ‖u‖ < 10¹⁵⁰ (the
+column changes nothing: μ = y_mean + Σ_j w_j exp(e_j) with nothing taken off) and +inf beyond,
+where the squares and the exponents of the other columns lose their meaning (x∘x overflows
+near |x| ≈ 1.3·10¹⁵⁴); a NaN or ±inf input makes it NaN or +inf as well.  So an input whose
+kernel cannot be evaluated in float64 always shows up as a non-finite μ, and one check of μ
+replaces a pass over x (the C export applies the same rule: docs/c-export.md).
 """
 
 import torch
@@ -50,10 +55,12 @@ from torch import nn
 from bemlearn.export.variance_factor import VarianceFactor
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["FoldedPosterior", "RAW_FORM_LIMIT"]
+__all__ = ["FoldedPosterior", "RAW_FORM_LIMIT", "SENTINEL_BOUND"]
 
-#: Weight of Σv² in the sentinel column (see module docstring).
+#: Mean weight w_M of the sentinel column (see module docstring): finite × it stays negligible, inf × it is inf.
 SENTINEL_WEIGHT = 1e-300
+#: ‖u‖² beyond which the kernel is not evaluated: the sentinel exponent is ‖u‖² − this (‖u‖ > 10¹⁵⁰ is an error).
+SENTINEL_BOUND = 1e300
 #: Diagonal entry of the triangular factor at the sentinel (its v entry underflows to 0).
 SENTINEL_PIVOT = 1e300
 #: The raw form is used while Σ_i (|b_i| + 5)² is at most this.
@@ -125,7 +132,8 @@ class FoldedPosterior(nn.Module):
             W[:M, :n_inputs] = a[free] * (b[free] + zs[:, free])
             W[:M, n_inputs:] = -0.5 * a[free] ** 2
             c[:M] = -0.5 * ((b[free] + zs[:, free]) ** 2).sum(1) + fixed_part
-        W[M, n_inputs:] = SENTINEL_WEIGHT
+        W[M, n_inputs:] = 1.0 if self.centered else a[free] ** 2    # ‖u‖² (u ≈ a∘x far from the data)
+        c[M] = -SENTINEL_BOUND
         gain = state.y_std * state.outputscale                  # y_std σ_f²
         self.n_inputs = n_inputs
         self.chunk = chunk
@@ -133,12 +141,12 @@ class FoldedPosterior(nn.Module):
         self.register_buffer("nb", -b[free].contiguous())
         self.register_buffer("W", W)
         self.register_buffer("c", c)
-        self.register_buffer("offset", (state.y_mean - 1.0).reshape(1).to(**f64))
+        self.register_buffer("offset", state.y_mean.reshape(1).to(**f64))
         self.register_buffer("powers", torch.tensor([[1.0], [2.0]], **f64))   # [v, v∘v] = v ** powers
         if share is None:
             w = torch.empty(M + 1, **f64)
             w[:M] = gain * state.alpha
-            w[M] = 1.0
+            w[M] = SENTINEL_WEIGHT
             RT = torch.zeros(0, 0, **f64)
             if factor.L is not None:    # exact / factored: v = k̂ (L_ext / gain)⁻ᵀ, upper-triangular solve
                 FT = torch.zeros(M + 1, M + 1, **f64)

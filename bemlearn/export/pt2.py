@@ -22,6 +22,7 @@ docs/predictor-contract.md.
 
 from __future__ import annotations
 
+import io
 import json
 import logging
 import os
@@ -35,9 +36,9 @@ from torch import nn
 from bemlearn.errors import PredictorInputError
 from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.errors import CheckpointError
-from bemlearn.files import atomic_path
+from bemlearn.files import atomic_write_files
 
-__all__ = ["save_pt2", "load_pt2_predictor", "Pt2Predictor", "PT2_PROGRAMS", "PT2_METADATA_FILE"]
+__all__ = ["save_pt2", "pt2_bytes", "load_pt2_predictor", "Pt2Predictor", "PT2_PROGRAMS", "PT2_METADATA_FILE"]
 
 log = logging.getLogger(__name__)
 
@@ -79,17 +80,29 @@ def _export_programs(predictor: BEMPredictor) -> dict[str, torch.export.Exported
     return programs
 
 
-def save_pt2(predictor: BEMPredictor, path: str | os.PathLike[str]) -> Path:
-    """Export ``predictor``'s four methods with ``torch.export`` and write one ``.pt2``."""
+def pt2_bytes(predictor: BEMPredictor) -> bytes:
+    """The ``.pt2`` archive of ``predictor``'s methods (``torch.export``), serialized in memory (torch's
+    C++ archive writer aborts the process on a full disk; :mod:`bemlearn.files` writes the bytes)."""
     from torch.export.pt2_archive._package import package_pt2
 
-    path = Path(path)
     programs = _export_programs(predictor)
-    with atomic_path(path) as tmp, warnings.catch_warnings():
+    buf = io.BytesIO()
+    with warnings.catch_warnings():
         # bem and full share their weight/factor tensors; torch warns about the shared group,
         # harmless for CPU weights (the test suite checks every program's numbers after loading)
         warnings.filterwarnings("ignore", message="No complete tensor found in the group")
-        package_pt2(tmp, exported_programs=programs, extra_files={PT2_METADATA_FILE: predictor.metadata_json})
+        package_pt2(buf, exported_programs=programs, extra_files={PT2_METADATA_FILE: predictor.metadata_json})
+    return buf.getvalue()
+
+
+def save_pt2(predictor: BEMPredictor, path: str | os.PathLike[str]) -> Path:
+    """Export ``predictor``'s methods with ``torch.export`` and write one ``.pt2`` atomically.
+
+    Raises:
+        EnvironmentProblem: no room on the disk, or it is read-only (nothing written).
+    """
+    path = Path(path)
+    atomic_write_files({path: pt2_bytes(predictor)})
     log.info("wrote torch.export BEM predictor %s", path)
     return path
 
@@ -141,7 +154,8 @@ class Pt2Predictor:
         except RuntimeError as exc:  # the program's own finite check: entries too large to evaluate
             if "BEMPredictor." in str(exc):
                 raise PredictorInputError(
-                    f"BEMPredictor.{method}: x has finite entries too large to evaluate (magnitude above ~1e140)"
+                    f"BEMPredictor.{method}: x has finite entries too large to evaluate: the kernel cannot be evaluated in "
+                    "float64 (||(x - x_mean) / (x_std * lengthscale)|| above 1e150)"
                 ) from None
             raise
 
@@ -173,28 +187,31 @@ class Pt2Predictor:
     def forward_latent(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(μ(x_0^e), latent σ(x_0^e)) (eq. 12, 14); archives without the program return ``forward``
         (written before the calibrated band, when ``std`` was the latent std)."""
-        return self._forward(x) if self._forward_latent is None else self._forward_latent(x)
+        program = self._forward if self._forward_latent is None else self._forward_latent
+        return self._call(program, x, "forward_latent", False)
 
     def predict_full_latent(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(mean, latent std) of f(x) (eq. 11, 12); see :meth:`forward_latent` for old archives."""
-        return self._predict_full(x) if self._predict_full_latent is None else self._predict_full_latent(x)
+        program = self._predict_full if self._predict_full_latent is None else self._predict_full_latent
+        return self._call(program, x, "predict_full_latent", True)
 
     def metadata(self) -> str:
         """The metadata JSON document."""
         return self.metadata_json
 
 
-def load_pt2_predictor(path: str | os.PathLike[str]) -> Pt2Predictor:
-    """Load a ``.pt2`` written by :func:`save_pt2`."""
-    from torch.export.pt2_archive._package import load_pt2
+def load_pt2_predictor(path: str | os.PathLike[str] | bytes, *, where: str | os.PathLike[str] | None = None) -> Pt2Predictor:
+    """Load a ``.pt2`` written by :func:`save_pt2`, refusing archives that would run pickled code
+    or native libraries (:func:`bemlearn.safe_load.read_pt2_archive`).
 
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such .pt2 predictor file")
-    try:
-        contents = load_pt2(path)
-    except Exception as exc:  # torch raises several types for foreign archives
-        raise CheckpointError(f"{path}: not a torch.export .pt2 archive ({type(exc).__name__}: {exc})") from exc
+    Raises:
+        FileNotFoundError: no such file.
+        CheckpointError: a foreign or tampered archive, or not a bemlearn predictor.
+    """
+    from bemlearn.safe_load import read_pt2_archive
+
+    contents = read_pt2_archive(path, where=where)
+    path = where or ("<.pt2 bytes>" if isinstance(path, bytes) else Path(path))
     missing = [k for k in PT2_PROGRAMS if k not in contents.exported_programs and k not in _OPTIONAL_PROGRAMS]
     meta = contents.extra_files.get(PT2_METADATA_FILE)
     if missing or not meta:

@@ -10,6 +10,7 @@ torch ≥ 2.10 marks the ``torch.jit`` API deprecated; these helpers silence tha
 from __future__ import annotations
 
 import contextlib
+import io
 import logging
 import os
 import warnings
@@ -20,9 +21,9 @@ import torch
 
 from bemlearn.export.bem_predictor import EXPORTED_METHODS, LATENT_METHODS, BEMPredictor
 from bemlearn.errors import CheckpointError
-from bemlearn.files import atomic_path
+from bemlearn.files import atomic_write_files
 
-__all__ = ["script_predictor", "save_torchscript", "load_torchscript", "METADATA_FILE"]
+__all__ = ["script_predictor", "save_torchscript", "torchscript_bytes", "load_torchscript", "METADATA_FILE"]
 
 log = logging.getLogger(__name__)
 
@@ -47,27 +48,40 @@ def script_predictor(predictor: BEMPredictor, *, freeze: bool = True) -> torch.j
     return scripted
 
 
+def torchscript_bytes(predictor: BEMPredictor, *, freeze: bool = True) -> bytes:
+    """The TorchScript file of ``predictor``, serialized in memory (torch's C++ file writer aborts the
+    process on a full disk; the bytes are written by :mod:`bemlearn.files`, which reports it)."""
+    buf = io.BytesIO()
+    with _quiet_jit():
+        torch.jit.save(script_predictor(predictor, freeze=freeze), buf, _extra_files={METADATA_FILE: predictor.metadata_json})
+    return buf.getvalue()
+
+
 def save_torchscript(predictor: BEMPredictor, path: str | os.PathLike[str], *, freeze: bool = True) -> Path:
-    """Script ``predictor`` and write it to ``path`` (parent directories are created)."""
+    """Script ``predictor`` and write it to ``path`` atomically (parent directories are created).
+
+    Raises:
+        EnvironmentProblem: no room on the disk, or it is read-only (nothing written).
+    """
     path = Path(path)
-    scripted = script_predictor(predictor, freeze=freeze)
-    with atomic_path(path) as tmp, _quiet_jit():
-        torch.jit.save(scripted, str(tmp), _extra_files={METADATA_FILE: predictor.metadata_json})
+    atomic_write_files({path: torchscript_bytes(predictor, freeze=freeze)})
     log.info("wrote TorchScript BEM predictor %s", path)
     return path
 
 
-def load_torchscript(path: str | os.PathLike[str]) -> torch.jit.ScriptModule:
-    """``torch.jit.load(path)`` with a clear error for a missing or foreign file."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such TorchScript predictor file")
+def load_torchscript(path: str | os.PathLike[str] | bytes, *, where: str | os.PathLike[str] | None = None) -> torch.jit.ScriptModule:
+    """``torch.jit.load(path)`` with a clear error for a missing, foreign or tampered file (:mod:`bemlearn.safe_load`).
+
+    Raises:
+        FileNotFoundError: no such file.
+        CheckpointError: not a TorchScript file, or not a bemlearn predictor.
+    """
+    from bemlearn.safe_load import load_script_module
+
+    path = path if isinstance(path, bytes) else Path(path)
     extra = {METADATA_FILE: ""}
-    try:
-        with _quiet_jit():
-            module = torch.jit.load(str(path), map_location="cpu", _extra_files=extra)
-    except Exception as exc:  # torch raises RuntimeError and others for foreign or truncated files
-        raise CheckpointError(f"{path}: not a TorchScript file ({type(exc).__name__}: {exc})") from exc
+    module = load_script_module(path, extra, where=where)  # C++ loader: no Python unpickling (bemlearn.safe_load)
+    path = where or ("<TorchScript bytes>" if isinstance(path, bytes) else path)
     missing = [m for m in EXPORTED_METHODS if not hasattr(module, m) and m not in LATENT_METHODS]
     if missing or not extra[METADATA_FILE]:
         raise CheckpointError(f"{path}: not a bemlearn BEM predictor (missing {missing or [METADATA_FILE]})")

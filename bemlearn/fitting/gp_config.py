@@ -7,6 +7,8 @@ from typing import Literal
 
 import torch
 
+from bemlearn.config import Limit, config_limits
+
 __all__ = ["GPConfig"]
 
 _DTYPES = {"float64": torch.float64, "float32": torch.float32}
@@ -103,3 +105,8 @@ class GPConfig:
     def torch_dtype(self) -> torch.dtype:
         """The torch dtype named by :attr:`dtype`."""
         return _DTYPES[self.dtype]
+
+
+# (the lower bounds of the counts and step sizes are checked by __post_init__)
+config_limits(GPConfig, n_inducing=Limit(le=10**6), init_subset=Limit(le=10**7), fit_subset=Limit(le=10**8),
+              max_iter=Limit(le=10**7), tol=Limit(ge=0), batch_size=Limit(le=10**8), epochs=Limit(le=10**6), seed=Limit(ge=0))

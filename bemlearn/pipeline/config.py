@@ -12,7 +12,11 @@
     simulate: {...}        # bemlearn.sim.closed_loop.SimulateConfig
 
 Every section is a strict dataclass defined next to its component; an unknown key
-anywhere is an error naming the file and the key path.
+anywhere is an error naming the file and the key path, as is a value outside the limits its
+component declares (:func:`bemlearn.config.config_limits`).  :class:`PipelineConfig` adds the
+rules between sections (``__post_init__``): amplitude and sample budgets, a validation split
+that needs two trials, and so on; :func:`bemlearn.pipeline.resolve.resolve_pipeline_config`
+those that need the robot (the gain matrix's size, the mismatched bodies).
 """
 
 from __future__ import annotations
@@ -20,13 +24,28 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from bemlearn.config import Limit, config_limits
 from bemlearn.data.collect import CollectConfig
 from bemlearn.data.dataset import DatasetConfig
 from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.pipeline.evaluation import EvaluationConfig
 from bemlearn.sim.closed_loop import SimulateConfig
 
-__all__ = ["PipelineConfig", "load_pipeline_config"]
+__all__ = ["PipelineConfig", "load_pipeline_config", "MAX_SAMPLES"]
+
+#: Most samples a stage may produce (collect: trials × duration × rate; evaluate and simulate alike).
+MAX_SAMPLES = 10**9
+
+# The limits of the collect and evaluate sections (their dataclasses live in collect.py and evaluation.py).
+config_limits(CollectConfig, n_trials=Limit(ge=1, le=10**6), duration_s=Limit(gt=0, le=1e6, unit="s"),
+              rate_hz=Limit(gt=0, le=1e6, unit="Hz"), fall_window=Limit(gt=0), gain_scale=Limit(ge=0, ordered=True),
+              n_sines=Limit(ge=1, le=1000, ordered=True), amplitude=Limit(ge=0, ordered=True),
+              frequency_hz=Limit(ge=0, le=1e6, ordered=True, unit="Hz"), initial_qa=Limit(ordered=True),
+              initial_qu=Limit(ordered=True), seed=Limit(ge=0), workers=Limit(ge=0, le=4096),
+              physics_timestep=Limit(gt=0, le=1, unit="s"))
+config_limits(EvaluationConfig, n_references=Limit(ge=1, le=10**5), n_sines=Limit(ge=1, le=1000, ordered=True),
+              amplitude_max=Limit(gt=0), amplitude_min=Limit(ge=0), frequency_hz=Limit(gt=0, le=1e6, ordered=True, unit="Hz"),
+              duration_s=Limit(gt=0, le=1e6, unit="s"), rate_hz=Limit(gt=0, le=1e6, unit="Hz"), seed=Limit(ge=0))
 
 
 @dataclass(frozen=True)
@@ -57,6 +76,23 @@ class PipelineConfig:
         if self.model is not None and self.robot is not None:
             raise ValueError("'model:' is for model-free runs (data: without robot:); with 'robot:' the robot's own "
                              "model is the ground truth")
+        ev, c, sim = self.evaluate, self.collect, self.simulate
+        if sim.warmup_s >= sim.duration_s:
+            raise ValueError(f"simulate.warmup_s ({sim.warmup_s:g} s) must be shorter than simulate.duration_s ({sim.duration_s:g} s): "
+                             "the tracking RMSE leaves out the samples before warmup_s")
+        if ev.amplitude_min is not None and ev.amplitude_max is not None and ev.amplitude_min > ev.amplitude_max:
+            raise ValueError(f"evaluate.amplitude_min ({ev.amplitude_min:g}) must not exceed evaluate.amplitude_max ({ev.amplitude_max:g})")
+        budgets = (("collect", c.n_trials * c.duration_s, c.rate_hz), ("evaluate", ev.n_references * ev.duration_s, ev.rate_hz),
+                   ("simulate", sim.duration_s, sim.rate_hz))
+        for name, seconds, rate in budgets:
+            if rate is not None and seconds * rate > MAX_SAMPLES:
+                raise ValueError(f"{name}: {seconds:g} s at {rate:g} Hz is {seconds * rate:.3g} samples, more than {MAX_SAMPLES:.0e}; "
+                                 "lower the duration, the number of trials or references, or the rate")
+        if ev.rate_hz * ev.duration_s < 2:
+            raise ValueError(f"evaluate: duration_s × rate_hz = {ev.duration_s * ev.rate_hz:g} samples per reference; need at least 2")
+        if self.data is None and self.dataset.val_fraction > 0 and c.n_trials < 2:
+            raise ValueError(f"dataset.val_fraction = {self.dataset.val_fraction:g} holds out whole trials for validation: "
+                             f"collect.n_trials must be at least 2, got {c.n_trials} (or set dataset.val_fraction: 0)")
 
 
 def load_pipeline_config(path: str | Path) -> PipelineConfig:

@@ -15,6 +15,7 @@ import inspect
 import re
 import typing
 
+from bemlearn.config import LIMITS
 from bemlearn.pipeline.config import PipelineConfig
 
 __all__ = ["config_markdown", "attribute_docs"]
@@ -22,7 +23,11 @@ __all__ = ["config_markdown", "attribute_docs"]
 _INTRO = """# Pipeline configuration
 
 A pipeline config is one YAML file with a section per stage. Every key is checked: an unknown or
-misspelt key, or a value of the wrong type, is an error that names the file and the key path.
+misspelt key, a repeated key, a value of the wrong type, a number that is not finite (`.nan`,
+`.inf`) or outside the limits in the *type* column below (e.g. `≥ 1`, or `min ≤ max` for a
+(min, max) pair), or values that contradict each other (`simulate.warmup_s` not shorter than
+`simulate.duration_s`, reference lists of different lengths, gains that do not fit the robot,
+…) is an error that names the file and the key path — before any command writes anything.
 The smallest config names only the robot:
 
 ```yaml
@@ -99,7 +104,11 @@ def _rows(cls, prefix: str, rows: list[str], sections: list[tuple[str, type]]) -
             continue
         derived = "derived" if key in DERIVED_KEYS else ""
         desc = docs.get(f.name, "").replace("|", "\\|")
-        rows.append(f"| `{key}` | {_type_name(tp).replace('|', 'or')} | {_default(f)} | {derived} | {desc} |")
+        limit = LIMITS.get(cls, {}).get(f.name)
+        bounds = "" if limit is None else ", ".join(b for b in (limit.describe(), "min ≤ max" if limit.ordered else "",
+                                                                 f"≥ {limit.min_len} entries" if limit.min_len else "") if b)
+        kind = _type_name(tp).replace('|', 'or') + (f" ({bounds})" if bounds else "")
+        rows.append(f"| `{key}` | {kind} | {_default(f)} | {derived} | {desc} |")
 
 
 def config_markdown() -> str:

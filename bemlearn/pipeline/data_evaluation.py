@@ -237,7 +237,10 @@ def bem_slice_figure(result: dict[str, Any], path: str | Path | None = None, *, 
     fig.suptitle("learned BEM on slices (data only; grey: outside the training data)", fontsize=10)
     fig.tight_layout()
     if path is not None:
-        fig.savefig(path, dpi=110)
+        from bemlearn.files import atomic_path
+
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=110)
     return fig
 
 

@@ -1,10 +1,13 @@
 """Check the whole config and environment before any long step (seconds, nothing written).
 
 Every CLI command that runs a long step (collect, train, run, simulate, walk, gpdm) calls
-:func:`preflight` first: an empty or comment-only config, an unknown robot or missing MJCF,
-a missing or unreadable data file, ``--device cuda`` without CUDA, an unwritable output
-folder, or outputs that exist (without ``--force``) end the command within a second or two,
-before any folder is created.
+:func:`preflight` first: an empty or comment-only config, an unknown robot or missing MJCF
+(or one whose physics makes no sense: ``timestep="0"``, NaN parameters), any value of any
+section that is of the wrong type, not finite, out of its component's limits or inconsistent
+with another (:func:`check_config`: the whole config is parsed and resolved), a missing or
+unreadable data file, ``--device cuda`` without CUDA, an unwritable output folder, or outputs
+that exist (without ``--force``) end the command within a second or two, before any folder
+is created.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from bemlearn.config import load_yaml
 from bemlearn.errors import ConfigError, EnvironmentProblem
 from bemlearn.files import check_outputs, check_writable
 
-__all__ = ["preflight", "check_config_file", "check_robot", "check_device", "check_data_file"]
+__all__ = ["preflight", "check_config_file", "check_config", "check_robot", "check_device", "check_data_file"]
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +45,30 @@ def check_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
             "(`robot: path/to/robot.xml` alone is enough; docs/config.md)"
         )
     return data
+
+
+def check_config(path: str | os.PathLike[str], data: dict[str, Any]) -> None:
+    """Parse every section of the config at ``path`` strictly, as the command will: an application's
+    config by its application's parser, a pipeline config by
+    :func:`~bemlearn.pipeline.resolve.resolve_pipeline_config` (types, finite numbers, limits, the
+    rules between sections and those that need the robot, with the values derived from its model).
+
+    Raises:
+        ConfigError: naming the file and the key.
+    """
+    if data.get("application") is not None:
+        from bemlearn.applications import get_application
+
+        try:
+            app = get_application(str(data["application"]))
+        except (KeyError, ValueError) as exc:
+            raise ConfigError(f"{path}: application: {exc}") from None
+        if app.parse_config is not None:
+            app.parse_config(path)
+        return
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
+
+    resolve_pipeline_config(path)
 
 
 def check_robot(name: Any, *, where: str = "robot") -> None:
@@ -121,6 +148,7 @@ def preflight(
         cfg = check_config_file(config)
         if robot and "robot" in cfg:
             check_robot(cfg["robot"], where=f"{config}: robot")
+        check_config(config, cfg)
         train = cfg.get("train")
         if device is None and isinstance(train, dict):
             check_device(train.get("device"), where=f"{config}: train.device")

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from bemlearn.files import atomic_write_text
+
 __all__ = ["write_report"]
 
 

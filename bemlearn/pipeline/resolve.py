@@ -112,6 +112,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
                 _set(raw, key, value)
                 notes[key] = note
         parsed = from_dict(PipelineConfig, raw, where=source)
+        _check_for_robot(parsed, robot, source)
     if "dataset.derivative_options" not in notes:
         est = parsed.dataset.estimator()
         if not getattr(est, "resolved", True):   # e.g. the Gaussian's σ: chosen from the data at train time
@@ -130,6 +131,28 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
         else:
             origins[key] = "default"
     return ResolvedConfig(parsed, origins, {k: v for k, v in notes.items()}, source)
+
+
+def _check_for_robot(cfg: PipelineConfig, robot, source: str) -> None:
+    """The rules that need the robot: the gain matrix's size, the bodies of the model mismatch.
+
+    Raises:
+        ConfigError: naming the key, what the robot needs and what was given.
+    """
+    gains = cfg.collect.gains
+    if gains is not None and len(gains) != robot.m * 2 * robot.n:
+        raise ConfigError(f"{source}.collect.gains: expected m·2n = {robot.m * 2 * robot.n} values for robot {robot.name!r} "
+                          f"(k row-major (m, 2n), m = {robot.m}, n = {robot.n}), got {len(gains)}")
+    bodies = cfg.simulate.nominal.bodies
+    model = getattr(robot, "model", None)
+    if bodies is not None and model is not None:
+        import mujoco
+
+        names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, i) for i in range(model.nbody)]
+        missing = [b for b in bodies if b not in names]
+        if missing:
+            raise ConfigError(f"{source}.simulate.nominal.bodies: no body {missing[:5]} in robot {robot.name!r}; "
+                              f"its bodies are {[n for n in names if n][:20]}")
 
 
 def format_resolved(resolved: ResolvedConfig) -> str:

@@ -66,6 +66,43 @@ def _custom_text(model: mujoco.MjModel, name: str) -> str | None:
     return bytes(model.text_data[start : start + size]).split(b"\0")[0].decode()
 
 
+#: MjModel arrays that must be finite, with the MJCF attribute they come from.
+_FINITE_ARRAYS = (("body_mass", "body mass"), ("body_inertia", "body inertia"), ("body_pos", "body pos"),
+                  ("body_quat", "body quat"), ("jnt_range", "joint range"), ("dof_damping", "joint damping"),
+                  ("dof_armature", "joint armature"), ("dof_frictionloss", "joint frictionloss"),
+                  ("jnt_stiffness", "joint stiffness"), ("actuator_gear", "actuator gear"),
+                  ("actuator_ctrlrange", "actuator ctrlrange"), ("actuator_gainprm", "actuator gain"),
+                  ("actuator_biasprm", "actuator bias"), ("geom_size", "geom size"))
+
+
+def _check_physics(model: mujoco.MjModel, where: str) -> None:
+    """What the simulation divides by or integrates must make sense: a positive, finite physics step,
+    finite gravity and parameters, non-negative masses and damping, ranges with lo < hi.
+
+    Raises:
+        RobotModelError: naming the MJCF option or attribute, what was expected and what was found.
+    """
+    h = float(model.opt.timestep)
+    if not (np.isfinite(h) and 0.0 < h <= 1.0):
+        raise RobotModelError(f"{where}: <option timestep=\"{h:g}\">: expected a positive, finite physics step of at most 1 s")
+    if not np.all(np.isfinite(model.opt.gravity)):
+        raise RobotModelError(f"{where}: <option gravity=\"{' '.join(f'{g:g}' for g in model.opt.gravity)}\">: expected finite values")
+    for attr, label in _FINITE_ARRAYS:
+        values = np.asarray(getattr(model, attr, np.zeros(0)))
+        if values.size and not np.all(np.isfinite(values)):
+            raise RobotModelError(f"{where}: a {label} is not finite (NaN or inf); expected finite numbers")
+    for attr, label in (("body_mass", "body mass"), ("dof_damping", "joint damping"), ("dof_armature", "joint armature")):
+        values = np.asarray(getattr(model, attr))
+        if values.size and np.any(values < 0):
+            raise RobotModelError(f"{where}: a {label} is negative ({values.min():g}); expected ≥ 0")
+    for limited, ranges, label in ((model.jnt_limited, model.jnt_range, "joint range"),
+                                   (model.actuator_ctrllimited, model.actuator_ctrlrange, "actuator ctrlrange")):
+        for i in np.flatnonzero(np.asarray(limited).astype(bool)):
+            lo, hi = ranges[i]
+            if not lo < hi:
+                raise RobotModelError(f"{where}: {label} \"{lo:g} {hi:g}\" of entry {i}: expected lo < hi")
+
+
 class MujocoRobot(Robot):
     """A robot defined by an MJCF model (see module docstring).
 
@@ -81,6 +118,7 @@ class MujocoRobot(Robot):
         self.source = source or "<MjModel>"
         self.name = name or model.names[: model.names.find(b"\0")].decode() or "robot"
         where = f"{self.source}"
+        _check_physics(model, where)
         if model.njnt == 0:
             raise RobotModelError(f"{where}: the model has no joints")
         kinds = [_JOINT_KIND.get(int(t), str(t)) for t in model.jnt_type]

@@ -15,11 +15,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from bemlearn.config import Limit, config_limits
 from bemlearn.control.actuator_inverse import MujocoActuatorInverse
 from bemlearn.control.bem_sources import make_bem_source
 from bemlearn.control.eic import EICController, EICGains
@@ -55,6 +57,12 @@ class ReferenceConfig:
         rows = lambda v: tuple(tuple(v) for _ in range(m))  # noqa: E731
         return CompositeSinusoid(rows(self.amplitudes), rows(self.frequencies_hz), rows(self.phases), (self.offset,) * m)
 
+    def __post_init__(self) -> None:
+        lengths = {k: len(v) for k, v in (("amplitudes", self.amplitudes), ("frequencies_hz", self.frequencies_hz),
+                                          ("phases", self.phases)) if v is not None}
+        if len(set(lengths.values())) > 1:
+            raise ValueError(f"amplitudes, frequencies_hz and phases need one entry per component, got lengths {lengths}")
+
 
 @dataclass(frozen=True)
 class NominalConfig:
@@ -72,6 +80,10 @@ class NominalConfig:
     bodies: tuple[str, ...] | None = None
 
 
+config_limits(ReferenceConfig, amplitudes=Limit(min_len=1), frequencies_hz=Limit(ge=0, min_len=1, unit="Hz"), phases=Limit(min_len=1))
+config_limits(NominalConfig, mass_scale=Limit(gt=0, le=1e3), length_scale=Limit(gt=0, le=1e3))
+
+
 @dataclass(frozen=True)
 class SimulateConfig:
     """Closed-loop simulation options (``simulate:`` section).
@@ -79,7 +91,7 @@ class SimulateConfig:
     Attributes:
         duration_s: simulated time, s.
         rate_hz: control rate, Hz (``null``: derived from the model): the collection's rate.
-        bem_source: ``"predictor"``, ``"model"`` or ``"zero"``.
+        bem_source: ``"predictor"``, ``"model"`` or ``"zero"`` (:data:`~bemlearn.control.bem_sources.BEM_SOURCES`).
         predictor: path of the exported ``bem_predictor.pt`` (for ``predictor``).
         reference: q_a^d(t).
         gains: EIC gains (:class:`~bemlearn.control.EICGains`) (``null``: derived from the model).
@@ -94,7 +106,7 @@ class SimulateConfig:
 
     duration_s: float = 60.0
     rate_hz: float | None = None
-    bem_source: str = "predictor"
+    bem_source: Literal["predictor", "model", "zero"] = "predictor"
     predictor: str | None = None
     reference: ReferenceConfig = field(default_factory=ReferenceConfig)
     gains: EICGains = field(default_factory=EICGains)
@@ -105,6 +117,11 @@ class SimulateConfig:
     warmup_s: float = 1.0
     seed: int = 0
     physics_timestep: float | None = None
+
+
+config_limits(SimulateConfig, duration_s=Limit(gt=0, le=1e6, unit="s"), rate_hz=Limit(gt=0, le=1e6, unit="Hz"),
+              initial_qu=Limit(ge=-1e3, le=1e3), fall_window=Limit(gt=0), warmup_s=Limit(ge=0, unit="s"), seed=Limit(ge=0),
+              physics_timestep=Limit(gt=0, le=1, unit="s"))
 
 
 @dataclass(frozen=True)

@@ -45,6 +45,12 @@ def _run(config_path, out_dir=None, *, device=None, progress=True) -> Path:
     return run_biped_pipeline(load_biped_config(config_path), out_dir, progress=progress)
 
 
+def _parse(config_path):
+    from bemlearn.apps.biped.config import load_biped_config
+
+    return load_biped_config(config_path)
+
+
 APPLICATION = Application(
     name="biped",
     description="5-link planar biped, paper Section IV-B",
@@ -52,4 +58,5 @@ APPLICATION = Application(
     add_cli=_cli,
     add_bench=_bench,
     run=_run,
+    parse_config=_parse,
 )

@@ -58,7 +58,9 @@ def train_walking_gp(X: np.ndarray, y: np.ndarray, out_dir: str | Path, *, confi
     state = stage.state
     metrics = {"fit": stage.fit, "n_train": len(y), "noise_std_rad": float(state.y_std * state.noise.sqrt()),
                "lengthscale_physical": stage.lengthscale_physical}
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=float))
+    from bemlearn.files import atomic_write_text
+
+    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
     return metrics
 
 

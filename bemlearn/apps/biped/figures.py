@@ -42,7 +42,7 @@ def fig4(r, model_bem, steady, chi, chi_hat, path: Path, *, window_s: float = 3.
         a.legend(loc="upper right", fontsize=8)
     ax[0].set_title("Biped walking with the learned torso BEM in the loop (cf. paper Fig. 4)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _save(fig, path)
     plt.close(fig)
 
 
@@ -69,7 +69,13 @@ def fig5(human: np.ndarray, robot: np.ndarray, chi_h: np.ndarray, chi_hat: np.nd
     ax[3].set_xlabel("step phase (time since touchdown / step time)")
     ax[0].set_title("Human gait transferred to the biped (cf. paper Fig. 5), step-phase averages")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _save(fig, path)
     plt.close(fig)
 
 
+def _save(fig, path: Path) -> None:
+    """``fig`` as a PNG at ``path``, written atomically."""
+    from bemlearn.files import atomic_path
+
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)

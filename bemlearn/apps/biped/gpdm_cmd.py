@@ -63,17 +63,19 @@ def run(args) -> int:
     from bemlearn.apps.biped.pipeline import load_biped_config
     from bemlearn.apps.biped.gpdm_study import fit_gpdm_logged
 
-    from bemlearn.files import created_dir, new_run_dir
+    from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.preflight import preflight
 
-    out = args.out or new_run_dir("gpdm")
-    preflight(config=args.config, out_dir=out, outputs=[out / "metrics.json", out / "latents.npz", out / "tb"], force=args.force)
+    names = ("metrics.json", "latents.npz", "tb")
+    preflight(config=args.config, out_dir=args.out or Path("runs"), outputs=[args.out / n for n in names] if args.out else [],
+              force=args.force)
     if args.data is not None and not args.data.is_file():
         raise FileNotFoundError(f"--data: {args.data} not found")
     cfg = load_biped_config(args.config)
     fit = cfg.gpdm.fit if args.max_iter is None else dataclasses.replace(cfg.gpdm.fit, max_iter=args.max_iter)
     seqs, where = _sequences(args, cfg)
-    with created_dir(out, keep_on_interrupt=["metrics.json"]):
+    with claim_outputs(args.out, entries=names, default_name="gpdm", force=args.force, keep_on_interrupt=["metrics.json"],
+                       what="gpdm") as out:
         model = fit_gpdm_logged(seqs, out, config=fit, threads=cfg.gpdm.threads, progress=not args.no_progress)
     m = json.loads((out / "metrics.json").read_text())
     print(f"data: {where}")

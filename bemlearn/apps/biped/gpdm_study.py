@@ -74,9 +74,12 @@ def fit_gpdm_logged(Q_list: list[np.ndarray], out_dir: str | Path, *, config: GP
     metrics = {"c": model.c.tolist(), "c_normalized": model.c_normalized.detach().tolist(),
                "q_mean": model.q_mean.tolist(), "fit_seconds": seconds, "sequences": [len(q) for q in Q_list],
                "corr_latent_projection": compare_latents(chi, proj).corr, **gpdm_metrics(model)}
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
-    np.savez(out / "latents.npz", chi=chi.numpy(), projection=proj.numpy(), q=Q,
-             sequence=np.repeat(np.arange(len(Q_list)), [len(q) for q in Q_list]))
+    from bemlearn.files import atomic_path, atomic_write_text
+
+    with atomic_path(out / "latents.npz") as tmp:
+        np.savez(tmp, chi=chi.numpy(), projection=proj.numpy(), q=Q,
+                 sequence=np.repeat(np.arange(len(Q_list)), [len(q) for q in Q_list]))
+    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2))   # last: its presence marks a finished fit
     log.info("GPDM: c = %s in %.1f s", np.round(metrics["c"], 3).tolist(), seconds)
     return model
 

@@ -29,18 +29,18 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    from bemlearn.files import created_dir, new_run_dir
+    from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.preflight import preflight
 
-    args.out = args.out or new_run_dir("walk")
     names = ("walk.json", "walk.npz", "walk.truth.npz", "walk.png")
-    preflight(config=args.config, out_dir=args.out, outputs=[args.out / n for n in names], force=args.force)
+    preflight(config=args.config, out_dir=args.out or Path("runs"), outputs=[args.out / n for n in names] if args.out else [],
+              force=args.force)
     source = args.source or ("predictor" if args.predictor else None)
     if args.predictor is not None and source != "predictor":
         raise ValueError(f"--predictor is only used with --source predictor, got --source {source}")
     if args.predictor is not None and not args.predictor.is_file():
         raise FileNotFoundError(f"--predictor: {args.predictor} not found (expected an exported bem_predictor.pt)")
-    with created_dir(args.out, keep_on_interrupt=[]):
+    with claim_outputs(args.out, entries=names, default_name="walk", force=args.force, what="walk") as args.out:
         return _walk(args)
 
 
