@@ -17,6 +17,7 @@ from bemlearn.errors import (
     PredictorInputError,
     RobotModelError,
     StalePredictorError,
+    SweepError,
     TrajectoryFormatError,
 )
 
@@ -30,5 +31,6 @@ __all__ = [
     "PredictorInputError",
     "RobotModelError",
     "StalePredictorError",
+    "SweepError",
     "TrajectoryFormatError",
 ]
