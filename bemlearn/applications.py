@@ -45,6 +45,8 @@ class Application:
         add_robot_commands: ``add_robot_commands(subparsers)`` registers ``bemlearn robot`` commands.
         run: ``run(config_path, out_dir, *, device, progress) -> Path`` runs a config whose
             top-level ``application:`` key names this application (``bemlearn run``).
+        sweep_stages: stage name → a factory returning a :class:`~bemlearn.sweep.stage.SweepStage`
+            that ``bemlearn sweep`` runs for configs naming this application (``stage:`` of a sweep file).
     """
 
     name: str
@@ -54,6 +56,7 @@ class Application:
     add_bench: Callable[[Any], None] | None = None
     add_robot_commands: Callable[[Any], None] | None = None
     run: Callable[..., Path] | None = None
+    sweep_stages: dict[str, Callable[[], Any]] = field(default_factory=dict)
 
 
 _APPS: dict[str, Application] = {}
