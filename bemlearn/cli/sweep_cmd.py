@@ -42,8 +42,9 @@ def _sweep(args) -> int:
                        force=args.force, max_parallel=args.max_parallel, progress=not args.no_progress)
     _print_table(result.columns, result.rows)
     n = len(result.cells)
-    print(f"{n} cells: {result.n_ok} ok, {result.n_failed} failed ({len(result.ran)} run now on the {result.backend} "
-          f"backend, {n - len(result.ran)} complete before) in {result.wall_s:.0f} s")
+    now = f"{len(result.ran)} run now on the {result.backend} backend" if result.ran else "nothing to run"
+    print(f"{n} cells: {result.n_ok} ok, {result.n_failed} failed ({now}, {n - len(result.ran)} complete before) "
+          f"in {result.wall_s:.0f} s")
     print(f"results: {result.out_dir / 'results.csv'}")
     return 1 if result.n_failed else 0
 

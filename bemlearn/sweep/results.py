@@ -96,8 +96,9 @@ def _tick(v: Any) -> str:
 
 def summary_figure(path: str | Path, columns: list[str], rows: list[dict[str, Any]], grid_keys: list[str], *,
                    max_metrics: int = 8) -> Path | None:
-    """Each headline metric (rows of panels, at most ``max_metrics``) against each grid key (columns):
-    the ok cells as points, their mean per value as a bar; ``None`` when no metric has a number."""
+    """The first ``max_metrics`` numeric headline metrics (rows of panels; true/false columns such as
+    ``fell`` are left to the table) against each grid key (columns of panels): the ok cells as points,
+    their mean per value as a bar.  ``None`` (and no file) when no metric has a number."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -105,7 +106,8 @@ def summary_figure(path: str | Path, columns: list[str], rows: list[dict[str, An
 
     ok = [r for r in rows if r["status"] == "ok"]
     start = columns.index(FIXED_COLUMNS[-1]) + 1
-    metrics = [c for c in columns[start:] if any(_numeric(r.get(c)) is not None for r in ok)][:max_metrics]
+    metrics = [c for c in columns[start:] if any(_numeric(r.get(c)) is not None for r in ok)
+               and not all(isinstance(r.get(c), bool) for r in ok if r.get(c) is not None)][:max_metrics]
     if not metrics:
         return None
     axes_keys = grid_keys or ["cell"]
@@ -131,7 +133,7 @@ def summary_figure(path: str | Path, columns: list[str], rows: list[dict[str, An
     n_fail = sum(r["status"] == "failed" for r in rows)
     fig.suptitle(f"{len(ok)} ok cells" + (f", {n_fail} failed (not shown)" if n_fail else "") + "; bar: mean over the other axes",
                  fontsize=9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.35 / fig.get_figheight()))
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110)
     plt.close(fig)
