@@ -109,7 +109,8 @@ class RayBackend:
             try:
                 ray.init(address=address, **kwargs)
             except (ConnectionError, RuntimeError, ValueError) as exc:
-                raise EnvironmentProblem(f"--address {address}: cannot connect to a Ray cluster there ({exc})") from exc
+                cause = str(exc.__cause__ or exc).strip().splitlines()[0][:400]  # Ray's reason (e.g. a missing auth token)
+                raise EnvironmentProblem(f"--address {address}: cannot connect to a Ray cluster there ({cause})") from exc
         elif address is not None:
             log.info("Ray is already initialised in this process; --address %s is not used", address)
         self.startup_s = time.perf_counter() - t0
