@@ -95,7 +95,7 @@ def test_resume_runs_only_the_incomplete_cells_and_an_existing_sweep_is_not_repl
 @pytest.fixture(scope="module")
 def ray_instance():
     ray = pytest.importorskip("ray", reason="Ray is the [ray] extra (installed by the [test] extra)")
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
     yield ray
     ray.shutdown()
 

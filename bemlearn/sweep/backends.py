@@ -86,7 +86,8 @@ class RayBackend:
     Args:
         resources: what each cell declares.
         address: a running cluster (``auto``, ``HOST:6379``, ``ray://HOST:10001``); ``None``
-            starts a local instance with ``os.cpu_count()`` CPUs.
+            starts a new local instance with ``os.cpu_count()`` CPUs (never joins a cluster
+            ``ray start`` left on the machine or ``RAY_ADDRESS`` names: give ``--address`` for that).
         max_parallel: at most this many cells at once (default: as many as the cluster's CPUs
             and GPUs hold).
 
@@ -104,13 +105,15 @@ class RayBackend:
         self.started_here = not ray.is_initialized()
         if self.started_here:
             kwargs: dict[str, Any] = dict(include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING)
-            if address is None:
+            if address is None:  # "local": a new instance, even when RAY_ADDRESS or a `ray start` cluster is around
                 kwargs["num_cpus"] = os.cpu_count() or 1
             try:
-                ray.init(address=address, **kwargs)
+                ray.init(address=address or "local", **kwargs)
             except (ConnectionError, RuntimeError, ValueError) as exc:
                 cause = str(exc.__cause__ or exc).strip().splitlines()[0][:400]  # Ray's reason (e.g. a missing auth token)
-                raise EnvironmentProblem(f"--address {address}: cannot connect to a Ray cluster there ({cause})") from exc
+                what = f"--address {address}: cannot connect to a Ray cluster there" if address else \
+                    "--backend ray: cannot start a local Ray instance"
+                raise EnvironmentProblem(f"{what} ({cause})") from exc
         elif address is not None:
             log.info("Ray is already initialised in this process; --address %s is not used", address)
         self.startup_s = time.perf_counter() - t0

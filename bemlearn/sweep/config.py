@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from bemlearn.config import check_dotted_key, from_dict, load_yaml
+from bemlearn.config import check_dotted_key, from_dict, load_yaml, set_dotted
 from bemlearn.errors import ConfigError
 
 __all__ = ["SweepResources", "SweepConfig", "LoadedSweep", "load_sweep"]
@@ -118,7 +118,6 @@ def load_sweep(sweep: str | Path | dict[str, Any]) -> LoadedSweep:
             names no config field (the message names the key and lists the valid ones there), an
             unknown stage (the message lists the stages), or a missing base file.
     """
-    from bemlearn.config import set_dotted
     from bemlearn.sweep.stage import get_stage
 
     if isinstance(sweep, dict):
