@@ -112,6 +112,14 @@ def test_the_ray_backend_runs_the_same_cells_in_workers_with_the_same_metrics(se
     assert [r["status"] for r in ray_rows] == ["failed", "ok"] and ray_rows[1]["bem_heldout.rmse"] > 0
 
 
+def test_a_cell_larger_than_the_ray_cluster_is_refused_before_any_runs(ray_instance, tmp_path):
+    from bemlearn.errors import SweepError
+
+    with pytest.raises(SweepError, match=r"a cell asks for 3 CPU\(s\) and 0 GPU\(s\); the Ray cluster has 2 CPU\(s\)"):
+        run_sweep({**SWEEP, "resources": {"cpus": 3}}, tmp_path / "big", backend="ray", progress=False)
+    assert not list((tmp_path / "big" / "cells").iterdir())
+
+
 def _driver(args: list[str], *, block_ray: bool) -> subprocess.Popen:
     """``bemlearn ARGS`` in a child process (its own session: what it leaves behind can be ended by group)."""
     preamble = ""
