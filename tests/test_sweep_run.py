@@ -23,7 +23,7 @@ BASE = {"robot": str(ROOT / "tests/robots/cartpole.xml"), "collect": {"n_trials"
         "dataset": {"n_points": 80}, "train": {"max_iter": 15}, "evaluate": {"n_references": 1, "duration_s": 5.0}}
 #: one cell that cannot work (1 trial: nothing to validate on) and one that does
 SWEEP = {"base": BASE, "grid": {"collect.n_trials": [1, 2]}, "stage": "train"}
-TIMING = {"wall_s", "host", "finished"}
+TIMING = {"wall_s", "cpu_s", "host", "finished"}
 
 
 def _events(out: Path) -> list[dict]:
@@ -48,7 +48,7 @@ def test_a_failed_cell_is_retried_once_then_recorded_and_the_sweep_goes_on(seria
     assert fail.status == "failed" and fail.attempt == 2
     assert fail.error == "ValueError: val_fraction = 0.2 needs at least 2 trials to split by trial, got 1"
     assert "Traceback" in fail.traceback and "build_datasets" in fail.traceback
-    assert ok.status == "ok" and ok.attempt == 1 and ok.pid == os.getpid()
+    assert ok.status == "ok" and ok.attempt == 1 and ok.pid == os.getpid() and 0 < ok.cpu_s
     started = [e["cell"] for e in _events(out) if e["event"] == "started"]
     assert started.count(bad.cell_id) == 2 and started.count(good.cell_id) == 1
     # the ok cell is the folder `bemlearn collect` + `bemlearn train` write, plus cell.json and cell.log

@@ -26,7 +26,7 @@ from pathlib import Path
 
 __all__ = ["run_sweep_bench", "format_sweep_bench"]
 
-_TIMING = {"wall_s", "host", "finished"}
+_TIMING = {"wall_s", "cpu_s", "host", "finished"}
 
 
 def run_sweep_bench(sweep: str | Path, out_dir: str | Path, *, max_parallel: int | None = None, force: bool = False,
@@ -62,6 +62,8 @@ def run_sweep_bench(sweep: str | Path, out_dir: str | Path, *, max_parallel: int
         "ratio": ray.wall_s / serial.wall_s, "ratio_without_startup": (ray.wall_s - ray.backend_startup_s) / serial.wall_s,
         "stage_s_serial": sum(o.wall_s for o in serial.outcomes.values()),
         "stage_s_ray": sum(o.wall_s for o in ray.outcomes.values()),
+        "cpu_s_serial": sum(o.cpu_s for o in serial.outcomes.values()),
+        "cpu_s_ray": sum(o.cpu_s for o in ray.outcomes.values()),
         "overhead_mean_s": statistics.fmean(overhead) if overhead else float("nan"),
         "overhead_max_s": max(overhead, default=float("nan")),
         "overhead_first_on_worker_s": first, "overhead_later_mean_s": statistics.fmean(rest) if rest else float("nan"),
@@ -81,11 +83,12 @@ def format_sweep_bench(r: dict) -> str:
         f"serial: {r['serial_s']:.1f} s ({r['ok'][0]} ok); ray: {r['ray_s']:.1f} s ({r['ok'][1]} ok), of which "
         f"{r['ray_startup_s']:.1f} s starting Ray",
         f"ray / serial wall time: {r['ratio']:.3f} ({r['ratio_without_startup']:.3f} without Ray's start)",
-        f"stage time summed over the cells: serial {r['stage_s_serial']:.1f} s, ray {r['stage_s_ray']:.1f} s",
+        f"stage time summed over the cells: serial {r['stage_s_serial']:.1f} s, ray {r['stage_s_ray']:.1f} s "
+        f"(CPU time: serial {r['cpu_s_serial']:.1f} s, ray {r['cpu_s_ray']:.1f} s)",
         f"Ray overhead per cell: mean {r['overhead_mean_s']:.3f} s, max {r['overhead_max_s']:.3f} s; first cell on "
         f"each worker {first} s, later cells mean {r['overhead_later_mean_s']:.3f} s "
         f"(serial backend: {r['serial_overhead_mean_s']:.4f} s)",
-        "results: " + ("identical on both backends (every column but wall_s, host, finished)" if r["identical"] else
+        "results: " + ("identical on both backends (every column but wall_s, cpu_s, host, finished)" if r["identical"] else
                        f"DIFFER in {len(r['differences'])} cells: {r['differences']}"),
         f"resume of the finished sweep: {r['resume_s']:.1f} s in this process, {r['resume_ran']} cells run",
     ])

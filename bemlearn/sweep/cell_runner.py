@@ -80,6 +80,8 @@ class CellOutcome:
         metrics: the stage's headline figures (:attr:`~bemlearn.sweep.stage.SweepStage.headline`).
         attempt: the attempt that produced this record.
         wall_s: the stage's wall time, s.
+        cpu_s: the CPU time the stage used (user + system, its threads and finished child
+            processes), s; ``wall_s`` above it on a cell declaring one CPU means the core was shared.
         started, finished: Unix times of the stage's start and end (the host's clock).
         host, pid: where it ran.
         reused: ``True`` when the cell was already complete and nothing ran (see :func:`run_cell`).
@@ -97,6 +99,7 @@ class CellOutcome:
     metrics: dict[str, Any] = field(default_factory=dict)
     attempt: int = 1
     wall_s: float = 0.0
+    cpu_s: float = 0.0
     started: float = 0.0
     finished: float = 0.0
     host: str = ""
@@ -215,6 +218,14 @@ def _cell_logging(path: Path) -> Iterator[None]:
             h.setLevel(level)
 
 
+def _cpu_seconds() -> float:
+    """User + system CPU time of this process and its finished children, s."""
+    import resource
+
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
 def _verdict(metrics: dict[str, Any]) -> tuple[str | None, list[str]]:
     v = metrics.get("verdict")
     if not isinstance(v, dict):
@@ -242,7 +253,7 @@ def run_cell(job: CellJob) -> CellOutcome:
         stage = get_stage(cell.stage, cell.application)
         append_event(events, {"event": "started", "time": time.time(), **who})
         started = time.time()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), _cpu_seconds()
         error = details = None
         metrics: dict[str, Any] = {}
         with _cell_logging(folder / "cell.log"), _cell_environment(job.cpus, int(cell.cell_id[:8], 16)):
@@ -256,12 +267,12 @@ def run_cell(job: CellJob) -> CellOutcome:
                 details = traceback.format_exc()
                 error = f"{type(exc).__name__}: {str(exc).strip()}".splitlines()[0]
                 log.error("cell %s failed:\n%s", cell.cell_id, details)
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, _cpu_seconds() - c0
         verdict, reasons = _verdict(metrics)
         outcome = CellOutcome(cell.cell_id, cell.index, cell.grid, cell.stage, "failed" if error else "ok", error=error,
                               traceback=details, verdict=verdict, verdict_reasons=reasons,
                               metrics=stage.headline(metrics) if not error else {}, attempt=job.attempt, wall_s=wall,
-                              started=started, finished=time.time(), host=who["host"], pid=who["pid"])
+                              cpu_s=cpu, started=started, finished=time.time(), host=who["host"], pid=who["pid"])
         atomic_write_text(folder / MARKER, outcome.to_json())  # last: the cell is complete from here on
         append_event(events, {"event": "completed" if outcome.status == "ok" else "failed", "time": outcome.finished,
                               "wall_s": wall, **who})

@@ -3,8 +3,8 @@
 Columns, in order: ``cell`` (the id, the folder under ``cells/``), ``index``, one column per grid
 key (named by the key), ``status`` (``ok``, ``failed``, or ``pending`` for a cell not run yet),
 ``verdict`` and ``verdict_reasons`` (the run's own verdict, ``metrics.json["verdict"]``, empty
-where the run has none), ``error`` (the first line, for ``failed``), ``attempts``, ``wall_s`` (the
-stage's wall time), ``host``, ``finished`` (UTC), then the stage's headline figures, each named
+where the run has none), ``error`` (the first line, for ``failed``), ``attempts``, ``wall_s`` and
+``cpu_s`` (the stage's wall and CPU time), ``host``, ``finished`` (UTC), then the stage's headline figures, each named
 by its dotted key in the cell's metrics file (``bem_heldout.rmse``,
 ``closed_loop.predictor.tracking_rmse``, …) and left empty where a cell does not have it.
 ``results.json`` holds the same rows (``{"columns": […], "cells": [{column: value}]}``).
@@ -28,7 +28,7 @@ from bemlearn.sweep.cells import Cell
 __all__ = ["result_rows", "write_results", "summary_figure", "FIXED_COLUMNS"]
 
 #: The columns after the grid keys and before the metrics.
-FIXED_COLUMNS = ("status", "verdict", "verdict_reasons", "error", "attempts", "wall_s", "host", "finished")
+FIXED_COLUMNS = ("status", "verdict", "verdict_reasons", "error", "attempts", "wall_s", "cpu_s", "host", "finished")
 
 
 def result_rows(cells: Sequence[Cell], outcomes: dict[str, CellOutcome]) -> tuple[list[str], list[dict[str, Any]]]:
@@ -41,10 +41,11 @@ def result_rows(cells: Sequence[Cell], outcomes: dict[str, CellOutcome]) -> tupl
         row: dict[str, Any] = {"cell": cell.cell_id, "index": cell.index, **{k: cell.grid[k] for k in grid_keys}}
         if o is None:
             row.update(status="pending", verdict=None, verdict_reasons=None, error=None, attempts=0, wall_s=None,
-                       host=None, finished=None)
+                       cpu_s=None, host=None, finished=None)
         else:
             row.update(status=o.status, verdict=o.verdict, verdict_reasons="; ".join(o.verdict_reasons) or None,
-                       error=o.error, attempts=o.attempt, wall_s=round(o.wall_s, 3), host=o.host or None,
+                       error=o.error, attempts=o.attempt, wall_s=round(o.wall_s, 3), cpu_s=round(o.cpu_s, 3),
+                       host=o.host or None,
                        finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(o.finished)) if o.finished else None)
             for k, v in o.metrics.items():
                 if k not in metric_keys:
