@@ -8,8 +8,12 @@ the rest (retries, results, progress) the same way for both.
 :class:`RayBackend` connects to the cluster at ``address`` (``ray start --head`` on one node,
 ``ray start --address HEAD:6379`` on the others; or ``ray://HEAD:10001``), or starts a local
 Ray instance with this machine's cores (``os.cpu_count()``) when no address is given; a Ray
-instance already initialised in this process is used as it is and left running.  Each cell is
-a task declaring ``num_cpus = resources.cpus`` and ``num_gpus = resources.gpus``; Ray's own
+instance already initialised in this process is used as it is and left running.  Ray starts its
+workers at niceness 15 (background priority); the local instance starts them at niceness 0
+(``RAY_worker_niceness=0`` unless the environment sets it), the priority of the driver and of a
+``--backend serial`` cell: on a machine shared with other work, niceness-15 cells get only what
+that work leaves (docs/sweeps.md has the measurement).  A cluster's own setting is left alone.
+Each cell is a task declaring ``num_cpus = resources.cpus`` and ``num_gpus = resources.gpus``; Ray's own
 retries are off (the driver retries a failed cell itself, ``retries:``), a crashed worker is
 a failed attempt.  Ray is imported only here, and only when this backend is asked for: the
 core runs without it.
@@ -105,8 +109,12 @@ class RayBackend:
         self.started_here = not ray.is_initialized()
         if self.started_here:
             kwargs: dict[str, Any] = dict(include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING)
+            niceness_set = False
             if address is None:  # "local": a new instance, even when RAY_ADDRESS or a `ray start` cluster is around
                 kwargs["num_cpus"] = os.cpu_count() or 1
+                if "RAY_worker_niceness" not in os.environ:  # the raylet reads it when it starts
+                    os.environ["RAY_worker_niceness"] = "0"
+                    niceness_set = True
             try:
                 ray.init(address=address or "local", **kwargs)
             except (ConnectionError, RuntimeError, ValueError) as exc:
@@ -114,6 +122,9 @@ class RayBackend:
                 what = f"--address {address}: cannot connect to a Ray cluster there" if address else \
                     "--backend ray: cannot start a local Ray instance"
                 raise EnvironmentProblem(f"{what} ({cause})") from exc
+            finally:
+                if niceness_set:
+                    del os.environ["RAY_worker_niceness"]
         elif address is not None:
             log.info("Ray is already initialised in this process; --address %s is not used", address)
         self.startup_s = time.perf_counter() - t0
