@@ -131,3 +131,28 @@ def test_dry_run_lists_the_cells_and_resume_with_force_is_refused(tmp_path, caps
     assert "collect.seed=0" in out and "collect.seed=1" in out and "2 cells, stage train: every config is valid" in out
     assert main(["sweep", str(sweep), "--resume", "--force"]) == 2
     assert "--resume and --force: give one" in capsys.readouterr().err
+
+
+def test_docs_describe_every_sweep_key_and_stage():
+    import dataclasses
+
+    from bemlearn.pipeline.config_doc import attribute_docs
+    from bemlearn.sweep import SweepConfig, SweepResources, stage_names
+
+    text = (ROOT / "docs" / "sweeps.md").read_text()
+    for cls in (SweepConfig, SweepResources):
+        for f in dataclasses.fields(cls):
+            assert attribute_docs(cls).get(f.name), f"{cls.__name__}.{f.name} has no docstring entry"
+            assert f"`{f.name}`" in text, f"docs/sweeps.md does not describe {f.name}"
+    for names in stage_names().values():
+        for name in names:
+            assert f"| `{name}` |" in text or f"| `{name}` (" in text, name
+
+
+def test_rows_differ_only_in_what_was_computed():
+    from bemlearn.sweep.results import differing_columns
+
+    a = {"cell": "x", "wall_s": 1.0, "cpu_s": 1.0, "host": "a", "closed_loop.zero.tracking_rmse": float("nan"), "m": 0.25}
+    b = {**a, "wall_s": 2.0, "cpu_s": 3.0, "host": "b", "closed_loop.zero.tracking_rmse": float("nan")}
+    assert differing_columns(a, b) == []
+    assert differing_columns(a, {**b, "m": 0.25 + 1e-16, "status": "ok"}) == ["m", "status"]

@@ -12,7 +12,7 @@ finished Ray sweep once, and reports:
   first cell on each worker process carries the start-up, so it is reported apart;
 * the stage time summed over the cells of each backend (how much the cells slowed down by
   sharing the machine's cores);
-* whether both backends gave the same results (every column but the timings);
+* whether both backends gave the same results (every column but the timings; NaN equals NaN);
 * the resume of the finished sweep (nothing to run);
 * the load average before and after (other processes on the machine change every figure).
 """
@@ -26,13 +26,12 @@ from pathlib import Path
 
 __all__ = ["run_sweep_bench", "format_sweep_bench"]
 
-_TIMING = {"wall_s", "cpu_s", "host", "finished"}
-
 
 def run_sweep_bench(sweep: str | Path, out_dir: str | Path, *, max_parallel: int | None = None, force: bool = False,
                     progress: bool = True) -> dict:
     """Run the benchmark (module docstring); returns its figures."""
     from bemlearn.sweep import run_sweep
+    from bemlearn.sweep.results import differing_columns
 
     out = Path(out_dir)
     load_before = os.getloadavg()
@@ -44,8 +43,7 @@ def run_sweep_bench(sweep: str | Path, out_dir: str | Path, *, max_parallel: int
     load_after = os.getloadavg()
     differ = []
     for a, b in zip(serial.rows, ray.rows):
-        keys = (set(a) | set(b)) - _TIMING
-        bad = sorted(k for k in keys if a.get(k) != b.get(k))
+        bad = differing_columns(a, b)
         if bad:
             differ.append({"cell": a["cell"], "columns": bad})
     seen_pids: set[int] = set()

@@ -25,10 +25,12 @@ from bemlearn.files import atomic_path, atomic_write_text
 from bemlearn.sweep.cell_runner import CellOutcome
 from bemlearn.sweep.cells import Cell
 
-__all__ = ["result_rows", "write_results", "summary_figure", "FIXED_COLUMNS"]
+__all__ = ["result_rows", "write_results", "summary_figure", "differing_columns", "FIXED_COLUMNS", "TIMING_COLUMNS"]
 
 #: The columns after the grid keys and before the metrics.
 FIXED_COLUMNS = ("status", "verdict", "verdict_reasons", "error", "attempts", "wall_s", "cpu_s", "host", "finished")
+#: The columns that depend on when and where a cell ran, not on what it computed.
+TIMING_COLUMNS = ("wall_s", "cpu_s", "host", "finished")
 
 
 def result_rows(cells: Sequence[Cell], outcomes: dict[str, CellOutcome]) -> tuple[list[str], list[dict[str, Any]]]:
@@ -54,6 +56,15 @@ def result_rows(cells: Sequence[Cell], outcomes: dict[str, CellOutcome]) -> tupl
         rows.append(row)
     columns = ["cell", "index", *grid_keys, *FIXED_COLUMNS, *metric_keys]
     return columns, [{c: row.get(c) for c in columns} for row in rows]
+
+
+def differing_columns(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
+    """The columns (other than :data:`TIMING_COLUMNS`) where rows ``a`` and ``b`` differ; a NaN equals a NaN
+    (a run that fell has NaN tracking on every backend)."""
+    def same(x: Any, y: Any) -> bool:
+        return x == y or (isinstance(x, float) and isinstance(y, float) and math.isnan(x) and math.isnan(y))
+
+    return sorted(k for k in (set(a) | set(b)) - set(TIMING_COLUMNS) if not same(a.get(k), b.get(k)))
 
 
 def _csv_value(v: Any) -> str:
