@@ -18,6 +18,7 @@ from bemlearn.errors import (
     PredictorInputError,
     RobotModelError,
     StalePredictorError,
+    SweepError,
     TrajectoryFormatError,
 )
 
@@ -32,5 +33,6 @@ __all__ = [
     "PredictorInputError",
     "RobotModelError",
     "StalePredictorError",
+    "SweepError",
     "TrajectoryFormatError",
 ]

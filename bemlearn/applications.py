@@ -47,6 +47,8 @@ class Application:
             top-level ``application:`` key names this application (``bemlearn run``).
         parse_config: ``parse_config(config_path)`` parses and validates such a config strictly
             (raising :class:`~bemlearn.errors.ConfigError`); the preflight of every command calls it.
+        sweep_stages: stage name → a factory returning a :class:`~bemlearn.sweep.stage.SweepStage`
+            that ``bemlearn sweep`` runs for configs naming this application (``stage:`` of a sweep file).
     """
 
     name: str
@@ -57,6 +59,7 @@ class Application:
     add_robot_commands: Callable[[Any], None] | None = None
     run: Callable[..., Path] | None = None
     parse_config: Callable[[Any], Any] | None = None
+    sweep_stages: dict[str, Callable[[], Any]] = field(default_factory=dict)
 
 
 _APPS: dict[str, Application] = {}

@@ -41,7 +41,7 @@ from bemlearn.errors import ConfigError
 from bemlearn.files import atomic_write_text
 
 __all__ = ["ConfigError", "from_dict", "to_dict", "load_yaml", "save_yaml", "replace_path", "Limit", "config_limits",
-           "show_value", "MAX_NODES", "MAX_CONFIG_BYTES"]
+           "show_value", "MAX_NODES", "MAX_CONFIG_BYTES", "set_dotted", "check_dotted_key"]
 
 T = TypeVar("T")
 
@@ -353,3 +353,62 @@ def replace_path(obj: T, dotted: str, value: Any) -> T:
     if not rest:
         return dataclasses.replace(obj, **{head: value})
     return dataclasses.replace(obj, **{head: replace_path(getattr(obj, head), rest, value)})
+
+
+def set_dotted(raw: dict[str, Any], dotted: str, value: Any) -> None:
+    """Set ``raw["a"]["b"]["c"] = value`` for ``dotted = "a.b.c"`` in a config mapping, creating
+    missing (or ``null``) sections.
+
+    Raises:
+        ConfigError: a section on the way holds a value that is not a mapping.
+    """
+    head, _, rest = dotted.partition(".")
+    if not rest:
+        raw[head] = value
+        return
+    child = raw.get(head)
+    if child is None:
+        child = raw[head] = {}
+    if not isinstance(child, dict):
+        raise ConfigError(f"{head}: expected a mapping, got {child!r}")
+    set_dotted(child, rest, value)
+
+
+def check_dotted_key(cls: type, dotted: str, *, where: str = "config") -> None:
+    """Check that ``dotted`` (``"collect.seed"``) names a field of dataclass ``cls`` or of its
+    nested config dataclasses; a key inside a free-form mapping field (``dict[str, Any]``) is accepted.
+
+    Raises:
+        ConfigError: naming ``where``, the dotted key, the first unknown part and the valid keys there.
+    """
+    tp: Any = cls
+    parts = dotted.split(".")
+    for i, part in enumerate(parts):
+        inner = _dataclass_of(tp)
+        if inner is None:
+            if _is_mapping_type(tp):
+                return
+            raise ConfigError(f"{where}: {dotted}: {'.'.join(parts[:i])} is a value, not a section")
+        fields = {f.name: f for f in dataclasses.fields(inner) if f.init}
+        if part not in fields:
+            section = ".".join(parts[:i]) or "the top level"
+            raise ConfigError(f"{where}: {dotted}: unknown key {part!r} in {section}; valid keys are {sorted(fields)}")
+        tp = typing.get_type_hints(inner)[part]
+
+
+def _dataclass_of(tp: Any) -> type | None:
+    """``tp`` itself, or the one dataclass of an optional ``X | None``; else ``None``."""
+    if dataclasses.is_dataclass(tp):
+        return tp
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        found = [a for a in typing.get_args(tp) if dataclasses.is_dataclass(a)]
+        return found[0] if len(found) == 1 else None
+    return None
+
+
+def _is_mapping_type(tp: Any) -> bool:
+    if tp is Any or typing.get_origin(tp) is dict or tp is dict:
+        return True
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        return any(_is_mapping_type(a) for a in typing.get_args(tp) if a is not type(None))
+    return False

@@ -19,6 +19,7 @@ __all__ = [
     "PredictorInputError",
     "StalePredictorError",
     "EnvironmentProblem",
+    "SweepError",
 ]
 
 
@@ -60,3 +61,8 @@ class StalePredictorError(BemlearnError, ValueError):
 
 class EnvironmentProblem(BemlearnError, RuntimeError):
     """The machine cannot do what was asked (no CUDA device, no offscreen GL backend, unwritable folder)."""
+
+
+class SweepError(BemlearnError, RuntimeError):
+    """A sweep cannot start or go on: its folder is being written by another ``bemlearn sweep``,
+    or its cells ask for more CPUs or GPUs than the Ray cluster has."""

@@ -9,6 +9,8 @@
 * ``bench import [--rows N] [--accuracy]`` — logger CSV import speed and the model-free path's accuracy (issue 14).
 * ``bench robots [MJCF …]`` — collect → train → export → held-out BEM → closed loop on MJCF
   robots with model-derived values only (issue 13).
+* ``bench sweep SWEEP`` — the Ray backend of ``bemlearn sweep`` against the serial one: speed-up,
+  per-cell overhead, identical results (issue 24).
 * ``bench uncertainty`` — candidate BEM bands: coverage, sharpness, bound violations, cost (issue 15).
 * ``bench band RUN…`` — the exported band's terms on trained runs (coverage and sharpness of each).
 * ``bench c-footprint`` — flash/RAM footprint of the C export per model size and kind (issue 17).
@@ -103,6 +105,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     rb.add_argument("--workers", type=int, default=1, help="collect processes (default 1)")
     rb.add_argument("--seed", type=int, default=0, help="collect seed (default 0)")
     rb.set_defaults(func=_robots)
+    sw = sub.add_parser("sweep", help="the Ray backend of `bemlearn sweep` against the serial one: speed-up, per-cell "
+                        "overhead, same results (issue 24)",
+                        description="Run SWEEP with --backend serial into OUT/serial and with --backend ray into OUT/ray "
+                        "(a local Ray instance with this machine's cores), resume the finished one, and report wall "
+                        "times, Ray's overhead per cell and whether the results agree (see bemlearn/bench/sweep_bench.py).")
+    sw.add_argument("sweep", type=Path, help="a sweep file, e.g. configs/sweeps/robots-quick.yaml")
+    sw.add_argument("--out", type=Path, required=True, help="folder of the two sweeps (OUT/serial, OUT/ray)")
+    sw.add_argument("--max-parallel", type=int, default=None, help="cells at once on Ray (default: the cores)")
+    sw.add_argument("--force", action="store_true", help="run every cell again in existing OUT/serial and OUT/ray")
+    sw.add_argument("--no-progress", action="store_true")
+    sw.set_defaults(func=_sweep)
     u = sub.add_parser("uncertainty", help="candidate BEM bands: coverage of the model BEM, sharpness, bound violations, cost",
                        description="Fit the config's robot (and a generated cart-pole) BEM GP and score each candidate band "
                        "on held-out references against the model-based BEM (see bemlearn/bench/uncertainty_bench.py).")
@@ -254,6 +267,14 @@ def _robots(args: argparse.Namespace) -> int:
                                 workers=args.workers, seed=args.seed, progress=print))
     print(f"load average {os.getloadavg()[0]:.2f}")
     print(format_robots_bench(rows))
+    return 0
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from bemlearn.bench.sweep_bench import format_sweep_bench, run_sweep_bench
+
+    print(format_sweep_bench(run_sweep_bench(args.sweep, args.out, max_parallel=args.max_parallel, force=args.force,
+                                             progress=not args.no_progress)))
     return 0
 
 

@@ -30,6 +30,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "bemlearn.cli.train_cmd",
     "bemlearn.cli.evaluate_cmd",
     "bemlearn.cli.run_cmd",
+    "bemlearn.cli.sweep_cmd",
     "bemlearn.cli.data_cmd",
     "bemlearn.cli.export_cmd",
     "bemlearn.cli.bench_cmd",

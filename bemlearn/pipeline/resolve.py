@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bemlearn.config import ConfigError, from_dict, load_yaml, to_dict
+from bemlearn.config import ConfigError, from_dict, load_yaml, set_dotted, to_dict
 from bemlearn.pipeline.config import PipelineConfig
 
 __all__ = ["ResolvedConfig", "resolve_pipeline_config", "complete_section", "format_resolved", "flatten"]
@@ -63,19 +63,6 @@ def flatten(data: Any, prefix: str = "") -> dict[str, Any]:
     return {prefix[:-1]: data}
 
 
-def _set(raw: dict, dotted: str, value: Any) -> None:
-    head, _, rest = dotted.partition(".")
-    if not rest:
-        raw[head] = value
-        return
-    child = raw.get(head)
-    if child is None:
-        child = raw[head] = {}
-    if not isinstance(child, dict):
-        raise ConfigError(f"{head}: expected a mapping, got {child!r}")
-    _set(child, rest, value)
-
-
 def _has(raw: Mapping, dotted: str) -> bool:
     head, _, rest = dotted.partition(".")
     if head not in raw:
@@ -83,14 +70,17 @@ def _has(raw: Mapping, dotted: str) -> bool:
     return True if not rest else isinstance(raw[head], Mapping) and _has(raw[head], rest)
 
 
-def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: bool = True) -> ResolvedConfig:
+def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: bool = True,
+                            source: str | None = None) -> ResolvedConfig:
     """Parse ``config`` (a YAML path or a mapping) strictly and fill in what the robot's model derives.
+
+    ``source`` names a mapping in error messages and in :attr:`ResolvedConfig.source` (default ``"<dict>"``).
 
     Raises:
         ConfigError: unknown keys, wrong types, or a config naming neither ``robot:`` nor ``data:``.
     """
     if isinstance(config, Mapping):
-        raw, source = copy.deepcopy(dict(config)), "<dict>"
+        raw, source = copy.deepcopy(dict(config)), source or "<dict>"
     else:
         raw, source = load_yaml(config), str(config)
     if not raw:
@@ -109,7 +99,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
             raise ConfigError(f"{source}: robot: {exc}") from exc
         for key, (value, note) in derive_pipeline_values(robot, parsed, given).items():
             if not _has(raw, key):
-                _set(raw, key, value)
+                set_dotted(raw, key, value)
                 notes[key] = note
         parsed = from_dict(PipelineConfig, raw, where=source)
         _check_for_robot(parsed, robot, source)

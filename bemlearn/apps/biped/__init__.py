@@ -2,7 +2,8 @@
 
 Registers the robot ``biped`` (the pinned-stance model, ``assets/biped_pinned.xml``, torso
 pitch q1 unactuated), the commands ``bemlearn walk`` and ``bemlearn gpdm``, the benches
-``bemlearn bench biped-bem`` and ``bemlearn bench walks``, and runs configs whose top-level
+``bemlearn bench biped-bem`` and ``bemlearn bench walks``, the sweep stages ``biped-bem`` and ``run``
+(:mod:`bemlearn.apps.biped.sweep_stage`), and runs configs whose top-level
 key is ``application: biped`` (``bemlearn run configs/biped.yaml``: walking data, the torso
 BEM learned with the core's train → export stage, walking with it in the loop, GPDMs of the
 robot's and the human gait, Fig. 4/5 and the report).
@@ -37,6 +38,18 @@ def _bench(sub) -> None:
     add_bench(sub)
 
 
+def _bem_stage():
+    from bemlearn.apps.biped.sweep_stage import biped_bem_stage
+
+    return biped_bem_stage()
+
+
+def _run_stage():
+    from bemlearn.apps.biped.sweep_stage import biped_run_stage
+
+    return biped_run_stage()
+
+
 def _run(config_path, out_dir=None, *, device=None, progress=True) -> Path:
     from bemlearn.apps.biped.pipeline import load_biped_config, run_biped_pipeline
 
@@ -59,4 +72,5 @@ APPLICATION = Application(
     add_bench=_bench,
     run=_run,
     parse_config=_parse,
+    sweep_stages={"biped-bem": _bem_stage, "run": _run_stage},
 )

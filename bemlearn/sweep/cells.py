@@ -1,0 +1,118 @@
+"""The cells of a sweep: every combination of the grid, resolved and identified by a hash.
+
+A cell's config is the sweep's base (with its overrides) with one value of each grid key set
+(:func:`~bemlearn.config.set_dotted`), resolved by the stage (for pipeline configs: strict
+parse and the model's derived values, :func:`~bemlearn.pipeline.resolve.resolve_pipeline_config`).
+:func:`expand_cells` resolves every cell before anything runs, so a bad value in the last
+cell fails in seconds, naming the sweep file, the cell and the key.
+
+The cell id is the first 12 hex digits of the SHA-256 of the cell's stage and resolved config
+(:func:`cell_id`), in which every input file a config names (``robot:`` MJCF, ``data:``,
+``simulate.predictor``, …) stands for the SHA-256 of its bytes, and keys that only change how a
+cell runs (``collect.workers``) are left out.  The same cell therefore keeps its id (and
+``--resume`` finds it) when the checkout moves or the grid gains other cells, and gets a new one
+when a value or an input file changes.  An MJCF's included files are not hashed.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import itertools
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bemlearn.config import set_dotted, to_dict
+from bemlearn.errors import ConfigError
+from bemlearn.files import file_sha256
+from bemlearn.sweep.config import LoadedSweep
+from bemlearn.sweep.stage import SweepStage, dotted_get, get_stage
+
+__all__ = ["Cell", "expand_cells", "cell_id"]
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One point of the grid, ready to run.
+
+    Attributes:
+        index: its position in the grid (first key slowest).
+        cell_id: 12 hex digits identifying its stage and resolved config (module docstring).
+        grid: the grid key → value of this cell, as the sweep file wrote them.
+        stage: the stage's name.
+        application: the application whose stage it is (``None``: the core's).
+        config: the stage's resolved config (what :attr:`SweepStage.execute` takes).
+    """
+
+    index: int
+    cell_id: str
+    grid: dict[str, Any]
+    stage: str
+    application: str | None
+    config: Any
+
+    @property
+    def label(self) -> str:
+        """``key=value, …`` of its grid values (``base`` for a sweep without a grid)."""
+        return ", ".join(f"{k}={v}" for k, v in self.grid.items()) or "base"
+
+
+def cell_id(stage: SweepStage, application: str | None, resolved: Any, *, file_hashes: dict[str, str] | None = None) -> str:
+    """The id of a cell running ``stage`` on ``resolved`` (module docstring)."""
+    plain = to_dict(stage.config_of(resolved))
+    hashes = {} if file_hashes is None else file_hashes
+    for key in stage.path_keys:
+        value = dotted_get(plain, key)
+        if isinstance(value, str) and Path(value).is_file():
+            if value not in hashes:
+                hashes[value] = file_sha256(value)
+            set_dotted(plain, key, f"sha256:{hashes[value]}")
+    for key in stage.execution_keys:
+        head, _, last = key.rpartition(".")
+        section = dotted_get(plain, head) if head else plain
+        if isinstance(section, dict):
+            section.pop(last, None)
+    text = json.dumps({"stage": stage.name, "application": application, "config": plain}, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def _absolute_paths(raw: dict[str, Any], keys: tuple[str, ...]) -> None:
+    """Values of ``keys`` that name an existing file relative to the current directory → absolute paths."""
+    for key in keys:
+        value = dotted_get(raw, key)
+        if isinstance(value, str) and not Path(value).is_absolute() and Path(value).is_file():
+            set_dotted(raw, key, str(Path(value).absolute()))
+
+
+def expand_cells(sweep: LoadedSweep) -> list[Cell]:
+    """Every cell of ``sweep``, resolved and validated (module docstring).
+
+    Raises:
+        ConfigError: a cell's config is invalid (the message names the sweep file, the cell's
+            index and grid values, and the key), or two cells resolve to the same config.
+    """
+    spec, source = sweep.spec, sweep.source
+    application = sweep.base.get("application")
+    stage = get_stage(spec.stage, application, where=f"{source}: stage")
+    keys = list(spec.grid)
+    cells: list[Cell] = []
+    seen: dict[str, Cell] = {}
+    hashes: dict[str, str] = {}
+    for index, values in enumerate(itertools.product(*spec.grid.values())):
+        grid = dict(zip(keys, values))
+        raw = copy.deepcopy(sweep.base)
+        for key, value in grid.items():
+            set_dotted(raw, key, copy.deepcopy(value))
+        _absolute_paths(raw, stage.path_keys)
+        where = f"{source}: cell {index} ({', '.join(f'{k}={v}' for k, v in grid.items()) or 'base'})"
+        resolved = stage.resolve(raw, where)
+        cid = cell_id(stage, application, resolved, file_hashes=hashes)
+        cell = Cell(index, cid, grid, stage.name, application, resolved)
+        if cid in seen:
+            raise ConfigError(f"{source}: cells {seen[cid].index} ({seen[cid].label}) and {index} ({cell.label}) "
+                              f"resolve to the same config (cell {cid}); remove one of the values")
+        seen[cid] = cell
+        cells.append(cell)
+    return cells
