@@ -21,8 +21,9 @@ from bemlearn.sweep import read_outcome, run_sweep
 ROOT = Path(__file__).resolve().parents[1]
 BASE = {"robot": str(ROOT / "tests/robots/cartpole.xml"), "collect": {"n_trials": 2, "duration_s": 2.0},
         "dataset": {"n_points": 80}, "train": {"max_iter": 15}, "evaluate": {"n_references": 1, "duration_s": 5.0}}
-#: one cell that cannot work (1 trial: nothing to validate on) and one that does
-SWEEP = {"base": BASE, "grid": {"collect.n_trials": [1, 2]}, "stage": "train"}
+#: one cell that cannot work (a q_u window of 10 µrad holds no sample: it fails while building the
+#: datasets, after the config checks) and one that does
+SWEEP = {"base": BASE, "grid": {"dataset.qu_window": [1e-5, 0.5]}, "stage": "train"}
 TIMING = {"wall_s", "cpu_s", "host", "finished"}
 
 
@@ -46,7 +47,7 @@ def test_a_failed_cell_is_retried_once_then_recorded_and_the_sweep_goes_on(seria
     assert result.backend == "serial" and result.ran == [bad.cell_id, good.cell_id]
     fail, ok = result.outcomes[bad.cell_id], result.outcomes[good.cell_id]
     assert fail.status == "failed" and fail.attempt == 2
-    assert fail.error == "ValueError: val_fraction = 0.2 needs at least 2 trials to split by trial, got 1"
+    assert fail.error.startswith("TrajectoryFormatError: choose_sigma: ") and "fewer than 10 samples inside" in fail.error
     assert "Traceback" in fail.traceback and "build_datasets" in fail.traceback
     assert ok.status == "ok" and ok.attempt == 1 and ok.pid == os.getpid() and 0 < ok.cpu_s
     started = [e["cell"] for e in _events(out) if e["event"] == "started"]
@@ -65,10 +66,10 @@ def test_a_failed_cell_is_retried_once_then_recorded_and_the_sweep_goes_on(seria
 def test_results_have_one_row_per_cell_with_grid_values_status_and_metrics(serial):
     out, result = serial
     header = (out / "results.csv").read_text().splitlines()[0].split(",")
-    assert header[:5] == ["cell", "index", "collect.n_trials", "status", "verdict"]
+    assert header[:5] == ["cell", "index", "dataset.qu_window", "status", "verdict"]
     rows = _results(out)
-    assert [(r["collect.n_trials"], r["status"], r["attempts"]) for r in rows] == [(1, "failed", 2), (2, "ok", 1)]
-    assert rows[0]["error"].startswith("ValueError: val_fraction") and rows[1]["error"] is None
+    assert [(r["dataset.qu_window"], r["status"], r["attempts"]) for r in rows] == [(1e-5, "failed", 2), (0.5, "ok", 1)]
+    assert rows[0]["error"].startswith("TrajectoryFormatError: choose_sigma") and rows[1]["error"] is None
     metrics = json.loads((out / "cells" / rows[1]["cell"] / "metrics.json").read_text())
     assert rows[1]["val_rmse"] == metrics["val_rmse"] and rows[1]["verdict"] == (metrics.get("verdict") or {}).get("status")
     assert (out / "summary.png").stat().st_size > 10_000 and (out / "sweep.yaml").is_file()
@@ -134,7 +135,7 @@ def _driver(args: list[str], *, block_ray: bool) -> subprocess.Popen:
 
 def test_sigterm_cancels_the_sweep_and_resume_completes_it_without_rerunning_a_cell(tmp_path):
     # closed-loop cells with the model BEM: a short one, then a longer one the signal interrupts
-    sweep = {"base": {**BASE, "simulate": {"bem_source": "model"}}, "grid": {"simulate.duration_s": [1.0, 3.0]},
+    sweep = {"base": {**BASE, "simulate": {"bem_source": "model"}}, "grid": {"simulate.duration_s": [1.5, 3.0]},
              "stage": "simulate"}
     path = tmp_path / "s.yaml"
     path.write_text(json.dumps(sweep))  # JSON is YAML
@@ -163,7 +164,7 @@ def test_sigterm_cancels_the_sweep_and_resume_completes_it_without_rerunning_a_c
 @pytest.mark.slow
 def test_a_killed_ray_driver_leaves_complete_cells_and_resume_runs_each_cell_to_completion_once(tmp_path):
     pytest.importorskip("ray")
-    sweep = {"base": {**BASE, "simulate": {"bem_source": "model"}}, "grid": {"simulate.duration_s": [1.0, 6.0, 7.0, 8.0]},
+    sweep = {"base": {**BASE, "simulate": {"bem_source": "model"}}, "grid": {"simulate.duration_s": [1.5, 6.0, 7.0, 8.0]},
              "stage": "simulate"}
     path = tmp_path / "s.yaml"
     path.write_text(json.dumps(sweep))

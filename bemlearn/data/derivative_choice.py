@@ -184,6 +184,10 @@ def choose_sigma(traj: Trajectory, *, qu_window: float | None = 0.5, truncate: f
     within = np.abs(traj.q[:, iu]) <= qu_window if qu_window is not None else None
     ladder = _ladder(traj, truncate, within)
     where = f"{meta.robot!r} ({traj.n_samples} samples in {len(traj.trial_ids)} trials at {rate:g} Hz)"
+    if within is not None and int(within.sum()) < 10:
+        raise TrajectoryFormatError(f"choose_sigma: {where}: fewer than 10 samples inside |{meta.unactuated}| ≤ {qu_window:g} "
+                                    f"({int(within.sum())}); widen dataset.qu_window or check the sign and offset of "
+                                    f"{meta.unactuated} (upright must read 0)")
     if not ladder:
         raise TrajectoryFormatError(
             f"choose_sigma: the trials of {where} are too short for the Gaussian estimator (a σ of two samples needs "
