@@ -1,4 +1,4 @@
-"""Issue-4 training figures on the shipped Furuta config (``bemlearn bench train``).
+"""Training figures on the shipped Furuta config (``bemlearn bench train``).
 
 * exact GP on the paper's 500 points: fit time (1 and 2 torch threads) and the held-out
   learned-BEM accuracy (RMSE, max, ±2σ coverage with latent and predictive std);

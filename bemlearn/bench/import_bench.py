@@ -1,4 +1,4 @@
-"""``bemlearn bench import``: log import speed (10⁶ rows) and the model-free path's accuracy (issue 14).
+"""``bemlearn bench import``: log import speed (10⁶ rows) and the model-free path's accuracy.
 
 * speed: logger CSVs with ``rows`` rows in total (degrees, flipped pendulum, ms stamps with
   20 µs jitter, dropped samples, extra columns; :mod:`bemlearn.data.rig_logs`) are written

@@ -1,4 +1,4 @@
-"""``bemlearn bench uncertainty``: candidate BEM bands side by side (issue 15).
+"""``bemlearn bench uncertainty``: candidate BEM bands side by side.
 
 For each robot (the shipped Furuta config and data; a cart-pole MJCF generated here, with
 LQR gains and excitation data collected by the simulator) one exact GP is fitted as

@@ -1,21 +1,21 @@
-"""``bemlearn bench``: the measurements the issues name, kept out of the timed test suite.
+"""``bemlearn bench``: measurements kept out of the timed test suite.
 
-* ``bench train [CONFIG]`` — exact / sgpr / svgp fit times and learned-BEM accuracy (issue 4);
-* ``bench predict [CHECKPOINT]`` — predictor latency, throughput and GPyTorch parity (issue 5);
-* ``bench sim PREDICTOR`` — the learned BEM in the EIC loop, mismatch study, Lemma 1, speed (issue 6);
-* ``bench derivatives [CONFIG]`` — derivative estimators and their effect on the learned BEM (issue 3);
-* ``bench gpdm`` — GPDM fit time and recovery on synthetic gait data (issue 7);
+* ``bench train [CONFIG]`` — exact / sgpr / svgp fit times and learned-BEM accuracy;
+* ``bench predict [CHECKPOINT]`` — predictor latency, throughput and GPyTorch parity;
+* ``bench sim PREDICTOR`` — the learned BEM in the EIC loop, mismatch study, Lemma 1, speed;
+* ``bench derivatives [CONFIG]`` — derivative estimators and their effect on the learned BEM;
+* ``bench gpdm`` — GPDM fit time and recovery on synthetic gait data;
 * the installed applications' benches (e.g. the biped's ``bench biped-bem`` and ``bench walks``).
-* ``bench import [--rows N] [--accuracy]`` — logger CSV import speed and the model-free path's accuracy (issue 14).
+* ``bench import [--rows N] [--accuracy]`` — logger CSV import speed and the model-free path's accuracy.
 * ``bench robots [MJCF …]`` — collect → train → export → held-out BEM → closed loop on MJCF
-  robots with model-derived values only (issue 13).
+  robots with model-derived values only.
 * ``bench sweep SWEEP`` — the Ray backend of ``bemlearn sweep`` against the serial one: speed-up,
-  per-cell overhead, identical results (issue 24).
-* ``bench uncertainty`` — candidate BEM bands: coverage, sharpness, bound violations, cost (issue 15).
+  per-cell overhead, identical results.
+* ``bench uncertainty`` — candidate BEM bands: coverage, sharpness, bound violations, cost.
 * ``bench band RUN…`` — the exported band's terms on trained runs (coverage and sharpness of each).
-* ``bench c-footprint`` — flash/RAM footprint of the C export per model size and kind (issue 17).
-* ``bench sigint CONFIG --data FILE`` — Ctrl-C latency of ``train`` on the 3,000-point exact GP (issue 16);
-* ``bench fuzz`` — bad-input classes fed to every reader and how many end in a named error (issue 16).
+* ``bench c-footprint`` — flash/RAM footprint of the C export per model size and kind.
+* ``bench sigint CONFIG --data FILE`` — Ctrl-C latency of ``train`` on the 3,000-point exact GP;
+* ``bench fuzz`` — bad-input classes fed to every reader and how many end in a named error.
 """
 
 from __future__ import annotations
@@ -86,7 +86,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         if app.add_bench is not None:
             app.add_bench(sub)
     im = sub.add_parser("import", help="logger CSV import speed (10⁶ rows) and, with --accuracy, the model-free "
-                        "path's learned BEM vs the simulator file's (issue 14)")
+                        "path's learned BEM vs the simulator file's")
     im.add_argument("--data", type=Path, required=True,
                     help="a simulator trajectory file, written out as logger CSVs (e.g. the shipped data/*.npz)")
     im.add_argument("--rows", type=int, default=1_000_000, help="rows imported in the speed case (default 10⁶)")
@@ -96,7 +96,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     im.add_argument("--config", type=Path, default=None, help="pipeline YAML (robot, dataset and train sections); needed with --accuracy")
     im.add_argument("--figures", type=Path, default=None, help="folder for the BEM slice figures")
     im.set_defaults(func=_import)
-    rb = sub.add_parser("robots", help="the whole chain on MJCF robots with derived values only (issue 13)")
+    rb = sub.add_parser("robots", help="the whole chain on MJCF robots with derived values only")
     rb.add_argument("robots", nargs="+", help="MJCF files or registry names, e.g. tests/robots/*.xml")
     rb.add_argument("--out", type=Path, default=Path("runs/bench-robots"), help="folder of the per-robot runs")
     rb.add_argument("--trials", type=int, default=24, help="excitation trials per robot (default 24)")
@@ -106,7 +106,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     rb.add_argument("--seed", type=int, default=0, help="collect seed (default 0)")
     rb.set_defaults(func=_robots)
     sw = sub.add_parser("sweep", help="the Ray backend of `bemlearn sweep` against the serial one: speed-up, per-cell "
-                        "overhead, same results (issue 24)",
+                        "overhead, same results",
                         description="Run SWEEP with --backend serial into OUT/serial and with --backend ray into OUT/ray "
                         "(a local Ray instance with this machine's cores), resume the finished one, and report wall "
                         "times, Ray's overhead per cell and whether the results agree (see bemlearn/bench/sweep_bench.py).")
@@ -206,10 +206,8 @@ def _sim(args: argparse.Namespace) -> int:
 
 
 def _derivatives(args: argparse.Namespace) -> int:
-    from bemlearn.bench.derivatives_bench import run_derivatives_bench
+    from bemlearn.bench.derivatives_bench import TABLE_HEAD, run_derivatives_bench
     from bemlearn.pipeline.config import load_pipeline_config
-
-    from bemlearn.bench.derivatives_bench import TABLE_HEAD
 
     cfg = load_pipeline_config(args.config)
     head = TABLE_HEAD[0] + ("" if args.no_gp else TABLE_HEAD[1])

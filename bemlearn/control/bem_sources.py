@@ -1,7 +1,8 @@
 """Where the controller gets its BEM q_u^e from, chosen by name (``BEM_SOURCES``).
 
 Every source maps a batch of BEM inputs ``x (B, 3m)`` = [q̈_a, q̇_a, q_a] (rad/s², rad/s,
-rad; the exported predictor's column order, eq. 14) to ``q_u^e (B,)`` rad.
+rad; m/s², m/s, m for slides; the exported predictor's column order, eq. 14) to ``q_u^e (B,)``
+in q_u's unit (rad for a hinge, m for a slide).
 
 * ``predictor`` — the exported TorchScript file (``bem_predictor.pt``), its ``bem_mean``
   called every control tick: the learned BEM μ(x_0^e) of eq. (14).
@@ -35,7 +36,7 @@ class PredictorBEM:
             raise FileNotFoundError(f"BEM predictor file {path} not found (run `bemlearn export RUN_DIR` first)")
         self.module = load_script_module(path)  # CheckpointError (a ValueError) for a foreign or tampered file
         self.meta = json.loads(self.module.metadata())
-        if robot is not None:
+        if robot is not None:  # noqa: SIM102 - the robot check reads as its own block
             if self.meta.get("robot") != robot.name or int(self.meta.get("m", -1)) != robot.m:
                 raise ValueError(
                     f"{path}: predictor is for robot {self.meta.get('robot')!r} (m = {self.meta.get('m')}), "
@@ -53,7 +54,7 @@ class PredictorBEM:
             return self.module.full_mean(torch.from_numpy(x)).numpy()
 
     def mean_std(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Mean and posterior std (rad) for logging/plots (slower than ``__call__``)."""
+        """Mean and posterior std (q_u's unit) for logging/plots (slower than ``__call__``)."""
         with torch.no_grad():
             mean, std = self.module(torch.from_numpy(np.ascontiguousarray(x)))
         return mean.numpy(), std.numpy()

@@ -143,8 +143,8 @@ class EICController:
 
         Args:
             t: time, s.
-            q: ``(n,)`` measured coordinates, rad.
-            qd: ``(n,)`` estimated rates, rad/s.
+            q: ``(n,)`` measured coordinates, rad (m for slides).
+            qd: ``(n,)`` estimated rates, rad/s (m/s for slides).
         """
         g, m, ia, iu = self.gains, self.m, self.ia, self.iu
         h = g.deriv_step

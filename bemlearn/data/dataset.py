@@ -55,7 +55,7 @@ class DatasetConfig:
         derivative_options: the estimator's options, e.g. ``{"sigma_s": 0.1}`` (gaussian) or
             ``{"window_s": 0.3, "polyorder": 4}`` (savgol); an option left out takes the
             estimator's default (the Gaussian's σ: chosen from the data).
-        qu_window: keep samples with |q_u| ≤ qu_window, rad (``None``: keep all).
+        qu_window: keep samples with |q_u| ≤ qu_window, in q_u's unit (``None``: keep all).
         n_points: training points drawn at random from the training pool (``None``: all).
         n_val_points: validation points drawn at random (``None``: all).
         val_fraction: fraction of trials held out for validation, 0 ≤ f < 1.
@@ -94,7 +94,7 @@ class DatasetConfig:
         """The configured derivative estimator (options left to the data still unset)."""
         return make_estimator(self.derivative, self.derivative_options, where="derivative_options")
 
-    def with_estimator(self, estimator: DerivativeEstimator) -> "DatasetConfig":
+    def with_estimator(self, estimator: DerivativeEstimator) -> DatasetConfig:
         """This config with ``estimator``'s options written out (e.g. a σ chosen from the data)."""
         import dataclasses as dc
 

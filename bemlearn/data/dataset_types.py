@@ -2,8 +2,8 @@
 
 A :class:`BEMDataset` holds N points of eq. (11) in physical units,
 
-    x: (N, d) float64, d = 3n − 1, columns ``input_names`` (rad/s², rad/s, rad, rad/s², rad/s),
-    y: (N,)  float64, q_u in rad,
+    x: (N, d) float64, d = 3n − 1, columns ``input_names`` (rad/s², rad/s, rad, rad/s², rad/s; m/s², m/s, m for slides),
+    y: (N,)  float64, q_u in its joint's unit (rad or m),
 
 and the training split's :class:`~bemlearn.data.normalization.Normalization`; indexing
 returns the *normalized* pair (x̃_i, ỹ_i) that the GP is trained on.
@@ -29,7 +29,7 @@ class BEMDataset(Dataset):
 
     Args:
         x: (N, d) float64 inputs, physical units, columns ``input_names``.
-        y: (N,) float64 outputs q_u, rad.
+        y: (N,) float64 outputs q_u, in its joint's unit (rad or m).
         normalization: the training split's mean/std (shared by train and validation sets).
         input_names: the d column names (``qdd_<a>…, qd_<a>…, q_<a>…, qdd_<u>, qd_<u>``).
         output_name: ``q_<u>``.
@@ -102,12 +102,12 @@ class BEMDataset(Dataset):
 
     @property
     def y_mean(self) -> torch.Tensor:
-        """() float64, rad."""
+        """() float64, in q_u's unit."""
         return self.normalization.y_mean
 
     @property
     def y_std(self) -> torch.Tensor:
-        """() float64, rad."""
+        """() float64, in q_u's unit."""
         return self.normalization.y_std
 
     @property

@@ -12,10 +12,9 @@ takes as much smoothing as the motion allows:
         std(S_σ[q_u] − trial mean) = ρ · std(S_σ₀[q_u] − trial mean)                   (C1)
 
 with σ₀ two samples (std over the rows valid at every σ tried and inside ``qu_window``).  For
-a single sine of frequency f, (C1) is σ = √(−2 ln ρ) / (2πf) ≈ 0.06 / f.  ρ was chosen by
-measurement: on ten robots (six of the project's, four public files) the learned BEM vs the
-model BEM over the design region is within the issue's targets across ρ ∈ [0.9, 0.95] and best
-near 0.93 (docs/derivatives.md; ``bemlearn bench derivatives``).  No model is used.
+a single sine of frequency f, (C1) is σ = √(−2 ln ρ) / (2πf) ≈ 0.06 / f.  The measurements
+behind the default ρ = 0.93 are in docs/derivatives.md (``bemlearn bench derivatives``).
+No model is used.
 
 The result also states how much quantization noise is left in S[q̈] at that σ: the noise std
 δ/√12 · ‖w2‖ of each joint with a detected encoder step δ, as a fraction of the std of S[q̈] in
@@ -42,8 +41,8 @@ log = logging.getLogger(__name__)
 
 #: ρ of (C1): the share of the label's motion (std) the smoothing keeps.
 KEPT_MOTION = 0.93
-#: Quantization noise in S[q̈] above this fraction of its std in the data: noise-dominated (measured:
-#: 2 % noise cost the learned BEM 1 % of its gain, 7 % cost 11 %; docs/derivatives.md).
+#: Quantization noise in S[q̈] above this fraction of its std in the data: noise-dominated
+#: (the measurements behind the threshold: docs/derivatives.md).
 NOISY = 0.04
 #: Ratio between neighbouring widths of the ladder (C1) is evaluated on, interpolated between.
 LADDER_RATIO = 1.25
@@ -158,7 +157,7 @@ def _ladder(traj: Trajectory, truncate: float, within: np.ndarray | None = None)
 
 
 def _detrended_std(v: np.ndarray, trial: np.ndarray) -> float:
-    ids, inv = np.unique(trial, return_inverse=True)
+    _, inv = np.unique(trial, return_inverse=True)
     means = np.bincount(inv, weights=v) / np.bincount(inv)
     return float(np.std(v - means[inv]))
 

@@ -48,10 +48,10 @@ class DerivativeEstimator(Protocol):
         ...
 
     def __call__(self, q: np.ndarray, *, sample_rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
-        """``q`` (T, n) rad → (qd (T, n) rad/s, qdd (T, n) rad/s²)."""
+        """``q`` (T, n) rad (m for slides) → (qd (T, n) rad/s, qdd (T, n) rad/s²)."""
         ...
 
-    def neighbours(self, sample_rate_hz: float) -> tuple["DerivativeEstimator", ...]:
+    def neighbours(self, sample_rate_hz: float) -> tuple[DerivativeEstimator, ...]:
         """The estimators next to this one in its own option space (e.g. a wider and a narrower
         window), each as plausible a choice; the spread of the BEM over them is the estimator
         term of the calibrated band (:mod:`bemlearn.fitting.estimator_sensitivity`).  Empty
@@ -99,7 +99,7 @@ def estimate_derivatives(
         progress: show a tqdm bar over trials.
 
     Returns:
-        qd (T, n) rad/s and qdd (T, n) rad/s², aligned with ``traj.q``.
+        qd (T, n) rad/s and qdd (T, n) rad/s² (m/s, m/s² for slides), aligned with ``traj.q``.
 
     Raises:
         ValueError: a trial is shorter than ``estimator.min_samples`` (names the trial);

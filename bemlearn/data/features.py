@@ -45,14 +45,14 @@ def gp_inputs(q: ArrayT, qd: ArrayT, qdd: ArrayT, *, unactuated_index: int) -> A
     """x = [q̈_a, q̇_a, q_a, q̈_u, q̇_u] (eq. 11) for given angles and derivatives.
 
     Args:
-        q: (..., n) joint angles, rad, robot joint order (numpy array or torch tensor).
-        qd: (..., n) joint velocities, rad/s.
-        qdd: (..., n) joint accelerations, rad/s².
+        q: (..., n) joint coordinates, rad (m for slides), robot joint order (numpy array or torch tensor).
+        qd: (..., n) joint velocities, rad/s (m/s for slides).
+        qdd: (..., n) joint accelerations, rad/s² (m/s² for slides).
         unactuated_index: column of q_u (``TrajectoryMeta.unactuated_index``).
 
     Returns:
         x: (..., 3n − 1), same type, dtype and device as ``q``; columns as in
-        :func:`gp_input_names` (units rad/s², rad/s, rad, rad/s², rad/s).
+        :func:`gp_input_names` (units rad/s², rad/s, rad, rad/s², rad/s; m/s², m/s, m for slides).
     """
     if not (q.shape == qd.shape == qdd.shape) or q.ndim < 1:
         raise ValueError(

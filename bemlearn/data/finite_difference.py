@@ -47,11 +47,11 @@ class CentralDifference:
         """q̇ and q̈ of one trial.
 
         Args:
-            q: (T, n) float64 angles of one trial, rad, uniformly sampled (T ≥ 4).
+            q: (T, n) float64 coordinates of one trial, rad (m for slides), uniformly sampled (T ≥ 4).
             sample_rate_hz: f_s = 1/h, Hz.
 
         Returns:
-            qd (T, n) rad/s and qdd (T, n) rad/s².
+            qd (T, n) rad/s and qdd (T, n) rad/s² (m/s, m/s² for slides).
         """
         q = np.asarray(q, dtype=np.float64)
         if q.ndim != 2 or q.shape[0] < 4:

@@ -7,9 +7,9 @@ file's first two lines (:func:`detect_delimiter`: comma, semicolon, tab or white
 one that splits them into the same number of numeric fields).  Every line must have as many
 fields as the header (or ``columns:``) names.
 
-The named columns are parsed by NumPy's C reader (``np.loadtxt`` with ``usecols``: about
-0.5 s per 10⁶ rows × 9 columns); the field counts are checked by counting delimiters over the
-whole file (a few ms), and only when a count or a cell is wrong is the file scanned row by
+The named columns are parsed by NumPy's C reader (``np.loadtxt`` with ``usecols``; import
+speed: ``bemlearn bench import``); the field counts are checked by counting delimiters over the
+whole file, and only when a count or a cell is wrong is the file scanned row by
 row, to name the first bad line.  A byte-order mark, CRLF line ends, quoted header names and
 spaces around fields are accepted.
 

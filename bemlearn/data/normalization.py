@@ -27,8 +27,8 @@ class Normalization:
     Attributes:
         x_mean: (d,) float64, physical units of each column.
         x_std: (d,) float64, > 0, physical units of each column.
-        y_mean: () float64, rad.
-        y_std: () float64, > 0, rad.
+        y_mean: () float64, in q_u's unit (rad or m).
+        y_std: () float64, > 0, in q_u's unit.
     """
 
     x_mean: torch.Tensor
@@ -77,15 +77,15 @@ class Normalization:
         return (x - self.x_mean) / self.x_std
 
     def normalize_y(self, y: torch.Tensor) -> torch.Tensor:
-        """ỹ = (y − y_mean) / y_std for ``y`` (...,) rad."""
+        """ỹ = (y − y_mean) / y_std for ``y`` (...,) in q_u's unit."""
         return (y - self.y_mean) / self.y_std
 
     def denormalize_y(self, y_tilde: torch.Tensor) -> torch.Tensor:
-        """y = y_mean + y_std ỹ, rad."""
+        """y = y_mean + y_std ỹ, in q_u's unit."""
         return self.y_mean + self.y_std * y_tilde
 
     def denormalize_std(self, std_tilde: torch.Tensor) -> torch.Tensor:
-        """σ = y_std σ̃, rad (a standard deviation, no shift)."""
+        """σ = y_std σ̃, in q_u's unit (a standard deviation, no shift)."""
         return self.y_std * std_tilde
 
     def to_dict(self) -> dict[str, torch.Tensor]:

@@ -54,13 +54,13 @@ class SensedPlant:
         self.velocity = FilteredDifferentiator(robot.n, cutoff=sensor.velocity_cutoff, dt=self.dt)
 
     def reset(self, q0: np.ndarray, qd0: np.ndarray | None = None) -> None:
-        """Set the true state: ``q0``, ``qd0`` ``(n,)`` coordinates (rad) and rates (rad/s)."""
+        """Set the true state: ``q0``, ``qd0`` ``(n,)`` coordinates (rad / m) and rates (rad/s / m/s), by joint kind."""
         self.data.qpos[:] = self.Tinv @ q0
         if qd0 is not None:
             self.data.qvel[:] = self.Tinv @ qd0
 
     def true_q(self) -> np.ndarray:
-        """The true coordinates now, ``(n,)`` rad."""
+        """The true coordinates now, ``(n,)`` rad / m by joint kind."""
         return self.T @ self.data.qpos
 
     def measure(self, q_true: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -81,7 +81,7 @@ class SavitzkyGolay:
         """Samples at each trial end estimated from the edge polynomial: (w − 1) / 2."""
         return self.window_samples(sample_rate_hz) // 2
 
-    def neighbours(self, sample_rate_hz: float) -> tuple["SavitzkyGolay", ...]:
+    def neighbours(self, sample_rate_hz: float) -> tuple[SavitzkyGolay, ...]:
         """The four filters next to this one: window w·2/3 and w·3/2 (odd, in samples) at the same
         degree, and degree p − 1 and p + 1 at the same window (each only where valid: w > p ≥ 2).
 
@@ -102,11 +102,11 @@ class SavitzkyGolay:
         """q̇ and q̈ of one trial.
 
         Args:
-            q: (T, n) float64 angles of one trial, rad, uniformly sampled (T ≥ w).
+            q: (T, n) float64 coordinates of one trial, rad (m for slides), uniformly sampled (T ≥ w).
             sample_rate_hz: f_s = 1/h, Hz.
 
         Returns:
-            qd (T, n) rad/s and qdd (T, n) rad/s².
+            qd (T, n) rad/s and qdd (T, n) rad/s² (m/s, m/s² for slides).
         """
         q = np.asarray(q, dtype=np.float64)
         w = self.window_samples(sample_rate_hz)

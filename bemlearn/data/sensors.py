@@ -27,7 +27,7 @@ class SensorConfig:
 
     Attributes:
         counts_per_rev: encoder resolution; 0 disables quantization.
-        noise_std: additive angle noise before quantization, rad.
+        noise_std: additive noise before quantization, in each joint's unit (rad, or m for a slide).
         velocity_cutoff: ω_c of the controller's velocity filter, rad/s.
         m_per_count: resolution of slide-joint encoders, m (0: slides use the angle step).
     """
@@ -49,7 +49,7 @@ class SensorConfig:
 
     @property
     def step(self) -> float:
-        """Quantization step, rad (0 when disabled)."""
+        """Quantization step of a hinge encoder, rad (0 when disabled)."""
         return 2 * math.pi / self.counts_per_rev if self.counts_per_rev else 0.0
 
 
@@ -58,7 +58,7 @@ config_limits(SensorConfig, counts_per_rev=Limit(ge=0, le=2**31), noise_std=Limi
 
 
 class Encoder:
-    """Quantize (and optionally perturb) joint angles: ``q (n,)`` rad → ``(n,)`` rad.
+    """Quantize (and optionally perturb) joint coordinates: ``q (n,)`` rad / m by joint kind → ``(n,)``.
 
     ``kinds`` (the joint kind of each coordinate) selects ``m_per_count`` for slides.
     """

@@ -17,6 +17,7 @@ the checks in :mod:`bemlearn.data.validation`.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import math
 from collections.abc import Iterator, Mapping
@@ -25,9 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from bemlearn.units import JOINT_KINDS
 from bemlearn.data.quantization import detect_quantization_step
 from bemlearn.errors import TrajectoryFormatError
+from bemlearn.units import JOINT_KINDS
 
 __all__ = ["TrajectoryMeta", "Trajectory", "TrialSlice", "TrajectoryFormatError", "DEFAULT_UNITS"]
 
@@ -245,11 +246,11 @@ class Trajectory:
     Attributes:
         t: (T,) float64 time, s.
         trial: (T,) int64 trial id; each trial's rows are contiguous.
-        q: (T, n) float64 joint angles, rad, columns ``meta.joint_names``.
+        q: (T, n) float64 joint coordinates, rad (m for slides), columns ``meta.joint_names``.
         u: (T, n − 1) float64 inputs, ``meta.units["u"]``, columns ``meta.actuator_names``.
         meta: what the columns mean, sample rate, per-trial outcome.
-        qd: optional (T, n) float64 true joint velocities, rad/s (ground-truth files).
-        qdd: optional (T, n) float64 true joint accelerations, rad/s² (ground-truth files).
+        qd: optional (T, n) float64 true joint velocities, rad/s (m/s for slides) (ground-truth files).
+        qdd: optional (T, n) float64 true joint accelerations, rad/s² (m/s² for slides) (ground-truth files).
         channels: (T, k) float64 extra logged channels, columns ``meta.channel_names``
             (``None`` → an empty (T, 0) block when there are no channels).
 
@@ -324,7 +325,7 @@ class Trajectory:
         bounds = np.concatenate([[0], starts, [self.n_samples]])
         return [
             TrialSlice(int(self.trial[a]), self.meta.trial_failed.get(int(self.trial[a]), False), slice(int(a), int(b)))
-            for a, b in zip(bounds[:-1], bounds[1:])
+            for a, b in itertools.pairwise(bounds)
         ]
 
     def iter_trials(self) -> Iterator[TrialSlice]:

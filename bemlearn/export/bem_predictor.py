@@ -3,9 +3,9 @@
 ``BEMPredictor`` is an ``nn.Module`` that ``torch.jit.script`` compiles and ``torch.export``
 traces.  Its methods (the contract of docs/predictor-contract.md):
 
-    forward(x)       x: (B, 3m) float64 [q̈_a, q̇_a, q_a] (rad/s², rad/s, rad)
-                     → (mean (B,), std (B,)) rad: μ(x_0^e), σ_band(x_0^e), x_0^e = [x, 0, 0]  (eq. 14)
-    bem_mean(x)      same input → mean (B,) rad only (the control-loop path)
+    forward(x)       x: (B, 3m) float64 [q̈_a, q̇_a, q_a] (rad/s², rad/s, rad; m/s², m/s, m for slides)
+                     → (mean (B,), std (B,)) in q_u's unit: μ(x_0^e), σ_band(x_0^e), x_0^e = [x, 0, 0]  (eq. 14)
+    bem_mean(x)      same input → mean (B,) only (the control-loop path)
     predict_full(x)  x: (B, 3m + 2) [q̈_a, q̇_a, q_a, q̈_u, q̇_u] → (mean, std) of f(x)  (eq. 11)
     forward_latent(x), predict_full_latent(x)
                      the same means with the latent posterior std of f (eq. 12), the ``std``
@@ -91,8 +91,8 @@ class BEMPredictor(nn.Module):
         if x.dim() != 2 or x.size(1) != n or x.size(0) == 0 or x.dtype != torch.float64:
             if torch.jit.is_scripting():
                 raise ValueError(
-                    "BEMPredictor.{}: expected x of shape (B, {}), B >= 1, and dtype torch.float64 with columns "
-                    "[{}]; got shape {} and dtype {}".format(method, n, columns, x.shape, _dtype_name(x))
+                    f"BEMPredictor.{method}: expected x of shape (B, {n}), B >= 1, and dtype torch.float64 with columns "
+                    f"[{columns}]; got shape {x.shape} and dtype {_dtype_name(x)}"
                 )
             else:
                 raise ValueError(
@@ -104,11 +104,9 @@ class BEMPredictor(nn.Module):
         bad = torch.nonzero(~torch.isfinite(x))
         if bad.size(0) > 0:
             r, c = int(bad[0, 0]), int(bad[0, 1])
-            return "BEMPredictor.{}: x[{}, {}] is {}; inputs must be finite ({} non-finite entries)".format(
-                method, r, c, float(x[r, c]), bad.size(0)
-            )
-        return ("BEMPredictor.{}: x has finite entries too large to evaluate: the kernel cannot be evaluated in float64 "
-                "(||(x - x_mean) / (x_std * lengthscale)|| above 1e150)").format(method)
+            return f"BEMPredictor.{method}: x[{r}, {c}] is {float(x[r, c])}; inputs must be finite ({bad.size(0)} non-finite entries)"
+        return (f"BEMPredictor.{method}: x has finite entries too large to evaluate: the kernel cannot be evaluated in float64 "
+                "(||(x - x_mean) / (x_std * lengthscale)|| above 1e150)")
 
     def _check_finite(self, mean: torch.Tensor, x: torch.Tensor, method: str) -> None:
         # A non-finite x, or one too far from the data for float64 (||u|| > 1e150), always makes the mean
@@ -128,8 +126,9 @@ class BEMPredictor(nn.Module):
 
     # ---- the contract --------------------------------------------------------------------
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """BEM mean and calibrated std: ``x: (B, 3m)`` float64 [q̈_a (rad/s²), q̇_a (rad/s), q_a (rad)];
-        returns (μ(x_0^e), σ_band(x_0^e)), each ``(B,)`` rad (eq. 14, B1)."""
+        """BEM mean and calibrated std: ``x: (B, 3m)`` float64 [q̈_a, q̇_a, q_a] in each joint's unit
+        (rad/s², rad/s, rad for hinges; m/s², m/s, m for slides); returns (μ(x_0^e), σ_band(x_0^e)),
+        each ``(B,)`` in q_u's unit (eq. 14, B1)."""
         self._check_input(x, self.n_bem, "forward", self.bem_columns)
         mean, std = self.bem.mean_band(x)
         self._check_finite(mean, x, "forward")
@@ -145,7 +144,7 @@ class BEMPredictor(nn.Module):
 
     @torch.jit.export
     def bem_mean(self, x: torch.Tensor) -> torch.Tensor:
-        """BEM mean only: ``x: (B, 3m)`` as in :meth:`forward`; returns μ(x_0^e) ``(B,)`` rad."""
+        """BEM mean only: ``x: (B, 3m)`` as in :meth:`forward`; returns μ(x_0^e) ``(B,)`` in q_u's unit."""
         self._check_input(x, self.n_bem, "bem_mean", self.bem_columns)
         mean = self.bem.mean(x)
         self._check_finite(mean, x, "bem_mean")
@@ -154,7 +153,7 @@ class BEMPredictor(nn.Module):
     @torch.jit.export
     def predict_full(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Full learned map f (eq. 11): ``x: (B, 3m + 2)`` float64 [q̈_a, q̇_a, q_a, q̈_u, q̇_u];
-        returns (mean, σ_band), each ``(B,)`` rad (eq. B1 over all 3m + 2 columns)."""
+        returns (mean, σ_band), each ``(B,)`` in q_u's unit (eq. B1 over all 3m + 2 columns)."""
         self._check_input(x, self.n_full, "predict_full", self.full_columns)
         mean, std = self.full.mean_band(x)
         self._check_finite(mean, x, "predict_full")
@@ -171,7 +170,7 @@ class BEMPredictor(nn.Module):
     @torch.jit.export
     def full_mean(self, x: torch.Tensor) -> torch.Tensor:
         """Mean of the full learned map f (eq. 11) only: ``x: (B, 3m + 2)`` as in
-        :meth:`predict_full`; returns ``(B,)`` rad (the control-loop path for momentum-corrected EIC)."""
+        :meth:`predict_full`; returns ``(B,)`` in q_u's unit (the control-loop path for momentum-corrected EIC)."""
         self._check_input(x, self.n_full, "full_mean", self.full_columns)
         mean = self.full.mean(x)
         self._check_finite(mean, x, "full_mean")

@@ -19,7 +19,7 @@ __all__ = ["find_cc", "compile_shared", "CPredictorLibrary", "PORTABLE_FLAGS", "
 
 #: Recommended, portable build flags (no -march, no -ffast-math: results independent of the CPU).
 PORTABLE_FLAGS = ("-std=c99", "-O2")
-#: Warnings the tests demand (issue 17; -Wextra -pedantic: issue 22, what docs/c-export.md promises).
+#: Warnings the tests demand (what docs/c-export.md promises).
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror")
 
 

@@ -7,11 +7,11 @@ either choice of the variable v:
     v = x (raw):       e_j = −½‖a∘x − (b + z_j)‖² = [x, x∘x] · [a∘(b + z_j), −½ a∘a] − ½‖b + z_j‖²
     v = u (centered):  e_j = −½‖u − z_j‖²         = [u, u∘u] · [z_j, −½ 1]          − ½‖z_j‖²
 
-The raw form saves the ``addcmul`` that forms u (≈1 µs a query) but its terms grow like
+The raw form saves the ``addcmul`` that forms u but its terms grow like
 (|b| + |u|)², so it is used only while Σ_i (|b_i| + 5)² ≤ 10³ (rounding in e_j stays below
 ~2·10⁻¹³), i.e. unless a column's mean is far from zero in units of its spread; otherwise the
 centered form.  Either way a batch ``x: (B, n)`` costs one ``pow`` (which forms [v, v∘v] in one
-call, ≈1.5 µs a query less than ``cat`` of ``v`` and ``v * v``), one ``linear``, one ``exp`` and
+call, one op fewer than ``cat`` of ``v`` and ``v * v``), one ``linear``, one ``exp`` and
 one ``addmv`` for the mean (eq. 12) and one triangular solve or ``mm`` for the variance:
 
     μ(x) = y_mean + Σ_j w_j exp(e_j),                  w = y_std σ_f² α
@@ -195,15 +195,15 @@ class FoldedPosterior(nn.Module):
         return F.linear(vv, self.W, self.c).exp_(), v
 
     def _chunked(self, x: torch.Tensor) -> bool:
-        # Large batches run in row blocks so the (rows, M + 1) kernel block stays in cache
-        # (≈2× faster at B = 10⁵); not while torch.export traces a dynamic batch size.
+        # Large batches run in row blocks so the (rows, M + 1) kernel block stays in cache;
+        # not while torch.export traces a dynamic batch size.
         if torch.jit.is_scripting():
             return x.size(0) > self.chunk
         return not torch.compiler.is_exporting() and x.size(0) > self.chunk
 
     @torch.jit.export
     def mean(self, x: torch.Tensor) -> torch.Tensor:
-        """μ(x): ``(B,)`` rad for ``x: (B, n_inputs)`` float64 physical inputs (eq. 12)."""
+        """μ(x): ``(B,)`` in q_u's unit for ``x: (B, n_inputs)`` float64 physical inputs (eq. 12)."""
         if self._chunked(x):
             out = torch.empty(x.size(0), dtype=x.dtype)
             for i in range(0, x.size(0), self.chunk):
@@ -213,12 +213,12 @@ class FoldedPosterior(nn.Module):
 
     @torch.jit.export
     def mean_std(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(μ(x), σ(x)): each ``(B,)`` rad, σ the latent posterior std (eq. 12)."""
+        """(μ(x), σ(x)): each ``(B,)`` in q_u's unit, σ the latent posterior std (eq. 12)."""
         return self._mean_and(x, False)
 
     @torch.jit.export
     def mean_band(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(μ(x), σ_band(x)): each ``(B,)`` rad, σ_band the calibrated band (module docstring, eq. B1)."""
+        """(μ(x), σ_band(x)): each ``(B,)`` in q_u's unit, σ_band the calibrated band (module docstring, eq. B1)."""
         return self._mean_and(x, True)
 
     def _mean_and(self, x: torch.Tensor, band: bool) -> tuple[torch.Tensor, torch.Tensor]:

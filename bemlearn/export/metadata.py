@@ -37,10 +37,10 @@ class PredictorMetadata:
         robot: robot name, e.g. ``"furuta"``.
         joint_names: all joint names of the robot.
         actuated_names: the m actuated joints q_a, in the predictor's column order.
-        unactuated_name: the unactuated joint q_u (the GP output, rad).
+        unactuated_name: the unactuated joint q_u (the GP output, in its joint's unit: rad or m).
         m: number of actuated joints.
         input_names: the 3m + 2 GP input columns [q̈_a, q̇_a, q_a, q̈_u, q̇_u] (eq. 11).
-        units: unit of every input column (rad/s², rad/s, rad), as ``{name: unit}``
+        units: unit of every input column (rad/s², rad/s, rad; m/s², m/s, m for slides), as ``{name: unit}``
             (a list parallel to ``input_names`` is accepted and converted).
         n_train: number of training points.
         n_inducing: number of inducing points, ``None`` for an exact GP.

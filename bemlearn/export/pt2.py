@@ -33,9 +33,8 @@ from typing import Any
 import torch
 from torch import nn
 
-from bemlearn.errors import PredictorInputError
+from bemlearn.errors import CheckpointError, PredictorInputError
 from bemlearn.export.bem_predictor import BEMPredictor
-from bemlearn.errors import CheckpointError
 from bemlearn.files import atomic_write_files
 
 __all__ = ["save_pt2", "pt2_bytes", "load_pt2_predictor", "Pt2Predictor", "PT2_PROGRAMS", "PT2_METADATA_FILE"]
@@ -160,7 +159,7 @@ class Pt2Predictor:
             raise
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(μ(x_0^e), σ(x_0^e)) for ``x: (B, 3m)`` float64, each ``(B,)`` rad (eq. 12, 14).
+        """(μ(x_0^e), σ(x_0^e)) for ``x: (B, 3m)`` float64, each ``(B,)`` in q_u's unit (eq. 12, 14).
 
         Raises:
             PredictorInputError: (a ValueError) wrong rank, width or dtype, B = 0, or non-finite entries.
@@ -171,7 +170,7 @@ class Pt2Predictor:
         return self.forward(x)
 
     def bem_mean(self, x: torch.Tensor) -> torch.Tensor:
-        """μ(x_0^e) ``(B,)`` rad for ``x: (B, 3m)`` float64."""
+        """μ(x_0^e) ``(B,)`` in q_u's unit for ``x: (B, 3m)`` float64."""
         return self._call(self._bem_mean, x, "bem_mean", False)
 
     def predict_full(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -179,7 +178,7 @@ class Pt2Predictor:
         return self._call(self._predict_full, x, "predict_full", True)
 
     def full_mean(self, x: torch.Tensor) -> torch.Tensor:
-        """Mean of the full learned map only (eq. 11), ``(B,)`` rad."""
+        """Mean of the full learned map only (eq. 11), ``(B,)`` in q_u's unit."""
         if self._full_mean is None:
             return self._call(self._predict_full, x, "full_mean", True)[0]
         return self._call(self._full_mean, x, "full_mean", True)

@@ -35,7 +35,7 @@ def _kernel_row(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
 
 
 def reference_posterior(state: PredictorState, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, float]:
-    """Dense μ, σ (rad) for physical ``x: (B, d)`` float64, and the variance rounding bound (rad²)."""
+    """Dense μ, σ (q_u's unit) for physical ``x: (B, d)`` float64, and the variance rounding bound (its square)."""
     if state.factored:
         return _factored_reference(state, x)
     if state.kind != "exact":
@@ -67,7 +67,7 @@ def _factored_reference(state: PredictorState, x: torch.Tensor) -> tuple[torch.T
 
 
 def _estimator_rounding(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
-    """Rounding allowance (rad², ``(B,)``) of the band's estimator term (eq. E2): each shift
+    """Rounding allowance (q_u's unit squared, ``(B,)``) of the band's estimator term (eq. E2): each shift
     y_std kᵀδ_k is a sum of M terms that cancel like the mean's (δ inherits α's size), so its
     error is up to M ε y_std |k|ᵀ|δ_k|, and its square's up to 2 |shift| times that."""
     if not state.n_estimators:
@@ -100,7 +100,7 @@ def verify_predictor(
         predictor: anything with ``forward``, ``bem_mean`` and ``predict_full`` (a loaded
             TorchScript module, a :class:`~bemlearn.export.pt2.Pt2Predictor`, a BEMPredictor).
         state: the posterior it was built from.
-        mean_atol: accepted |Δμ| in rad, plus the rounding allowance 10⁻¹² y_std σ_f² ‖α‖₁.
+        mean_atol: accepted |Δμ| in q_u's unit, plus the rounding allowance 10⁻¹² y_std σ_f² ‖α‖₁.
         var_rtol: accepted |Δσ²| / σ²_ref, plus the reference's rounding bound.
 
     Returns:

@@ -3,7 +3,7 @@
 The latent posterior std σ̃ of eq. (12) assumes i.i.d. label noise.  The BEM's training
 data violate that: q̇, q̈ come from Savitzky–Golay smoothing of quantized angles, so the
 residuals of one trial are correlated over the filter window and share the trial's
-excitation, and μ's error is larger than σ̃ says (72 % inside ±2σ̃ on the Furuta).
+excitation, and μ's error is larger than σ̃ says (coverage of ±2σ̃ on trained runs: docs/uncertainty.md).
 The calibrated std is a scaled latent std,
 
     σ(x) = c · σ̃(x),   c ≥ 1,                                                       (C1)
@@ -21,9 +21,9 @@ with one scalar c learned *without a model* from the data themselves:
    over all pairs (``level`` = 0.95 by default).
 
 Replicas drawn from the *same* trials share each trial's derivative errors and
-understate c (0.66 instead of 1.3 on the Furuta); trial-disjoint halves see them.  The
-cost is 2 · ``n_pairs`` Cholesky factorizations of ``n_points`` points (≈0.3 s for
-4 pairs of 500 points); prediction cost is one scalar multiply.
+understate c (docs/uncertainty.md); trial-disjoint halves see them.  The cost is
+2 · ``n_pairs`` Cholesky factorizations of ``n_points`` points; prediction cost is one
+scalar multiply.
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ def condition_state(state: PredictorState, x: torch.Tensor, y: torch.Tensor) -> 
 
     Args:
         state: supplies kernel, noise and normalization (any kind).
-        x: ``(N, d)`` physical inputs; y: ``(N,)`` outputs, rad.
+        x: ``(N, d)`` physical inputs; y: ``(N,)`` outputs, in q_u's unit.
 
     Returns:
         an exact-kind state (α = K⁻¹ỹ, S = K⁻¹, K = K_XX + σ_0² I on normalized data).
@@ -123,7 +123,7 @@ def calibrate_replicas(
     Args:
         state: the fitted posterior (its hyperparameters are reused).
         x: ``(N, d)`` physical inputs of the training *pool* (all training-trial samples).
-        y: ``(N,)`` q_u, rad.
+        y: ``(N,)`` q_u, in its joint's unit.
         trial: ``(N,)`` trial id of each row (at least 2 distinct trials).
         queries: ``(Q, d)`` physical BEM queries x_0^e (held-out trials' actuated states,
             q̈_u = q̇_u = 0).

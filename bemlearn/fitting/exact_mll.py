@@ -6,8 +6,7 @@ The gradient with respect to K is  ∂L/∂K = ½ (K⁻¹ − α αᵀ) / N  wit
 Williams 2006, eq. 5.9), one ``cholesky_inverse`` of the factor the forward pass computed.
 Differentiating through the Cholesky factor instead (what GPyTorch's
 ``ExactMarginalLogLikelihood`` does under the dense-Cholesky policy) costs about four
-n³ operations inside one autograd node (5 s at N = 3,000 on one loaded core), during which
-Ctrl-C cannot be noticed; here the backward pass is Python with a SIGINT check between its
+n³ operations inside one autograd node, during which Ctrl-C cannot be noticed; here the backward pass is Python with a SIGINT check between its
 steps (:func:`bemlearn.interrupts.check_interrupt`).
 """
 
@@ -25,7 +24,7 @@ __all__ = ["gaussian_nll"]
 
 class _GaussianNLL(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, K: torch.Tensor, r: torch.Tensor) -> torch.Tensor:  # noqa: ANN001
+    def forward(ctx, K: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
         L = psd_safe_cholesky(K)
         alpha = torch.cholesky_solve(r.unsqueeze(-1), L).squeeze(-1)
         n = r.numel()
@@ -34,7 +33,7 @@ class _GaussianNLL(torch.autograd.Function):
         return loss / n
 
     @staticmethod
-    def backward(ctx, grad: torch.Tensor):  # noqa: ANN001
+    def backward(ctx, grad: torch.Tensor):
         L, alpha = ctx.saved_tensors
         n = alpha.numel()
         check_interrupt()

@@ -35,8 +35,8 @@ def fit_sgpr(
     Each evaluation costs O(N M²); L-BFGS from a good start (hyperparameters of a small
     exact GP, k-means++ inducing points) needs few of them.  With ``0 < subset < N`` the
     hyperparameters and Z are optimized on ``subset`` random training points (the bound of that
-    subset), and the model's posterior is then conditioned on all N points again: on a smooth
-    5-D target with N = 50,000, M = 256 this was both ~5× cheaper and as accurate.
+    subset), and the model's posterior is then conditioned on all N points again (each
+    evaluation then costs O(subset · M²) instead of O(N M²)).
 
     Args:
         model: the SGPR model (holds X, Y, Z and ``likelihood``).

@@ -11,9 +11,9 @@ import torch
 from tqdm.auto import tqdm
 
 from bemlearn.fitting.optimize import NumericalFailure, checked_loss
-from bemlearn.interrupts import check_interrupt, interruptible
 from bemlearn.fitting.result import Callback, FitResult, hyperparameter_metrics
 from bemlearn.fitting.variational import optimal_variational
+from bemlearn.interrupts import check_interrupt, interruptible
 from bemlearn.models.solver import DEFAULT_JITTER, DEFAULT_MAX_TRIES, cholesky_policy
 from bemlearn.models.svgp import SVGPBEMGP
 from bemlearn.models.validation import check_inputs, check_targets
@@ -42,13 +42,11 @@ def fit_svgp(
 ) -> FitResult:
     """Maximize the minibatch ELBO  (N/B) Σ_{i∈batch} E_q[log N(y_i | f_i, σ_0²)] − KL(q(v) ‖ p(v)).
 
-    q(v) takes natural-gradient steps and θ, Z take Adam steps on the same minibatch.  Plain
-    Adam on the parameters of q undoes a good (e.g. optimal, :func:`optimal_variational`)
-    initialization: on 3,000 points it raised the test RMSE from 0.0009 to 0.11 in 12 steps.
-    With small noise (σ_0² ~ 1e-4 Var(y)) q is so sharply peaked that a stochastic q lags
-    behind θ (minibatch losses of 10–100 nats per point were seen with NGD step 0.1); hence
-    the small default steps and the final exact refresh of q, which makes the returned
-    posterior the optimal one for the learned θ and Z.
+    q(v) takes natural-gradient steps and θ, Z take Adam steps on the same minibatch (plain
+    Adam on the parameters of q would undo a good, e.g. optimal, :func:`optimal_variational`
+    initialization).  With small noise (σ_0² ~ 1e-4 Var(y)) q is sharply peaked and a
+    stochastic q lags behind θ; hence the small default steps and the final exact refresh of
+    q, which makes the returned posterior the optimal one for the learned θ and Z.
 
     The data stay where they are (e.g. CPU, even for a GPU model) and only each shuffled
     minibatch is moved to the model's device, so memory is O(B M + M²) beyond the data.
@@ -114,7 +112,7 @@ def fit_svgp(
                         yb = train_y[idx.to(train_y.device)].to(device)
                         ngd.zero_grad(set_to_none=True)
                         opt.zero_grad(set_to_none=True)
-                        loss = checked_loss(lambda: -elbo(model(xb), yb))
+                        loss = checked_loss(lambda xb=xb, yb=yb: -elbo(model(xb), yb))
                         loss.backward()
                         ngd.step()
                         opt.step()

@@ -7,8 +7,8 @@ over the neighbouring derivative estimators).
     σ_est²(x) = (1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)²                                            (E2)
 
 σ_in and σ_est are two estimates of the same error (the estimator spread already holds the
-noise a narrower window lets through), so they are not added: adding them made the Furuta band
-2.18 × its RMSE against 1.97 × for the larger one, with the same coverage (docs/uncertainty.md).
+noise a narrower window lets through), so the band takes the larger, not the sum (the two
+compared on trained runs: docs/uncertainty.md).
 
 σ the latent posterior std of eq. (12) (physical units), c = ``PredictorState.std_scale``
 (trial-split replica calibration), s = ``PredictorState.input_std`` (Savitzky–Golay
@@ -32,7 +32,7 @@ __all__ = ["band_extra_variance", "band_reference"]
 
 def band_reference(state: PredictorState, x: torch.Tensor, *, n_inputs: int | None = None
                    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """(μ, σ_band, σ) of (B1), each ``(B,)`` rad, for physical ``x (B, d)``.
+    """(μ, σ_band, σ) of (B1), each ``(B,)`` in q_u's unit (rad or m), for physical ``x (B, d)``.
 
     Args:
         n_inputs: columns 0..n−1 carry input noise (default d); the rest are exact.
@@ -43,7 +43,7 @@ def band_reference(state: PredictorState, x: torch.Tensor, *, n_inputs: int | No
 
 
 def band_extra_variance(state: PredictorState, x: torch.Tensor, *, n_inputs: int | None = None) -> torch.Tensor:
-    """The term of (B1) beyond the scaled latent variance, ``(B,)`` rad², for physical ``x (B, d)``:
+    """The term of (B1) beyond the scaled latent variance, ``(B,)`` in q_u's unit squared, for physical ``x (B, d)``:
     max(Σ_{i < n} (s_i ∂μ/∂x_i)², (1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)²)."""
     n = state.dim if n_inputs is None else n_inputs
     if not 1 <= n <= state.dim:

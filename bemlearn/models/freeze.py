@@ -115,7 +115,7 @@ def predictor_state(
         model: a trained ``ExactBEMGP``, ``SGPRBEMGP`` or ``SVGPBEMGP``.
         likelihood: its Gaussian likelihood (σ_0²).
         x_mean, x_std: ``(d,)`` input normalization, physical units of each column.
-        y_mean, y_std: ``()`` output normalization, rad.
+        y_mean, y_std: ``()`` output normalization, in q_u's unit (rad for a hinge, m for a slide).
         input_names: the d column names in order.
         n_train: number of training points the posterior was conditioned on.
 

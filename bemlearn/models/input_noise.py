@@ -36,7 +36,7 @@ __all__ = ["estimator_noise_gains", "estimator_noise_gains3", "mean_gradient", "
 
 
 def mean_gradient(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
-    """∇μ of (N2): ``x (B, d)`` physical inputs → ``(B, d)`` rad per input unit."""
+    """∇μ of (N2): ``x (B, d)`` physical inputs → ``(B, d)`` q_u's unit per input unit."""
     xt = (x.to(torch.float64) - state.x_mean) / state.x_std
     diff = (xt[:, None, :] - state.Z[None, :, :]) / state.lengthscale        # (B, M, d)
     k = state.outputscale * torch.exp(-0.5 * (diff**2).sum(-1))              # (B, M)
@@ -101,5 +101,5 @@ def quantization_input_std(input_names: tuple[str, ...], steps: dict[str, float]
 
 
 def propagated_variance(state: PredictorState, x: torch.Tensor, input_std: torch.Tensor) -> torch.Tensor:
-    """σ_in² of (N1): ``x (B, d)``, ``input_std (d,)`` → ``(B,)`` rad²."""
+    """σ_in² of (N1): ``x (B, d)``, ``input_std (d,)`` → ``(B,)`` in q_u's unit squared."""
     return ((mean_gradient(state, x) * input_std) ** 2).sum(-1)

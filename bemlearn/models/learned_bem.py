@@ -14,11 +14,11 @@ Bound (eq. 13, 15): with probability ≥ η,
 The κ of Srinivas et al. (2012, Thm. 6) is available (:func:`srinivas_kappa`), but it is
 very conservative (it grows like ln^{3/2} N and needs the RKHS norm and the information
 gain); bemlearn's documented default is the Gaussian quantile κ = 2 with Σ^{1/2} = ``band_std``:
-nominal η = erf(κ/√2) = 95.45 % (:meth:`LearnedBEM.nominal_confidence`).  Measured on held-out
-Furuta references the band's violation rate at κ = 2 is 0 % (nominal 4.55 %); with the
-latent std it was 27 % (``bemlearn bench uncertainty``).  ΔΓ_max / F_min (the BEM–zero-dynamics
-gap of Lemma 1) is a model property; pass the measured max |q_u^d − q_u^e|
-(``bemlearn robot lemma1``) or 0.
+nominal η = erf(κ/√2) = 95.45 % (:meth:`LearnedBEM.nominal_confidence`); how often the bound
+is violated on held-out references is reported by every run (``metrics.json`` →
+``bem_heldout.bound_violation``; findings in docs/uncertainty.md).  ΔΓ_max / F_min (the
+BEM–zero-dynamics gap of Lemma 1) is a model property; pass the max |q_u^d − q_u^e| that
+``bemlearn robot lemma1`` reports, or 0.
 """
 
 from __future__ import annotations
@@ -37,7 +37,8 @@ __all__ = ["LearnedBEM", "BEMPrediction", "srinivas_kappa"]
 @dataclass(frozen=True)
 class BEMPrediction:
     """Learned BEM for a batch: ``mean``, ``std`` (√Σ, eq. 12 as printed), ``latent_std`` and
-    ``band_std`` (calibrated band, eq. B1; use it in :meth:`LearnedBEM.bound`), all ``(B,)`` rad."""
+    ``band_std`` (calibrated band, eq. B1; use it in :meth:`LearnedBEM.bound`), all ``(B,)`` in q_u's unit
+    (rad for a hinge, m for a slide)."""
 
     mean: torch.Tensor
     std: torch.Tensor
@@ -88,20 +89,21 @@ class LearnedBEM:
         return BEMPrediction(mean, (latent**2 + noise).sqrt(), latent, band)
 
     def bem(self, qa, qad, qadd) -> BEMPrediction:
-        """μ(x_0^e) and its std (eq. 14, 12): ``qa, qad, qadd (B, m)`` rad, rad/s, rad/s²."""
+        """μ(x_0^e) and its std (eq. 14, 12): ``qa, qad, qadd (B, m)`` rad, rad/s, rad/s²
+        (m, m/s, m/s² for slides)."""
         parts = [torch.as_tensor(v, dtype=torch.float64) for v in (qadd, qad, qa)]
         for name, p in zip(("qadd", "qad", "qa"), parts):
             if p.ndim != 2 or p.shape[1] != self.m:
                 raise ValueError(f"LearnedBEM.bem: {name} must have shape (B, {self.m}), got {tuple(p.shape)}")
-        x = torch.cat(parts + [torch.zeros(parts[0].shape[0], 2, dtype=torch.float64)], dim=1)
+        x = torch.cat([*parts, torch.zeros(parts[0].shape[0], 2, dtype=torch.float64)], dim=1)
         return self.predict(x, n_inputs=3 * self.m)
 
     @staticmethod
     def bound(std: torch.Tensor, *, kappa: float = 2.0, zero_dynamics_gap: float = 0.0) -> torch.Tensor:
-        """Half-width of eq. (15): κ Σ^{1/2} + ΔΓ_max/F_min, rad (see module docstring for κ).
+        """Half-width of eq. (15): κ Σ^{1/2} + ΔΓ_max/F_min, in q_u's unit (see module docstring for κ).
 
-        Pass ``band_std`` for a bound that holds at :meth:`nominal_confidence` (measured:
-        ``bemlearn bench uncertainty``, ``metrics.json`` → ``bem_heldout.bound_violation``)."""
+        Pass ``band_std`` for the bound whose stated confidence is :meth:`nominal_confidence`
+        (a run's ``metrics.json`` → ``bem_heldout.bound_violation`` reports how often it was violated)."""
         return kappa * std + zero_dynamics_gap
 
     @staticmethod

@@ -74,7 +74,7 @@ class PredictorState:
         outputscale: ``()`` σ_f² (normalized output units squared).
         noise: ``()`` σ_0² (normalized output units squared).
         x_mean, x_std: ``(d,)`` input normalization, physical units of each column.
-        y_mean, y_std: ``()`` output normalization, rad.
+        y_mean, y_std: ``()`` output normalization, in q_u's unit (rad for a hinge, m for a slide).
         input_names: the d column names, in order, e.g. ``("qdd_theta", ..., "qd_alpha")``.
         n_train: number of training points the posterior was conditioned on.
         std_scale: ``()`` c ≥ 1 of the calibrated band (default 1).
@@ -180,12 +180,12 @@ class PredictorState:
         return out
 
     @classmethod
-    def from_dict(cls, data: dict) -> "PredictorState":
+    def from_dict(cls, data: dict) -> PredictorState:
         kw = dict(data)
         kw["input_names"] = tuple(kw["input_names"])
         return cls(**kw)
 
-    def to(self, device: torch.device | str | None = None, dtype: torch.dtype | None = None) -> "PredictorState":
+    def to(self, device: torch.device | str | None = None, dtype: torch.dtype | None = None) -> PredictorState:
         moved = {k: v.to(device=device, dtype=dtype) for k, v in self.tensors().items()}
         return dataclasses.replace(self, **moved)
 
@@ -232,7 +232,7 @@ class PredictorState:
         sparse states without the factor (frozen before it existed) use S as given.
 
         Returns:
-            mean ``(B,)`` rad and std ``(B,)`` rad.
+            mean ``(B,)`` and std ``(B,)`` in q_u's unit.
         """
         k = self.kernel_row(x)
         mean = k @ self.alpha

@@ -1,9 +1,9 @@
 """The explicit linear-solver policy of every bemlearn GP: dense Cholesky with logged jitter.
 
 GPyTorch switches from Cholesky to conjugate gradients above
-``gpytorch.settings.max_cholesky_size`` (800 by default) with a loose tolerance; the
-posterior mean of eq. (12) then drifts by ~0.07 at N = 801 with small noise.  bemlearn
-therefore solves K v = b by Cholesky, K = L Lᵀ, at every size, in training and in
+``gpytorch.settings.max_cholesky_size`` (800 by default) with a loose tolerance, and with
+small noise the posterior mean of eq. (12) then drifts visibly (docs/design.md, "Solver
+policy").  bemlearn therefore solves K v = b by Cholesky, K = L Lᵀ, at every size, in training and in
 prediction (:func:`cholesky_policy`).
 
 A Cholesky that fails (K only positive semi-definite in floating point, e.g. duplicated
@@ -56,7 +56,7 @@ def cholesky_policy(*, jitter: float = DEFAULT_JITTER, max_tries: int = DEFAULT_
         warnings.filterwarnings("always", category=NumericalWarning)
         previous = warnings.showwarning
 
-        def _show(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
+        def _show(message, category, filename, lineno, file=None, line=None):
             if issubclass(category, NumericalWarning):
                 logger.warning("%s", message)
             else:

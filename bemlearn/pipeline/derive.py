@@ -49,7 +49,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 DESIGN_QU = 0.2
-"""The BEM range the data must cover, |q_u^e − nominal| ≤ 0.2 rad (issue 13)."""
+"""The BEM range the data must cover, |q_u^e − nominal| ≤ 0.2 in q_u's unit (rad for a hinge, m for a slide)."""
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,7 @@ def design_region(robot) -> Derived:
     """Half width of the BEM design region: min(0.2, q_u half range), rad (m for a slide)."""
     half = qu_half_range(robot)
     d = min(DESIGN_QU, half)
-    return Derived(d, f"|q_u^e − nominal| ≤ {d:g} (issue 13's 0.2 rad, q_u half range {half:.3g})")
+    return Derived(d, f"|q_u^e − nominal| ≤ {d:g} (min of the default {DESIGN_QU:g}, q_u half range {half:.3g})")
 
 
 def control_rate(robot, *, preferred_hz: float = 200.0, min_hz: float = 100.0, fine_timestep: float = 0.001) -> Derived:
@@ -127,7 +127,7 @@ def _robust_gain_scale(A: np.ndarray, B: np.ndarray, K: np.ndarray, *, draws: in
     95 % of random scalings keep the linear tick map stable (spectral radius < 1)."""
     rng = np.random.default_rng(0)
     for w in (0.4, 0.2, 0.1):
-        s = rng.uniform(1 - w, 1 + w, size=(draws,) + K.shape)
+        s = rng.uniform(1 - w, 1 + w, size=(draws, *K.shape))
         rho = np.array([np.max(np.abs(np.linalg.eigvals(A + B @ (K * si)))) for si in s])
         frac = float(np.mean(rho < 1.0))
         if frac >= 0.95:

@@ -25,13 +25,13 @@ def learned_lemma1(bem_fn, full_fn, robot, reference, *, n_nodes: int = 256, h: 
     """Learned ΔΓ vs model Ḣ_u along a periodic ``reference``.
 
     Args:
-        bem_fn: learned BEM mean, ``x (B, 3m)`` = [q̈_a, q̇_a, q_a] → ``(B,)`` rad (eq. 14).
-        full_fn: learned map mean, ``x (B, 3m + 2)`` → ``(B,)`` rad (eq. 11); e.g. a
+        bem_fn: learned BEM mean, ``x (B, 3m)`` = [q̈_a, q̇_a, q_a] → ``(B,)`` in q_u's unit (eq. 14).
+        full_fn: learned map mean, ``x (B, 3m + 2)`` → ``(B,)`` in q_u's unit (eq. 11); e.g. a
             :class:`~bemlearn.control.bem_sources.PredictorBEM` and its ``full``.
         robot: the (nominal) robot, for D_uu and the model-based side.
         reference: a periodic composite sinusoid.
         n_nodes: samples over one period.
-        h: finite-difference step in q̈_u (rad/s²) for ∂f/∂q̈_u.
+        h: finite-difference step in q̈_u (rad/s², m/s² for a slide) for ∂f/∂q̈_u.
 
     Returns:
         dict of ``(N,)`` arrays ``t``, ``hdot``, ``delta_gamma_model``, ``damping``,

@@ -26,8 +26,8 @@ import torch
 from bemlearn.config import save_yaml
 from bemlearn.data import build_datasets, read_trajectory
 from bemlearn.data.validation import check_robot
-from bemlearn.models import predict
 from bemlearn.files import atomic_path, atomic_write_text, file_sha256
+from bemlearn.models import predict
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.evaluation import evaluate_bem, held_out_references
 from bemlearn.pipeline.reliability import reliability_figure
@@ -58,9 +58,9 @@ def train_run(
     """Train the BEM GP of ``config`` on ``data_path`` into ``out_dir``; returns the metrics dict.
 
     ``threads`` sets torch's intra-op threads for the run (restored afterwards; ``None``
-    keeps the current setting).  One thread is the default: for the paper-sized exact GP
-    (N = 500) it measured 4.5 s against 28 s with two threads on this 2-core machine under
-    load (``bemlearn bench train`` reports both).
+    keeps the current setting).  One thread is the default, because a second thread slows
+    the fit down when other processes share the cores (``bemlearn bench train`` times both;
+    figures in docs/furuta.md).
     """
     previous = torch.get_num_threads()
     if threads is not None:

@@ -35,7 +35,7 @@ from typing import Any
 
 __all__ = ["Finding", "Verdict", "judge_run", "GAIN_RANGE", "EXIT_UNUSABLE", "EXIT_DEGRADED_STRICT"]
 
-#: Targets of the learned vs model BEM over the design region (issue 21).
+#: Targets of the learned vs model BEM over the design region (docs/verdict.md).
 GAIN_RANGE = (0.95, 1.05)
 RMSE_OF_BOUND = 0.05           # RMSE ≤ 0.05 d (0.01 rad at d = 0.2 rad)
 MAX_OF_BOUND = 0.2             # max ≤ 0.2 d (0.04 rad)

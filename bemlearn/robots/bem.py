@@ -27,9 +27,9 @@ class BEMResult:
     """The model-based BEM for a batch.
 
     Attributes:
-        qu: ``(B,)`` q_u^e (rad); NaN where no root was found in the range.
+        qu: ``(B,)`` q_u^e in q_u's unit (rad for a hinge, m for a slide); NaN where no root was found in the range.
         valid: ``(B,)`` bool, True where a root was found.
-        residual: ``(B,)`` |Γ_0(q_u^e)| (N·m); NaN where invalid.
+        residual: ``(B,)`` |Γ_0(q_u^e)| (N·m, or N for a slide q_u); NaN where invalid.
         iterations: refinement iterations used (max over the batch).
     """
 

@@ -54,8 +54,8 @@ class CompositeSinusoid:
         return (self._A * s).sum(-1) + self._c, (self._A * self._w * c).sum(-1), -(self._A * self._w**2 * s).sum(-1)
 
     @classmethod
-    def single(cls, amplitudes, frequencies, phases=None, offset: float = 0.0) -> "CompositeSinusoid":
-        """One actuated joint: ``amplitudes`` (rad), ``frequencies`` (Hz), ``phases`` (rad)."""
+    def single(cls, amplitudes, frequencies, phases=None, offset: float = 0.0) -> CompositeSinusoid:
+        """One actuated joint: ``amplitudes`` (its unit: rad, or m for a slide), ``frequencies`` (Hz), ``phases`` (rad)."""
         phases = [0.0] * len(amplitudes) if phases is None else phases
         return cls((tuple(map(float, amplitudes)),), (tuple(map(float, frequencies)),), (tuple(map(float, phases)),), (float(offset),))
 
@@ -92,7 +92,7 @@ class CompositeSinusoid:
         return out
 
     def __call__(self, t) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """``(q_a^d, q̇_a^d, q̈_a^d)`` at times ``t``, each ``(T, m)`` (rad, rad/s, rad/s²)."""
+        """``(q_a^d, q̇_a^d, q̈_a^d)`` at times ``t``, each ``(T, m)`` (rad, rad/s, rad/s²; m, m/s, m/s² for slides)."""
         return self.derivative(t, 0), self.derivative(t, 1), self.derivative(t, 2)
 
 

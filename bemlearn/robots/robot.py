@@ -11,7 +11,10 @@ into C.  Implementations supply D (:meth:`Robot.mass_matrix`), C q̇ + G
 unactuated-row residual Γ (eq. 5), Γ_0 (eq. 7) and the model-based BEM (eq. 6, 9) — is
 defined here once, so every robot (MuJoCo or analytic) shares it.
 
-All tensors are float64; batched arguments have a leading batch dimension B.
+All tensors are float64; batched arguments have a leading batch dimension B.  Units follow
+the joint (:mod:`bemlearn.units`): a hinge coordinate is in rad (rates rad/s, rad/s²; force
+N·m), a slide coordinate in m (m/s, m/s²; force N).  "rad" below is short for "rad, or m for
+a slide", "N·m" for "N·m, or N for a slide".
 """
 
 from __future__ import annotations
@@ -103,11 +106,11 @@ class Robot(abc.ABC):
     # ---- dynamics supplied by implementations ------------------------------------------
     @abc.abstractmethod
     def mass_matrix(self, q: torch.Tensor) -> torch.Tensor:
-        """D(q) of eq. (1). ``q: (B, n)`` rad → ``(B, n, n)``."""
+        """D(q) of eq. (1). ``q: (B, n)`` in each joint's unit (rad or m) → ``(B, n, n)``."""
 
     @abc.abstractmethod
     def bias(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
-        """C(q, q̇) q̇ + G(q) of eq. (1). ``q, qd: (B, n)`` rad, rad/s → ``(B, n)`` N·m."""
+        """C(q, q̇) q̇ + G(q) of eq. (1). ``q, qd: (B, n)`` rad, rad/s (m, m/s for slides) → ``(B, n)`` N·m (N for slides)."""
 
     @abc.abstractmethod
     def passive(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
@@ -130,12 +133,12 @@ class Robot(abc.ABC):
         return self.inverse_dynamics(q, qd, qdd)[:, self.unactuated_index]
 
     def gamma0(self, qu: torch.Tensor, qa: torch.Tensor, qad: torch.Tensor, qadd: torch.Tensor) -> torch.Tensor:
-        """Γ_0(q_u; q_a) = Γ at q̇_u = q̈_u = 0 (eq. 7), ``(B,)`` N·m.
+        """Γ_0(q_u; q_a) = Γ at q̇_u = q̈_u = 0 (eq. 7), ``(B,)`` N·m (N if q_u is a slide).
 
         Args:
-            qu: ``(B,)`` rad, candidate unactuated coordinate.
-            qa, qad, qadd: ``(B, m)`` actuated positions (rad), velocities (rad/s),
-                accelerations (rad/s²).
+            qu: ``(B,)`` candidate unactuated coordinate, in its joint's unit (rad for a hinge, m for a slide).
+            qa, qad, qadd: ``(B, m)`` actuated positions, velocities, accelerations, each in its
+                joint's unit (rad, rad/s, rad/s² for hinges; m, m/s, m/s² for slides).
         """
         zeros = torch.zeros_like(qu)
         return self.gamma(self.join(qa, qu), self.join(qad, zeros), self.join(qadd, zeros))
@@ -159,10 +162,11 @@ class Robot(abc.ABC):
 
         The root nearest :attr:`qu_nominal` inside the admissible range is returned,
         refined by a bracketed inverse-quadratic (Chandrupatla) iteration to
-        |Γ_0| ≤ 1e-10 N·m.  See :func:`bemlearn.robots.bem.solve_bem`.
+        |Γ_0| ≤ 1e-10 (N·m, or N for a slide q_u).  See :func:`bemlearn.robots.bem.solve_bem`.
 
         Args:
-            qa, qad, qadd: ``(B, m)`` actuated q_a (rad), q̇_a (rad/s), q̈_a (rad/s²).
+            qa, qad, qadd: ``(B, m)`` actuated q_a, q̇_a, q̈_a, each in its joint's unit
+                (rad, rad/s, rad/s² for hinges; m, m/s, m/s² for slides).
             qu_range: admissible ``(lo, hi)``; default :attr:`qu_range`.
             n_grid: grid points used to bracket roots (roots closer together than
                 the grid spacing may be missed).
@@ -171,7 +175,7 @@ class Robot(abc.ABC):
                 such batch index.
 
         Returns:
-            :class:`BEMResult` with ``qu (B,)`` rad, ``valid (B,)`` bool and
+            :class:`BEMResult` with ``qu (B,)`` in q_u's unit (rad or m), ``valid (B,)`` bool and
             ``residual (B,)`` |Γ_0| at the root.
         """
         qa, qad, qadd = self._states(qa, qad, qadd, func="bem", width=self.m, names=("qa", "qad", "qadd"))

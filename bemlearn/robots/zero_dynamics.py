@@ -72,7 +72,7 @@ class ZeroDynamicsSolution:
     Attributes:
         t: ``(N,)`` s.
         qa, qad, qadd: ``(N, m)`` the desired actuated trajectory and its derivatives.
-        qu, qud, qudd: ``(N,)`` q_u^d and its derivatives (rad, rad/s, rad/s²).
+        qu, qud, qudd: ``(N,)`` q_u^d and its derivatives (rad, rad/s, rad/s²; m, m/s, m/s² for a slide).
         residual: ``(N,)`` Γ(q_u^d; q_a^d) at the grid (N·m), the eq. (4) residual.
         iterations: Newton / BVP iterations used.
     """
@@ -128,7 +128,7 @@ def periodic_zero_dynamics(
     u = bem.qu.numpy().copy()
     D1, D2 = _diff_matrix(n_nodes, T, 1), _diff_matrix(n_nodes, T, 2)
     it = 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 - the count reached is returned
         ud, udd = D1 @ u, D2 @ u
         r = _gamma(robot, qa, qad, qadd, u, ud, udd)
         if np.max(np.abs(r)) <= tol:
@@ -200,7 +200,7 @@ class LemmaOneResult:
         hdot: Ḣ_u = d/dt(D_uu q̇_u^e), N·m.
         damping: b_u q̇_u^e, the passive-force term (0 without damping), N·m.
         gap: ΔΓ − Ḣ_u − damping (should vanish), N·m.
-        max_distance: max |q_u^d − q_u^e|, rad.
+        max_distance: max |q_u^d − q_u^e|, in q_u's unit (rad or m).
     """
 
     t: np.ndarray

@@ -22,8 +22,8 @@ def plot_run(result, path: str | Path, *, model_bem: np.ndarray | None = None, b
     Args:
         result: the run.
         path: output PNG.
-        model_bem: ``(T,)`` model-based BEM at the loop's BEM inputs, rad.
-        band: ``(mean, std)`` of the learned BEM, ``(T,)`` each, rad.
+        model_bem: ``(T,)`` model-based BEM at the loop's BEM inputs, in q_u's unit.
+        band: ``(mean, std)`` of the learned BEM, ``(T,)`` each, in q_u's unit.
         lemma: ``{"t", "delta_gamma", "hdot"}`` arrays for panel (c).
         joint_names, units, indices: name, unit (rad or m, by joint kind) and column in ``result.q`` of
             the (first) actuated joint and of the unactuated joint.

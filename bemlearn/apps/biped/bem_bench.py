@@ -14,7 +14,7 @@ The walks are read from ``data`` (a ``data.npz`` written by ``bemlearn run
 configs/biped.yaml``, with its ``.truth.npz`` beside it when ``dataset.derivatives`` is
 ``truth``), or collected from ``config.collect`` when ``data`` is ``None``.  The training
 walks are themselves a random draw: ``collect_seeds`` collects them once per seed (each
-``collect.seed``, about 40 s) and fits the subsets on each, so the spread covers both draws
+``collect.seed``) and fits the subsets on each, so the spread covers both draws
 (the shipped ``collect.seed: 0`` is a favourable one, see :mod:`bemlearn.apps.biped.pipeline`).
 """
 
@@ -76,9 +76,15 @@ def run_biped_bem_bench(config, *, data: str | Path | None = None, subsets: int 
             fit ``subsets`` on each; ``None``: one set, ``config.collect.seed``.  Not with ``data``.
         progress: show progress bars.
     """
+    from bemlearn.apps.biped.pipeline import (
+        collect_walks,
+        heldout_bem,
+        heldout_walks,
+        train_walking_gp,
+        walking_gp_data,
+        walks_trajectories,
+    )
     from bemlearn.data import ground_truth_path, read_trajectory, write_trajectory
-    from bemlearn.apps.biped.pipeline import (collect_walks, heldout_bem, heldout_walks, train_walking_gp,
-                                         walking_gp_data, walks_trajectories)
 
     if subsets < 1:
         raise ValueError(f"subsets: expected a positive integer, got {subsets}")

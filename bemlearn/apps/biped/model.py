@@ -142,9 +142,8 @@ def biped_planar_mjcf(p: BipedParameters = BipedParameters(), *, timestep: float
     pinned model (eq. 1, and with it the model-based BEM) pivots at a point foot, while a
     sphere rolls, which moves the pivot by r per radian of shank pitch.  The torso row's
     q̈ terms are each worth ~1 rad of q1 and nearly cancel, so this few-percent mismatch
-    showed up in full: the median learned-vs-model torso BEM RMSE (``bemlearn bench
-    biped-bem``) was 0.045 / 0.077 rad (default / human gait) with r = 0.01 m and
-    0.024 / 0.053 rad with r = 0.002 m (six training subsets each, MuJoCo 3.17).
+    shows up in full in the learned-vs-model torso BEM (``bemlearn bench biped-bem``;
+    docs/biped.md compares foot radii).
     """
     if not foot_radius > 0:
         raise ValueError(f"biped_planar_mjcf: foot_radius must be > 0 m, got {foot_radius}")

@@ -1,6 +1,6 @@
 """``bemlearn bench walks``: how reliably the biped walks, over seeds (Section IV-B).
 
-Issue 7 asks for ≥ 20 consecutive steps without falling on the default and the
+The target is ≥ 20 consecutive steps without falling on the default and the
 human-derived gait, torso unactuated, with the learned torso BEM in the loop.  One walk is
 one draw of the initial state and the sensor noise; this benchmark repeats the walk of a
 config's ``walk:`` section for ``seeds`` seeds per gait and per torso BEM source (the
