@@ -7,10 +7,16 @@ import numpy as np
 import pytest
 
 from bemlearn.apps.biped.bem_bench import format_biped_bem_bench, run_biped_bem_bench
+from bemlearn.apps.biped.pipeline import (
+    BipedConfig,
+    BipedEvaluateConfig,
+    WalkCollectConfig,
+    WalkDatasetConfig,
+    heldout_bem,
+    heldout_walks,
+)
 from bemlearn.cli import main
 from bemlearn.fitting import GPConfig
-from bemlearn.apps.biped.pipeline import (BipedConfig, BipedEvaluateConfig, WalkCollectConfig, WalkDatasetConfig,
-                                     heldout_bem, heldout_walks)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -25,23 +31,42 @@ def small():
     )
 
 
+def _pipeline_rmse(config, tmp_path, *, collect_seed: int, dataset_seed: int) -> float:
+    """The held-out RMSE of one draw through the pipeline's own stages (collect → GP data → fit and
+    export → held-out walks), independently of the bench's loop and bookkeeping."""
+    from bemlearn.apps.biped.pipeline import collect_walks, train_walking_gp, walking_gp_data, walks_trajectories
+    from bemlearn.data import write_trajectory
+
+    cfg = dataclasses.replace(config, collect=dataclasses.replace(config.collect, seed=collect_seed),
+                              dataset=dataclasses.replace(config.dataset, seed=dataset_seed))
+    data, truth = walks_trajectories(collect_walks(cfg, progress=False))
+    out = tmp_path / f"walks{collect_seed}-subset{dataset_seed}"
+    out.mkdir()
+    path = write_trajectory(data, out / "data.npz")
+    X, y, _ = walking_gp_data(data, truth, cfg.dataset)
+    train_walking_gp(X, y, out / "gp", config=cfg.train, data_path=path, progress=False)
+    return heldout_bem(out / "gp" / "bem_predictor.pt", cfg, progress=False)["default"]["rmse"]
+
+
 def test_subsets_are_scored_like_the_pipeline(small, tmp_path):
     result = run_biped_bem_bench(small, subsets=2, progress=False)
     assert [r.seed for r in result.subsets] == [0, 1] and result.derivatives == "truth"
     assert all(r.n_train == 60 and np.isfinite(r.loss) and set(r.rmse) == {"default"} for r in result.subsets)
-    # different subsets, different fits
-    assert result.subsets[0].rmse["default"] != result.subsets[1].rmse["default"]
+    # subset i is the pipeline's draw with dataset.seed + i, scored as the pipeline scores it
+    for r in result.subsets:
+        assert r.rmse["default"] == _pipeline_rmse(small, tmp_path, collect_seed=small.collect.seed, dataset_seed=r.seed)
     text = format_biped_bem_bench(result)
     assert "| 0 | 60 |" in text and "default: RMSE min" in text and "target <= 0.02 rad" in text
 
 
-def test_collect_seeds_refit_on_each_set_of_walks(small):
+def test_collect_seeds_refit_on_each_set_of_walks(small, tmp_path):
     one = run_biped_bem_bench(small, subsets=1, progress=False)  # config.collect.seed = 0
     both = run_biped_bem_bench(small, subsets=1, collect_seeds=[0, 7], progress=False)
     assert [r.collect_seed for r in both.subsets] == [0, 7] and len(both.pool) == 2
     # the seed-0 walks are the config's own: the same fit, bit for bit
     assert both.subsets[0].rmse == one.subsets[0].rmse and both.pool[0] == one.pool[0]
-    assert both.subsets[1].rmse["default"] != both.subsets[0].rmse["default"]
+    # the seed-7 walks are collected as the pipeline collects them with collect.seed = 7
+    assert both.subsets[1].rmse["default"] == _pipeline_rmse(small, tmp_path, collect_seed=7, dataset_seed=small.dataset.seed)
     assert "seed 0" in both.source and "seed 7" in both.source
     text = format_biped_bem_bench(both)
     assert "| walks seed | dataset seed |" in text and "| 7 | 0 | 60 |" in text
@@ -51,8 +76,8 @@ def test_collect_seeds_refit_on_each_set_of_walks(small):
 
 def test_heldout_walks_are_shared_bit_identically(small, tmp_path):
     # heldout_bem with precomputed walks equals heldout_bem simulating them itself
-    from bemlearn.data import write_trajectory
     from bemlearn.apps.biped.pipeline import collect_walks, train_walking_gp, walking_gp_data, walks_trajectories
+    from bemlearn.data import write_trajectory
 
     walks = collect_walks(small, progress=False)
     data, truth = walks_trajectories(walks)
@@ -92,10 +117,10 @@ def test_config_dataclass_defaults_match_the_shipped_yaml():
 
 def test_the_sweep_stage_scores_each_draw_exactly_as_the_bench(small, tmp_path):
     # configs/sweeps/biped-bem.yaml's cells (collect.seed × dataset.seed) are the bench's --collect-seeds × --subsets
+    import torch
+
     from bemlearn.config import to_dict
     from bemlearn.sweep import run_sweep
-
-    import torch
 
     torch.set_num_threads(1)  # a cell runs with resources.cpus = 1 thread; the last bits of a fit depend on it
     bench = run_biped_bem_bench(small, subsets=2, collect_seeds=[7], progress=False)

@@ -7,13 +7,13 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
+from conftest import furuta_section
 
+from bemlearn.apps.furuta.model import AnalyticFuruta
 from bemlearn.control.bem_sources import ModelBEM, PredictorBEM, make_bem_source
 from bemlearn.data.sensors import SensorConfig
-from bemlearn.apps.furuta.model import AnalyticFuruta
 from bemlearn.robots.reference import ConstantAcceleration
 from bemlearn.sim.closed_loop import simulate
-from conftest import furuta_section
 
 IDEAL = SensorConfig(counts_per_rev=0, velocity_cutoff=400.0)
 
@@ -30,9 +30,21 @@ def test_alpha_settles_on_the_bem_under_constant_acceleration():
     # the BEM itself moves (θ̇ grows to 9 rad/s): not a trivial constant
     assert np.ptp(bem[late]) > 0.01
     assert np.max(np.abs(res.q[late, 1] - bem[late])) < 5e-3
-    # θ tracks the quadratic ramp (13.5 rad at 9 rad/s after 3 s); measured max error 0.039 rad,
-    # growing with θ̇ through the BEM's θ̇² term: bound it at 0.05 rad, under 0.4 % of the travel
-    assert np.max(np.abs(res.q[late, 0] - qa[late, 0])) < 0.05
+    # θ tracks the quadratic ramp (13.5 rad at 9 rad/s after 3 s).  Reference: the external loop's
+    # error dynamics.  v_ext = θ̈_d − k_d ė − k_p e makes e = θ − θ_d obey ë + k_d ė + k_p e = d, with
+    # d = θ̈ − v_ext the balance loop's residual (logged: true θ̈ against the BEM input v_ext).  The
+    # derived gains are critically damped (k_p = ω², k_d = 2ω): the impulse response g(t) = t e^{−ωt}
+    # is ≥ 0, so from e(0) = ė(0) = 0,  |e(t)| ≤ ∫ g(t − s) |d(s)| ds.  The controller's θ̇ comes
+    # through the first-order velocity filter (cutoff ω_c), whose lag θ̈/ω_c adds k_d |θ̈| / ω_c to |d|.
+    kp, kd, wc = cfg.gains.kp_a, cfg.gains.kd_a, IDEAL.velocity_cutoff
+    assert kd == pytest.approx(2 * kp**0.5, rel=1e-12)  # critically damped, as the bound needs
+    d = np.abs(res.qdd[:, 0] - res.bem_x[:, 0]) + kd * np.abs(res.qdd[:, 0]) / wc
+    lag = res.t[:, None] - res.t[None, :]
+    g = np.where(lag >= 0, lag * np.exp(-(kp**0.5) * lag), 0.0)
+    bound = g @ d * (res.t[1] - res.t[0])
+    e = np.abs(res.q[:, 0] - qa[:, 0])
+    assert np.all(e <= bound)
+    assert np.max(e[late]) < 0.004 * 13.5  # and the error stays under 0.4 % of the travel (the spec)
 
 
 def test_seeded_run_is_deterministic():

@@ -1,4 +1,11 @@
-"""Fitting recovers a known function; callbacks report every hyperparameter; seeds reproduce."""
+"""Fitting recovers a known function; callbacks report every hyperparameter; seeds reproduce.
+
+Accuracy tolerances come from the data's noise, not from a recorded run: a GP mean is a linear
+smoother μ = H y, whose noise part has mean square σ² tr(H²)/N ≤ σ² tr(H)/N at the training
+inputs; tr(H) is the exact GP's effective degrees of freedom (a dense solve with the fitted
+hyperparameters) and at most M for a sparse GP of rank M.  Each fit must reach twice that noise
+floor (the bias allowed as large as the noise part).
+"""
 
 from __future__ import annotations
 
@@ -22,6 +29,21 @@ def _data(n: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
     return x, _target(x) + NOISE_STD * torch.randn(n, generator=gen, dtype=F64)
 
 
+def _noise_floor_exact(model, lik, x: torch.Tensor) -> float:
+    """σ √(tr(H)/N), H = K (K + σ_0² I)⁻¹ with the fitted kernel and noise (dense ``torch.linalg.solve``)."""
+    from bemlearn.models import kernel_matrix
+
+    with torch.no_grad():
+        K = kernel_matrix(model.covar_module, x, x)
+        H = torch.linalg.solve(K + lik.noise * torch.eye(len(x), dtype=F64), K)
+    return NOISE_STD * float(torch.trace(H) / len(x)) ** 0.5
+
+
+def _noise_floor_sparse(n_inducing: int, n: int) -> float:
+    """σ √(M/N): the smoother of a rank-M sparse GP has tr(H) ≤ M."""
+    return NOISE_STD * (n_inducing / n) ** 0.5
+
+
 def _test_points() -> torch.Tensor:
     gen = torch.Generator().manual_seed(99)
     return torch.rand(1000, 5, generator=gen, dtype=F64) * 3.6 - 1.8  # inside the data cube
@@ -35,9 +57,9 @@ def test_exact_fit_recovers_sin_plus_linear() -> None:
         x, y, config=GPConfig(kind="exact"), callback=lambda s, m: (steps.append(s), metrics.append(m))
     )
     xs = _test_points()
-    mean, var = predict(model, lik, xs)
+    mean, _ = predict(model, lik, xs)
     rmse = float((mean - _target(xs)).pow(2).mean().sqrt())
-    assert rmse < 0.005  # measured 0.0017; the data noise std is 0.01
+    assert rmse < 2 * _noise_floor_exact(model, lik, x)
     assert float(lik.noise.detach()) < 10 * NOISE_STD**2  # noise level recovered to within an order of magnitude
     # x2..x4 are irrelevant: their ARD lengthscales grow far beyond the relevant x0's
     ls = model.covar_module.base_kernel.lengthscale.detach().reshape(-1)
@@ -59,7 +81,7 @@ def test_sgpr_fit_recovers_function() -> None:
     config = GPConfig(kind="sgpr", n_inducing=64, max_iter=15, init_subset=200)
     model, lik, result = train_gp(x, y, config=config)
     mean, _ = predict(model, lik, _test_points())
-    assert float((mean - _target(_test_points())).pow(2).mean().sqrt()) < 0.003  # measured 0.0009
+    assert float((mean - _target(_test_points())).pow(2).mean().sqrt()) < 2 * _noise_floor_sparse(64, 2000)
     assert result.stop_reason in ("converged", "max_iter")
 
 
@@ -71,12 +93,12 @@ def test_svgp_fit_recovers_function_and_is_reproducible() -> None:
         model, lik = build_gp(x, y, config=config)
         result = fit_gp(model, lik, x, y, config=config)
         runs.append((model, lik, result))
-    (m1, l1, r1), (m2, l2, r2) = runs
+    (m1, l1, r1), (m2, _, _) = runs
     assert r1.steps == 2 * 6
     for p1, p2 in zip(m1.parameters(), m2.parameters()):
         assert torch.equal(p1, p2)
     mean, _ = predict(m1, l1, _test_points())
-    assert float((mean - _target(_test_points())).pow(2).mean().sqrt()) < 0.003  # measured 0.0009
+    assert float((mean - _target(_test_points())).pow(2).mean().sqrt()) < 2 * _noise_floor_sparse(64, 3000)
 
 
 @pytest.mark.gpu

@@ -1,13 +1,21 @@
-"""Training runs: run folder contents, interruption, resume, learned BEM API, CLI errors."""
+"""Training runs: run folder contents, interruption, resume, learned BEM API, CLI errors.
+
+References: the learned BEM's mean, stds and band against eq. (12) and (B1) solved densely
+(``torch.linalg.solve``) on the training set the fit saw, with the fitted hyperparameters;
+the bound of eq. (15) against Gaussian sampling; Srinivas et al.'s κ against Theorem 6 evaluated
+by hand.
+"""
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 
 import pytest
 import torch
 import yaml
+from conftest import furuta_section
 
 from bemlearn.cli.main import main
 from bemlearn.data.collect import collect
@@ -15,7 +23,9 @@ from bemlearn.data.trajectory_io import write_trajectory
 from bemlearn.export import load_learned_bem
 from bemlearn.models.learned_bem import LearnedBEM, srinivas_kappa
 from bemlearn.pipeline.train import train_run
-from conftest import furuta_section
+
+#: run folder → the normalized training set (X̃, ỹ) its fit saw, recorded by the fixture.
+TRAIN_SET: dict = {}
 
 
 @pytest.fixture(scope="module")
@@ -23,18 +33,50 @@ def small(tmp_path_factory):
     root = tmp_path_factory.mktemp("train")
     data, _ = collect("furuta", furuta_section("collect", n_trials=6, duration_s=6.0, workers=1, seed=1), progress=False)
     path = write_trajectory(data, root / "data.npz")
-    from bemlearn.pipeline.config import load_pipeline_config
     from conftest import FURUTA_CONFIG
+
+    from bemlearn.pipeline.config import load_pipeline_config
 
     cfg = load_pipeline_config(FURUTA_CONFIG)
     cfg = dataclasses.replace(cfg, dataset=dataclasses.replace(cfg.dataset, n_points=150), train=dataclasses.replace(cfg.train, max_iter=30))
     out = root / "run"
-    metrics = train_run(cfg, path, out, progress=False)
+    import bemlearn.pipeline.gp_stage as stage
+
+    seen = {}
+    fit_gp = stage.fit_gp
+
+    def recording_fit(model, lik, x, y, **kwargs):  # the normalized training set the posterior is conditioned on
+        seen["x"], seen["y"] = x.detach().clone(), y.detach().clone()
+        return fit_gp(model, lik, x, y, **kwargs)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(stage, "fit_gp", recording_fit)
+        metrics = train_run(cfg, path, out, progress=False)
+    assert seen, "train_run did not fit through gp_stage.fit_gp"
+    TRAIN_SET[out] = (seen["x"], seen["y"])
     return cfg, path, out, metrics
 
 
+def _dense_posterior(state, train_set, x: torch.Tensor):
+    """Eq. (12) by ``torch.linalg.solve`` (LU) on the training set, with the state's hyperparameters only.
+
+    Returns μ (B,), the latent and predictive variances (B,) in physical units and the SE kernel
+    row k(x̃, X̃) (B, N)."""
+    X, Y = train_set
+    ell, sf2, s02 = state.lengthscale, state.outputscale, state.noise
+
+    def se(a, b):  # eq. (11): σ_f² exp(−½ Σ_j (a_j − b_j)² / ℓ_j²)
+        return sf2 * torch.exp(-0.5 * (((a[:, None, :] - b[None, :, :]) / ell) ** 2).sum(-1))
+
+    K = se(X, X) + s02 * torch.eye(X.shape[0], dtype=X.dtype)
+    k = se((x - state.x_mean) / state.x_std, X)
+    mean = state.y_mean + state.y_std * (k @ torch.linalg.solve(K, Y))
+    latent_var = state.y_std**2 * (sf2 - (k * torch.linalg.solve(K, k.T).T).sum(-1))
+    return mean, latent_var, latent_var + state.y_std**2 * s02, k
+
+
 def test_run_folder_contents(small):
-    cfg, path, out, metrics = small
+    _, _, out, _ = small
     for name in ("config.yaml", "checkpoint.pt", "metrics.json", "bem_validation.png"):
         assert (out / name).is_file(), name
     assert any((out / "tb").iterdir())
@@ -50,25 +92,47 @@ def test_run_folder_contents(small):
     assert 0 <= m["bem_heldout"]["coverage_2sigma_latent"] <= m["bem_heldout"]["coverage_2sigma_predictive"] <= 1
 
 
-def test_learned_bem_api_matches_frozen_posterior(small):
+def test_learned_bem_api_matches_the_dense_posterior(small):
     _, _, out, _ = small
     learned = load_learned_bem(out)
     qa = torch.tensor([[0.1], [-0.2]], dtype=torch.float64)
     qad = torch.tensor([[0.5], [1.0]], dtype=torch.float64)
     qadd = torch.tensor([[3.0], [-6.0]], dtype=torch.float64)
     pred = learned.bem(qa, qad, qadd)
-    x = torch.cat([qadd, qad, qa, torch.zeros(2, 2, dtype=torch.float64)], 1)
-    mean, latent = learned.state.predict_reference(x)
-    torch.testing.assert_close(pred.mean, mean, rtol=0, atol=0)
-    torch.testing.assert_close(pred.latent_std, latent, rtol=0, atol=0)
-    noise = learned.state.y_std**2 * learned.state.noise
-    torch.testing.assert_close(pred.std, (latent**2 + noise).sqrt(), rtol=1e-15, atol=0)
-    torch.testing.assert_close(learned.bound(pred.std, kappa=2.0, zero_dynamics_gap=0.01), 2 * pred.std + 0.01)
+    x = torch.cat([qadd, qad, qa, torch.zeros(2, 2, dtype=torch.float64)], 1)  # x_0^e of eq. (14)
+    st = learned.state
+    mean, latent_var, pred_var, _ = _dense_posterior(st, TRAIN_SET[out], x)
+    # tolerance: a millionth of the posterior std the dense solve states (LU and the state's
+    # Cholesky of the same K agree to rounding, far below that)
+    torch.testing.assert_close(pred.mean, mean, rtol=0, atol=1e-6 * float(latent_var.sqrt().min()))
+    torch.testing.assert_close(pred.latent_std**2, latent_var, rtol=1e-6, atol=0)
+    torch.testing.assert_close(pred.std**2, pred_var, rtol=1e-6, atol=0)
     with pytest.raises(ValueError, match=r"qad must have shape \(B, 1\)"):
         learned.bem(qa, torch.zeros(2, 2), qadd)
     with pytest.raises(ValueError, match=r"shape \(B, 5\)"):
         learned.predict(torch.zeros(3, 4))
-    assert srinivas_kappa(1.0, 10.0, 500, 0.9) > 100  # the theorem's κ is very conservative
+    # Theorem 6 of Srinivas et al. (2012) by hand: κ² = 2 B² + 300 γ ln³(N / (1 − η)) with B = 1, γ = 10,
+    # N = 500, η = 0.9: ln 5000 = 8.517193, cubed 617.8592, κ² = 2 + 1,853,577.5 → κ = 1361.462
+    assert srinivas_kappa(1.0, 10.0, 500, 0.9) == pytest.approx(1361.4623, rel=1e-7)
+
+
+def test_bound_holds_at_its_stated_confidence():
+    """Eq. (13)/(15): |q_u^d − μ| ≤ κ σ + gap with probability ≥ η = erf(κ/√2), for a Gaussian error
+    of std σ on top of any offset within ±gap; checked by sampling (tolerance: 5 binomial stds)."""
+    gen = torch.Generator().manual_seed(0)
+    n = 400_000
+    std = 0.002 + 0.01 * torch.rand(n, generator=gen, dtype=torch.float64)
+    for kappa, gap in ((2.0, 0.0), (1.0, 0.0), (2.0, 0.003)):
+        offset = gap * (2 * torch.rand(n, generator=gen, dtype=torch.float64) - 1)
+        err = offset + std * torch.randn(n, generator=gen, dtype=torch.float64)
+        inside = float((err.abs() <= LearnedBEM.bound(std, kappa=kappa, zero_dynamics_gap=gap)).double().mean())
+        eta = LearnedBEM.nominal_confidence(kappa)
+        tol = 5 * math.sqrt(eta * (1 - eta) / n)
+        if gap == 0:
+            assert inside == pytest.approx(eta, abs=tol)   # exactly η without an offset
+        else:
+            assert inside >= eta - tol                     # at least η with one
+    assert LearnedBEM.nominal_confidence(2.0) == pytest.approx(0.954499736, rel=1e-9)  # the normal table's 95.45 %
 
 
 def test_interrupt_leaves_usable_checkpoint_and_resume_continues(small, tmp_path, monkeypatch):
@@ -109,10 +173,6 @@ def test_evaluate_cli(small, capsys):
 
 def test_training_computes_the_calibrated_band(small):
     """train_run stores c ≥ 1 and the quantization input std, reports the band and the bound."""
-    import math
-
-    from bemlearn.models.band import band_reference
-
     _, _, out, metrics = small
     learned = load_learned_bem(out)
     st = learned.state
@@ -124,11 +184,18 @@ def test_training_computes_the_calibrated_band(small):
     assert b["bound_violation"]["nominal"] == pytest.approx(1 - LearnedBEM.nominal_confidence(2.0), rel=1e-12)
     assert b["bound_violation"]["observed"] == pytest.approx(1 - b["coverage_2sigma_band"], abs=1e-12)
     assert [r["level"] for r in b["reliability"]["band"]] == [0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 0.99]
-    qa = torch.tensor([[0.1]], dtype=torch.float64)
-    pred = learned.bem(qa, 0 * qa, 2 + 0 * qa)
-    ref = band_reference(st, torch.tensor([[2.0, 0.0, 0.1, 0.0, 0.0]], dtype=torch.float64), n_inputs=3)
-    torch.testing.assert_close(pred.band_std, ref[1], rtol=0, atol=0)
-    assert 0 <= metrics["val_coverage_2sigma_band"] <= 1
+    # the band of eq. (B1) from the dense posterior: ∂μ/∂x by autograd of the dense mean over the
+    # 3m BEM columns, the estimator term from the state's δ and the dense kernel row
+    qa, qad, qadd = (torch.tensor(v, dtype=torch.float64) for v in ([[0.1], [-0.05]], [[0.0], [0.4]], [[2.0], [2.0]]))
+    pred = learned.bem(qa, qad, qadd)
+    x = torch.cat([qadd, qad, qa, torch.zeros(2, 2, dtype=torch.float64)], 1).requires_grad_(True)
+    mean, latent_var, _, k = _dense_posterior(st, TRAIN_SET[out], x)
+    (grad,) = torch.autograd.grad(mean.sum(), x)
+    sigma_in2 = ((grad[:, :3] * st.input_std[:3]) ** 2).sum(1)
+    sigma_est2 = ((st.y_std * k.detach() @ st.estimator_delta) ** 2).mean(1)
+    dense_band2 = st.std_scale**2 * latent_var.detach() + torch.maximum(sigma_in2, sigma_est2)
+    torch.testing.assert_close(pred.band_std**2, dense_band2, rtol=1e-6, atol=0)  # a millionth, as above
+    assert bool((sigma_in2 > 0).all() and (sigma_est2 > 0).all())  # both terms are live in this run
 
 
 def test_training_stores_the_estimator_term_and_band_bench_agrees(small):
