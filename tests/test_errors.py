@@ -357,7 +357,7 @@ def _quadratic(bug: str):
     p = torch.nn.Parameter(torch.tensor([2.0], dtype=torch.float64))
 
     def loss():
-        if float(p) < 1.5:
+        if float(p.detach()) < 1.5:
             if bug == "shape":
                 _a, _b = p  # ValueError: not enough values to unpack
             return (p * float("nan")).sum()
