@@ -35,6 +35,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["BipedParameters", "biped_pinned_mjcf", "biped_planar_mjcf", "PINNED_COORDINATES"]
 
 
@@ -146,7 +148,7 @@ def biped_planar_mjcf(p: BipedParameters = BipedParameters(), *, timestep: float
     docs/biped.md compares foot radii).
     """
     if not foot_radius > 0:
-        raise ValueError(f"biped_planar_mjcf: foot_radius must be > 0 m, got {foot_radius}")
+        raise ArgumentError(f"biped_planar_mjcf: foot_radius must be > 0 m, got {foot_radius}")
     lim = _g(p.motor_torque_max)
     dmp = _g(p.joint_damping)
     h0 = p.L_t + p.L_s + 0.002
