@@ -38,13 +38,24 @@ the last finite one (zero at the start) and counted in :attr:`EICController.comm
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
 from bemlearn.config import Limit, config_limits
+from bemlearn.control.bem_sources import BEMSource
+from bemlearn.robots.protocol import ControlRobot
 from bemlearn.robots.reference import CompositeSinusoid
 
-__all__ = ["EICGains", "EICController"]
+__all__ = ["EICGains", "EICController", "Actuator"]
+
+
+class Actuator(Protocol):
+    """Maps the actuated generalized forces to commands (e.g. :class:`~bemlearn.control.MujocoActuatorInverse`)."""
+
+    def command(self, tau_a: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """``tau_a (m,)`` N·m or N, ``q, qd (n,)`` → commands ``(nu,)`` (e.g. V)."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -78,15 +89,19 @@ class EICController:
     """EIC control law (module docstring).
 
     Args:
-        nominal: a robot with ``terms(q, qd) -> (D (n,n), h (n,))`` and the partition.
-        bem: a BEM source, ``x (B, 3m) -> (B,)``.
+        nominal: the controller's model, with ``terms(q, qd) -> (D (n,n), h (n,))`` and the partition.
+        bem: a BEM source, ``x (B, 3m) -> (B,)`` and its ``full`` map.
         reference: q_a^d(t).
         actuator: maps τ_a to commands.
-        gains: :class:`EICGains`.
+        gains: :class:`EICGains` with all four loop gains set (derived from the model by
+            ``bemlearn.pipeline.complete_section(robot, "simulate", config)``, or given).
+
+    Raises:
+        ValueError: a gain of ``gains`` is unset, or the reference's m is not the robot's.
     """
 
-    def __init__(self, nominal, bem, reference: CompositeSinusoid, actuator, gains: EICGains = EICGains(), *, rate_hz: float | None = None, chunk: int = 400,
-                 qu_limits: tuple[float, float] | None = None) -> None:
+    def __init__(self, nominal: ControlRobot, bem: BEMSource, reference: CompositeSinusoid, actuator: Actuator, gains: EICGains, *,
+                 rate_hz: float | None = None, chunk: int = 400, qu_limits: tuple[float, float] | None = None) -> None:
         if reference.m != nominal.m:
             raise ValueError(f"EICController: reference has {reference.m} actuated joints, robot {nominal.name!r} has {nominal.m}")
         unset = [n for n in ("kp_a", "kd_a", "kp_u", "kd_u") if getattr(gains, n) is None]

@@ -17,13 +17,20 @@ unstable for every gain (see :func:`eic_linear_abscissa`).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import torch
+
+from bemlearn.robots.protocol import BalanceRobot
+
+if TYPE_CHECKING:
+    from bemlearn.control.eic import EICGains
 
 __all__ = ["eic_linear_matrix", "eic_linear_abscissa"]
 
 
-def _model_terms(robot, eps: float = 1e-6):
+def _model_terms(robot: BalanceRobot, eps: float = 1e-6) -> tuple[float, float, np.ndarray, np.ndarray]:
     from bemlearn.robots.scales import bem_slopes
 
     n, iu, ia = robot.n, robot.unactuated_index, robot.actuated_index[0]
@@ -43,7 +50,7 @@ def _model_terms(robot, eps: float = 1e-6):
     return D[iu, iu], D[iu, ia], Hq, bem_slopes(robot)[:, 0]
 
 
-def eic_linear_matrix(robot, gains, *, terms=None) -> np.ndarray:
+def eic_linear_matrix(robot: BalanceRobot, gains: EICGains, *, terms: tuple[float, float, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """The ``(4, 4)`` matrix A of ẋ = A x (module docstring) for a robot with m = 1 (1/s, 1/s²)."""
     if robot.m != 1:
         raise ValueError(f"eic_linear_matrix: needs one actuated joint, robot {robot.name!r} has {robot.m}")
@@ -59,6 +66,6 @@ def eic_linear_matrix(robot, gains, *, terms=None) -> np.ndarray:
     return A
 
 
-def eic_linear_abscissa(robot, gains) -> float:
+def eic_linear_abscissa(robot: BalanceRobot, gains: EICGains) -> float:
     """max Re λ of :func:`eic_linear_matrix` (1/s): < 0 is needed for the EIC to balance."""
     return float(np.max(np.linalg.eigvals(eic_linear_matrix(robot, gains)).real))

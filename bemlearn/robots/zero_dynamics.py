@@ -35,8 +35,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from bemlearn.robots.protocol import BalanceRobot
 from bemlearn.robots.reference import CompositeSinusoid
-from bemlearn.robots.robot import Robot
 
 __all__ = [
     "ZeroDynamicsSolution",
@@ -88,7 +88,7 @@ class ZeroDynamicsSolution:
     iterations: int
 
 
-def _gamma(robot: Robot, qa, qad, qadd, qu, qud, qudd) -> np.ndarray:
+def _gamma(robot: BalanceRobot, qa, qad, qadd, qu, qud, qudd) -> np.ndarray:
     T = lambda a: torch.as_tensor(np.asarray(a, dtype=np.float64))  # noqa: E731
     q = robot.join(T(qa), T(qu))
     qd = robot.join(T(qad), T(qud))
@@ -97,7 +97,7 @@ def _gamma(robot: Robot, qa, qad, qadd, qu, qud, qudd) -> np.ndarray:
 
 
 def periodic_zero_dynamics(
-    robot: Robot,
+    robot: BalanceRobot,
     reference: CompositeSinusoid,
     *,
     n_nodes: int = 256,
@@ -108,7 +108,7 @@ def periodic_zero_dynamics(
     """The periodic orbit q_u^d(t) of S_0 (eq. 4) for a periodic q_a^d, by Fourier collocation.
 
     Args:
-        robot: the robot (any :class:`Robot`).
+        robot: the robot (any :class:`~bemlearn.robots.BalanceRobot`).
         reference: a T-periodic composite sinusoid for the m actuated joints.
         n_nodes: collocation nodes over one period.
         tol: stop when max |Γ| at the nodes ≤ tol (N·m).
@@ -128,7 +128,7 @@ def periodic_zero_dynamics(
     u = bem.qu.numpy().copy()
     D1, D2 = _diff_matrix(n_nodes, T, 1), _diff_matrix(n_nodes, T, 2)
     it = 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 (the count is returned after the loop)
         ud, udd = D1 @ u, D2 @ u
         r = _gamma(robot, qa, qad, qadd, u, ud, udd)
         if np.max(np.abs(r)) <= tol:
@@ -147,7 +147,7 @@ def periodic_zero_dynamics(
 
 
 def finite_zero_dynamics(
-    robot: Robot,
+    robot: BalanceRobot,
     reference: CompositeSinusoid,
     t0: float,
     t1: float,
@@ -216,7 +216,7 @@ class LemmaOneResult:
     zero_dynamics: ZeroDynamicsSolution
 
 
-def lemma1(robot: Robot, reference: CompositeSinusoid, *, n_nodes: int = 256) -> LemmaOneResult:
+def lemma1(robot: BalanceRobot, reference: CompositeSinusoid, *, n_nodes: int = 256) -> LemmaOneResult:
     """Evaluate ΔΓ and Ḣ_u of eq. (10) along a periodic reference (see module docstring)."""
     zd = periodic_zero_dynamics(robot, reference, n_nodes=n_nodes)
     T = reference.period
@@ -250,7 +250,7 @@ def lemma1(robot: Robot, reference: CompositeSinusoid, *, n_nodes: int = 256) ->
     )
 
 
-def scaled_references(robot: Robot, *, design_qu: float = 0.2) -> dict[str, CompositeSinusoid]:
+def scaled_references(robot: BalanceRobot, *, design_qu: float = 0.2) -> dict[str, CompositeSinusoid]:
     """Periodic composite sinusoids scaled to ``robot`` for Lemma 1 (labels → references).
 
     Base frequency f_0 = 0.1 λ/2π (λ = √(Γ_q/D_uu), :func:`bemlearn.robots.scales.instability_rate`)
