@@ -56,12 +56,12 @@ def test_objects_missing_members_do_not_satisfy_them():
 
 
 def _tiny_state(n: int = 12) -> PredictorState:
-    """A small exact-GP posterior on the Furuta's columns (its values do not matter here)."""
+    """A small sparse-GP posterior (inducing points Z, any PSD S) on the Furuta's columns (its values do not matter here)."""
     g = torch.Generator().manual_seed(0)
     Z = torch.randn(n, 5, generator=g, dtype=F64)
     names = ("qdd_theta", "qd_theta", "q_theta", "qdd_alpha", "qd_alpha")
     state = PredictorState(
-        kind="exact", Z=Z, alpha=torch.randn(n, generator=g, dtype=F64), S=0.1 * torch.eye(n, dtype=F64),
+        kind="sgpr", Z=Z, alpha=torch.randn(n, generator=g, dtype=F64), S=0.1 * torch.eye(n, dtype=F64),
         lengthscale=torch.full((5,), 1.5, dtype=F64), outputscale=torch.tensor(1.0, dtype=F64), noise=torch.tensor(1e-3, dtype=F64),
         x_mean=torch.zeros(5, dtype=F64), x_std=torch.ones(5, dtype=F64), y_mean=torch.tensor(0.0, dtype=F64),
         y_std=torch.tensor(0.1, dtype=F64), input_names=names, n_train=n,
@@ -75,7 +75,7 @@ def _tiny_predictor(tmp_path: Path, state: PredictorState) -> Path:
     meta = PredictorMetadata(
         robot="furuta", joint_names=("theta", "alpha"), actuated_names=("theta",), unactuated_name="alpha", m=1,
         input_names=names, units={nm: "rad/s^2" if nm.startswith("qdd") else "rad/s" if nm.startswith("qd") else "rad" for nm in names},
-        n_train=n, n_inducing=None, hyperparameters={}, bemlearn_version="test", data_sha256="0" * 64,
+        n_train=n, n_inducing=n, hyperparameters={}, bemlearn_version="test", data_sha256="0" * 64,
     )
     return save_torchscript(BEMPredictor(state, meta), tmp_path / "bem_predictor.pt")
 

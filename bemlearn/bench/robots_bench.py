@@ -20,14 +20,13 @@ import torch
 
 if TYPE_CHECKING:
     from bemlearn.models.predictor_state import PredictorState
-    from bemlearn.robots.mujoco_robot import MujocoRobot
     from bemlearn.robots.protocol import BalanceRobot
     from bemlearn.robots.reference import CompositeSinusoid
 
 __all__ = ["robot_chain", "format_robots_bench"]
 
 
-def _configs(robot_path: str, robot: MujocoRobot, *, n_trials: int, duration_s: float, sim_duration_s: float, workers: int, seed: int):
+def _configs(robot_path: str, robot: BalanceRobot, *, n_trials: int, duration_s: float, sim_duration_s: float, workers: int, seed: int):
     from bemlearn.config import from_dict, to_dict
     from bemlearn.data.collect import CollectConfig
     from bemlearn.pipeline.config import PipelineConfig
@@ -117,7 +116,7 @@ def robot_chain(robot_path: str, out_dir: str | Path, *, n_trials: int = 24, dur
     return row
 
 
-def _saturation(robot: MujocoRobot, u: np.ndarray) -> float:
+def _saturation(robot, u: np.ndarray) -> float:
     model = robot.model
     lim = model.actuator_ctrllimited.astype(bool)
     if not lim.any():

@@ -118,7 +118,7 @@ class EICController:
         # with a known control rate, the reference-only quantities (q_a^d and the BEM along it at
         # t and t ± h) are evaluated ``chunk`` ticks at a time in one batched call
         self.rate_hz, self.chunk = rate_hz, chunk
-        self._cache_k0 = None
+        self._cache_k0: int | None = None
         self.qu_limits = tuple(qu_limits) if qu_limits is not None else tuple(nominal.qu_range)
         self.bem_rejected = 0
         self.command_rejected = 0
@@ -140,7 +140,8 @@ class EICController:
             x = np.concatenate([qadd_d, qad_d, qa_d], axis=1)
             return qa_d[1], qad_d[1], qadd_d[1], self.bem(x)
         k = int(round(t * self.rate_hz))
-        if self._cache_k0 is None or not (self._cache_k0 <= k < self._cache_k0 + self.chunk):
+        k0 = self._cache_k0
+        if k0 is None or not (k0 <= k < k0 + self.chunk):
             ks = np.arange(k, k + self.chunk)
             tk = ks / self.rate_hz
             ts = np.concatenate([tk - h, tk, tk + h])
@@ -148,8 +149,8 @@ class EICController:
             b = self.bem(np.ascontiguousarray(np.concatenate([qadd_d, qad_d, qa_d], axis=1))).reshape(3, self.chunk)
             n = self.chunk
             self._cache = (qa_d[n : 2 * n], qad_d[n : 2 * n], qadd_d[n : 2 * n], b)
-            self._cache_k0 = k
-        i = k - self._cache_k0
+            self._cache_k0 = k0 = k
+        i = k - k0
         qa_d, qad_d, qadd_d, b = self._cache
         return qa_d[i], qad_d[i], qadd_d[i], b[:, i]
 

@@ -17,15 +17,10 @@ unstable for every gain (see :func:`eic_linear_abscissa`).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import torch
 
 from bemlearn.robots.protocol import BalanceRobot
-
-if TYPE_CHECKING:
-    from bemlearn.control.eic import EICGains
 
 __all__ = ["eic_linear_matrix", "eic_linear_abscissa"]
 
@@ -50,7 +45,7 @@ def _model_terms(robot: BalanceRobot, eps: float = 1e-6) -> tuple[float, float, 
     return D[iu, iu], D[iu, ia], Hq, bem_slopes(robot)[:, 0]
 
 
-def eic_linear_matrix(robot: BalanceRobot, gains: EICGains, *, terms: tuple[float, float, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+def eic_linear_matrix(robot: BalanceRobot, gains, *, terms: tuple[float, float, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """The ``(4, 4)`` matrix A of ẋ = A x (module docstring) for a robot with m = 1 (1/s, 1/s²)."""
     if robot.m != 1:
         raise ValueError(f"eic_linear_matrix: needs one actuated joint, robot {robot.name!r} has {robot.m}")
@@ -66,6 +61,6 @@ def eic_linear_matrix(robot: BalanceRobot, gains: EICGains, *, terms: tuple[floa
     return A
 
 
-def eic_linear_abscissa(robot: BalanceRobot, gains: EICGains) -> float:
+def eic_linear_abscissa(robot: BalanceRobot, gains) -> float:
     """max Re λ of :func:`eic_linear_matrix` (1/s): < 0 is needed for the EIC to balance."""
     return float(np.max(np.linalg.eigvals(eic_linear_matrix(robot, gains)).real))

@@ -42,7 +42,7 @@ def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: st
     from torch.utils.tensorboard import SummaryWriter
 
     writer = SummaryWriter(str(Path(out_dir) / "tb" / "simulate"))
-    robot = load(str(config.robot))   # simulate() below runs MuJoCo robots only
+    robot = load(str(config.robot))   # the callers check that the config names a robot
     nominal = nominal_robot(robot, scfg.nominal)
     for src in sources:
         cfg = dataclasses.replace(scfg, bem_source=src, predictor=str(predictor) if predictor else None)

@@ -220,6 +220,7 @@ class _Named:
 
     def __init__(self, robot: BalanceRobot, name: str) -> None:
         self.name, self.joint_names, self.unactuated_name = name, robot.joint_names, robot.unactuated_name
+        self.actuated_names = robot.actuated_names
 
 
 def _bem_figure(curves: BEMCurves, qu_name: str, unit: str = "rad"):
