@@ -21,6 +21,7 @@ from bemlearn.export.c_build import find_cc
 from bemlearn.export.c_export import write_files
 from bemlearn.export.variance_factor import kernel_gram
 from bemlearn.models.predictor_state import PredictorState
+from bemlearn.robots import load
 from bemlearn.sim.closed_loop import simulate
 
 pytestmark = pytest.mark.skipif(find_cc() is None, reason="no C compiler (cc, gcc, clang or $CC) on PATH")
@@ -78,7 +79,7 @@ def test_c_eic_balances_and_tracks_like_python(tmp_path):
     lib = ex.build(tmp_path, tmp_path / "libeic.so")
     config = ex.simulate_config(pt, duration_s=6.0)       # the Furuta's resolved simulate section (400 Hz, its gains)
     c = ex.run(lib, config)
-    py = simulate("furuta", config, progress=False)
+    py = simulate(load("furuta"), config, progress=False)
     assert not c.fell and not py.fell
     assert c.alpha_max <= 0.1                                      # balanced: |α| stays small (rad)
     assert abs(c.alpha_max - py.metrics["qu_max"]) <= 0.1 * py.metrics["qu_max"]

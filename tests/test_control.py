@@ -12,6 +12,7 @@ from conftest import furuta_section
 from bemlearn.apps.furuta.model import AnalyticFuruta
 from bemlearn.control.bem_sources import ModelBEM, PredictorBEM, make_bem_source
 from bemlearn.data.sensors import SensorConfig
+from bemlearn.robots import load
 from bemlearn.robots.reference import ConstantAcceleration
 from bemlearn.sim.closed_loop import simulate
 
@@ -22,7 +23,7 @@ def test_alpha_settles_on_the_bem_under_constant_acceleration():
     """Section III-A: constant θ̈ — α follows the BEM of eq. (9) along q_a^d(t)."""
     ref = ConstantAcceleration((0.0,), (0.0,), (3.0,))
     cfg = furuta_section("simulate", duration_s=3.0, bem_source="model", sensor=IDEAL)
-    res = simulate("furuta", cfg, progress=False, reference=ref)
+    res = simulate(load("furuta"), cfg, progress=False, reference=ref)
     assert not res.fell
     qa, qad, qadd = ref.evaluate(res.t)
     bem = AnalyticFuruta().bem(qa, qad, qadd).qu.numpy()
@@ -49,10 +50,11 @@ def test_alpha_settles_on_the_bem_under_constant_acceleration():
 
 def test_seeded_run_is_deterministic():
     cfg = furuta_section("simulate", duration_s=1.0, bem_source="model", sensor=SensorConfig(noise_std=1e-3, velocity_cutoff=100.0), seed=5)
-    a = simulate("furuta", cfg, progress=False)
-    b = simulate("furuta", cfg, progress=False)
+    robot = load("furuta")
+    a = simulate(robot, cfg, progress=False)
+    b = simulate(robot, cfg, progress=False)
     assert np.array_equal(a.q, b.q) and np.array_equal(a.u, b.u)
-    c = simulate("furuta", dataclasses.replace(cfg, seed=6), progress=False)
+    c = simulate(robot, dataclasses.replace(cfg, seed=6), progress=False)
     assert not np.array_equal(a.q_meas, c.q_meas)
 
 
@@ -102,7 +104,7 @@ def test_nominal_mismatch_generic_matches_analytic_furuta():
     from bemlearn.sim.closed_loop import NominalConfig, nominal_robot
 
     ms, ls = 1.2, 0.9
-    mj = nominal_robot("furuta", NominalConfig(mass_scale=ms, length_scale=ls, bodies=("pendulum",)))
+    mj = nominal_robot(load("furuta"), NominalConfig(mass_scale=ms, length_scale=ls, bodies=("pendulum",)))
     p = FurutaParameters()
     p = dataclasses.replace(p, m_p=p.m_p * ms, J_p=p.J_p * ms * ls**2, L_p=p.L_p * ls, L_r=p.L_r * ls, J_ax=p.J_ax * ms * ls**2)
     an = AnalyticFuruta(p)
@@ -110,7 +112,7 @@ def test_nominal_mismatch_generic_matches_analytic_furuta():
     qd = torch.tensor([[1.0, -2.0], [0.5, 0.3]], dtype=torch.float64)
     torch.testing.assert_close(mj.mass_matrix(q), an.mass_matrix(q), rtol=1e-9, atol=1e-12)
     torch.testing.assert_close(mj.bias(q, qd), an.bias(q, qd), rtol=1e-9, atol=1e-12)
-    biped = nominal_robot("biped", NominalConfig(mass_scale=1.2))  # any MJCF robot now
+    biped = nominal_robot(load("biped"), NominalConfig(mass_scale=1.2))  # any MJCF robot now
     assert biped.m == 4
 
 
@@ -132,3 +134,29 @@ def test_offscreen_gif_rendering(tmp_path):
         pytest.skip(f"no offscreen OpenGL backend: {out.stderr.strip().splitlines()[-1]}")
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "10"
+
+
+def test_eic_controller_needs_its_gains():
+    """``gains`` has no default (an all-unset ``EICGains()`` cannot run the loop): leaving it out is a
+    TypeError, and unset loop gains a ValueError naming them."""
+    import inspect
+
+    from bemlearn.control.bem_sources import ZeroBEM
+    from bemlearn.control.eic import EICController, EICGains
+    from bemlearn.robots.reference import CompositeSinusoid
+
+    assert inspect.signature(EICController).parameters["gains"].default is inspect.Parameter.empty
+
+    class Volts:
+        def command(self, tau_a, q, qd):
+            return np.asarray(tau_a, dtype=np.float64)
+
+    robot = AnalyticFuruta()
+    args = (robot, ZeroBEM(robot.qu_nominal), CompositeSinusoid.single([0.05], [0.3]), Volts())
+    with pytest.raises(TypeError, match="gains"):
+        EICController(*args)
+    with pytest.raises(ValueError, match=r"gains \['kp_a', 'kd_u'\] not set"):
+        EICController(*args, EICGains(kd_a=1.0, kp_u=1.0))
+    ctrl = EICController(*args, EICGains(kp_a=4.0, kd_a=4.0, kp_u=100.0, kd_u=20.0), rate_hz=400.0)
+    u, info = ctrl(0.0, np.array([0.0, robot.qu_nominal]), np.zeros(2))
+    assert u.shape == (1,) and np.isfinite(u).all() and info["qu_e"] == robot.qu_nominal

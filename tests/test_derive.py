@@ -10,11 +10,10 @@ import pytest
 import torch
 
 from bemlearn.control.actuator_inverse import MujocoActuatorInverse
+from bemlearn.control.eic import EICGains
 from bemlearn.control.lqr import discrete_lqr, linearize
 from bemlearn.pipeline import derive
 from bemlearn.robots import MujocoRobot, load
-
-from bemlearn.control.eic import EICGains  # noqa: E402
 
 GAINS = EICGains(kp_a=4.0, kd_a=4.0, kp_u=200.0, kd_u=30.0)
 
@@ -26,7 +25,7 @@ def _robot(name: str) -> MujocoRobot:
     return load("furuta") if name == "furuta" else MujocoRobot.from_xml(ROBOTS / f"{name}.xml")
 
 
-@pytest.mark.parametrize("name", TEST_ROBOTS + ["furuta"])
+@pytest.mark.parametrize("name", [*TEST_ROBOTS, "furuta"])
 def test_control_rate_whole_substeps(name):
     robot = _robot(name)
     r = derive.control_rate(robot).value
@@ -39,7 +38,7 @@ def test_control_rate_whole_substeps(name):
         assert "coarser" in derive.control_rate(robot).note
 
 
-@pytest.mark.parametrize("name", TEST_ROBOTS + ["furuta"])
+@pytest.mark.parametrize("name", [*TEST_ROBOTS, "furuta"])
 def test_lqr_stabilises_discrete_linearisation(name):
     robot = _robot(name)
     r = derive.control_rate(robot).value
@@ -159,8 +158,8 @@ def test_variants_scale_masses_inertias_lengths():
 
 
 def test_slide_encoder_in_metres():
-    from bemlearn.data.plant import SensedPlant
     from bemlearn.data.sensors import SensorConfig
+    from bemlearn.sim.plant import SensedPlant
 
     robot = _robot("cartpole")
     plant = SensedPlant(robot, rate_hz=250.0, sensor=SensorConfig(m_per_count=1e-4), rng=np.random.default_rng(0), where="t")
@@ -171,8 +170,8 @@ def test_slide_encoder_in_metres():
 
 
 def test_plant_timestep_override_keeps_robot_model():
-    from bemlearn.data.plant import SensedPlant
     from bemlearn.data.sensors import SensorConfig
+    from bemlearn.sim.plant import SensedPlant
 
     robot = _robot("cartpole_coarse")
     plant = SensedPlant(robot, rate_hz=200.0, sensor=SensorConfig(), rng=np.random.default_rng(0), where="t", timestep=0.001)
@@ -229,7 +228,7 @@ def test_short_closed_loop_model_bem_stays_up(name):
         bem_source="model", reference=from_dict(ReferenceConfig, {k: list(v) if isinstance(v, tuple) else v for k, v in D["simulate.reference"].value.items()}),
         gains=D["simulate.gains"].value, fall_window=D["simulate.fall_window"].value,
     )
-    m = simulate(str(ROBOTS / f"{name}.xml"), cfg, progress=False).metrics
+    m = simulate(robot, cfg, progress=False).metrics
     assert not m["fell"] and m["bem_rejected"] == 0 and m["command_rejected"] == 0
     assert m["qu_max"] < D["simulate.fall_window"].value / 2
     torch.set_num_threads(torch.get_num_threads())

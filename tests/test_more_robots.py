@@ -97,7 +97,7 @@ def _short_loop(name: str, source: str) -> dict:
         bem_source=source, reference=from_dict(ReferenceConfig, ref),
         gains=D["simulate.gains"].value, fall_window=D["simulate.fall_window"].value,
     )
-    return simulate(str(ROBOTS / f"{name}.xml"), cfg, progress=False).metrics
+    return simulate(_robot(name), cfg, progress=False).metrics
 
 
 @pytest.mark.parametrize("name", ["pendubot", "xy_cartpole"])

@@ -38,10 +38,9 @@ def _fit_and_eval(ds, gp_cfg, config, *, threads: int) -> dict:
     st = predictor_state(model, lik, x_mean=tr.x_mean, x_std=tr.x_std, y_mean=tr.y_mean, y_std=tr.y_std, input_names=tr.input_names, n_train=len(tr))
     robot = load(config.robot)
     ev = evaluate_bem(st, robot, held_out_references(config.evaluate, robot.m), duration_s=config.evaluate.duration_s, rate_hz=config.evaluate.rate_hz)
-    ev.pop("curves")
     return {"kind": gp_cfg.kind, "n_train": len(tr), "threads": threads, "seconds": seconds, "steps": res.steps,
-            "stop_reason": res.stop_reason, "rmse": ev["rmse"], "max_abs": ev["max_abs"],
-            "coverage_latent": ev["coverage_2sigma_latent"], "coverage_predictive": ev["coverage_2sigma_predictive"]}
+            "stop_reason": res.stop_reason, "rmse": ev.rmse, "max_abs": ev.max_abs,
+            "coverage_latent": ev.coverage_2sigma_latent, "coverage_predictive": ev.coverage_2sigma_predictive}
 
 
 def bench_bem_training(config, data_path: str | Path, *, sgpr_points: int = 50_000, n_inducing: int = 512,

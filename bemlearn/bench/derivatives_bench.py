@@ -165,7 +165,7 @@ def run_derivatives_bench(config, data_path: str | Path, *, with_gp: bool = True
             ev = evaluate_bem(st, robot, held_out_references(ecfg, robot.m), duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
             dr = evaluate_design_region(st, grid_points)
             row.update({
-                "bem_rmse": ev["rmse"], "bem_max": ev["max_abs"], "bem_coverage_latent": ev["coverage_2sigma_latent"],
+                "bem_rmse": ev.rmse, "bem_max": ev.max_abs, "bem_coverage_latent": ev.coverage_2sigma_latent,
                 "design_rmse": dr["rmse"], "design_max": dr["max_abs"], "design_gain": dr["gain"],
                 "fit_seconds": time.perf_counter() - t0,
             })

@@ -120,14 +120,13 @@ def bench_model_free_accuracy(
         t0 = time.perf_counter()
         state, ds = fit_predictor(traj, config.dataset, config.train)
         ev = evaluate_bem(state, robot, held_out_references(ecfg, robot.m), duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
-        ev.pop("curves")
         held = heldout_prediction(state, ds.val)
         sl = bem_slices(state, ds.train)
         if figure_dir is not None:
             Path(figure_dir).mkdir(parents=True, exist_ok=True)
             bem_slice_figure(sl, Path(figure_dir) / f"bem_slices_{which}.png", unactuated=traj.meta.unactuated)
         out[which] = {
-            "seconds": time.perf_counter() - t0, "bem_rmse_vs_model": ev["rmse"], "bem_max_abs_vs_model": ev["max_abs"],
+            "seconds": time.perf_counter() - t0, "bem_rmse_vs_model": ev.rmse, "bem_max_abs_vs_model": ev.max_abs,
             "heldout_rmse": held["rmse"], "heldout_coverage_2sigma": held["coverage"], "heldout_points": held["n_points"],
             "slices": sl["summary"],
         }

@@ -13,14 +13,20 @@ import json
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
+if TYPE_CHECKING:
+    from bemlearn.models.predictor_state import PredictorState
+    from bemlearn.robots.protocol import BalanceRobot
+    from bemlearn.robots.reference import CompositeSinusoid
+
 __all__ = ["robot_chain", "format_robots_bench"]
 
 
-def _configs(robot_path: str, robot, *, n_trials: int, duration_s: float, sim_duration_s: float, workers: int, seed: int):
+def _configs(robot_path: str, robot: BalanceRobot, *, n_trials: int, duration_s: float, sim_duration_s: float, workers: int, seed: int):
     from bemlearn.config import from_dict, to_dict
     from bemlearn.data.collect import CollectConfig
     from bemlearn.pipeline.config import PipelineConfig
@@ -45,7 +51,7 @@ def _configs(robot_path: str, robot, *, n_trials: int, duration_s: float, sim_du
     return PipelineConfig(robot=robot_path, collect=ccfg, evaluate=ecfg, simulate=scfg), D
 
 
-def heldout_bem_errors(state, robot, references, *, bound: float, duration_s: float, rate_hz: float) -> dict:
+def heldout_bem_errors(state: PredictorState, robot: BalanceRobot, references: list[CompositeSinusoid], *, bound: float, duration_s: float, rate_hz: float) -> dict:
     """Learned (μ at x_0^e, eq. 14) minus model BEM (eq. 9) on ``references``, over |q_u^e − nominal| ≤ ``bound``."""
     t = np.arange(0.0, duration_s, 1.0 / rate_hz)
     errs, peaks, nan = [], [], 0
@@ -102,7 +108,7 @@ def robot_chain(robot_path: str, out_dir: str | Path, *, n_trials: int = 24, dur
     for src in ("predictor", "model", "zero"):
         scfg = dataclasses.replace(cfg.simulate, bem_source=src, predictor=str(out / "bem_predictor.pt") if src == "predictor" else None)
         t0 = time.perf_counter()
-        m = simulate(robot_path, scfg, progress=False).metrics
+        m = simulate(robot, scfg, progress=False).metrics
         row["closed_loop"][src] = {k: m[k] for k in ("fell", "duration_s", "tracking_rmse", "qu_max", "u_max", "bem_rejected", "command_rejected")}
         row["closed_loop"][src]["seconds"] = time.perf_counter() - t0
         progress(f"{robot.name}: closed loop {src}: {row['closed_loop'][src]}")

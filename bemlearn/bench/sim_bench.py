@@ -68,7 +68,6 @@ def run_sim_bench(run_dir: str | Path, *, n_refs: int = 5, n_seeds: int = 5, dur
     if not predictor.is_file():
         raise MissingFileError(f"{run_dir}: no bem_predictor.pt (export the run first: bemlearn export {run_dir})")
     truth, ref_rec = run_truth_robot(run_dir)
-    robot = ref_rec["mjcf"] or ref_rec["registry"]
     cfg = from_dict(PipelineConfig, load_yaml(run_dir / "config.yaml"), where=str(run_dir / "config.yaml"))
     ev = cfg.evaluate
     base = dataclasses.replace(cfg.simulate, duration_s=duration_s, predictor=str(predictor))
@@ -80,7 +79,7 @@ def run_sim_bench(run_dir: str | Path, *, n_refs: int = 5, n_seeds: int = 5, dur
             row = {"ref": i, "seed": seed}
             for src in ("predictor", "model", "zero"):
                 cfg = dataclasses.replace(_seeded(base, seed), reference=ref, bem_source=src)
-                m = simulate(robot, cfg, progress=False).metrics
+                m = simulate(truth, cfg, progress=False).metrics
                 row[src] = {k: m[k] for k in ("fell", "duration_s", "tracking_rmse", "u_max", "qu_max", "real_time_factor", "tick_us")}
             runs.append(row)
             p, mo, z = row["predictor"], row["model"], row["zero"]
@@ -102,9 +101,9 @@ def run_sim_bench(run_dir: str | Path, *, n_refs: int = 5, n_seeds: int = 5, dur
     out["lemma1"] = []
     for ref in refs:
         lem = learned_lemma1(pred, pred.full, truth, ref.build(1), n_nodes=512)
-        out["lemma1"].append({"period_s": ref.build(1).period, "r_learned_vs_hdot": lem["r_hdot"], "r_learned_vs_model_delta_gamma": lem["r"], "model_gap": lem["model_gap"]})
+        out["lemma1"].append({"period_s": ref.build(1).period, "r_learned_vs_hdot": lem.r_hdot, "r_learned_vs_model_delta_gamma": lem.r, "model_gap": lem.model_gap})
     if mismatch:
-        out["mismatch"] = _mismatch(pred, robot, truth, base, refs[0], ev, bodies, progress)
+        out["mismatch"] = _mismatch(pred, truth, base, refs[0], ev, bodies, progress)
     return out
 
 
@@ -119,18 +118,18 @@ def _bem_rmse(fn, truth_robot, refs) -> float:
     return float(np.sqrt(np.mean(e**2)))
 
 
-def _mismatch(pred: PredictorBEM, robot: str, truth, base: SimulateConfig, ref: ReferenceConfig, ecfg, bodies, progress) -> list[dict]:
+def _mismatch(pred: PredictorBEM, truth, base: SimulateConfig, ref: ReferenceConfig, ecfg, bodies, progress) -> list[dict]:
     from bemlearn.control.bem_sources import ModelBEM
 
     refs = held_out_references(ecfg, truth.m)
     rows = []
     for ms, ls in ((1.0, 1.0), (0.8, 1.0), (1.2, 1.0), (1.0, 0.8), (1.0, 1.2), (0.8, 0.8), (1.2, 1.2)):
         nom = NominalConfig(mass_scale=ms, length_scale=ls, bodies=bodies)
-        wrong = ModelBEM(nominal_robot(robot, nom))
+        wrong = ModelBEM(nominal_robot(truth, nom))
         row = {"mass_scale": ms, "length_scale": ls,
                "bem_rmse_model": _bem_rmse(wrong, truth, refs), "bem_rmse_learned": _bem_rmse(pred, truth, refs)}
         for src in ("model", "predictor"):
-            m = simulate(robot, dataclasses.replace(_seeded(base, 0), reference=ref, bem_source=src, nominal=nom), progress=False).metrics
+            m = simulate(truth, dataclasses.replace(_seeded(base, 0), reference=ref, bem_source=src, nominal=nom), progress=False).metrics
             row[f"tracking_{src}"] = None if m["fell"] else m["tracking_rmse"]
             row[f"fell_{src}"] = m["fell"]
         rows.append(row)

@@ -286,9 +286,9 @@ def run_seed_sweep(case: BenchCase, seeds, *, progress=print) -> list[dict]:
                              input_names=tr.input_names, n_train=len(tr))
         st, summary = calibrate_band(st, traj, dcfg, train_rows=tr.row, seed=int(seed))
         ev = evaluate_bem(st, robot, held_out_references(ev_cfg, robot.m), duration_s=ev_cfg.duration_s, rate_hz=ev_cfg.rate_hz)
-        row = {"robot": case.name, "seed": int(seed), "rmse": ev["rmse"], "latent": ev["coverage_2sigma_latent"],
-               "band": ev["coverage_2sigma_band"], "median_over_rmse": ev["median_band_std_over_rmse"],
-               "c": summary["std_scale"], "violation": ev["bound_violation"]["observed"]}
+        row = {"robot": case.name, "seed": int(seed), "rmse": ev.rmse, "latent": ev.coverage_2sigma_latent,
+               "band": ev.coverage_2sigma_band, "median_over_rmse": ev.median_band_std_over_rmse,
+               "c": summary["std_scale"], "violation": ev.bound_violation.observed}
         progress(f"{case.name} dataset seed {seed}: BEM RMSE {row['rmse']:.5f}, band {100 * row['band']:.1f}%")
         rows.append(row)
     return rows

@@ -64,7 +64,8 @@ def _evaluate(args, ck) -> int:
     overrides = {k: v for k, v in (("n_references", args.references), ("seed", args.seed)) if v is not None}
     ecfg = dataclasses.replace(ecfg, **overrides)
     refs = held_out_references(ecfg, robot.m)
-    ev = evaluate_bem(ck.predictor_state, robot, refs, duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
+    result = evaluate_bem(ck.predictor_state, robot, refs, duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
+    ev = result.as_dict()
     ev["robot"] = ref
     if ecfg.design_points > 0:
         from bemlearn.pipeline.design_evaluation import design_grid, evaluate_design_region
@@ -72,12 +73,12 @@ def _evaluate(args, ck) -> int:
         dr = evaluate_design_region(ck.predictor_state, design_grid(robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed))
         dr.pop("curve")
         ev["bem_design_region"] = dr   # over the whole design region (D1, D2); ev["design_region"] is along the references
-    c = ev.pop("curves")
+    c = result.curves
     unit = ck.metadata.units.get(f"qd_{ck.metadata.unactuated_name}", "rad/s").removesuffix("/s")
     fig, ax = plt.subplots(figsize=(9, 3.5))
-    ax.plot(c["t"], c["model"], "k", lw=1.2, label="model-based BEM (eq. 9)")
-    ax.plot(c["t"], c["mean"], "C1--", lw=1.2, label="learned BEM (eq. 14)")
-    ax.fill_between(c["t"], c["mean"] - 2 * c["std"], c["mean"] + 2 * c["std"], color="C1", alpha=0.25, label="±2σ (latent)")
+    ax.plot(c.t, c.model, "k", lw=1.2, label="model-based BEM (eq. 9)")
+    ax.plot(c.t, c.mean, "C1--", lw=1.2, label="learned BEM (eq. 14)")
+    ax.fill_between(c.t, c.mean - 2 * c.std, c.mean + 2 * c.std, color="C1", alpha=0.25, label="±2σ (latent)")
     ax.set_xlabel("t (s)")
     ax.set_ylabel(f"{ck.metadata.unactuated_name} ({unit})")
     ax.legend(fontsize=8)

@@ -1,12 +1,14 @@
 """Controllers: the EIC law (eq. 3, 8), BEM sources, the inverse of MuJoCo's actuator model, LQR."""
 
 from bemlearn.control.actuator_inverse import MujocoActuatorInverse
-from bemlearn.control.bem_sources import BEM_SOURCES, ModelBEM, PredictorBEM, ZeroBEM, make_bem_source
-from bemlearn.control.eic import EICController, EICGains
+from bemlearn.control.bem_sources import BEM_SOURCES, BEMSource, ModelBEM, PredictorBEM, ZeroBEM, make_bem_source
+from bemlearn.control.eic import Actuator, EICController, EICGains
 from bemlearn.control.lqr import LQRResult, discrete_lqr, linearize
 
 __all__ = [
+    "Actuator",
     "BEM_SOURCES",
+    "BEMSource",
     "EICController",
     "EICGains",
     "LQRResult",

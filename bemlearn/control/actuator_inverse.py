@@ -17,10 +17,15 @@ clipped to ``ctrlrange`` where ``ctrllimited``.  The Quanser motor of the shippe
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import mujoco
 import numpy as np
 
 from bemlearn.errors import RobotModelError
+
+if TYPE_CHECKING:
+    from bemlearn.robots.mujoco_robot import MujocoRobot
 
 __all__ = ["MujocoActuatorInverse"]
 
@@ -39,7 +44,7 @@ class MujocoActuatorInverse:
             other than fixed/affine, naming the actuator.
     """
 
-    def __init__(self, robot) -> None:
+    def __init__(self, robot: MujocoRobot) -> None:
         model = robot.model
         for i in range(model.nu):
             name = model.actuator(i).name or f"#{i}"

@@ -9,6 +9,9 @@ in q_u's unit (rad for a hinge, m for a slide).
 * ``model`` — the model-based BEM of the *nominal* robot (eq. 9), by a warm-started,
   safeguarded Newton iteration on Γ_0 per row (falls back to the bracketed solver).
 * ``zero`` — q_u^e ≡ nominal (plain balancing), a baseline.
+
+All three satisfy :class:`BEMSource`, the interface :class:`~bemlearn.control.EICController`
+and :func:`~bemlearn.pipeline.lemma.learned_lemma1` call.
 """
 
 from __future__ import annotations
@@ -16,13 +19,35 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import torch
 
 from bemlearn.errors import ArgumentError, ConfigError, MissingFileError
+from bemlearn.robots.protocol import BalanceRobot, ControlRobot
 
-__all__ = ["BEM_SOURCES", "PredictorBEM", "ModelBEM", "ZeroBEM", "make_bem_source"]
+__all__ = ["BEM_SOURCES", "BEMSource", "PredictorBEM", "ModelBEM", "ZeroBEM", "make_bem_source"]
+
+
+@runtime_checkable
+class BEMSource(Protocol):
+    """A BEM the controller can call: the learned BEM μ(x_0^e) (eq. 14) and the full learned map
+    f (eq. 11), or their model-based counterparts (eq. 9, 5).
+
+    ``__call__``: ``x (B, 3m)`` = [q̈_a, q̇_a, q_a] → q_u^e ``(B,)``.
+    ``full``: ``x (B, 3m + 2)`` = [q̈_a, q̇_a, q_a, q̈_u, q̇_u] → q_u ``(B,)``.
+    Units follow the joints (q_a in rad or m and its rates; q_u in rad or m); float64 numpy arrays.
+    """
+
+    @property
+    def name(self) -> str:
+        """The source's name in :data:`BEM_SOURCES` (or another label)."""
+        ...
+
+    def __call__(self, x: np.ndarray) -> np.ndarray: ...
+
+    def full(self, x: np.ndarray) -> np.ndarray: ...
 
 
 class PredictorBEM:
@@ -30,7 +55,7 @@ class PredictorBEM:
 
     name = "predictor"
 
-    def __init__(self, path: str | Path, *, robot=None) -> None:
+    def __init__(self, path: str | Path, *, robot: BalanceRobot | None = None) -> None:
         from bemlearn.safe_load import load_script_module
 
         path = Path(path)
@@ -38,12 +63,11 @@ class PredictorBEM:
             raise MissingFileError(f"BEM predictor file {path} not found (run `bemlearn export RUN_DIR` first)")
         self.module = load_script_module(path)  # CheckpointError (a ValueError) for a foreign or tampered file
         self.meta = json.loads(self.module.metadata())
-        if robot is not None:  # noqa: SIM102 - the robot check reads as its own block
-            if self.meta.get("robot") != robot.name or int(self.meta.get("m", -1)) != robot.m:
-                raise ArgumentError(
-                    f"{path}: predictor is for robot {self.meta.get('robot')!r} (m = {self.meta.get('m')}), "
-                    f"but the controller runs {robot.name!r} (m = {robot.m})"
-                )
+        if robot is not None and (self.meta.get("robot") != robot.name or int(self.meta.get("m", -1)) != robot.m):
+            raise ArgumentError(
+                f"{path}: predictor is for robot {self.meta.get('robot')!r} (m = {self.meta.get('m')}), "
+                f"but the controller runs {robot.name!r} (m = {robot.m})"
+            )
         self.path = path
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
@@ -67,7 +91,7 @@ class ModelBEM:
 
     name = "model"
 
-    def __init__(self, robot) -> None:
+    def __init__(self, robot: ControlRobot) -> None:
         self.robot = robot
         self.m = robot.m
         self.lo, self.hi = robot.qu_range
@@ -135,7 +159,7 @@ class ZeroBEM:
 BEM_SOURCES = ("predictor", "model", "zero")
 
 
-def make_bem_source(name: str, *, robot, predictor: str | Path | None = None):
+def make_bem_source(name: str, *, robot: ControlRobot, predictor: str | Path | None = None) -> BEMSource:
     """Build a BEM source by name for ``robot`` (the nominal robot for ``model``)."""
     if name == "predictor":
         if predictor is None:

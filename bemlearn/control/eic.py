@@ -38,14 +38,25 @@ the last finite one (zero at the start) and counted in :attr:`EICController.comm
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
 from bemlearn.config import Limit, config_limits
+from bemlearn.control.bem_sources import BEMSource
 from bemlearn.errors import ArgumentError, ConfigError
+from bemlearn.robots.protocol import ControlRobot
 from bemlearn.robots.reference import CompositeSinusoid
 
-__all__ = ["EICGains", "EICController"]
+__all__ = ["EICGains", "EICController", "Actuator"]
+
+
+class Actuator(Protocol):
+    """Maps the actuated generalized forces to commands (e.g. :class:`~bemlearn.control.MujocoActuatorInverse`)."""
+
+    def command(self, tau_a: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """``tau_a (m,)`` N·m or N, ``q, qd (n,)`` → commands ``(nu,)`` (e.g. V)."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -79,15 +90,19 @@ class EICController:
     """EIC control law (module docstring).
 
     Args:
-        nominal: a robot with ``terms(q, qd) -> (D (n,n), h (n,))`` and the partition.
-        bem: a BEM source, ``x (B, 3m) -> (B,)``.
+        nominal: the controller's model, with ``terms(q, qd) -> (D (n,n), h (n,))`` and the partition.
+        bem: a BEM source, ``x (B, 3m) -> (B,)`` and its ``full`` map.
         reference: q_a^d(t).
         actuator: maps τ_a to commands.
-        gains: :class:`EICGains`.
+        gains: :class:`EICGains` with all four loop gains set (derived from the model by
+            ``bemlearn.pipeline.complete_section(robot, "simulate", config)``, or given).
+
+    Raises:
+        ValueError: a gain of ``gains`` is unset, or the reference's m is not the robot's.
     """
 
-    def __init__(self, nominal, bem, reference: CompositeSinusoid, actuator, gains: EICGains = EICGains(), *, rate_hz: float | None = None, chunk: int = 400,
-                 qu_limits: tuple[float, float] | None = None) -> None:
+    def __init__(self, nominal: ControlRobot, bem: BEMSource, reference: CompositeSinusoid, actuator: Actuator, gains: EICGains, *,
+                 rate_hz: float | None = None, chunk: int = 400, qu_limits: tuple[float, float] | None = None) -> None:
         if reference.m != nominal.m:
             raise ArgumentError(f"EICController: reference has {reference.m} actuated joints, robot {nominal.name!r} has {nominal.m}")
         unset = [n for n in ("kp_a", "kd_a", "kp_u", "kd_u") if getattr(gains, n) is None]
@@ -104,7 +119,7 @@ class EICController:
         # with a known control rate, the reference-only quantities (q_a^d and the BEM along it at
         # t and t ± h) are evaluated ``chunk`` ticks at a time in one batched call
         self.rate_hz, self.chunk = rate_hz, chunk
-        self._cache_k0 = None
+        self._cache_k0: int | None = None
         self.qu_limits = tuple(qu_limits) if qu_limits is not None else tuple(nominal.qu_range)
         self.bem_rejected = 0
         self.command_rejected = 0
@@ -126,7 +141,8 @@ class EICController:
             x = np.concatenate([qadd_d, qad_d, qa_d], axis=1)
             return qa_d[1], qad_d[1], qadd_d[1], self.bem(x)
         k = int(round(t * self.rate_hz))
-        if self._cache_k0 is None or not (self._cache_k0 <= k < self._cache_k0 + self.chunk):
+        k0 = self._cache_k0
+        if k0 is None or not (k0 <= k < k0 + self.chunk):
             ks = np.arange(k, k + self.chunk)
             tk = ks / self.rate_hz
             ts = np.concatenate([tk - h, tk, tk + h])
@@ -134,8 +150,8 @@ class EICController:
             b = self.bem(np.ascontiguousarray(np.concatenate([qadd_d, qad_d, qa_d], axis=1))).reshape(3, self.chunk)
             n = self.chunk
             self._cache = (qa_d[n : 2 * n], qad_d[n : 2 * n], qadd_d[n : 2 * n], b)
-            self._cache_k0 = k
-        i = k - self._cache_k0
+            self._cache_k0 = k0 = k
+        i = k - k0
         qa_d, qad_d, qadd_d, b = self._cache
         return qa_d[i], qad_d[i], qadd_d[i], b[:, i]
 

@@ -21,11 +21,12 @@ import numpy as np
 import torch
 
 from bemlearn.errors import RobotModelError
+from bemlearn.robots.protocol import BalanceRobot
 
 __all__ = ["eic_linear_matrix", "eic_linear_abscissa"]
 
 
-def _model_terms(robot, eps: float = 1e-6):
+def _model_terms(robot: BalanceRobot, eps: float = 1e-6) -> tuple[float, float, np.ndarray, np.ndarray]:
     from bemlearn.robots.scales import bem_slopes
 
     n, iu, ia = robot.n, robot.unactuated_index, robot.actuated_index[0]
@@ -45,7 +46,7 @@ def _model_terms(robot, eps: float = 1e-6):
     return D[iu, iu], D[iu, ia], Hq, bem_slopes(robot)[:, 0]
 
 
-def eic_linear_matrix(robot, gains, *, terms=None) -> np.ndarray:
+def eic_linear_matrix(robot: BalanceRobot, gains, *, terms: tuple[float, float, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """The ``(4, 4)`` matrix A of ẋ = A x (module docstring) for a robot with m = 1 (1/s, 1/s²)."""
     if robot.m != 1:
         raise RobotModelError(f"eic_linear_matrix: needs one actuated joint, robot {robot.name!r} has {robot.m}")
@@ -61,6 +62,6 @@ def eic_linear_matrix(robot, gains, *, terms=None) -> np.ndarray:
     return A
 
 
-def eic_linear_abscissa(robot, gains) -> float:
+def eic_linear_abscissa(robot: BalanceRobot, gains) -> float:
     """max Re λ of :func:`eic_linear_matrix` (1/s): < 0 is needed for the EIC to balance."""
     return float(np.max(np.linalg.eigvals(eic_linear_matrix(robot, gains)).real))

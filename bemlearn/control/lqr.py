@@ -27,11 +27,15 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
 
 from bemlearn.errors import ArgumentError
+
+if TYPE_CHECKING:
+    from bemlearn.robots.mujoco_robot import MujocoRobot
 
 __all__ = ["LQRResult", "linearize", "discrete_lqr"]
 
@@ -66,7 +70,7 @@ class LQRResult:
     r_scale: float
 
 
-def linearize(robot, *, rate_hz: float, timestep: float | None = None, eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray, int, float]:
+def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = None, eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray, int, float]:
     """Tick map (A_N, B_N) of ``robot`` (a MujocoRobot) in its coordinates at upright.
 
     Args:
@@ -119,7 +123,7 @@ def _model_copy(model: mujoco.MjModel, timestep: float | None) -> mujoco.MjModel
     return out
 
 
-def bryson_scales(robot, *, design_qu: float = 0.2) -> tuple[np.ndarray, np.ndarray, float]:
+def bryson_scales(robot: MujocoRobot, *, design_qu: float = 0.2) -> tuple[np.ndarray, np.ndarray, float]:
     """Bryson maxima ``(x_max (2n,), u_max (nu,), λ)`` (module docstring); λ = √(Γ_q/D_uu), 1/s.
 
     An unlimited actuated coordinate gets at least the amplitude a sine at λ needs to move the
@@ -143,14 +147,14 @@ def bryson_scales(robot, *, design_qu: float = 0.2) -> tuple[np.ndarray, np.ndar
     return xmax, umax, lam
 
 
-def _limited_actuated(robot) -> np.ndarray:
+def _limited_actuated(robot: MujocoRobot) -> np.ndarray:
     if not np.allclose(robot.T.numpy(), np.eye(robot.n)):
         return np.ones(robot.m, dtype=bool)
     return np.array([bool(robot.model.jnt_limited[j]) for j in robot.actuated_index])
 
 
 def discrete_lqr(
-    robot,
+    robot: MujocoRobot,
     *,
     rate_hz: float,
     timestep: float | None = None,

@@ -28,6 +28,7 @@ import math
 import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
@@ -35,11 +36,13 @@ from tqdm.auto import tqdm
 
 from bemlearn._version import __version__
 from bemlearn.config import to_dict
-from bemlearn.data.plant import SensedPlant
 from bemlearn.data.sensors import SensorConfig
 from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
 from bemlearn.errors import ConfigError, DataError, RobotModelError
 from bemlearn.units import q_unit_label
+
+if TYPE_CHECKING:
+    from bemlearn.robots.mujoco_robot import MujocoRobot
 
 __all__ = ["CollectConfig", "TrialResult", "collect", "simulate_trial"]
 
@@ -125,8 +128,10 @@ def _robot_and_model(robot_name: str):
     return robot
 
 
-def simulate_trial(robot, config: CollectConfig, trial_id: int, seed_seq: np.random.SeedSequence) -> TrialResult:
+def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, seed_seq: np.random.SeedSequence) -> TrialResult:
     """Run one excitation trial (module docstring) and return its logged and true signals."""
+    from bemlearn.sim.plant import SensedPlant  # here: importing the simulator loads torch and MuJoCo's closed loop
+
     rng = np.random.default_rng(seed_seq)
     model, n, m = robot.model, robot.n, robot.m
     plant = SensedPlant(robot, rate_hz=config.rate_hz, sensor=config.sensor, rng=rng, where="collect", timestep=config.physics_timestep)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -148,48 +149,17 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
     scales = [j.sign * j.kind_and_scale()[1] for j in imap.joints]
     offsets = [j.offset for j in imap.joints] + [0.0] * (len(imap.inputs) + len(imap.keep))
     mult = np.asarray(scales + [1.0] * (len(imap.inputs) + len(imap.keep)))
-    parts: dict[str, list[np.ndarray]] = {"t": [], "trial": [], "v": [], "filled": []}
-    trials_info, failed, reports = [], {}, []
-    filled_total = splits = dropped = 0
-    tcol = imap.time.column
+    pieces, reports = _Pieces(), []
     for table in tables:
         raw = np.stack([table.columns[c] for c in value_cols], axis=1)
         values = raw * mult + np.asarray(offsets)
         for a, b, episode in _trial_blocks(table, imap):
-            if tcol is not None:
-                t = table.columns[tcol][a:b] * TIME_UNITS[imap.time.unit]
-                where = lambda i, a=a, table=table: table.where(tcol, a + i)  # noqa: E731
-                if resampling:
-                    segs, report = resample_linear(
-                        t, values[a:b], rate_hz=rate, max_fill=imap.time.max_fill, on_gap=imap.time.on_gap,
-                        tolerance=imap.time.max_jitter, where=where,
-                    )
-                    reports.append(report)
-                else:
-                    segs = place_on_grid(
-                        t, values[a:b], rate_hz=rate, max_jitter=imap.time.max_jitter, max_fill=imap.time.max_fill,
-                        on_gap=imap.time.on_gap, where=where,
-                    )
-            else:
-                segs = [GridSegment(np.arange(b - a) / rate, values[a:b], np.zeros(b - a, dtype=bool), 0)]
-            splits += len(segs) - 1
+            segs = _grid_segments(table, a, values[a:b], imap, rate, reports)
+            pieces.splits += len(segs) - 1
             for seg in segs:
-                if len(seg.t) < min_trial_samples:
-                    dropped += 1
-                    logger.warning("%s: dropped a %d-sample piece at row %d (shorter than %d samples)",
-                                   table.path, len(seg.t), a + seg.first_row, min_trial_samples)
-                    continue
-                tid = len(trials_info)
-                parts["t"].append(seg.t)
-                parts["trial"].append(np.full(len(seg.t), tid, dtype=np.int64))
-                parts["v"].append(seg.values)
-                parts["filled"].append(seg.filled)
-                failed[tid] = False
-                filled_total += int(seg.filled.sum())
-                trials_info.append({
-                    "trial": tid, "file": str(table.path), "first_row": a + seg.first_row,
-                    "episode": episode, "samples": len(seg.t), "filled_samples": int(seg.filled.sum()),
-                })
+                pieces.add(seg, table, a, episode, min_trial_samples)
+    trials_info, failed = pieces.trials, pieces.failed
+    filled_total, splits, dropped = pieces.filled_total, pieces.splits, pieces.dropped
     if not trials_info:
         hint = (" (every trial was split at gaps into shorter pieces: raise time.max_fill to bridge them)"
                 if splits else "")
@@ -198,14 +168,93 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
         logger.info("import: %d %s, %d trials split at gaps, %d short pieces dropped", filled_total,
                     "grid samples more than ½ step from any stamp" if resampling else "dropped samples interpolated",
                     splits, dropped)
-    v = np.concatenate(parts["v"])
+    v = np.concatenate(pieces.v)
     n, m = len(imap.joints), len(imap.inputs)
-    snapped = (_snap_filled_joints(v, np.concatenate(parts["filled"]), logged_steps)
+    snapped = (_snap_filled_joints(v, np.concatenate(pieces.filled), logged_steps)
                if filled_total and not resampling else {})
     resample_info = _resample_summary(reports, rate, len(v), tables, imap, logged_steps) if resampling else None
+    provenance = {
+        "generator": f"bemlearn {__version__} data import",
+        "map": to_dict(imap),
+        "files": [str(p) for p in paths],
+        "delimiters": [delimiter_name(t.delimiter) for t in tables],
+        "filled_samples": filled_total, "split_gaps": splits, "dropped_pieces": dropped,
+        "filled_snapped_to_grid": {imap.joints[c].name: step for c, step in snapped.items()},
+        "quantization_step": {j.name: step for j, step in zip(imap.joints, logged_steps)},
+        "resample": resample_info,
+        "cut_last_lines": [{"file": str(t.path), **t.cut_line} for t in tables if t.cut_line is not None],
+        "trials": trials_info,
+    }
+    meta = _import_meta(imap, rate, failed, provenance)
+    return Trajectory(
+        t=np.concatenate(pieces.t), trial=np.concatenate(pieces.trial), q=v[:, :n], u=v[:, n:n + m],
+        meta=meta, channels=v[:, n + m:],
+    )
+
+
+@dataclass
+class _Pieces:
+    """The trial pieces kept so far (arrays in trial order), their provenance, and the counts of
+    filled samples, splits at gaps and pieces dropped as too short."""
+
+    t: list[np.ndarray] = field(default_factory=list)
+    trial: list[np.ndarray] = field(default_factory=list)
+    v: list[np.ndarray] = field(default_factory=list)
+    filled: list[np.ndarray] = field(default_factory=list)
+    trials: list[dict] = field(default_factory=list)
+    failed: dict[int, bool] = field(default_factory=dict)
+    filled_total: int = 0
+    splits: int = 0
+    dropped: int = 0
+
+    def add(self, seg: GridSegment, table: LogTable, a: int, episode: int | None, min_samples: int) -> None:
+        """Keep ``seg`` (of the block starting at row ``a``) as the next trial, or drop it when shorter than ``min_samples``."""
+        if len(seg.t) < min_samples:
+            self.dropped += 1
+            logger.warning("%s: dropped a %d-sample piece at row %d (shorter than %d samples)",
+                           table.path, len(seg.t), a + seg.first_row, min_samples)
+            return
+        tid = len(self.trials)
+        self.t.append(seg.t)
+        self.trial.append(np.full(len(seg.t), tid, dtype=np.int64))
+        self.v.append(seg.values)
+        self.filled.append(seg.filled)
+        self.failed[tid] = False
+        self.filled_total += int(seg.filled.sum())
+        self.trials.append({
+            "trial": tid, "file": str(table.path), "first_row": a + seg.first_row,
+            "episode": episode, "samples": len(seg.t), "filled_samples": int(seg.filled.sum()),
+        })
+
+
+def _grid_segments(table: LogTable, a: int, values: np.ndarray, imap: ImportMap, rate: float,
+                   reports: list[ResampleReport]) -> list[GridSegment]:
+    """The trial block of ``table`` starting at row ``a`` (``values (T, k)``, scaled) on its nominal grid
+    at ``rate`` Hz: resampled, placed on the grid, or (no time column) taken as sampled at ``rate``.
+    A ``time.resample: linear`` import appends its report to ``reports``."""
+    tcol = imap.time.column
+    if tcol is None:
+        return [GridSegment(np.arange(len(values)) / rate, values, np.zeros(len(values), dtype=bool), 0)]
+    t = table.columns[tcol][a:a + len(values)] * TIME_UNITS[imap.time.unit]
+    where = lambda i: table.where(tcol, a + i)  # noqa: E731
+    if imap.time.resample == "linear":
+        segs, report = resample_linear(
+            t, values, rate_hz=rate, max_fill=imap.time.max_fill, on_gap=imap.time.on_gap,
+            tolerance=imap.time.max_jitter, where=where,
+        )
+        reports.append(report)
+        return segs
+    return place_on_grid(
+        t, values, rate_hz=rate, max_jitter=imap.time.max_jitter, max_fill=imap.time.max_fill,
+        on_gap=imap.time.on_gap, where=where,
+    )
+
+
+def _import_meta(imap: ImportMap, rate: float, failed: dict[int, bool], provenance: dict) -> TrajectoryMeta:
+    """The imported trajectory's metadata; ``provenance`` goes to ``extra["import"]``."""
     kinds = tuple(j.kind_and_scale()[0] for j in imap.joints)
     u_units = [u.unit for u in imap.inputs]
-    meta = TrajectoryMeta(
+    return TrajectoryMeta(
         robot=imap.robot,
         joint_names=tuple(j.name for j in imap.joints),
         unactuated=imap.unactuated,
@@ -215,24 +264,8 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
         units={"t": "s", "q": q_unit_label(kinds), "u": u_units[0] if len(set(u_units)) == 1 else "|".join(u_units)},
         joint_kinds=kinds,
         channel_names=tuple(imap.keep),
-        extra={"import": {
-            "generator": f"bemlearn {__version__} data import",
-            "map": to_dict(imap),
-            "files": [str(p) for p in paths],
-            "delimiters": [delimiter_name(t.delimiter) for t in tables],
-            "filled_samples": filled_total, "split_gaps": splits, "dropped_pieces": dropped,
-            "filled_snapped_to_grid": {imap.joints[c].name: step for c, step in snapped.items()},
-            "quantization_step": {j.name: step for j, step in zip(imap.joints, logged_steps)},
-            "resample": resample_info,
-            "cut_last_lines": [{"file": str(t.path), **t.cut_line} for t in tables if t.cut_line is not None],
-            "trials": trials_info,
-        }},
+        extra={"import": provenance},
     )
-    return Trajectory(
-        t=np.concatenate(parts["t"]), trial=np.concatenate(parts["trial"]), q=v[:, :n], u=v[:, n:n + m],
-        meta=meta, channels=v[:, n + m:],
-    )
-
 
 def _resample_summary(reports: list[ResampleReport], rate: float, samples: int, tables: list[LogTable],
                       imap: ImportMap, steps: list[float | None]) -> dict:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 from bemlearn.errors import ArgumentError, PredictorInputError
@@ -57,10 +58,15 @@ def srinivas_kappa(rkhs_norm: float, info_gain: float, n: int, eta: float) -> fl
 class LearnedBEM:
     """The learned BEM of a trained run (module docstring).
 
+    Calling it (and :meth:`full`) makes it a :class:`~bemlearn.control.BEMSource`, the eager
+    counterpart of the exported predictor.
+
     Args:
         state: the frozen posterior.
         robot, actuated_names, unactuated_name: what the columns mean.
     """
+
+    name = "learned"
 
     def __init__(self, state: PredictorState, *, robot: str, actuated_names: tuple[str, ...], unactuated_name: str) -> None:
         self.state = state
@@ -98,6 +104,16 @@ class LearnedBEM:
                 raise PredictorInputError(f"LearnedBEM.bem: {name} must have shape (B, {self.m}), got {tuple(p.shape)}")
         x = torch.cat([*parts, torch.zeros(parts[0].shape[0], 2, dtype=torch.float64)], dim=1)
         return self.predict(x, n_inputs=3 * self.m)
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """μ(x_0^e) (eq. 14) for the controller: ``x (B, 3m)`` = [q̈_a, q̇_a, q_a] → ``(B,)``, numpy float64."""
+        x = np.asarray(x, dtype=np.float64)
+        m = self.m
+        return self.bem(x[:, 2 * m :], x[:, m : 2 * m], x[:, :m]).mean.numpy()
+
+    def full(self, x: np.ndarray) -> np.ndarray:
+        """The mean of the full map f (eq. 11): ``x (B, 3m + 2)`` = [q̈_a, q̇_a, q_a, q̈_u, q̇_u] → ``(B,)``."""
+        return self.predict(torch.as_tensor(np.asarray(x, dtype=np.float64))).mean.numpy()
 
     @staticmethod
     def bound(std: torch.Tensor, *, kappa: float = 2.0, zero_dynamics_gap: float = 0.0) -> torch.Tensor:

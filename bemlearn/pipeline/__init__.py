@@ -2,9 +2,9 @@
 
 from bemlearn.pipeline.config import PipelineConfig, load_pipeline_config
 from bemlearn.pipeline.data_evaluation import SliceSpec, bem_slice_figure, bem_slices, heldout_prediction
-from bemlearn.pipeline.evaluation import EvaluationConfig, evaluate_bem, held_out_references, run_truth_robot
-from bemlearn.pipeline.gp_stage import GPStageResult, fit_bem_gp
-from bemlearn.pipeline.lemma import learned_lemma1
+from bemlearn.pipeline.evaluation import BEMEvaluation, EvaluationConfig, evaluate_bem, held_out_references, run_truth_robot
+from bemlearn.pipeline.gp_stage import CheckpointProvenance, GPStageResult, fit_bem_gp
+from bemlearn.pipeline.lemma import LearnedLemma1, learned_lemma1
 from bemlearn.pipeline.reliability import reliability_figure, reliability_table
 from bemlearn.pipeline.resolve import ResolvedConfig, complete_section, resolve_pipeline_config
 from bemlearn.pipeline.run import run_pipeline
@@ -13,8 +13,11 @@ from bemlearn.pipeline.train import train_run
 __all__ = [
     "reliability_table",
     "reliability_figure",
+    "BEMEvaluation",
+    "CheckpointProvenance",
     "EvaluationConfig",
     "GPStageResult",
+    "LearnedLemma1",
     "PipelineConfig",
     "ResolvedConfig",
     "SliceSpec",

@@ -27,12 +27,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
 from bemlearn.models.band import band_reference
 from bemlearn.models.predictor_state import PredictorState
+
+if TYPE_CHECKING:
+    from bemlearn.pipeline.evaluation import EvaluationConfig
+    from bemlearn.robots.protocol import BalanceRobot
 
 __all__ = ["DesignGrid", "design_grid", "evaluate_design_region", "least_squares_gain", "design_region_figure"]
 
@@ -56,7 +61,7 @@ class DesignGrid:
     n_drawn: int
 
 
-def design_grid(robot, evaluate_config, *, n_points: int = 4096, seed: int = 0, bound: float | None = None) -> DesignGrid:
+def design_grid(robot: BalanceRobot, evaluate_config: EvaluationConfig, *, n_points: int = 4096, seed: int = 0, bound: float | None = None) -> DesignGrid:
     """The queries of (D1) for ``robot`` (module docstring).
 
     Args:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -18,9 +19,11 @@ from bemlearn.errors import CheckpointError, ConfigError
 from bemlearn.models.band import band_reference
 from bemlearn.models.predictor_state import PredictorState
 from bemlearn.pipeline.reliability import reliability_table
+from bemlearn.robots.protocol import BalanceRobot
 from bemlearn.robots.reference import CompositeSinusoid
 
-__all__ = ["EvaluationConfig", "held_out_references", "reference_queries", "evaluate_bem", "run_truth_robot"]
+__all__ = ["EvaluationConfig", "held_out_references", "reference_queries", "evaluate_bem", "run_truth_robot", "BEMEvaluation",
+           "BEMCurves", "ReferenceErrors", "DesignRegionErrors", "BoundViolation"]
 
 
 @dataclass(frozen=True)
@@ -73,7 +76,7 @@ def held_out_references(config: EvaluationConfig, m: int) -> list[CompositeSinus
     return refs
 
 
-def reference_queries(robot, config: EvaluationConfig) -> tuple[torch.Tensor, np.ndarray]:
+def reference_queries(robot: BalanceRobot, config: EvaluationConfig) -> tuple[torch.Tensor, np.ndarray]:
     """The BEM queries x_0^e = [q̈_a, q̇_a, q_a, 0, 0] (eq. 14) along the held-out references of
     ``config``, sampled at ``config.rate_hz`` for ``config.duration_s``, and ``robot``'s model-based
     BEM there (eq. 9): ``(N, 3m + 2)`` physical inputs and ``(N,)`` q_u in its joint's unit, the
@@ -117,72 +120,203 @@ def run_truth_robot(run_dir, *, model=None):
     return ref.load(), ref.to_dict()
 
 
-def evaluate_bem(state: PredictorState, robot, references: list[CompositeSinusoid], *, duration_s: float = 20.0, rate_hz: float = 100.0,
-                 design_bound: float | None = None) -> dict:
-    """RMSE, max error and calibration of the learned BEM along ``references``.
+@dataclass(frozen=True)
+class ReferenceErrors:
+    """Learned minus model-based BEM along one held-out reference, in q_u's unit (rad or m).
+
+    Attributes:
+        rmse: root-mean-square error.
+        max_abs: largest |error|.
+    """
+
+    rmse: float
+    max_abs: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {"rmse": self.rmse, "max_abs": self.max_abs}
+
+
+@dataclass(frozen=True)
+class DesignRegionErrors:
+    """The errors at the points whose model BEM lies within ``bound`` of the nominal q_u.
+
+    Attributes:
+        bound: the design region's half width d, in q_u's unit.
+        n_points: the points inside.
+        rmse, max_abs: RMSE and largest |error| over them, in q_u's unit (NaN without points).
+    """
+
+    bound: float
+    n_points: int
+    rmse: float
+    max_abs: float
+
+    def as_dict(self) -> dict[str, float | int]:
+        return {"bound": self.bound, "n_points": self.n_points, "rmse": self.rmse, "max_abs": self.max_abs}
+
+
+@dataclass(frozen=True)
+class BoundViolation:
+    """How often the eq. (13)/(15) bound |error| ≤ κ σ_band fails.
+
+    Attributes:
+        kappa: κ (2).
+        observed: fraction of points outside ±κ σ_band.
+        nominal: the Gaussian rate 1 − erf(κ/√2) (0.0455 for κ = 2).
+    """
+
+    kappa: float
+    observed: float
+    nominal: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {"kappa": self.kappa, "observed": self.observed, "nominal": self.nominal}
+
+
+@dataclass(frozen=True, eq=False)
+class BEMCurves:
+    """The first reference's signals for plotting, each ``(T,)`` over ``t`` (s); q_u values in its unit.
+
+    Attributes:
+        t: sample times, s.
+        model: model-based BEM (eq. 9), NaN where it has no root.
+        mean: learned BEM μ(x_0^e) (eq. 14).
+        std: latent posterior std (eq. 12).
+        band_std: calibrated band σ_band (eq. B1, the exported ``std``).
+    """
+
+    t: np.ndarray
+    model: np.ndarray
+    mean: np.ndarray
+    std: np.ndarray
+    band_std: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class BEMEvaluation:
+    """What :func:`evaluate_bem` measured: learned vs model-based BEM along held-out references.
+
+    Errors are learned minus model BEM in q_u's unit (rad or m); coverages are fractions in [0, 1].
+
+    Attributes:
+        rmse, max_abs: RMSE and largest |error| over all points.
+        coverage_2sigma_latent: fraction of points with |error| ≤ 2σ, σ the latent std (eq. 12).
+        coverage_2sigma_predictive: the same with the predictive std √(σ² + σ_0²) (eq. 11).
+        coverage_2sigma_band: the same with the calibrated band σ_band (:mod:`bemlearn.models.band`).
+        median_band_std_over_rmse: median σ_band / RMSE (``inf`` when the RMSE is 0).
+        bound_violation: the eq. (13)/(15) bound at κ = 2, observed and nominal violation rates.
+        reliability: ``{"band": rows, "latent": rows}``, coverage vs nominal level 50–99 %
+            (:func:`~bemlearn.pipeline.reliability.reliability_table`).
+        design_region: the errors over the points whose model BEM is within the design bound.
+        n_points: points evaluated (those with a model root).
+        no_model_root: points left out because the model has no BEM there.
+        per_reference: RMSE and max error per reference.
+        curves: the first reference's signals, for plots (not serialized).
+    """
+
+    rmse: float
+    max_abs: float
+    coverage_2sigma_latent: float
+    coverage_2sigma_predictive: float
+    coverage_2sigma_band: float
+    median_band_std_over_rmse: float
+    bound_violation: BoundViolation
+    reliability: dict[str, list[dict[str, float]]]
+    design_region: DesignRegionErrors
+    n_points: int
+    no_model_root: int
+    per_reference: tuple[ReferenceErrors, ...]
+    curves: BEMCurves
+
+    def as_dict(self) -> dict[str, Any]:
+        """The JSON-ready summary (``metrics.json`` → ``bem_heldout``, ``evaluation.json``), without ``curves``."""
+        return {
+            "design_region": self.design_region.as_dict(),
+            "coverage_2sigma_band": self.coverage_2sigma_band,
+            "median_band_std_over_rmse": self.median_band_std_over_rmse,
+            "bound_violation": self.bound_violation.as_dict(),
+            "reliability": {k: [dict(row) for row in rows] for k, rows in self.reliability.items()},
+            "rmse": self.rmse,
+            "max_abs": self.max_abs,
+            "coverage_2sigma_latent": self.coverage_2sigma_latent,
+            "coverage_2sigma_predictive": self.coverage_2sigma_predictive,
+            "n_points": self.n_points,
+            "no_model_root": self.no_model_root,
+            "per_reference": [r.as_dict() for r in self.per_reference],
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class _ReferencePoints:
+    """One reference's points with a model root: errors, latent and band std, inside the design region."""
+
+    error: np.ndarray
+    latent_std: np.ndarray
+    band_std: np.ndarray
+    inside: np.ndarray
+    no_model_root: int
+    curves: BEMCurves
+
+
+def _reference_points(state: PredictorState, robot: BalanceRobot, ref: CompositeSinusoid, t: np.ndarray,
+                      design_bound: float) -> _ReferencePoints:
+    """Learned (eq. 14) vs model (eq. 9) BEM along ``ref`` at times ``t``."""
+    qa, qad, qadd = ref.evaluate(t)
+    bem = robot.bem(qa, qad, qadd)
+    ok = bem.valid.numpy()
+    x = np.concatenate([qadd, qad, qa, np.zeros((t.size, 2))], axis=1)
+    mean, band, std = (v.numpy() for v in band_reference(state, torch.from_numpy(x), n_inputs=state.dim - 2))
+    model = bem.qu.numpy()
+    return _ReferencePoints(error=(mean - model)[ok], latent_std=std[ok], band_std=band[ok],
+                            inside=np.abs(model[ok] - robot.qu_nominal) <= design_bound, no_model_root=int((~ok).sum()),
+                            curves=BEMCurves(t=t, model=model, mean=mean, std=std, band_std=band))
+
+
+def _design_region_errors(e: np.ndarray, bound: float) -> DesignRegionErrors:
+    return DesignRegionErrors(bound=float(bound), n_points=int(e.size),
+                              rmse=float(np.sqrt(np.mean(e**2))) if e.size else float("nan"),
+                              max_abs=float(np.abs(e).max()) if e.size else float("nan"))
+
+
+def evaluate_bem(state: PredictorState, robot: BalanceRobot, references: list[CompositeSinusoid], *, duration_s: float = 20.0,
+                 rate_hz: float = 100.0, design_bound: float | None = None) -> BEMEvaluation:
+    """RMSE, max error and calibration of the learned BEM along ``references`` (module docstring).
+
+    Each reference is sampled at ``rate_hz`` for ``duration_s``; points where the model has no BEM
+    are left out (counted in ``no_model_root``).  ``design_bound``: the half width of the design
+    region in q_u's unit (default: :func:`~bemlearn.pipeline.derive.design_region`, the region the
+    derived excitation is designed to cover).
 
     Returns:
-        a dict with ``rmse``, ``max_abs``, ``coverage_2sigma_latent``,
-        ``coverage_2sigma_predictive`` (fractions), ``n_points``, ``no_model_root``
-        (points where the model has no BEM, excluded), and ``per_reference`` lists; plus
-        ``curves`` (t, model, mean, std of the first reference) for plotting.  For the
-        calibrated band σ_band of :mod:`bemlearn.models.band` (the exported ``std``):
-        ``coverage_2sigma_band``, ``median_band_std_over_rmse``, ``bound_violation`` (the
-        eq. 13/15 bound at κ = 2: observed and nominal violation rates) and ``reliability``
-        (coverage vs nominal level, 50–99 %, band and latent); ``curves`` gains ``band_std``.
-        ``design_region``: RMSE and max error over the points whose model BEM lies within
-        ``design_bound`` of the nominal q_u (default: :func:`~bemlearn.pipeline.derive.design_region`,
-        the region the derived excitation is designed to cover), with their count.
+        a :class:`BEMEvaluation`; :meth:`BEMEvaluation.as_dict` is what ``metrics.json`` records.
     """
     if design_bound is None:
         from bemlearn.pipeline.derive import design_region
 
         design_bound = design_region(robot).value
     t = np.arange(0.0, duration_s, 1.0 / rate_hz)
-    errs, lat, pred, per, inside = [], [], [], [], []
-    bands, lats = [], []
-    curves = None
     noise_std = float(state.y_std * state.noise.sqrt())
-    skipped = 0
-    for i, ref in enumerate(references):
-        qa, qad, qadd = ref.evaluate(t)
-        bem = robot.bem(qa, qad, qadd)
-        ok = bem.valid.numpy()
-        skipped += int((~ok).sum())
-        x = np.concatenate([qadd, qad, qa, np.zeros((t.size, 2))], axis=1)
-        mean, band, std = (v.numpy() for v in band_reference(state, torch.from_numpy(x), n_inputs=state.dim - 2))
-        bands.append(band[ok])
-        lats.append(std[ok])
-        e = (mean - bem.qu.numpy())[ok]
-        inside.append(np.abs(bem.qu.numpy()[ok] - robot.qu_nominal) <= design_bound)
-        s = std[ok]
-        errs.append(e)
-        lat.append(np.abs(e) <= 2 * s)
-        pred.append(np.abs(e) <= 2 * np.sqrt(s**2 + noise_std**2))
-        per.append({"rmse": float(np.sqrt(np.mean(e**2))), "max_abs": float(np.abs(e).max())})
-        if i == 0:
-            curves = {"t": t, "model": bem.qu.numpy(), "mean": mean, "std": std, "band_std": band}
-    e = np.concatenate(errs)
-    band_all, lat_all = np.concatenate(bands), np.concatenate(lats)
+    points = [_reference_points(state, robot, ref, t, design_bound) for ref in references]
+    e = np.concatenate([p.error for p in points])
+    lat_all = np.concatenate([p.latent_std for p in points])
+    band_all = np.concatenate([p.band_std for p in points])
+    within_latent = np.abs(e) <= 2 * lat_all
+    within_predictive = np.abs(e) <= 2 * np.sqrt(lat_all**2 + noise_std**2)
     rmse = float(np.sqrt(np.mean(e**2)))
-    ein = e[np.concatenate(inside)]
-    extra = {
-        "design_region": {"bound": float(design_bound), "n_points": int(ein.size),
-                          "rmse": float(np.sqrt(np.mean(ein**2))) if ein.size else float("nan"),
-                          "max_abs": float(np.abs(ein).max()) if ein.size else float("nan")},
-        "coverage_2sigma_band": float(np.mean(np.abs(e) <= 2 * band_all)),
-        "median_band_std_over_rmse": float(np.median(band_all)) / rmse if rmse > 0 else math.inf,
-        "bound_violation": {"kappa": 2.0, "observed": float(np.mean(np.abs(e) > 2 * band_all)),
-                            "nominal": 1.0 - math.erf(2.0 / math.sqrt(2.0))},
-        "reliability": {"band": reliability_table(e, band_all), "latent": reliability_table(e, lat_all)},
-    }
-    return extra | {
-        "rmse": float(np.sqrt(np.mean(e**2))),
-        "max_abs": float(np.abs(e).max()),
-        "coverage_2sigma_latent": float(np.mean(np.concatenate(lat))),
-        "coverage_2sigma_predictive": float(np.mean(np.concatenate(pred))),
-        "n_points": int(e.size),
-        "no_model_root": skipped,
-        "per_reference": per,
-        "curves": curves,
-    }
+    return BEMEvaluation(
+        rmse=rmse,
+        max_abs=float(np.abs(e).max()),
+        coverage_2sigma_latent=float(np.mean(within_latent)),
+        coverage_2sigma_predictive=float(np.mean(within_predictive)),
+        coverage_2sigma_band=float(np.mean(np.abs(e) <= 2 * band_all)),
+        median_band_std_over_rmse=float(np.median(band_all)) / rmse if rmse > 0 else math.inf,
+        bound_violation=BoundViolation(kappa=2.0, observed=float(np.mean(np.abs(e) > 2 * band_all)),
+                                       nominal=1.0 - math.erf(2.0 / math.sqrt(2.0))),
+        reliability={"band": reliability_table(e, band_all), "latent": reliability_table(e, lat_all)},
+        design_region=_design_region_errors(e[np.concatenate([p.inside for p in points])], design_bound),
+        n_points=int(e.size),
+        no_model_root=sum(p.no_model_root for p in points),
+        per_reference=tuple(ReferenceErrors(rmse=float(np.sqrt(np.mean(p.error**2))), max_abs=float(np.abs(p.error).max()))
+                            for p in points),
+        curves=points[0].curves,
+    )

@@ -26,11 +26,17 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
 from bemlearn.errors import NumericalError, RobotModelError
+
+if TYPE_CHECKING:
+    from bemlearn.control.actuator_inverse import MujocoActuatorInverse
+    from bemlearn.pipeline.config import PipelineConfig
+    from bemlearn.robots.mujoco_robot import MujocoRobot
 
 __all__ = ["FeasibilityCheck", "model_feasibility", "hold_effort"]
 
@@ -59,7 +65,7 @@ class FeasibilityCheck:
                 "severity": self.severity, "text": self.text}
 
 
-def _effort(robot, inv, q: np.ndarray, qdd: np.ndarray) -> float:
+def _effort(robot: MujocoRobot, inv: MujocoActuatorInverse, q: np.ndarray, qdd: np.ndarray) -> float:
     """max over actuators of |ctrl|/ctrl limit and |force|/force limit to realise (q, q̇ = 0, q̈)."""
     qt = torch.from_numpy(q[None])
     z = torch.zeros_like(qt)
@@ -76,7 +82,7 @@ def _effort(robot, inv, q: np.ndarray, qdd: np.ndarray) -> float:
     return out
 
 
-def hold_effort(robot, bound: float) -> tuple[float, str]:
+def hold_effort(robot: MujocoRobot, bound: float) -> tuple[float, str]:
     """The smallest effort (multiple of the actuator limits) that holds the BEM at ±``bound``, the
     worse of the two signs, and how (module docstring); ``inf`` when no way is found."""
     from bemlearn.control.actuator_inverse import MujocoActuatorInverse
@@ -120,7 +126,7 @@ def hold_effort(robot, bound: float) -> tuple[float, str]:
     return worst, how
 
 
-def model_feasibility(robot, config) -> list[FeasibilityCheck]:
+def model_feasibility(robot: MujocoRobot, config: PipelineConfig) -> list[FeasibilityCheck]:
     """The checks of the module docstring for ``robot`` (a MujocoRobot) and the resolved ``config``."""
     from bemlearn.pipeline.derive import design_region
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +29,7 @@ from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.models import predictor_state
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["GPStageResult", "fit_bem_gp"]
+__all__ = ["CheckpointProvenance", "GPStageResult", "fit_bem_gp"]
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +60,26 @@ class GPStageResult:
     calibration: dict | None = None
 
 
+@dataclass(frozen=True)
+class CheckpointProvenance:
+    """What the checkpoint records about the data a GP was fitted on.
+
+    Attributes:
+        robot: the robot the data came from, as recorded by the run (``RobotRef.to_dict()``,
+            or ``{"name": ..., "mjcf": None, ...}`` for a model-free run).
+        joint_names: the coordinates, in the robot's order.
+        unactuated_name: the unactuated coordinate (one of ``joint_names``).
+        data_sha256: sha256 of the data file.
+        extra: more provenance for the checkpoint's metadata (``extra``).
+    """
+
+    robot: Mapping[str, Any]
+    joint_names: Sequence[str]
+    unactuated_name: str
+    data_sha256: str
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+
 def fit_bem_gp(
     x: torch.Tensor,
     y: torch.Tensor,
@@ -69,11 +89,7 @@ def fit_bem_gp(
     input_names: Sequence[str],
     units: Mapping[str, str],
     config: GPConfig,
-    robot: Mapping[str, Any],
-    joint_names: Sequence[str],
-    unactuated_name: str,
-    data_sha256: str,
-    extra: Mapping[str, Any] | None = None,
+    provenance: CheckpointProvenance,
     writer=None,
     resume: bool = False,
     progress: bool = True,
@@ -88,11 +104,7 @@ def fit_bem_gp(
         normalization: the training split's normalization (applied here).
         input_names, units: the columns and their units (``{column: unit}``).
         config: the GP options (kind, optimizer, device, dtype).
-        robot: the robot the data came from, as recorded by the run (``RobotRef.to_dict()``,
-            or ``{"name": ..., "mjcf": None, ...}`` for a model-free run).
-        joint_names, unactuated_name: the coordinates, in the robot's order.
-        data_sha256: sha256 of the data file (provenance in the checkpoint).
-        extra: more provenance for the checkpoint's metadata.
+        provenance: the robot, coordinates and data file, recorded in the checkpoint's metadata.
         writer: a TensorBoard ``SummaryWriter`` (loss, noise, outputscale, lengthscale/<input>).
         resume: start from the hyperparameters of the checkpoint already in ``out_dir``.
         calibrate: ``calibrate(state) -> (state, summary)`` applied to the frozen posterior before it is
@@ -109,27 +121,8 @@ def fit_bem_gp(
     xn, yn = normalization.normalize_x(x).to(dtype), normalization.normalize_y(y).to(dtype)
     model, lik = build_gp(xn, yn, config=config)
     if resume:
-        ck = load_checkpoint(out)
-        model.load_state_dict(ck.model_state, strict=False)
-        lik.load_state_dict({k[len("likelihood."):]: v for k, v in ck.model_state.items() if k.startswith("likelihood.")})
-        log.info("resumed from %s", ck.path)
-
-    def callback(step: int, metrics: dict[str, float]) -> None:
-        if writer is None:
-            return
-        for k, v in metrics.items():
-            tag = f"lengthscale/{names[int(k.split('_')[1])]}" if k.startswith("lengthscale_") else f"train/{k}"
-            writer.add_scalar(tag, v, step)
-
-    interrupted = False
-    t0 = time.perf_counter()
-    try:
-        result = fit_gp(model, lik, xn, yn, config=config, callback=callback, progress=progress)
-        fit = {"loss": result.loss, "steps": result.steps, "seconds": result.seconds, "stop_reason": result.stop_reason}
-    except KeyboardInterrupt:
-        interrupted = True
-        fit = {"stop_reason": "interrupted", "seconds": time.perf_counter() - t0}
-        log.warning("interrupted: writing a checkpoint of the current hyperparameters")
+        _resume(model, lik, out)
+    fit, interrupted = _fit(model, lik, xn, yn, config=config, writer=writer, names=names, progress=progress)
     model.eval()
     lik.eval()
     state = predictor_state(
@@ -142,35 +135,77 @@ def fit_bem_gp(
         state, calibration = calibrate(state)
     hyp = hyperparameter_metrics(model, lik)
     phys_ls = {n: float(state.lengthscale[j] * state.x_std[j]) for j, n in enumerate(names)}
-    model_state = dict(model.state_dict())
-    if not any(k.startswith("likelihood.") for k in model_state):  # likelihood not a submodule (sgpr/svgp)
-        model_state.update({f"likelihood.{k}": v for k, v in lik.state_dict().items()})
-    model_state = {k: v.detach().cpu() for k, v in model_state.items() if isinstance(v, torch.Tensor)}
-    actuated = [j for j in joint_names if j != unactuated_name]
+    extra = {"interrupted": interrupted, "robot_ref": dict(provenance.robot), **dict(provenance.extra),
+             **({"frozen_latent_check": latent_check} if latent_check is not None else {}),
+             **({"uncertainty": calibration} if calibration is not None else {})}
     path = write_checkpoint(
         out,
         read_back=not interrupted,
-        model_state=model_state,
+        model_state=_model_state(model, lik),
         predictor_state=state,
-        metadata={
-            "robot": str(robot.get("name") or "robot"),
-            "joint_names": list(joint_names),
-            "actuated_names": actuated,
-            "unactuated_name": unactuated_name,
-            "m": len(actuated),
-            "input_names": list(names),
-            "units": {n: units[n] for n in names},
-            "n_train": int(y.shape[0]),
-            "n_inducing": None if config.kind == "exact" else int(state.n_support),
-            "hyperparameters": {**hyp, "lengthscale_physical": phys_ls},
-            "bemlearn_version": __version__,
-            "data_sha256": data_sha256,
-            "extra": {"interrupted": interrupted, "robot_ref": dict(robot), **dict(extra or {}),
-                      **({"frozen_latent_check": latent_check} if latent_check is not None else {}),
-                      **({"uncertainty": calibration} if calibration is not None else {})},
-        },
+        metadata=_checkpoint_metadata(provenance, state, config=config, names=names, units=units, n_train=int(y.shape[0]),
+                                      hyperparameters={**hyp, "lengthscale_physical": phys_ls}, extra=extra),
     )
     return GPStageResult(state, model, lik, fit, hyp, phys_ls, interrupted, path, calibration)
+
+
+def _resume(model, lik, out: Path) -> None:
+    """Load the hyperparameters of the checkpoint in ``out`` into ``model`` and ``lik``."""
+    ck = load_checkpoint(out)
+    model.load_state_dict(ck.model_state, strict=False)
+    lik.load_state_dict({k[len("likelihood."):]: v for k, v in ck.model_state.items() if k.startswith("likelihood.")})
+    log.info("resumed from %s", ck.path)
+
+
+def _fit(model, lik, xn: torch.Tensor, yn: torch.Tensor, *, config: GPConfig, writer, names: tuple[str, ...],
+         progress: bool) -> tuple[dict[str, Any], bool]:
+    """Fit in place, logging to ``writer``; returns the fit summary and whether Ctrl-C stopped it."""
+
+    def callback(step: int, metrics: dict[str, float]) -> None:
+        if writer is None:
+            return
+        for k, v in metrics.items():
+            tag = f"lengthscale/{names[int(k.split('_')[1])]}" if k.startswith("lengthscale_") else f"train/{k}"
+            writer.add_scalar(tag, v, step)
+
+    t0 = time.perf_counter()
+    try:
+        result = fit_gp(model, lik, xn, yn, config=config, callback=callback, progress=progress)
+    except KeyboardInterrupt:
+        fit = {"stop_reason": "interrupted", "seconds": time.perf_counter() - t0}
+        log.warning("interrupted: writing a checkpoint of the current hyperparameters")
+        return fit, True
+    return {"loss": result.loss, "steps": result.steps, "seconds": result.seconds, "stop_reason": result.stop_reason}, False
+
+
+def _model_state(model, lik) -> dict[str, torch.Tensor]:
+    """The fitted parameters and buffers on the CPU, the likelihood's under ``likelihood.``."""
+    model_state = dict(model.state_dict())
+    if not any(k.startswith("likelihood.") for k in model_state):  # likelihood not a submodule (sgpr/svgp)
+        model_state.update({f"likelihood.{k}": v for k, v in lik.state_dict().items()})
+    return {k: v.detach().cpu() for k, v in model_state.items() if isinstance(v, torch.Tensor)}
+
+
+def _checkpoint_metadata(provenance: CheckpointProvenance, state: PredictorState, *, config: GPConfig, names: tuple[str, ...],
+                         units: Mapping[str, str], n_train: int, hyperparameters: dict, extra: dict) -> dict[str, Any]:
+    """The checkpoint's metadata (:class:`~bemlearn.export.metadata.PredictorMetadata` fields)."""
+    joint_names = list(provenance.joint_names)
+    actuated = [j for j in joint_names if j != provenance.unactuated_name]
+    return {
+        "robot": str(provenance.robot.get("name") or "robot"),
+        "joint_names": joint_names,
+        "actuated_names": actuated,
+        "unactuated_name": provenance.unactuated_name,
+        "m": len(actuated),
+        "input_names": list(names),
+        "units": {n: units[n] for n in names},
+        "n_train": n_train,
+        "n_inducing": None if config.kind == "exact" else int(state.n_support),
+        "hyperparameters": hyperparameters,
+        "bemlearn_version": __version__,
+        "data_sha256": provenance.data_sha256,
+        "extra": extra,
+    }
 
 
 def _frozen_latent_check(state: PredictorState, model, lik, xn: torch.Tensor, dtype, device) -> dict | None:

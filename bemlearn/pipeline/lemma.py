@@ -13,15 +13,48 @@ side (:func:`bemlearn.robots.zero_dynamics.lemma1`) gives ΔΓ and Ḣ_u exactly
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
 import numpy as np
 import torch
 
+from bemlearn.robots.protocol import BalanceRobot
+from bemlearn.robots.reference import CompositeSinusoid
 from bemlearn.robots.zero_dynamics import lemma1, spectral_derivative
 
-__all__ = ["learned_lemma1"]
+__all__ = ["LearnedLemma1", "learned_lemma1"]
 
 
-def learned_lemma1(bem_fn, full_fn, robot, reference, *, n_nodes: int = 256, h: float = 1e-3) -> dict:
+@dataclass(frozen=True, eq=False)
+class LearnedLemma1:
+    """Learned ΔΓ against the model's along one period of a reference (:func:`learned_lemma1`).
+
+    Generalized forces are in the unactuated row's unit (N·m for a hinge q_u, N for a slide).
+
+    Attributes:
+        t: ``(N,)`` sample times over one period, s.
+        hdot: ``(N,)`` Ḣ_u of the model's zero dynamics (Lemma 1, eq. 10).
+        damping: ``(N,)`` b_u q̇_u^e, the passive part of the model's ΔΓ.
+        delta_gamma_model: ``(N,)`` the model's ΔΓ.
+        delta_gamma_learned: ``(N,)`` ΔΓ from the learned map alone (module docstring).
+        r: Pearson correlation of ``delta_gamma_learned`` with Ḣ_u + b_u q̇_u^e (the model's ΔΓ).
+        r_hdot: its correlation with Ḣ_u alone.
+        model_gap: max |ΔΓ − Ḣ_u − b_u q̇_u^e| of the model side.
+    """
+
+    t: np.ndarray
+    hdot: np.ndarray
+    damping: np.ndarray
+    delta_gamma_model: np.ndarray
+    delta_gamma_learned: np.ndarray
+    r: float
+    r_hdot: float
+    model_gap: float
+
+
+def learned_lemma1(bem_fn: Callable[[np.ndarray], np.ndarray], full_fn: Callable[[np.ndarray], np.ndarray], robot: BalanceRobot,
+                   reference: CompositeSinusoid, *, n_nodes: int = 256, h: float = 1e-3) -> LearnedLemma1:
     """Learned ΔΓ vs model Ḣ_u along a periodic ``reference``.
 
     Args:
@@ -34,9 +67,7 @@ def learned_lemma1(bem_fn, full_fn, robot, reference, *, n_nodes: int = 256, h: 
         h: finite-difference step in q̈_u (rad/s², m/s² for a slide) for ∂f/∂q̈_u.
 
     Returns:
-        dict of ``(N,)`` arrays ``t``, ``hdot``, ``delta_gamma_model``, ``damping``,
-        ``delta_gamma_learned`` and the scalars ``r`` (Pearson correlation of learned ΔΓ with
-        Ḣ_u + b_u q̇_u^e, the model's ΔΓ), ``r_hdot`` (with Ḣ_u alone) and ``model_gap`` (max |ΔΓ − Ḣ_u − b_u q̇_u^e|).
+        a :class:`LearnedLemma1` (``N = n_nodes`` samples).
     """
     L = lemma1(robot, reference, n_nodes=n_nodes)
     T = reference.period
@@ -59,13 +90,5 @@ def learned_lemma1(bem_fn, full_fn, robot, reference, *, n_nodes: int = 256, h: 
     target = L.hdot + L.damping
     r = float(np.corrcoef(dg_learned, target)[0, 1])
     r_hdot = float(np.corrcoef(dg_learned, L.hdot)[0, 1])
-    return {
-        "t": L.t,
-        "hdot": L.hdot,
-        "damping": L.damping,
-        "delta_gamma_model": L.delta_gamma,
-        "delta_gamma_learned": dg_learned,
-        "r": r,
-        "r_hdot": r_hdot,
-        "model_gap": float(np.abs(L.gap).max()),
-    }
+    return LearnedLemma1(t=L.t, hdot=L.hdot, damping=L.damping, delta_gamma_model=L.delta_gamma, delta_gamma_learned=dg_learned,
+                         r=r, r_hdot=r_hdot, model_gap=float(np.abs(L.gap).max()))

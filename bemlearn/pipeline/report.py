@@ -26,7 +26,7 @@ def _verdict_lines(train: dict) -> list[str]:
         lines += [f"- **{f['severity']}**: {f['reason']}" for f in v.get("findings", [])] or [f"- {r}" for r in v["reasons"]]
     else:
         lines += ["Every check passed: " + ", ".join(v.get("checked", [])) + " (limits in `bemlearn.pipeline.verdict`)."]
-    return lines + [""]
+    return [*lines, ""]
 
 
 def _feasibility_lines(train: dict) -> list[str]:
@@ -53,21 +53,28 @@ def write_report(out: str | Path, *, config, resolved, data: dict | None, train:
             ``None`` for a run stopped after its model checks).
         export: the predictor files written.
     """
-    from bemlearn.files import atomic_write_text
-
     out = Path(out)
     unit = train.get("output_unit", "rad")
     robot = train.get("robot", {})
-    qu = train.get("unactuated")
     title = robot.get("registry") or robot.get("name") or "data"
     lines = [f"# bemlearn run: {title}" + (" (model-free)" if config.robot is None else ""), "", *_verdict_lines(train)]
     if data is None:          # stopped after the model checks: nothing was collected or learned
         lines += [f"Robot: `{config.robot}`. The run stopped after its model checks: the robot cannot be balanced over "
                   "the design region as configured, so no data were collected and no BEM was learned.", "",
                   *_feasibility_lines(train)]
-        path = out / "report.md"
-        atomic_write_text(path, "\n".join(lines))
-        return path
+    else:
+        lines += [*_source_lines(config, resolved, robot), *_feasibility_lines(train), *_data_lines(data, train),
+                  *_fit_lines(config, train), *_data_only_lines(train, unit), *_heldout_lines(train, unit),
+                  *_design_region_lines(train, unit, out), *_band_lines(train, unit),
+                  "## Exported predictor", *[f"- `{p.name}`" for p in export], "", *_closed_loop_lines(sim, data, train, unit)]
+    path = out / "report.md"
+    atomic_write_text(path, "\n".join(lines))
+    return path
+
+
+def _source_lines(config, resolved, robot: dict) -> list[str]:
+    """Where the robot came from and which values were derived from its model."""
+    lines: list[str] = []
     if robot.get("mjcf"):
         lines += [f"Robot: `{robot['mjcf']}` (sha256 `{robot['sha256'][:16]}…`)" + (f", registry name `{robot['registry']}`" if robot.get("registry") else "") + ".", ""]
     elif config.robot is None:
@@ -77,7 +84,10 @@ def write_report(out: str | Path, *, config, resolved, data: dict | None, train:
     if derived:
         lines += ["Values derived from the model (not given in the config; `config_resolved.json` and "
                   "`bemlearn config show` list each with how it was derived): " + ", ".join(f"`{k}`" for k in derived) + ".", ""]
-    lines += _feasibility_lines(train)
+    return lines
+
+
+def _data_lines(data: dict, train: dict) -> list[str]:
     src = "collected in MuJoCo (excitation, Section IV-A)" if data["collected"] else f"read from `{data['file']}`"
     ds = train.get("dataset") or {}
     choice = ds.get("derivative_choice")
@@ -89,15 +99,23 @@ def write_report(out: str | Path, *, config, resolved, data: dict | None, train:
                     if noise else ""))
     elif ds.get("estimator"):
         deriv = f"derivatives estimated from the positions only, by {ds['estimator']}"
-    lines += ["## Data", f"{data['trials']} trials ({data['failed']} fell, kept up to the fall), {data['samples']} samples at "
-              f"{data['rate_hz']:g} Hz, {src}; {deriv}.", ""]
+    return ["## Data", f"{data['trials']} trials ({data['failed']} fell, kept up to the fall), {data['samples']} samples at "
+            f"{data['rate_hz']:g} Hz, {src}; {deriv}.", ""]
+
+
+def _fit_lines(config, train: dict) -> list[str]:
     fit = train.get("fit", {})
     stop = fit.get("stop_reason")
     how = {"converged": "converged", "max_iter": "stopped at its iteration limit without converging",
            "epochs": "stopped after its epochs without converging"}.get(stop, f"ended by {stop}")
-    lines += ["## Learned BEM (eq. 11–14)",
-              f"{config.train.kind} GP on {train['n_train']} points: the fit {how} after {fit.get('steps', '—')} evaluations "
-              f"in {_f(fit.get('seconds'), '.1f')} s" + (" (interrupted)" if train.get("interrupted") else "") + ".", ""]
+    return ["## Learned BEM (eq. 11–14)",
+            f"{config.train.kind} GP on {train['n_train']} points: the fit {how} after {fit.get('steps', '—')} evaluations "
+            f"in {_f(fit.get('seconds'), '.1f')} s" + (" (interrupted)" if train.get("interrupted") else "") + ".", ""]
+
+
+def _data_only_lines(train: dict, unit: str) -> list[str]:
+    """Held-out trials, slices and resolution: what the data alone say (no model)."""
+    lines: list[str] = []
     h = train.get("data_heldout")
     if h is not None:
         lines += ["### From the data alone (no model)", "",
@@ -123,73 +141,93 @@ def write_report(out: str | Path, *, config, resolved, data: dict | None, train:
                   f"{_f(res['ratio'], '.1f')}× the exported band's median σ ({_f(res['band_std'], '.3g')} {unit}). The inputs that "
                   "move it most: " + ", ".join(f"{w['input']} (slope {_f(w['slope'], '.3g')} {unit} per {w['unit']}, data ±"
                                                 f"{_f(w['amplitude'], '.3g')} {w['unit']})" for w in top) + ".", ""]
+    return lines
+
+
+def _heldout_lines(train: dict, unit: str) -> list[str]:
+    """Learned vs model-based BEM along the held-out references (``bem_heldout``)."""
     b = train.get("bem_heldout")
-    if b is not None:
-        lines += ["### Against the model-based BEM (eq. 9)", "", "| held-out references: learned vs model-based BEM | value |", "| --- | --- |",
-                  f"| RMSE ({unit}) | {_f(b['rmse'], '.5f')} |",
-                  f"| max error ({unit}) | {_f(b['max_abs'], '.5f')} |",
-                  f"| points without a model BEM in range (excluded) | {b['no_model_root']} |",
-                  f"| inside ±2σ, latent std | {_pct(b['coverage_2sigma_latent'])} |",
-                  f"| inside ±2σ, predictive std (eq. 12 with k* = σ_f² + σ_0²) | {_pct(b['coverage_2sigma_predictive'])} |"]
-        dr = b.get("design_region")
-        if dr is not None:
-            lines += [f"| RMSE / max over \\|q_u^e\\| ≤ {dr['bound']:g} {unit} ({dr['n_points']} points) | "
-                      f"{_f(dr['rmse'], '.5f')} / {_f(dr['max_abs'], '.5f')} |"]
-        if "coverage_2sigma_band" in b:
-            v = b["bound_violation"]
-            lines += [f"| inside ±2σ, calibrated band (the exported std) | {_pct(b['coverage_2sigma_band'])} |",
-                      f"| median band σ / RMSE | {_f(b['median_band_std_over_rmse'], '.2f')} |",
-                      f"| eq. (13)/(15) bound at κ = {v['kappa']:g}: violated / nominal | {_pct(v['observed'])} / {_pct(v['nominal'])} |"]
-        lines += ["", "![learned vs model BEM](bem_validation.png)", ""]
+    if b is None:
+        return []
+    lines = ["### Against the model-based BEM (eq. 9)", "", "| held-out references: learned vs model-based BEM | value |", "| --- | --- |",
+             f"| RMSE ({unit}) | {_f(b['rmse'], '.5f')} |",
+             f"| max error ({unit}) | {_f(b['max_abs'], '.5f')} |",
+             f"| points without a model BEM in range (excluded) | {b['no_model_root']} |",
+             f"| inside ±2σ, latent std | {_pct(b['coverage_2sigma_latent'])} |",
+             f"| inside ±2σ, predictive std (eq. 12 with k* = σ_f² + σ_0²) | {_pct(b['coverage_2sigma_predictive'])} |"]
+    dr = b.get("design_region")
+    if dr is not None:
+        lines += [f"| RMSE / max over \\|q_u^e\\| ≤ {dr['bound']:g} {unit} ({dr['n_points']} points) | "
+                  f"{_f(dr['rmse'], '.5f')} / {_f(dr['max_abs'], '.5f')} |"]
+    if "coverage_2sigma_band" in b:
+        v = b["bound_violation"]
+        lines += [f"| inside ±2σ, calibrated band (the exported std) | {_pct(b['coverage_2sigma_band'])} |",
+                  f"| median band σ / RMSE | {_f(b['median_band_std_over_rmse'], '.2f')} |",
+                  f"| eq. (13)/(15) bound at κ = {v['kappa']:g}: violated / nominal | {_pct(v['observed'])} / {_pct(v['nominal'])} |"]
+    return [*lines, "", "![learned vs model BEM](bem_validation.png)", ""]
+
+
+def _design_region_lines(train: dict, unit: str, out: Path) -> list[str]:
+    """Learned vs model-based BEM over the whole design region (``bem_design_region``), and the reliability figure."""
     dr = train.get("bem_design_region")
-    if dr is not None and dr.get("n_points"):
-        box = "; ".join(f"{j}: |q| ≤ {_f(v['q'], '.3g')}, |q̇| ≤ {_f(v['qd'], '.3g')}, |q̈| ≤ {_f(v['qdd'], '.3g')}" for j, v in dr["box"].items())
-        lines += [f"### Over the whole design region (|q_u^e| ≤ {dr['bound']:g} {unit})", "",
-                  f"{dr['n_points']} actuated motions of a Sobol set in the box {box} (joint units; the points whose model BEM "
-                  "lies in the design region): learned μ(x₀ᵉ) vs the model-based BEM.", "",
-                  "| learned vs model BEM, design region | value | target |", "| --- | --- | --- |",
-                  f"| gain (least-squares slope of learned on model) | {_f(dr['gain'], '.3f')} | 0.95–1.05 |",
-                  f"| RMSE ({unit}) | {_f(dr['rmse'], '.5f')} | ≤ {0.05 * dr['bound']:.3g} |",
-                  f"| max error ({unit}) | {_f(dr['max_abs'], '.5f')} | ≤ {0.2 * dr['bound']:.3g} |",
-                  f"| inside ±2σ, calibrated band | {_pct(dr['coverage_2sigma_band'])} | ≥ 80 % |", "",
-                  "![design region](design_region.png)", ""]
-        if (out / "reliability.png").is_file():
-            lines += ["Reliability of the band: coverage of the model BEM against the nominal level (50–99 %).", "",
-                      "![reliability](reliability.png)", ""]
+    if dr is None or not dr.get("n_points"):
+        return []
+    box = "; ".join(f"{j}: |q| ≤ {_f(v['q'], '.3g')}, |q̇| ≤ {_f(v['qd'], '.3g')}, |q̈| ≤ {_f(v['qdd'], '.3g')}" for j, v in dr["box"].items())
+    lines = [f"### Over the whole design region (|q_u^e| ≤ {dr['bound']:g} {unit})", "",
+             f"{dr['n_points']} actuated motions of a Sobol set in the box {box} (joint units; the points whose model BEM "
+             "lies in the design region): learned μ(x₀ᵉ) vs the model-based BEM.", "",
+             "| learned vs model BEM, design region | value | target |", "| --- | --- | --- |",
+             f"| gain (least-squares slope of learned on model) | {_f(dr['gain'], '.3f')} | 0.95–1.05 |",
+             f"| RMSE ({unit}) | {_f(dr['rmse'], '.5f')} | ≤ {0.05 * dr['bound']:.3g} |",
+             f"| max error ({unit}) | {_f(dr['max_abs'], '.5f')} | ≤ {0.2 * dr['bound']:.3g} |",
+             f"| inside ±2σ, calibrated band | {_pct(dr['coverage_2sigma_band'])} | ≥ 80 % |", "",
+             "![design region](design_region.png)", ""]
+    if (out / "reliability.png").is_file():
+        lines += ["Reliability of the band: coverage of the model BEM against the nominal level (50–99 %).", "",
+                  "![reliability](reliability.png)", ""]
+    return lines
+
+
+def _band_lines(train: dict, unit: str) -> list[str]:
+    """How the exported std was calibrated (``uncertainty``)."""
     unc = train.get("uncertainty")
-    if unc:
-        est = unc.get("estimator_term") or {}
-        names = est.get("estimators") or []
-        med = est.get("median_shift") or [None] * len(names)
-        lines += ["### The exported std (calibrated band, eq. B1)", "",
-                  f"std² = c² · latent std² + max(Σ_i (s_i ∂μ/∂x_i)², mean over the neighbouring derivative estimators of the BEM's "
-                  f"shift²); c = {_f(unc.get('std_scale'), '.3f')} (trial-split replicas); "
-                  + ("s from the quantization steps " + ", ".join(f"{k} {v:.3g} {train.get('units', {}).get(f'q_{k}', 'rad')}" for k, v in (unc.get("quantization_step") or {}).items())
-                     if unc.get("quantization_step") else "no quantization grid detected (s = 0)") + "; "
-                  + (f"{len(names)} neighbouring estimators (median BEM shift at held-out queries, {unit}): "
-                     + ", ".join(f"{n} {_f(m, '.2g')}" for n, m in zip(names, med)) if names else "no estimator term (the estimator has no neighbours)")
-                  + ".", ""]
-    lines += ["## Exported predictor", *[f"- `{p.name}`" for p in export], ""]
-    if sim:
-        qa_unit = "/".join(sorted({v for k, v in train.get("units", {}).items() if k.startswith("q_")})) or "rad"
-        lines += ["## Closed loop (EIC, eq. 3 and 8) in MuJoCo", "",
-                  f"| BEM source | outcome | duration (s) | tracking RMSE of q_a ({qa_unit}) | max \\|{qu or 'q_u'}\\| ({unit}) | "
-                  f"max \\|u\\| ({data.get('input_units', 'actuator units')}) | BEM values held | real-time factor |",
-                  "| --- | --- | --- | --- | --- | --- | --- | --- |"]
-        for name, m in sim.items():
-            outcome = f"fell at {m['duration_s']:.2f} s" if m["fell"] else "diverged (q_a left the reference)" if m.get("diverged") else "stayed up"
-            lines.append(f"| {name} | {outcome} | {_f(m['duration_s'], '.1f')} | {_f(m['tracking_rmse'])} | {_f(m['qu_max'], '.3f')} | "
-                         f"{_f(m['u_max'], '.2f')} | {m.get('bem_rejected', 0)} | {_f(m['real_time_factor'], '.1f')} |")
-        if "predictor" in sim and "lemma1" in sim["predictor"]:
-            L = sim["predictor"]["lemma1"]
-            lines += ["", f"Lemma 1 along the reference: model-based max |ΔΓ − Ḣ_u − b_u q̇_u^e| = {L['model_gap']:.1e}; "
-                      f"learned ΔΓ vs Ḣ_u correlation r = {L['r_learned_vs_hdot']:.4f} (vs the model's ΔΓ: {L['r_learned_vs_model_delta_gamma']:.4f})."]
-        lines += [""]
-        for name in sim:
-            lines += [f"### BEM source: {name}", "", f"![fig2 {name}](simulate/fig2_{name}.png)", ""]
-    path = out / "report.md"
-    atomic_write_text(path, "\n".join(lines))
-    return path
+    if not unc:
+        return []
+    est = unc.get("estimator_term") or {}
+    names = est.get("estimators") or []
+    med = est.get("median_shift") or [None] * len(names)
+    return ["### The exported std (calibrated band, eq. B1)", "",
+            f"std² = c² · latent std² + max(Σ_i (s_i ∂μ/∂x_i)², mean over the neighbouring derivative estimators of the BEM's "
+            f"shift²); c = {_f(unc.get('std_scale'), '.3f')} (trial-split replicas); "
+            + ("s from the quantization steps " + ", ".join(f"{k} {v:.3g} {train.get('units', {}).get(f'q_{k}', 'rad')}" for k, v in (unc.get("quantization_step") or {}).items())
+               if unc.get("quantization_step") else "no quantization grid detected (s = 0)") + "; "
+            + (f"{len(names)} neighbouring estimators (median BEM shift at held-out queries, {unit}): "
+               + ", ".join(f"{n} {_f(m, '.2g')}" for n, m in zip(names, med)) if names else "no estimator term (the estimator has no neighbours)")
+            + ".", ""]
+
+
+def _closed_loop_lines(sim: dict, data: dict, train: dict, unit: str) -> list[str]:
+    """The closed-loop table, Lemma 1 and the Fig. 2 panels per BEM source."""
+    if not sim:
+        return []
+    qu = train.get("unactuated")
+    qa_unit = "/".join(sorted({v for k, v in train.get("units", {}).items() if k.startswith("q_")})) or "rad"
+    lines = ["## Closed loop (EIC, eq. 3 and 8) in MuJoCo", "",
+             f"| BEM source | outcome | duration (s) | tracking RMSE of q_a ({qa_unit}) | max \\|{qu or 'q_u'}\\| ({unit}) | "
+             f"max \\|u\\| ({data.get('input_units', 'actuator units')}) | BEM values held | real-time factor |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for name, m in sim.items():
+        outcome = f"fell at {m['duration_s']:.2f} s" if m["fell"] else "diverged (q_a left the reference)" if m.get("diverged") else "stayed up"
+        lines.append(f"| {name} | {outcome} | {_f(m['duration_s'], '.1f')} | {_f(m['tracking_rmse'])} | {_f(m['qu_max'], '.3f')} | "
+                     f"{_f(m['u_max'], '.2f')} | {m.get('bem_rejected', 0)} | {_f(m['real_time_factor'], '.1f')} |")
+    if "predictor" in sim and "lemma1" in sim["predictor"]:
+        L = sim["predictor"]["lemma1"]
+        lines += ["", f"Lemma 1 along the reference: model-based max |ΔΓ − Ḣ_u − b_u q̇_u^e| = {L['model_gap']:.1e}; "
+                  f"learned ΔΓ vs Ḣ_u correlation r = {L['r_learned_vs_hdot']:.4f} (vs the model's ΔΓ: {L['r_learned_vs_model_delta_gamma']:.4f})."]
+    lines += [""]
+    for name in sim:
+        lines += [f"### BEM source: {name}", "", f"![fig2 {name}](simulate/fig2_{name}.png)", ""]
+    return lines
 
 
 def _finite(v) -> bool:

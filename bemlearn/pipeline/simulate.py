@@ -10,12 +10,14 @@ import dataclasses
 import json
 import logging
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 import torch
 
 from bemlearn.files import atomic_write_text
 from bemlearn.pipeline.config import PipelineConfig
+from bemlearn.robots import MujocoRobot, load
 from bemlearn.sim.closed_loop import nominal_robot, simulate
 from bemlearn.sim.figures import plot_run
 from bemlearn.units import joint_unit
@@ -40,10 +42,11 @@ def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: st
     from torch.utils.tensorboard import SummaryWriter
 
     writer = SummaryWriter(str(Path(out_dir) / "tb" / "simulate"))
-    nominal = nominal_robot(config.robot, scfg.nominal)
+    robot = load(str(config.robot))   # the callers check that the config names a robot
+    nominal = nominal_robot(robot, scfg.nominal)
     for src in sources:
         cfg = dataclasses.replace(scfg, bem_source=src, predictor=str(predictor) if predictor else None)
-        res = simulate(config.robot, cfg, progress=progress)
+        res = simulate(robot, cfg, progress=progress)
         m = dict(res.metrics)
         # a run that stayed up but whose actuated coordinates left the reference (e.g. the zero BEM's
         # drifting arm: for m = 1 the external loop acts only through the BEM) has diverged
@@ -68,8 +71,8 @@ def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: st
                 from bemlearn.pipeline.lemma import learned_lemma1
 
                 L = learned_lemma1(pred, pred.full, nominal, ref)
-                m["lemma1"] = {"r_learned_vs_model_delta_gamma": L["r"], "r_learned_vs_hdot": L["r_hdot"], "model_gap": L["model_gap"]}
-                lemma = {"t": L["t"], "delta_gamma": L["delta_gamma_learned"], "hdot": L["hdot"], "delta_gamma_model": L["delta_gamma_model"]}
+                m["lemma1"] = {"r_learned_vs_model_delta_gamma": L.r, "r_learned_vs_hdot": L.r_hdot, "model_gap": L.model_gap}
+                lemma = {"t": L.t, "delta_gamma": L.delta_gamma_learned, "hdot": L.hdot, "delta_gamma_model": L.delta_gamma_model}
         ia, iu = nominal.actuated_index[0], nominal.unactuated_index
         kinds = nominal.coordinate_kinds
         plot_run(res, out / f"fig2_{src}.png", model_bem=model_bem, band=band, lemma=lemma,
@@ -77,10 +80,9 @@ def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: st
                  units=(joint_unit(kinds[ia]), joint_unit(kinds[iu])), indices=(ia, iu),
                  input_label=f"u ({config.collect.input_units or 'ctrl'})")
         if gif:
-            from bemlearn.robots import load
             from bemlearn.sim.render import render_gif
 
-            render_gif(load(config.robot), res.q, out / f"{src}.gif", rate_hz=scfg.rate_hz)
+            render_gif(cast(MujocoRobot, robot), res.q, out / f"{src}.gif", rate_hz=scfg.rate_hz)
         for k in ("tracking_rmse", "tracking_max", "qu_max", "u_max", "real_time_factor"):
             if isinstance(m.get(k), float):
                 writer.add_scalar(f"simulate/{src}/{k}", m[k], 0)

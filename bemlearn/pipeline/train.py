@@ -20,6 +20,7 @@ import json
 import logging
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import torch
 
@@ -30,10 +31,17 @@ from bemlearn.errors import ArgumentError, EnvironmentProblem
 from bemlearn.files import atomic_path, atomic_write_text, file_sha256
 from bemlearn.models import predict
 from bemlearn.pipeline.config import PipelineConfig
-from bemlearn.pipeline.evaluation import evaluate_bem, held_out_references
+from bemlearn.pipeline.evaluation import BEMCurves, EvaluationConfig, evaluate_bem, held_out_references
 from bemlearn.pipeline.reliability import reliability_figure
 from bemlearn.pipeline.uncertainty import calibrate_band
+from bemlearn.robots.protocol import BalanceRobot
 from bemlearn.units import gp_input_units
+
+if TYPE_CHECKING:
+    from bemlearn.data.dataset_types import BEMDataset
+    from bemlearn.fitting.gp_config import GPConfig
+    from bemlearn.models.predictor_state import PredictorState
+    from bemlearn.pipeline.gp_stage import GPStageResult
 
 __all__ = ["train_run", "file_sha256"]
 
@@ -77,7 +85,7 @@ def train_run(
 def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, progress) -> dict:
     from torch.utils.tensorboard import SummaryWriter
 
-    from bemlearn.pipeline.gp_stage import fit_bem_gp
+    from bemlearn.pipeline.gp_stage import CheckpointProvenance, fit_bem_gp
     from bemlearn.pipeline.robot_source import run_robot
 
     out = Path(out_dir)
@@ -105,12 +113,13 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     writer = SummaryWriter(str(out / "tb"))
     stage = fit_bem_gp(
         train.x, train.y, out, normalization=train.normalization, input_names=names, units=units, config=gp_cfg,
-        robot=ref.to_dict(), joint_names=meta.joint_names, unactuated_name=meta.unactuated,
-        data_sha256=file_sha256(data_path), extra={"data_file": str(data_path), "dataset_report": ds.report},
+        provenance=CheckpointProvenance(robot=ref.to_dict(), joint_names=meta.joint_names, unactuated_name=meta.unactuated,
+                                        data_sha256=file_sha256(data_path),
+                                        extra={"data_file": str(data_path), "dataset_report": ds.report}),
         writer=writer, resume=resume, progress=progress,
         calibrate=lambda st: calibrate_band(st, traj, ds.config, train_rows=train.row, seed=config.dataset.seed),  # std of eq. (B1)
     )
-    state, model, lik = stage.state, stage.model, stage.likelihood
+    state = stage.state
     interrupted = stage.interrupted
     metrics: dict = {"robot": ref.to_dict(), "fit": stage.fit, "hyperparameters": stage.hyperparameters,
                      "lengthscale_physical": stage.lengthscale_physical, "units": units,
@@ -121,62 +130,13 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         writer.close()
         atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
         raise KeyboardInterrupt
-    dtype = gp_cfg.torch_dtype
     if len(val):
-        mean, var = predict(model, lik, val.x_normalized.to(device=gp_cfg.device, dtype=dtype), noisy=True)
-        mean = mean.cpu().to(torch.float64) * train.y_std + train.y_mean
-        var_pred = var.cpu().to(torch.float64) * train.y_std**2
-        err = mean - val.y
-        metrics["val_rmse"] = float(err.pow(2).mean().sqrt())
-        metrics["val_mean_log_likelihood"] = float((-0.5 * (err**2 / var_pred + var_pred.log() + math.log(2 * math.pi))).mean())
-        writer.add_scalar("val/rmse", metrics["val_rmse"], 0)
-        writer.add_scalar("val/mean_log_likelihood", metrics["val_mean_log_likelihood"], 0)
-        from bemlearn.models.band import band_reference
-
-        band = band_reference(state, val.x)[1]  # model-free: held-out q_u inside ±2√(σ_band² + σ_0²)
-        metrics["val_coverage_2sigma_band"] = float((err.abs() <= 2 * (band**2 + state.y_std**2 * state.noise).sqrt()).double().mean())
-        metrics["val_coverage_2sigma_predictive"] = float((err.abs() <= 2 * var_pred.sqrt()).double().mean())
+        metrics.update(_validation_metrics(stage, train, val, gp_cfg, writer))
     metrics["uncertainty"] = stage.calibration
-    # data-only evaluation (no model): held-out trials' q_u from f(x), and the BEM on slices with the
-    # region the data cover marked, so that extrapolation is visible
-    from bemlearn.pipeline.data_evaluation import bem_resolution, bem_slice_figure, bem_slices, heldout_prediction
-
-    if len(val):
-        held = heldout_prediction(state, val, train=train)
-        metrics["data_heldout"] = {k: v for k, v in held.items() if k != "per_trial"}
-        metrics["data_heldout"]["per_trial"] = {str(k): v for k, v in held["per_trial"].items()}
-    metrics["resolution"] = bem_resolution(state, train)   # do the data resolve the BEM at all (model-free)?
-    slices = bem_slices(state, train)
-    metrics["bem_slices"] = {"summary": slices["summary"],
-                             "slices": [{k: v for k, v in sl.items() if not hasattr(v, "shape")} for sl in slices["slices"]]}
-    fig = bem_slice_figure(slices, out / "bem_slices.png", unactuated=meta.unactuated)
-    writer.add_figure("bem/slices", fig, 0)
+    metrics.update(_data_only_metrics(state, train, val, meta.unactuated, out, writer))
     if truth_robot is not None:  # held-out learned BEM vs model-based BEM (eq. 14 vs 9)
-        ecfg = config.evaluate
-        ev = evaluate_bem(state, truth_robot, held_out_references(ecfg, truth_robot.m), duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
-        curves = ev.pop("curves")
-        metrics["bem_heldout"] = ev
-        for k in ("rmse", "max_abs", "coverage_2sigma_latent", "coverage_2sigma_predictive", "coverage_2sigma_band"):
-            writer.add_scalar(f"bem/{k}", ev[k], 0)
-        writer.add_figure("bem/reliability", reliability_figure(ev["reliability"]), 0)
-        with atomic_path(out / "reliability.png") as tmp:
-            reliability_figure(ev["reliability"]).savefig(tmp, dpi=110)
-        fig = _bem_figure(curves, meta.unactuated, units[f"qd_{meta.unactuated}"].removesuffix("/s"))
-        writer.add_figure("bem/learned_vs_model", fig, 0)
-        with atomic_path(out / "bem_validation.png") as tmp:
-            fig.savefig(tmp, dpi=110)
-        if ecfg.design_points > 0:   # over the whole design region (D1, D2), not only along the references
-            from bemlearn.pipeline.design_evaluation import design_grid, design_region_figure, evaluate_design_region
-
-            dr = evaluate_design_region(state, design_grid(truth_robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed))
-            curve = dr.pop("curve")
-            metrics["bem_design_region"] = dr
-            for k in ("rmse", "max_abs", "gain"):
-                writer.add_scalar(f"bem/design_region_{k}", dr[k], 0)
-            fig = design_region_figure(curve, dr, meta.unactuated, units[f"qd_{meta.unactuated}"].removesuffix("/s"))
-            writer.add_figure("bem/design_region", fig, 0)
-            with atomic_path(out / "design_region.png") as tmp:
-                fig.savefig(tmp, dpi=110)
+        metrics.update(_model_metrics(state, truth_robot, config.evaluate, meta.unactuated,
+                                      units[f"qd_{meta.unactuated}"].removesuffix("/s"), out, writer))
     writer.close()
     from bemlearn.pipeline.verdict import judge_run
 
@@ -187,20 +147,90 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     return metrics
 
 
+def _validation_metrics(stage: GPStageResult, train: BEMDataset, val: BEMDataset, gp_cfg: GPConfig, writer) -> dict[str, float]:
+    """The fitted GP on the validation split: RMSE (q_u's unit), mean log likelihood and ±2σ coverages."""
+    state, model, lik = stage.state, stage.model, stage.likelihood
+    dtype = gp_cfg.torch_dtype
+    mean, var = predict(model, lik, val.x_normalized.to(device=gp_cfg.device, dtype=dtype), noisy=True)
+    mean = mean.cpu().to(torch.float64) * train.y_std + train.y_mean
+    var_pred = var.cpu().to(torch.float64) * train.y_std**2
+    err = mean - val.y
+    metrics = {"val_rmse": float(err.pow(2).mean().sqrt()),
+               "val_mean_log_likelihood": float((-0.5 * (err**2 / var_pred + var_pred.log() + math.log(2 * math.pi))).mean())}
+    writer.add_scalar("val/rmse", metrics["val_rmse"], 0)
+    writer.add_scalar("val/mean_log_likelihood", metrics["val_mean_log_likelihood"], 0)
+    from bemlearn.models.band import band_reference
+
+    band = band_reference(state, val.x)[1]  # model-free: held-out q_u inside ±2√(σ_band² + σ_0²)
+    metrics["val_coverage_2sigma_band"] = float((err.abs() <= 2 * (band**2 + state.y_std**2 * state.noise).sqrt()).double().mean())
+    metrics["val_coverage_2sigma_predictive"] = float((err.abs() <= 2 * var_pred.sqrt()).double().mean())
+    return metrics
+
+
+def _data_only_metrics(state: PredictorState, train: BEMDataset, val: BEMDataset, unactuated: str, out: Path, writer) -> dict:
+    """Data-only evaluation (no model): held-out trials' q_u from f(x), and the BEM on slices with the
+    region the data cover marked, so that extrapolation is visible (writes ``bem_slices.png``)."""
+    from bemlearn.pipeline.data_evaluation import bem_resolution, bem_slice_figure, bem_slices, heldout_prediction
+
+    metrics: dict = {}
+    if len(val):
+        held = heldout_prediction(state, val, train=train)
+        metrics["data_heldout"] = {k: v for k, v in held.items() if k != "per_trial"}
+        metrics["data_heldout"]["per_trial"] = {str(k): v for k, v in held["per_trial"].items()}
+    metrics["resolution"] = bem_resolution(state, train)   # do the data resolve the BEM at all (model-free)?
+    slices = bem_slices(state, train)
+    metrics["bem_slices"] = {"summary": slices["summary"],
+                             "slices": [{k: v for k, v in sl.items() if not hasattr(v, "shape")} for sl in slices["slices"]]}
+    fig = bem_slice_figure(slices, out / "bem_slices.png", unactuated=unactuated)
+    writer.add_figure("bem/slices", fig, 0)
+    return metrics
+
+
+def _model_metrics(state: PredictorState, truth_robot: BalanceRobot, ecfg: EvaluationConfig, unactuated: str, unit: str,
+                   out: Path, writer) -> dict:
+    """Learned vs model-based BEM along held-out references and over the design region (writes
+    ``reliability.png``, ``bem_validation.png``, ``design_region.png``)."""
+    ev = evaluate_bem(state, truth_robot, held_out_references(ecfg, truth_robot.m), duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
+    metrics: dict = {"bem_heldout": ev.as_dict()}
+    for k in ("rmse", "max_abs", "coverage_2sigma_latent", "coverage_2sigma_predictive", "coverage_2sigma_band"):
+        writer.add_scalar(f"bem/{k}", getattr(ev, k), 0)
+    writer.add_figure("bem/reliability", reliability_figure(ev.reliability), 0)
+    with atomic_path(out / "reliability.png") as tmp:
+        reliability_figure(ev.reliability).savefig(tmp, dpi=110)
+    fig = _bem_figure(ev.curves, unactuated, unit)
+    writer.add_figure("bem/learned_vs_model", fig, 0)
+    with atomic_path(out / "bem_validation.png") as tmp:
+        fig.savefig(tmp, dpi=110)
+    if ecfg.design_points > 0:   # over the whole design region (D1, D2), not only along the references
+        from bemlearn.pipeline.design_evaluation import design_grid, design_region_figure, evaluate_design_region
+
+        dr = evaluate_design_region(state, design_grid(truth_robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed))
+        curve = dr.pop("curve")
+        metrics["bem_design_region"] = dr
+        for k in ("rmse", "max_abs", "gain"):
+            writer.add_scalar(f"bem/design_region_{k}", dr[k], 0)
+        fig = design_region_figure(curve, dr, unactuated, unit)
+        writer.add_figure("bem/design_region", fig, 0)
+        with atomic_path(out / "design_region.png") as tmp:
+            fig.savefig(tmp, dpi=110)
+    return metrics
+
+
 class _Named:
     """``robot`` under another name (an MJCF given by path is matched by its joints, not its label)."""
 
-    def __init__(self, robot, name: str) -> None:
+    def __init__(self, robot: BalanceRobot, name: str) -> None:
         self.name, self.joint_names, self.unactuated_name = name, robot.joint_names, robot.unactuated_name
+        self.actuated_names = robot.actuated_names
 
 
-def _bem_figure(curves: dict, qu_name: str, unit: str = "rad"):
+def _bem_figure(curves: BEMCurves, qu_name: str, unit: str = "rad"):
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    t, model, mean, std = curves["t"], curves["model"], curves["mean"], curves.get("band_std", curves["std"])
+    t, model, mean, std = curves.t, curves.model, curves.mean, curves.band_std
     fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
     ax[0].plot(t, model, "k", lw=1.2, label="model-based BEM (eq. 9)")
     ax[0].plot(t, mean, "C1--", lw=1.2, label="learned BEM μ(x₀ᵉ) (eq. 14)")

@@ -95,106 +95,147 @@ def judge_run(metrics: dict[str, Any]) -> Verdict:
     failed), ``dataset.derivative_choice``, ``fit``, ``bem_design_region`` (with its ``bound``),
     ``resolution``, ``closed_loop`` and ``closed_loop.predictor.lemma1``.
     """
-    found: list[Finding] = []
-    checked: list[str] = []
+    notes = _Notes()
+    for check in _CHECKS:
+        check(metrics, notes)
+    found = sorted(notes.found, key=lambda f: -_RANK[f.severity])
+    status = max((f.severity for f in found), key=_RANK.__getitem__, default="ok")
+    return Verdict(status, tuple(found), tuple(notes.checked))
 
-    def add(sev: str, check: str, reason: str) -> None:
-        found.append(Finding(sev, check, reason))
 
+@dataclass
+class _Notes:
+    """The checks made and the findings, in the order the checks ran."""
+
+    checked: list[str] = field(default_factory=list)
+    found: list[Finding] = field(default_factory=list)
+
+    def add(self, sev: str, check: str, reason: str) -> None:
+        self.found.append(Finding(sev, check, reason))
+
+
+def _check_model(metrics: dict[str, Any], notes: _Notes) -> None:
     for c in metrics.get("feasibility") or []:
-        checked.append(f"model:{c['name']}")
+        notes.checked.append(f"model:{c['name']}")
         if not c["passed"]:
-            add(c["severity"], f"model:{c['name']}", c["text"])
+            notes.add(c["severity"], f"model:{c['name']}", c["text"])
+
+
+def _check_excitation(metrics: dict[str, Any], notes: _Notes) -> None:
     data = metrics.get("data")
     if data and data.get("collected") and data.get("trials"):
-        checked.append("excitation")
+        notes.checked.append("excitation")
         n, f = int(data["trials"]), int(data.get("failed", 0))
         if f == n:
-            add("unusable", "excitation", f"all {n} excitation trials fell: no data from balanced motion")
+            notes.add("unusable", "excitation", f"all {n} excitation trials fell: no data from balanced motion")
         elif f > n / 2:
-            add("degraded", "excitation", f"{f} of {n} excitation trials fell: the data come mostly from falling trials")
+            notes.add("degraded", "excitation", f"{f} of {n} excitation trials fell: the data come mostly from falling trials")
+
+
+def _check_derivatives(metrics: dict[str, Any], notes: _Notes) -> None:
     choice = (metrics.get("dataset") or {}).get("derivative_choice")
     if choice:
-        checked.append("derivatives")
+        notes.checked.append("derivatives")
         noisy = {j: v for j, v in (choice.get("qdd_noise_fraction") or {}).items() if v > 0.04}
         if noisy:
-            add("degraded", "derivatives", "the estimated accelerations are noise-dominated ("
-                + ", ".join(f"{j}: quantization noise {100 * v:.0f} % of q̈'s spread" for j, v in noisy.items())
-                + "): the learned slopes are attenuated; log at a higher rate or with a finer encoder")
+            notes.add("degraded", "derivatives", "the estimated accelerations are noise-dominated ("
+                      + ", ".join(f"{j}: quantization noise {100 * v:.0f} % of q̈'s spread" for j, v in noisy.items())
+                      + "): the learned slopes are attenuated; log at a higher rate or with a finer encoder")
+
+
+def _check_fit(metrics: dict[str, Any], notes: _Notes) -> None:
     fit = metrics.get("fit")
     if fit:
-        checked.append("fit")
+        notes.checked.append("fit")
         stop = fit.get("stop_reason")
         if stop == "max_iter":
-            add("degraded", "fit", f"the GP fit stopped at its iteration limit ({fit.get('steps')} evaluations) before "
-                "converging: raise train.max_iter")
+            notes.add("degraded", "fit", f"the GP fit stopped at its iteration limit ({fit.get('steps')} evaluations) before "
+                      "converging: raise train.max_iter")
         elif stop not in (None, "converged"):
-            add("degraded", "fit", f"the GP fit ended by {stop}: its hyperparameters are the best found before that")
+            notes.add("degraded", "fit", f"the GP fit ended by {stop}: its hyperparameters are the best found before that")
+
+
+def _check_design_region(metrics: dict[str, Any], notes: _Notes) -> None:
     dr = metrics.get("bem_design_region")
-    if dr and dr.get("n_points"):
-        checked.append("design_region")
-        d, unit = dr["bound"], metrics.get("output_unit", "rad")
-        gain, rmse, mx = dr.get("gain"), dr.get("rmse"), dr.get("max_abs")
-        bad = []
-        if _finite(gain) and not GAIN_RANGE[0] <= gain <= GAIN_RANGE[1]:
-            bad.append(f"gain {gain:.3f} (target {GAIN_RANGE[0]}–{GAIN_RANGE[1]})")
-        if _finite(rmse) and rmse > RMSE_OF_BOUND * d:
-            bad.append(f"RMSE {rmse:.4f} {unit} (target ≤ {RMSE_OF_BOUND * d:.3g})")
-        if _finite(mx) and mx > MAX_OF_BOUND * d:
-            bad.append(f"max {mx:.4f} {unit} (target ≤ {MAX_OF_BOUND * d:.3g})")
-        if bad:
-            severe = (_finite(gain) and not 0.5 <= gain <= 2.0) or (_finite(rmse) and rmse > 0.25 * d)
-            add("unusable" if severe else "degraded", "design_region",
-                f"learned vs model BEM over |q_u^e| ≤ {d:g} {unit}: " + ", ".join(bad))
-        cov = dr.get("coverage_2sigma_band")
-        if _finite(cov) and cov < 0.8:
-            add("degraded", "band", f"the exported ±2σ band holds only {100 * cov:.0f} % of the model BEM over the design region")
+    if not (dr and dr.get("n_points")):
+        return
+    notes.checked.append("design_region")
+    d, unit = dr["bound"], metrics.get("output_unit", "rad")
+    gain, rmse, mx = dr.get("gain"), dr.get("rmse"), dr.get("max_abs")
+    bad = []
+    if _finite(gain) and not GAIN_RANGE[0] <= gain <= GAIN_RANGE[1]:
+        bad.append(f"gain {gain:.3f} (target {GAIN_RANGE[0]}–{GAIN_RANGE[1]})")
+    if _finite(rmse) and rmse > RMSE_OF_BOUND * d:
+        bad.append(f"RMSE {rmse:.4f} {unit} (target ≤ {RMSE_OF_BOUND * d:.3g})")
+    if _finite(mx) and mx > MAX_OF_BOUND * d:
+        bad.append(f"max {mx:.4f} {unit} (target ≤ {MAX_OF_BOUND * d:.3g})")
+    if bad:
+        severe = (_finite(gain) and not 0.5 <= gain <= 2.0) or (_finite(rmse) and rmse > 0.25 * d)
+        notes.add("unusable" if severe else "degraded", "design_region",
+                  f"learned vs model BEM over |q_u^e| ≤ {d:g} {unit}: " + ", ".join(bad))
+    cov = dr.get("coverage_2sigma_band")
+    if _finite(cov) and cov < 0.8:
+        notes.add("degraded", "band", f"the exported ±2σ band holds only {100 * cov:.0f} % of the model BEM over the design region")
+
+
+def _check_resolution(metrics: dict[str, Any], notes: _Notes) -> None:
     res = metrics.get("resolution")
     held = metrics.get("data_heldout")
-    if res and _finite(res.get("spread")):
-        checked.append("resolution")
-        # the uncertainty the data leave on the BEM: the exported band's σ, or, if larger, the error of f on
-        # trials the fit never saw (median over them; a fit that memorises its trials has a small band)
-        scale, what = res["band_std"], "its band's σ"
-        per = [t["rmse"] for t in ((held or {}).get("per_trial") or {}).values() if _finite(t.get("rmse"))]
-        if per:
-            med = sorted(per)[len(per) // 2] if len(per) % 2 else 0.5 * sum(sorted(per)[len(per) // 2 - 1:len(per) // 2 + 1])
-            if med > scale:
-                scale, what = med, "the held-out trials' median q_u error"
-        r = res["spread"] / scale if scale > 0 else math.inf
-        if r < 4.0:
-            unit = res.get("unit", "rad")
-            text = (f"the data {'do not' if r < 2 else 'barely'} resolve the BEM: over the data's actuated motions it varies by "
-                    f"{res['spread']:.3g} {unit} (std), {r:.1f}× {what} ({scale:.3g} {unit})")
-            weak = [(w, 2 * scale / w["share"]) for w in res.get("inputs", []) if w.get("share")]
-            weak = [(w, f) for w, f in weak if f > 1.0][:3]
-            if weak:
-                text += "; at the learned slopes, " + ", ".join(
-                    f"{w['input']} (±{w['amplitude']:.3g} {w['unit']} in the data) would need about {f:.1f}× that amplitude"
-                    for w, f in weak) + " to move the BEM by more than ±2× that uncertainty"
-            add("unusable" if r < 2 else "degraded", "resolution", text)
+    if not (res and _finite(res.get("spread"))):
+        return
+    notes.checked.append("resolution")
+    # the uncertainty the data leave on the BEM: the exported band's σ, or, if larger, the error of f on
+    # trials the fit never saw (median over them; a fit that memorises its trials has a small band)
+    scale, what = res["band_std"], "its band's σ"
+    per = [t["rmse"] for t in ((held or {}).get("per_trial") or {}).values() if _finite(t.get("rmse"))]
+    if per:
+        med = sorted(per)[len(per) // 2] if len(per) % 2 else 0.5 * sum(sorted(per)[len(per) // 2 - 1:len(per) // 2 + 1])
+        if med > scale:
+            scale, what = med, "the held-out trials' median q_u error"
+    r = res["spread"] / scale if scale > 0 else math.inf
+    if r < 4.0:
+        unit = res.get("unit", "rad")
+        text = (f"the data {'do not' if r < 2 else 'barely'} resolve the BEM: over the data's actuated motions it varies by "
+                f"{res['spread']:.3g} {unit} (std), {r:.1f}× {what} ({scale:.3g} {unit})")
+        weak = [(w, 2 * scale / w["share"]) for w in res.get("inputs", []) if w.get("share")]
+        weak = [(w, f) for w, f in weak if f > 1.0][:3]
+        if weak:
+            text += "; at the learned slopes, " + ", ".join(
+                f"{w['input']} (±{w['amplitude']:.3g} {w['unit']} in the data) would need about {f:.1f}× that amplitude"
+                for w, f in weak) + " to move the BEM by more than ±2× that uncertainty"
+        notes.add("unusable" if r < 2 else "degraded", "resolution", text)
+
+
+def _check_heldout(metrics: dict[str, Any], notes: _Notes) -> None:
+    held = metrics.get("data_heldout")
     if held and _finite(held.get("coverage")):
-        checked.append("heldout")
+        notes.checked.append("heldout")
         if held["coverage"] < 0.8:
-            add("degraded", "heldout", f"only {100 * held['coverage']:.0f} % of the held-out trials' q_u lie inside the predictive "
-                "±2σ: the GP is overconfident away from its training trials")
+            notes.add("degraded", "heldout", f"only {100 * held['coverage']:.0f} % of the held-out trials' q_u lie inside the predictive "
+                      "±2σ: the GP is overconfident away from its training trials")
+
+
+def _check_closed_loop(metrics: dict[str, Any], notes: _Notes) -> None:
     loops = metrics.get("closed_loop") or {}
-    if "predictor" in loops:
-        checked.append("closed_loop")
-        p, mdl = loops["predictor"], loops.get("model", {})
-        if p.get("fell"):
-            both = mdl.get("fell")
-            add("unusable", "closed_loop", f"the closed loop with the learned BEM fell at {p.get('duration_s', math.nan):.2f} s"
-                + (" (so did the model BEM's: the EIC cannot balance this robot with these gains)" if both else ""))
-        elif p.get("diverged"):
-            add("degraded", "closed_loop", "the closed loop with the learned BEM stayed up but its actuated joints left the reference")
-        lem = p.get("lemma1")
-        if lem and _finite(lem.get("r_learned_vs_model_delta_gamma")):
-            checked.append("lemma1")
-            r = lem["r_learned_vs_model_delta_gamma"]
-            if r < 0.9:
-                add("degraded", "lemma1", f"Lemma 1 (eq. 10) does not hold for the learned BEM: its ΔΓ correlates with the model's "
-                    f"ΔΓ = Ḣ_u + b_u q̇_u^e at r = {r:.2f}")
-    found.sort(key=lambda f: -_RANK[f.severity])
-    status = max((f.severity for f in found), key=_RANK.__getitem__, default="ok")
-    return Verdict(status, tuple(found), tuple(checked))
+    if "predictor" not in loops:
+        return
+    notes.checked.append("closed_loop")
+    p, mdl = loops["predictor"], loops.get("model", {})
+    if p.get("fell"):
+        both = mdl.get("fell")
+        notes.add("unusable", "closed_loop", f"the closed loop with the learned BEM fell at {p.get('duration_s', math.nan):.2f} s"
+                  + (" (so did the model BEM's: the EIC cannot balance this robot with these gains)" if both else ""))
+    elif p.get("diverged"):
+        notes.add("degraded", "closed_loop", "the closed loop with the learned BEM stayed up but its actuated joints left the reference")
+    lem = p.get("lemma1")
+    if lem and _finite(lem.get("r_learned_vs_model_delta_gamma")):
+        notes.checked.append("lemma1")
+        r = lem["r_learned_vs_model_delta_gamma"]
+        if r < 0.9:
+            notes.add("degraded", "lemma1", f"Lemma 1 (eq. 10) does not hold for the learned BEM: its ΔΓ correlates with the model's "
+                      f"ΔΓ = Ḣ_u + b_u q̇_u^e at r = {r:.2f}")
+
+
+#: The checks of the module docstring's table, in the order their findings are listed (before sorting by severity).
+_CHECKS = (_check_model, _check_excitation, _check_derivatives, _check_fit, _check_design_region, _check_resolution,
+           _check_heldout, _check_closed_loop)

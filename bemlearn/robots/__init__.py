@@ -2,11 +2,14 @@
 
 from bemlearn.robots.bem import BEMResult, solve_bem
 from bemlearn.robots.mujoco_robot import MujocoRobot, RobotModelError
+from bemlearn.robots.protocol import BalanceRobot, ControlRobot
 from bemlearn.robots.registry import ROBOTS, RobotRef, load, register_robot, registered_robots, resolve_robot
 from bemlearn.robots.robot import Robot
 
 __all__ = [
     "BEMResult",
+    "BalanceRobot",
+    "ControlRobot",
     "MujocoRobot",
     "ROBOTS",
     "Robot",

@@ -42,7 +42,7 @@ class BEMResult:
 
 
 def solve_bem(
-    fun: Callable[[torch.Tensor], torch.Tensor],
+    fun: Callable[..., torch.Tensor],
     batch: int,
     *,
     lo: float,
@@ -71,29 +71,74 @@ def solve_bem(
         raise ArgumentError(f"solve_bem: need lo < hi, got lo={lo}, hi={hi}")
     if n_grid < 3:
         raise ArgumentError(f"solve_bem: n_grid must be ≥ 3, got {n_grid}")
+    call = _on_rows(fun, batch)
+    nodes = torch.linspace(lo, hi, n_grid, dtype=torch.float64)
+    br = _bracket(call, nodes, nominal, batch)
+    exact = br.valid & (br.fa == 0)
+    root = torch.where(exact, br.a, torch.full_like(br.a, float("nan")))
+    froot = torch.where(exact, br.fa, torch.full_like(br.a, float("nan")))
+    root, froot, it = _chandrupatla(call, br, root, froot, active=br.valid & ~exact, xtol=xtol, max_iter=max_iter)
+    # a last-node exact zero is a root only if nothing else was found
+    use_last = br.last_zero & ~br.valid
+    root = torch.where(use_last, nodes[-1].expand(batch), root)
+    froot = torch.where(use_last, torch.zeros_like(froot), froot)
+    valid = br.valid | use_last
+    residual = froot.abs()
+    good = valid & (residual <= ftol)
+    nan = torch.full_like(root, float("nan"))
+    return BEMResult(
+        qu=torch.where(good, root, nan),
+        valid=good,
+        residual=torch.where(good, residual, nan),
+        iterations=it,
+    )
+
+
+def _on_rows(fun: Callable[..., torch.Tensor], batch: int) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+    """``call(x (R, K), rows (R,))``: ``fun`` on the problems ``rows`` only (all problems, then
+    selected, when ``fun`` takes no ``rows``)."""
     import inspect
 
-    takes_rows = "rows" in inspect.signature(fun).parameters
+    if "rows" in inspect.signature(fun).parameters:
+        return lambda x, rows: fun(x, rows=rows)
 
     def call(x: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
-        """``fun`` on the problems ``rows`` only (all problems when ``fun`` takes no ``rows``)."""
-        if takes_rows:
-            return fun(x, rows=rows)
         full = torch.zeros(batch, x.shape[1], dtype=torch.float64)
         full[rows] = x
         return fun(full)[rows]
 
-    nodes = torch.linspace(lo, hi, n_grid, dtype=torch.float64)
-    all_rows = torch.arange(batch)
+    return call
+
+
+@dataclass(frozen=True, eq=False)
+class _Bracket:
+    """Per problem ``(B,)``: the sign-change cell [a, b] nearest the nominal value with its residuals
+    ``fa``, ``fb`` (NaN where none), ``valid`` where one was found, and ``last_zero`` where the residual
+    is exactly zero on the last grid node (not covered by the cells)."""
+
+    a: torch.Tensor
+    b: torch.Tensor
+    fa: torch.Tensor
+    fb: torch.Tensor
+    valid: torch.Tensor
+    last_zero: torch.Tensor
+
+
+def _bracket(call: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], nodes: torch.Tensor, nominal: float, batch: int) -> _Bracket:
+    """Scan the grid ``nodes`` for the sign-change cell nearest ``nominal`` (a node where the residual is
+    exactly zero counts as a root).
+
+    First a window of nodes around the nominal value (BEMs lie near it), then the whole grid for the
+    problems whose nearest root may lie outside the window.  A sign-change cell in a window is the
+    nearest one of the whole grid when it is no farther than the window's edges.
+    """
+    n_grid = nodes.numel()
     a = torch.full((batch,), float("nan"), dtype=torch.float64)
     b, fa, fb = a.clone(), a.clone(), a.clone()
     valid = torch.zeros(batch, dtype=torch.bool)
     last_zero = torch.zeros(batch, dtype=torch.bool)
-    # bracket: first a window of nodes around the nominal value (BEMs lie near it), then the whole
-    # grid for the problems whose nearest root may lie outside the window.  A sign-change cell in a
-    # window is the nearest one of the whole grid when it is no farther than the window's edges.
     k0 = int(torch.clamp(torch.searchsorted(nodes, torch.tensor(nominal, dtype=torch.float64)), 0, n_grid - 1))
-    pending = all_rows
+    pending = torch.arange(batch)
     for half in (4, n_grid):
         i0, i1 = max(0, k0 - half), min(n_grid - 1, k0 + half)
         if i1 - i0 < 1 or pending.numel() == 0:
@@ -117,13 +162,20 @@ def solve_bem(
         if whole:  # exact zero on the last node is not covered by the cells above
             last_zero[pending] = f[:, -1] == 0
         pending = pending[~found]
-    exact = valid & (fa == 0)
-    # Chandrupatla iteration on the bracket [a, b], on the problems still active only
+    return _Bracket(a, b, fa, fb, valid, last_zero)
+
+
+def _chandrupatla(call: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], br: _Bracket, root: torch.Tensor, froot: torch.Tensor,
+                  *, active: torch.Tensor, xtol: float, max_iter: int) -> tuple[torch.Tensor, torch.Tensor, int]:
+    """Chandrupatla's iteration on the brackets ``br`` of the ``active`` problems (evaluated on those only).
+
+    Returns ``(root, froot, iterations)``: ``root``/``froot`` updated where a problem converged, and
+    at the iteration cap the better end of each bracket still active.
+    """
+    a, b, fa, fb = br.a.clone(), br.b.clone(), br.fa.clone(), br.fb.clone()
     c, fc = a.clone(), fa.clone()
-    t = torch.full((batch,), 0.5, dtype=torch.float64)
-    active = valid & ~exact
-    root = torch.where(exact, a, torch.full_like(a, float("nan")))
-    froot = torch.where(exact, fa, torch.full_like(a, float("nan")))
+    t = torch.full_like(a, 0.5)
+    active = active.clone()
     it = 0
     while bool(active.any()) and it < max_iter:
         it += 1
@@ -157,17 +209,4 @@ def solve_bem(
         use_a = fa.abs() < fb.abs()
         root = torch.where(active, torch.where(use_a, a, b), root)
         froot = torch.where(active, torch.where(use_a, fa, fb), froot)
-    # a last-node exact zero is a root only if nothing else was found
-    use_last = last_zero & ~valid
-    root = torch.where(use_last, nodes[-1].expand(batch), root)
-    froot = torch.where(use_last, torch.zeros_like(froot), froot)
-    valid = valid | use_last
-    residual = froot.abs()
-    good = valid & (residual <= ftol)
-    nan = torch.full_like(root, float("nan"))
-    return BEMResult(
-        qu=torch.where(good, root, nan),
-        valid=good,
-        residual=torch.where(good, residual, nan),
-        iterations=it,
-    )
+    return root, froot, it

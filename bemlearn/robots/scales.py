@@ -19,6 +19,8 @@ import numpy as np
 import torch
 
 from bemlearn.errors import RobotModelError
+from bemlearn.robots.mujoco_robot import MujocoRobot
+from bemlearn.robots.protocol import BalanceRobot
 
 __all__ = ["instability_rate", "bem_slopes", "qu_half_range", "qa_half_ranges", "bem_gain", "UNLIMITED_HALF_RANGE"]
 
@@ -26,7 +28,7 @@ UNLIMITED_HALF_RANGE = 0.5
 """Half range assumed for an unlimited actuated coordinate, rad or m."""
 
 
-def instability_rate(robot, *, step: float = 1e-5) -> float:
+def instability_rate(robot: BalanceRobot, *, step: float = 1e-5) -> float:
     """λ = √(|Γ_q| / D_uu) at upright (1/s); see the module docstring."""
     n, iu = robot.n, robot.unactuated_index
     m = robot.m
@@ -40,7 +42,7 @@ def instability_rate(robot, *, step: float = 1e-5) -> float:
     return math.sqrt(abs(gq) / duu)
 
 
-def bem_slopes(robot, *, step: float = 1e-4) -> np.ndarray:
+def bem_slopes(robot: BalanceRobot, *, step: float = 1e-4) -> np.ndarray:
     """``(3, m)`` rows (s_p, s_v, s_a): ∂q_u^e/∂q_a, ∂/∂q̇_a, ∂/∂q̈_a at upright (module docstring)."""
     m = robot.m
     rows = np.zeros((6 * m, 3, m))
@@ -66,19 +68,20 @@ def bem_gain(slopes: np.ndarray, omega: float | np.ndarray) -> np.ndarray:
     return np.hypot(sp - sa * w**2, sv * w)
 
 
-def qu_half_range(robot) -> float:
+def qu_half_range(robot: BalanceRobot) -> float:
     """Distance from q_u,nominal to the nearer end of the admissible q_u range (rad or m)."""
     lo, hi = robot.qu_range
     return float(min(hi - robot.qu_nominal, robot.qu_nominal - lo))
 
 
-def qa_half_ranges(robot) -> np.ndarray:
-    """``(m,)`` half ranges of the actuated coordinates: min(|lo|, |hi|) of a limited joint,
-    else :data:`UNLIMITED_HALF_RANGE` (also when the model declares a coordinate map)."""
+def qa_half_ranges(robot: BalanceRobot) -> np.ndarray:
+    """``(m,)`` half ranges of the actuated coordinates: min(|lo|, |hi|) of a limited joint of a
+    :class:`~bemlearn.robots.MujocoRobot`, else :data:`UNLIMITED_HALF_RANGE` (also when the model
+    declares a coordinate map, and for a robot without a MuJoCo model)."""
     out = np.full(robot.m, UNLIMITED_HALF_RANGE)
-    model = robot.model
-    if not np.allclose(robot.T.numpy(), np.eye(robot.n)):
+    if not isinstance(robot, MujocoRobot) or not np.allclose(robot.T.numpy(), np.eye(robot.n)):
         return out
+    model = robot.model
     for k, j in enumerate(robot.actuated_index):
         if model.jnt_limited[j]:
             lo, hi = model.jnt_range[j]

@@ -36,8 +36,8 @@ import numpy as np
 import torch
 
 from bemlearn.errors import ArgumentError, NumericalError
+from bemlearn.robots.protocol import BalanceRobot
 from bemlearn.robots.reference import CompositeSinusoid
-from bemlearn.robots.robot import Robot
 
 __all__ = [
     "ZeroDynamicsSolution",
@@ -89,7 +89,7 @@ class ZeroDynamicsSolution:
     iterations: int
 
 
-def _gamma(robot: Robot, qa, qad, qadd, qu, qud, qudd) -> np.ndarray:
+def _gamma(robot: BalanceRobot, qa, qad, qadd, qu, qud, qudd) -> np.ndarray:
     T = lambda a: torch.as_tensor(np.asarray(a, dtype=np.float64))  # noqa: E731
     q = robot.join(T(qa), T(qu))
     qd = robot.join(T(qad), T(qud))
@@ -98,7 +98,7 @@ def _gamma(robot: Robot, qa, qad, qadd, qu, qud, qudd) -> np.ndarray:
 
 
 def periodic_zero_dynamics(
-    robot: Robot,
+    robot: BalanceRobot,
     reference: CompositeSinusoid,
     *,
     n_nodes: int = 256,
@@ -109,7 +109,7 @@ def periodic_zero_dynamics(
     """The periodic orbit q_u^d(t) of S_0 (eq. 4) for a periodic q_a^d, by Fourier collocation.
 
     Args:
-        robot: the robot (any :class:`Robot`).
+        robot: the robot (any :class:`~bemlearn.robots.BalanceRobot`).
         reference: a T-periodic composite sinusoid for the m actuated joints.
         n_nodes: collocation nodes over one period.
         tol: stop when max |Γ| at the nodes ≤ tol (N·m).
@@ -148,7 +148,7 @@ def periodic_zero_dynamics(
 
 
 def finite_zero_dynamics(
-    robot: Robot,
+    robot: BalanceRobot,
     reference: CompositeSinusoid,
     t0: float,
     t1: float,
@@ -217,7 +217,7 @@ class LemmaOneResult:
     zero_dynamics: ZeroDynamicsSolution
 
 
-def lemma1(robot: Robot, reference: CompositeSinusoid, *, n_nodes: int = 256) -> LemmaOneResult:
+def lemma1(robot: BalanceRobot, reference: CompositeSinusoid, *, n_nodes: int = 256) -> LemmaOneResult:
     """Evaluate ΔΓ and Ḣ_u of eq. (10) along a periodic reference (see module docstring)."""
     zd = periodic_zero_dynamics(robot, reference, n_nodes=n_nodes)
     T = reference.period
@@ -251,7 +251,7 @@ def lemma1(robot: Robot, reference: CompositeSinusoid, *, n_nodes: int = 256) ->
     )
 
 
-def scaled_references(robot: Robot, *, design_qu: float = 0.2) -> dict[str, CompositeSinusoid]:
+def scaled_references(robot: BalanceRobot, *, design_qu: float = 0.2) -> dict[str, CompositeSinusoid]:
     """Periodic composite sinusoids scaled to ``robot`` for Lemma 1 (labels → references).
 
     Base frequency f_0 = 0.1 λ/2π (λ = √(Γ_q/D_uu), :func:`bemlearn.robots.scales.instability_rate`)

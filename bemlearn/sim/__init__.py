@@ -1,12 +1,14 @@
-"""Closed-loop MuJoCo simulation of the EIC loop with a BEM source, figures, rendering."""
+"""Closed-loop MuJoCo simulation of the EIC loop with a BEM source, the sensed plant it runs, figures, rendering."""
 
 from bemlearn.sim.closed_loop import NominalConfig, ReferenceConfig, SimResult, SimulateConfig, nominal_robot, simulate
 from bemlearn.sim.figures import plot_run
+from bemlearn.sim.plant import SensedPlant
 from bemlearn.sim.render import render_gif
 
 __all__ = [
     "NominalConfig",
     "ReferenceConfig",
+    "SensedPlant",
     "SimResult",
     "SimulateConfig",
     "nominal_robot",

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, overload
 
 import numpy as np
 import torch
@@ -23,12 +23,14 @@ from tqdm.auto import tqdm
 
 from bemlearn.config import Limit, config_limits
 from bemlearn.control.actuator_inverse import MujocoActuatorInverse
-from bemlearn.control.bem_sources import make_bem_source
+from bemlearn.control.bem_sources import BEMSource, make_bem_source
 from bemlearn.control.eic import EICController, EICGains
-from bemlearn.data.plant import SensedPlant
 from bemlearn.data.sensors import SensorConfig
 from bemlearn.errors import ConfigError, RobotModelError
+from bemlearn.robots.mujoco_robot import MujocoRobot
+from bemlearn.robots.protocol import BalanceRobot
 from bemlearn.robots.reference import CompositeSinusoid
+from bemlearn.sim.plant import SensedPlant
 
 __all__ = ["ReferenceConfig", "NominalConfig", "SimulateConfig", "SimResult", "simulate", "nominal_robot"]
 
@@ -145,24 +147,27 @@ class SimResult:
     metrics: dict
 
 
-def nominal_robot(robot_name: str, nominal: NominalConfig):
-    """The controller's model: the true MJCF model, scaled by :func:`~bemlearn.robots.variants.
+@overload
+def nominal_robot(robot: MujocoRobot, nominal: NominalConfig) -> MujocoRobot: ...
+@overload
+def nominal_robot(robot: BalanceRobot, nominal: NominalConfig) -> BalanceRobot: ...
+
+
+def nominal_robot(robot: BalanceRobot, nominal: NominalConfig) -> BalanceRobot:
+    """The controller's model: ``robot`` itself, or its MJCF scaled by :func:`~bemlearn.robots.variants.
     scaled_robot` when ``nominal`` asks for a mismatch (any MJCF robot)."""
-    from bemlearn.robots import MujocoRobot, load
     from bemlearn.robots.variants import scaled_robot
 
-    robot = load(robot_name)
     if (nominal.mass_scale, nominal.length_scale) == (1.0, 1.0):
         return robot
     if not isinstance(robot, MujocoRobot):
-        raise ConfigError(f"simulate.nominal: parameter mismatch needs an MJCF robot, {robot_name!r} is {type(robot).__name__}")
-    out = scaled_robot(robot.source, name=robot.name, mass_scale=nominal.mass_scale, length_scale=nominal.length_scale, bodies=nominal.bodies)
-    return out
+        raise ConfigError(f"simulate.nominal: parameter mismatch needs an MJCF robot, {robot.name!r} is {type(robot).__name__}")
+    return scaled_robot(robot.source, name=robot.name, mass_scale=nominal.mass_scale, length_scale=nominal.length_scale, bodies=nominal.bodies)
 
 
 class _Timed:
-    def __init__(self, fn):
-        self.fn, self.total = fn, 0.0
+    def __init__(self, fn: BEMSource) -> None:
+        self.fn, self.total, self.name = fn, 0.0, fn.name
 
     def __call__(self, x):
         t0 = time.perf_counter()
@@ -177,8 +182,12 @@ class _Timed:
         return out
 
 
-def simulate(robot_name: str, config: SimulateConfig, *, progress: bool = True, reference=None) -> SimResult:
+def simulate(robot: BalanceRobot, config: SimulateConfig, *, progress: bool = True, reference=None) -> SimResult:
     """Run the closed loop (module docstring) and return logs and metrics.
+
+    ``robot`` is the simulated (true) robot, a :class:`~bemlearn.robots.MujocoRobot` (e.g.
+    ``bemlearn.robots.load(name_or_path)``; another robot is rejected with a ``ValueError``); the
+    controller's nominal model is ``robot`` or its scaled copy (:func:`nominal_robot`).
 
     ``reference`` overrides ``config.reference`` with any object offering ``m``,
     ``evaluate(t)`` and ``derivative(t, order)`` (e.g. a
@@ -191,12 +200,12 @@ def simulate(robot_name: str, config: SimulateConfig, *, progress: bool = True, 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        return _simulate(robot_name, config, progress=progress, reference=reference)
+        return _simulate(robot, config, progress=progress, reference=reference)
     finally:
         torch.set_num_threads(threads)
 
 
-def _simulate(robot_name: str, config: SimulateConfig, *, progress: bool, reference) -> SimResult:
+def _simulate(plant: BalanceRobot, config: SimulateConfig, *, progress: bool, reference) -> SimResult:
     unset = [n for n in ("rate_hz", "fall_window") if getattr(config, n) is None]
     unset += [f"gains.{n}" for n in ("kp_a", "kd_a", "kp_u", "kd_u") if getattr(config.gains, n) is None]
     if unset and reference is None:
@@ -204,12 +213,9 @@ def _simulate(robot_name: str, config: SimulateConfig, *, progress: bool, refere
     if unset:
         raise ConfigError(f"simulate: {unset} not set; derive them from the model with "
                          "bemlearn.pipeline.complete_section(robot, 'simulate', config) (as every pipeline command does) or give them")
-    from bemlearn.robots import MujocoRobot, load
-
-    plant = load(robot_name)
     if not isinstance(plant, MujocoRobot):
-        raise RobotModelError(f"simulate: robot {robot_name!r} has no MuJoCo model")
-    nominal = nominal_robot(robot_name, config.nominal)
+        raise RobotModelError(f"simulate: robot {plant.name!r} has no MuJoCo model")
+    nominal = nominal_robot(plant, config.nominal)
     bem = _Timed(make_bem_source(config.bem_source, robot=nominal, predictor=config.predictor))
     ref = reference if reference is not None else config.reference.build(plant.m)
     actuator = MujocoActuatorInverse(plant)

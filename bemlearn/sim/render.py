@@ -14,11 +14,15 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
 
 from bemlearn.errors import DataError, EnvironmentProblem
+
+if TYPE_CHECKING:
+    from bemlearn.robots.mujoco_robot import MujocoRobot
 
 __all__ = ["render_gif", "require_offscreen_backend", "probe_backend", "BACKENDS"]
 
@@ -86,7 +90,7 @@ def require_offscreen_backend() -> str:
     )
 
 
-def render_gif(robot, q: np.ndarray, path: str | Path, *, rate_hz: float, fps: int = 25, seconds: float | None = 10.0,
+def render_gif(robot: MujocoRobot, q: np.ndarray, path: str | Path, *, rate_hz: float, fps: int = 25, seconds: float | None = 10.0,
                size: tuple[int, int] = (320, 240), distance: float = 1.1, elevation: float = -20.0, azimuth: float = 135.0) -> Path:
     """Write a GIF of coordinates ``q (T, n)`` (rad / m by joint kind) logged at ``rate_hz``.
 

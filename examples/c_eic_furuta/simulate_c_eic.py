@@ -3,7 +3,7 @@
     python examples/c_eic_furuta/simulate_c_eic.py RUN_DIR [--duration 20] [--config configs/furuta.yaml]
 
 exports RUN_DIR's BEM to C, compiles it with eic_furuta.c into a shared library, closes the
-loop through ctypes on the simulated plant (bemlearn.data.plant.SensedPlant: encoder, velocity
+loop through ctypes on the simulated plant (bemlearn.sim.plant.SensedPlant: encoder, velocity
 filter, zero-order hold) and prints the metrics next to the Python EIC
 (bemlearn.sim.closed_loop.simulate) with the same gains, reference and sensor seed: the
 resolved ``simulate`` section of the Furuta's pipeline config (400 Hz, the hand-tuned EIC
@@ -22,11 +22,11 @@ from pathlib import Path
 import numpy as np
 
 from bemlearn.apps.furuta.model import AnalyticFuruta, FurutaParameters
-from bemlearn.data.plant import SensedPlant
 from bemlearn.export.c_build import STRICT_FLAGS, compile_shared
 from bemlearn.pipeline.config import load_pipeline_config
 from bemlearn.robots import load
 from bemlearn.sim.closed_loop import SimulateConfig
+from bemlearn.sim.plant import SensedPlant
 
 HERE = Path(__file__).resolve().parent
 #: The Furuta's pipeline config (its ``simulate`` section: rate, fall window, hand-tuned EIC gains, reference).
@@ -63,8 +63,9 @@ def build(bem_c_dir: Path, out: Path) -> Path:
                           flags=(*STRICT_FLAGS, "-O2", f"-I{bem_c_dir}", f"-I{HERE}"))
 
 
-def furuta_params(p: FurutaParameters = FurutaParameters()) -> Params:
-    """The controller's nominal model: the rigid-body rows of AnalyticFuruta."""
+def furuta_params(p: FurutaParameters | None = None) -> Params:
+    """The controller's nominal model: the rigid-body rows of AnalyticFuruta (default: the shipped parameters)."""
+    p = p if p is not None else FurutaParameters()
     a = AnalyticFuruta(p)
     return Params(a._Daa0, a._sin2, a._cos2, a._mLl, a._Duu, a._mgl, p.B_r, p.B_p, p.k_u, p.b_emf, p.V_max)
 
@@ -142,7 +143,7 @@ def main() -> None:
         pt = export_run(args.run_dir, out=tmp / "bem_predictor.pt")[0]
         config = simulate_config(pt, duration_s=args.duration, config=args.config)
         c = run(build(tmp, tmp / "libeic.so"), config)
-        py = simulate("furuta", config, progress=False)
+        py = simulate(load("furuta"), config, progress=False)
     print(f"C EIC:      fell={c.fell}  tracking RMSE {c.tracking_rmse:.4f} rad  max|alpha| {c.alpha_max:.4f} rad")
     print(f"Python EIC: fell={py.fell}  tracking RMSE {py.metrics['tracking_rmse']:.4f} rad  "
           f"max|alpha| {py.metrics['qu_max']:.4f} rad")

@@ -16,10 +16,10 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from bemlearn.apps.biped.controller import WalkExcitation
-from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.apps.biped.config import BipedConfig
+from bemlearn.apps.biped.controller import WalkExcitation
 from bemlearn.apps.biped.walker import WalkResult
+from bemlearn.fitting.gp_config import GPConfig
 
 __all__ = ["train_walking_gp", "heldout_walks", "bem_errors", "heldout_bem"]
 
@@ -35,7 +35,7 @@ def train_walking_gp(X: np.ndarray, y: np.ndarray, out_dir: str | Path, *, confi
 
     from bemlearn.data import Normalization, gp_input_names
     from bemlearn.export.export_run import export_run
-    from bemlearn.pipeline.gp_stage import fit_bem_gp
+    from bemlearn.pipeline.gp_stage import CheckpointProvenance, fit_bem_gp
     from bemlearn.pipeline.train import file_sha256
     from bemlearn.robots import resolve_robot
     from bemlearn.units import gp_input_units
@@ -49,8 +49,9 @@ def train_walking_gp(X: np.ndarray, y: np.ndarray, out_dir: str | Path, *, confi
     writer = SummaryWriter(str(out / "tb"))
     stage = fit_bem_gp(x, yt, out, normalization=Normalization.fit(x, yt, names=names), input_names=names,
                        units=gp_input_units(names, joints, robot.coordinate_kinds), config=config,
-                       robot=ref.to_dict(), joint_names=joints, unactuated_name=qu, data_sha256=file_sha256(data_path),
-                       extra={"data_file": str(data_path), **(extra or {})}, writer=writer, progress=progress)
+                       provenance=CheckpointProvenance(robot=ref.to_dict(), joint_names=joints, unactuated_name=qu,
+                                                       data_sha256=file_sha256(data_path), extra={"data_file": str(data_path), **(extra or {})}),
+                       writer=writer, progress=progress)
     writer.close()
     if stage.interrupted:
         raise KeyboardInterrupt

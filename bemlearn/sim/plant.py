@@ -14,12 +14,16 @@ left unchanged (the plant uses a copy).
 from __future__ import annotations
 
 import copy
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
 
 from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
 from bemlearn.errors import ConfigError, NumericalError
+
+if TYPE_CHECKING:
+    from bemlearn.robots.mujoco_robot import MujocoRobot
 
 __all__ = ["SensedPlant"]
 
@@ -36,7 +40,7 @@ class SensedPlant:
         timestep: physics step override, s (default: the model's ``opt.timestep``).
     """
 
-    def __init__(self, robot, *, rate_hz: float, sensor: SensorConfig, rng: np.random.Generator, where: str, timestep: float | None = None) -> None:
+    def __init__(self, robot: MujocoRobot, *, rate_hz: float, sensor: SensorConfig, rng: np.random.Generator, where: str, timestep: float | None = None) -> None:
         self.robot = robot
         self.model = robot.model
         if timestep is not None and timestep != self.model.opt.timestep:
@@ -82,7 +86,7 @@ class SensedPlant:
         return qd, qdd
 
 
-def _coordinate_kinds(robot) -> tuple[str, ...] | None:
+def _coordinate_kinds(robot: MujocoRobot) -> tuple[str, ...] | None:
     """Joint kinds per coordinate when coordinates are the joints (T = I), else None."""
     kinds = getattr(robot, "joint_kinds", None)
     if kinds is None or not np.allclose(robot.T.numpy(), np.eye(robot.n)):
