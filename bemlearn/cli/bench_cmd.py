@@ -23,8 +23,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from bemlearn.bench.predict_bench import format_predict_bench, run_predict_bench
-
 __all__ = ["add_parser", "run_predict"]
 
 
@@ -159,6 +157,8 @@ def _c_footprint(args: argparse.Namespace) -> int:
 
 
 def run_predict(args: argparse.Namespace) -> int:
+    from bemlearn.bench.predict_bench import format_predict_bench, run_predict_bench
+
     for name in ("n_train", "repeats", "gpytorch_repeats", "batch", "threads", "batch_threads"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')}: expected a positive integer, got {getattr(args, name)}")
@@ -206,10 +206,8 @@ def _sim(args: argparse.Namespace) -> int:
 
 
 def _derivatives(args: argparse.Namespace) -> int:
-    from bemlearn.bench.derivatives_bench import run_derivatives_bench
+    from bemlearn.bench.derivatives_bench import TABLE_HEAD, run_derivatives_bench
     from bemlearn.pipeline.config import load_pipeline_config
-
-    from bemlearn.bench.derivatives_bench import TABLE_HEAD
 
     cfg = load_pipeline_config(args.config)
     head = TABLE_HEAD[0] + ("" if args.no_gp else TABLE_HEAD[1])

@@ -38,8 +38,6 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from scipy.ndimage import convolve1d
-from scipy.signal import oaconvolve
 
 from bemlearn.errors import ConfigError
 
@@ -70,6 +68,9 @@ def gaussian_kernels(sigma_s: float, sample_rate_hz: float, truncate: float = 5.
 def apply_kernel(q: np.ndarray, w: np.ndarray) -> np.ndarray:
     """``(T, n)`` Σ_k w[K + k] q_{i−k}, the ends padded with the end values; overlap-add FFT for
     long kernels (the same numbers to rounding, faster beyond ~100 taps)."""
+    from scipy.ndimage import convolve1d
+    from scipy.signal import oaconvolve
+
     K = w.size // 2
     if K <= 64 or q.shape[0] < 4 * K:
         return convolve1d(q, w, axis=0, mode="nearest")
@@ -128,7 +129,7 @@ class GaussianDerivative:
         """Samples at each trial end without a full kernel: K (not valid, dropped by the datasets)."""
         return self.half_width(sample_rate_hz)
 
-    def neighbours(self, sample_rate_hz: float) -> tuple["GaussianDerivative", ...]:
+    def neighbours(self, sample_rate_hz: float) -> tuple[GaussianDerivative, ...]:
         """σ · 2/3 and σ · 3/2 (each only if at least one sample wide): equally plausible choices
         whose BEM spread is the estimator term of the calibrated band."""
         s = self._sigma(sample_rate_hz)

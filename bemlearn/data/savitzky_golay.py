@@ -23,7 +23,6 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 __all__ = ["SavitzkyGolay"]
 
@@ -81,7 +80,7 @@ class SavitzkyGolay:
         """Samples at each trial end estimated from the edge polynomial: (w − 1) / 2."""
         return self.window_samples(sample_rate_hz) // 2
 
-    def neighbours(self, sample_rate_hz: float) -> tuple["SavitzkyGolay", ...]:
+    def neighbours(self, sample_rate_hz: float) -> tuple[SavitzkyGolay, ...]:
         """The four filters next to this one: window w·2/3 and w·3/2 (odd, in samples) at the same
         degree, and degree p − 1 and p + 1 at the same window (each only where valid: w > p ≥ 2).
 
@@ -108,6 +107,8 @@ class SavitzkyGolay:
         Returns:
             qd (T, n) rad/s and qdd (T, n) rad/s².
         """
+        from scipy.signal import savgol_filter  # SciPy's signal package takes ~0.5 s to import
+
         q = np.asarray(q, dtype=np.float64)
         w = self.window_samples(sample_rate_hz)
         dt = 1.0 / sample_rate_hz

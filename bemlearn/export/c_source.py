@@ -33,11 +33,19 @@ import torch
 
 from bemlearn import __version__
 from bemlearn.export.bem_predictor import BEMPredictor
+from bemlearn.export.c_exp import EXP_BLOCK_F64, EXP_BLOCK_LIBM
 from bemlearn.export.c_float32 import Float32Errors, float32_errors, sample_inputs
 from bemlearn.export.c_posterior import RANGE_LENGTHSCALES, CPosterior, c_posterior, support_box
-from bemlearn.export.c_exp import EXP_BLOCK_F64, EXP_BLOCK_LIBM
-from bemlearn.export.c_std_templates import (BAND_GRADIENT, DENSE_STD, ESTIMATOR_TERM, FACTORED_STD, KERNELS, NO_BAND_GRADIENT,
-                                             NO_ESTIMATOR_TERM, TRIANGULAR_STD)
+from bemlearn.export.c_std_templates import (
+    BAND_GRADIENT,
+    DENSE_STD,
+    ESTIMATOR_TERM,
+    FACTORED_STD,
+    KERNELS,
+    NO_BAND_GRADIENT,
+    NO_ESTIMATOR_TERM,
+    TRIANGULAR_STD,
+)
 from bemlearn.export.c_templates import DISTANCE_EXPONENTS, FOLDED_EXPONENTS, HEADER, POSTERIOR, SOURCE
 from bemlearn.export.folded_posterior import SENTINEL_BOUND, FoldedPosterior
 from bemlearn.export.metadata import PredictorMetadata
@@ -182,9 +190,10 @@ def c_sources(
         metadata: its validated metadata (``m`` fixes the input widths).
         prefix: C identifier prefixed to every public name (``bem_mean``, ``BEM_OK``, ...).
         dtype: ``"float64"`` (``double``) or ``"float32"`` (``float``, for FPUs without double).
-        f32_mean_tol, f32_std_rtol: float32 only: refuse when the emulated float32 predictor
+        f32_mean_tol: float32 only: refuse when the emulated float32 predictor
             (:func:`~bemlearn.export.c_float32.float32_errors`) differs from float64 by more
-            than this in the mean (rad) or the std (relative) on in-range inputs.
+            than this in the mean (rad) on in-range inputs.
+        f32_std_rtol: float32 only: the same for the std (relative).
 
     Raises:
         ValueError: a bad prefix or dtype, or float32 too inaccurate for this posterior

@@ -11,9 +11,9 @@ import torch
 from tqdm.auto import tqdm
 
 from bemlearn.fitting.optimize import NumericalFailure, checked_loss
-from bemlearn.interrupts import check_interrupt, interruptible
 from bemlearn.fitting.result import Callback, FitResult, hyperparameter_metrics
 from bemlearn.fitting.variational import optimal_variational
+from bemlearn.interrupts import check_interrupt, interruptible
 from bemlearn.models.solver import DEFAULT_JITTER, DEFAULT_MAX_TRIES, cholesky_policy
 from bemlearn.models.svgp import SVGPBEMGP
 from bemlearn.models.validation import check_inputs, check_targets
@@ -66,7 +66,8 @@ def fit_svgp(
         refresh_q: after the last epoch, set q(v) to its optimum for the final θ and Z
             (:func:`~bemlearn.fitting.variational.optimal_variational`, one streamed O(N M²) pass).
         seed: seed of the minibatch order.
-        jitter, max_tries: Cholesky retry policy.
+        jitter: Cholesky retry policy: the first jitter j₀ (:func:`~bemlearn.models.solver.robust_cholesky`).
+        max_tries: Cholesky retry policy: the number of jittered retries.
         callback: ``callback(step, metrics)`` after every minibatch (metrics also has ``epoch``).
         progress: show a progress bar.
 
@@ -114,7 +115,7 @@ def fit_svgp(
                         yb = train_y[idx.to(train_y.device)].to(device)
                         ngd.zero_grad(set_to_none=True)
                         opt.zero_grad(set_to_none=True)
-                        loss = checked_loss(lambda: -elbo(model(xb), yb))
+                        loss = checked_loss(lambda: -elbo(model(xb), yb))  # noqa: B023 (called at once)
                         loss.backward()
                         ngd.step()
                         opt.step()

@@ -57,7 +57,9 @@ class LearnedBEM:
 
     Args:
         state: the frozen posterior.
-        robot, actuated_names, unactuated_name: what the columns mean.
+        robot: the robot's name (what the columns mean).
+        actuated_names: the actuated joints' names.
+        unactuated_name: the unactuated joint's name.
     """
 
     def __init__(self, state: PredictorState, *, robot: str, actuated_names: tuple[str, ...], unactuated_name: str) -> None:
@@ -93,7 +95,7 @@ class LearnedBEM:
         for name, p in zip(("qadd", "qad", "qa"), parts):
             if p.ndim != 2 or p.shape[1] != self.m:
                 raise ValueError(f"LearnedBEM.bem: {name} must have shape (B, {self.m}), got {tuple(p.shape)}")
-        x = torch.cat(parts + [torch.zeros(parts[0].shape[0], 2, dtype=torch.float64)], dim=1)
+        x = torch.cat([*parts, torch.zeros(parts[0].shape[0], 2, dtype=torch.float64)], dim=1)
         return self.predict(x, n_inputs=3 * self.m)
 
     @staticmethod

@@ -10,14 +10,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
-from bemlearn.models.band import band_reference
-from bemlearn.models.predictor_state import PredictorState
 from bemlearn.pipeline.reliability import reliability_table
 from bemlearn.robots.reference import CompositeSinusoid
+
+if TYPE_CHECKING:  # bemlearn.models loads GPyTorch: not needed to read an EvaluationConfig
+    from bemlearn.models.predictor_state import PredictorState
 
 __all__ = ["EvaluationConfig", "held_out_references", "reference_queries", "evaluate_bem", "run_truth_robot"]
 
@@ -137,6 +139,8 @@ def evaluate_bem(state: PredictorState, robot, references: list[CompositeSinusoi
         from bemlearn.pipeline.derive import design_region
 
         design_bound = design_region(robot).value
+    from bemlearn.models.band import band_reference
+
     t = np.arange(0.0, duration_s, 1.0 / rate_hz)
     errs, lat, pred, per, inside = [], [], [], [], []
     bands, lats = [], []

@@ -86,11 +86,13 @@ def fit_bem_gp(
             rad/s² or m/s², q̇ in rad/s or m/s, q in rad or m, by joint kind).
         y: ``(N,)`` float64 q_u, in its joint's unit.
         normalization: the training split's normalization (applied here).
-        input_names, units: the columns and their units (``{column: unit}``).
+        input_names: the columns.
+        units: their units (``{column: unit}``).
         config: the GP options (kind, optimizer, device, dtype).
         robot: the robot the data came from, as recorded by the run (``RobotRef.to_dict()``,
             or ``{"name": ..., "mjcf": None, ...}`` for a model-free run).
-        joint_names, unactuated_name: the coordinates, in the robot's order.
+        joint_names: the coordinates, in the robot's order.
+        unactuated_name: the unactuated one among them.
         data_sha256: sha256 of the data file (provenance in the checkpoint).
         extra: more provenance for the checkpoint's metadata.
         writer: a TensorBoard ``SummaryWriter`` (loss, noise, outputscale, lengthscale/<input>).

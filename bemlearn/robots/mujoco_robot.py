@@ -202,7 +202,7 @@ class MujocoRobot(Robot):
         return self._coordinate_kinds
 
     @classmethod
-    def from_xml(cls, path: str | Path, *, name: str | None = None) -> "MujocoRobot":
+    def from_xml(cls, path: str | Path, *, name: str | None = None) -> MujocoRobot:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"{path}: MJCF file not found")
@@ -213,7 +213,7 @@ class MujocoRobot(Robot):
         return cls(model, name=name or path.stem, source=str(path))
 
     @classmethod
-    def from_xml_string(cls, xml: str, *, name: str | None = None) -> "MujocoRobot":
+    def from_xml_string(cls, xml: str, *, name: str | None = None) -> MujocoRobot:
         try:
             model = mujoco.MjModel.from_xml_string(xml)
         except ValueError as exc:
@@ -301,7 +301,8 @@ class MujocoRobot(Robot):
         """D(q) and h = C(q, q̇)q̇ + G(q) − τ_p for one state, as numpy, without torch overhead.
 
         Args:
-            q, qd: ``(n,)`` coordinates (rad) and rates (rad/s).
+            q: ``(n,)`` coordinates (rad).
+            qd: ``(n,)`` rates (rad/s).
 
         Returns:
             ``D (n, n)`` and ``h (n,)`` in coordinates (eq. 1: D q̈ + h = B u).

@@ -134,8 +134,9 @@ class Robot(abc.ABC):
 
         Args:
             qu: ``(B,)`` rad, candidate unactuated coordinate.
-            qa, qad, qadd: ``(B, m)`` actuated positions (rad), velocities (rad/s),
-                accelerations (rad/s²).
+            qa: ``(B, m)`` actuated positions (rad).
+            qad: ``(B, m)`` actuated velocities (rad/s).
+            qadd: ``(B, m)`` actuated accelerations (rad/s²).
         """
         zeros = torch.zeros_like(qu)
         return self.gamma(self.join(qa, qu), self.join(qad, zeros), self.join(qadd, zeros))
@@ -162,7 +163,9 @@ class Robot(abc.ABC):
         |Γ_0| ≤ 1e-10 N·m.  See :func:`bemlearn.robots.bem.solve_bem`.
 
         Args:
-            qa, qad, qadd: ``(B, m)`` actuated q_a (rad), q̇_a (rad/s), q̈_a (rad/s²).
+            qa: ``(B, m)`` actuated q_a (rad).
+            qad: ``(B, m)`` actuated q̇_a (rad/s).
+            qadd: ``(B, m)`` actuated q̈_a (rad/s²).
             qu_range: admissible ``(lo, hi)``; default :attr:`qu_range`.
             n_grid: grid points used to bracket roots (roots closer together than
                 the grid spacing may be missed).

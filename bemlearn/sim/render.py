@@ -33,7 +33,7 @@ _PROBE = (
 )
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def probe_backend(name: str, *, timeout_s: float = 60.0) -> bool:
     """Whether ``MUJOCO_GL=name`` renders a frame, tried in a child Python process."""
     env = {**os.environ, "MUJOCO_GL": name}
@@ -97,7 +97,9 @@ def render_gif(robot, q: np.ndarray, path: str | Path, *, rate_hz: float, fps: i
         fps: frames per second of the animation (frames are subsampled from the log).
         seconds: only the first ``seconds`` of the log (``None``: all).
         size: ``(width, height)`` pixels.
-        distance, elevation, azimuth: the free camera around the model centre (m, deg, deg).
+        distance: the free camera's distance from the model centre (m).
+        elevation: its elevation (deg).
+        azimuth: its azimuth (deg).
     """
     from PIL import Image
 
