@@ -18,7 +18,7 @@ import pytest
 import yaml
 
 from bemlearn.cli.main import main
-from bemlearn.errors import OutputBusyError, OutputExistsError
+from bemlearn.errors import CheckpointError, DataError, OutputBusyError, OutputExistsError
 from bemlearn.files import atomic_write_text
 from bemlearn.outputs import LOCK_NAME, claim_outputs
 
@@ -161,7 +161,7 @@ def test_a_failed_train_force_leaves_the_run_as_it_was(trained, tmp_path, monkey
     before = _tree(copy)
 
     def fail(*args, **kwargs):
-        raise ValueError("dataset: injected failure after config.yaml was written")
+        raise DataError("dataset: injected failure after config.yaml was written")  # a user error: exit 2
 
     monkeypatch.setattr("bemlearn.pipeline.train.build_datasets", fail)
     cfg2 = _small_config(tmp_path, "other.yaml")
@@ -182,7 +182,7 @@ def test_a_failed_run_force_leaves_no_new_checkpoint_beside_the_old_report(train
     before = _tree(copy)
 
     def fail(*args, **kwargs):
-        raise ValueError("export: injected failure after the new checkpoint was written")
+        raise CheckpointError("export: injected failure after the new checkpoint was written")  # a user error: exit 2
 
     import importlib
 

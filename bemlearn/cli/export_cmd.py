@@ -12,6 +12,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["add_parser", "check_args", "run"]
 
 
@@ -49,9 +51,9 @@ def check_args(args: argparse.Namespace) -> None:
     """The rules between options that argparse cannot state, checked before any work (and by the
     README's test of the commands it shows)."""
     if args.fmt == "c" and args.out is None:
-        raise ValueError("--format c: give the output folder with --out DIR")
+        raise ArgumentError("--format c: give the output folder with --out DIR")
     if args.fmt != "c" and (args.prefix != "bem" or args.dtype != "float64"):
-        raise ValueError("--prefix and --dtype apply to --format c only")
+        raise ArgumentError("--prefix and --dtype apply to --format c only")
 
 
 def _run_c(args: argparse.Namespace) -> int:
