@@ -32,7 +32,7 @@ argument and what was expected.
 :class:`bemlearn.fitting.NumericalFailure` (a :class:`NumericalError`) is what a loss evaluation
 raises inside the optimizers; they catch it and keep the best parameters.
 
-Three built-ins are still raised on purpose, and the ``ast`` test allows exactly these:
+Four built-ins are still raised on purpose, and the ``ast`` test allows exactly these:
 
 * ``KeyboardInterrupt`` without arguments: the signal protocol (a SIGINT / SIGTERM handler, or a
   stage that stopped early on one and hands it on to the command).
@@ -42,6 +42,8 @@ Three built-ins are still raised on purpose, and the ``ast`` test allows exactly
 * ``AssertionError`` for an internal invariant (two results bemlearn computed itself that must
   agree): it is a bug in bemlearn, not a user error, so it stays outside the family and the
   ``bemlearn`` command shows its traceback.
+* ``AttributeError`` in a package's module-level ``__getattr__`` (PEP 562, ``bemlearn/_lazy.py``):
+  the protocol of attribute look-up (``hasattr``, ``getattr`` with a default) needs exactly it.
 
 The ``bemlearn`` command prints a :class:`BemlearnError` as one line on stderr,
 ``bemlearn COMMAND: error: MESSAGE``, and exits with status 2.  Anything else that escapes

@@ -164,3 +164,11 @@ def test_ci_runs_exactly_the_readme_test_command():
     assert cmds, "README quickstart test command not found"
     ci = (ROOT / ".ci" / "run").read_text().strip().splitlines()
     assert ci[-1] == cmds[0]
+
+
+def test_readme_check_catches_a_c_export_without_out():
+    from bemlearn.cli.main import build_parser
+
+    args = build_parser().parse_args(["export", "RUN", "--format", "c"])
+    with pytest.raises(ValueError, match="--out DIR"):
+        args.check(args)

@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from bemlearn.bench.predict_bench import format_predict_bench, run_predict_bench
 from bemlearn.errors import ArgumentError
 
 __all__ = ["add_parser", "run_predict"]
@@ -160,6 +159,8 @@ def _c_footprint(args: argparse.Namespace) -> int:
 
 
 def run_predict(args: argparse.Namespace) -> int:
+    from bemlearn.bench.predict_bench import format_predict_bench, run_predict_bench
+
     for name in ("n_train", "repeats", "gpytorch_repeats", "batch", "threads", "batch_threads"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
             raise ArgumentError(f"--{name.replace('_', '-')}: expected a positive integer, got {getattr(args, name)}")

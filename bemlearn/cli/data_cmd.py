@@ -17,9 +17,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from bemlearn.data.quantization import counts_per_revolution
-from bemlearn.data.trajectory_io import SUFFIXES, read_trajectory, write_trajectory
-from bemlearn.data.validation import JITTER_RTOL, MIN_TRIAL_SAMPLES, RATE_RTOL
+from bemlearn.data.limits import JITTER_RTOL, MIN_TRIAL_SAMPLES, RATE_RTOL
 from bemlearn.errors import ArgumentError, OutputExistsError
 
 __all__ = ["add_parser", "format_summary"]
@@ -96,6 +94,8 @@ def format_summary(path: Path | str, s: dict[str, Any]) -> str:
         if step is None:
             lines.append(f"  {joint:<12} none detected")
         else:
+            from bemlearn.data.quantization import counts_per_revolution
+
             counts = counts_per_revolution(step)
             lines.append(f"  {joint:<12} {step:.10g}" + (f" (= 2π/{counts}, {counts} counts/rev)" if counts else ""))
     return "\n".join(lines)
@@ -107,6 +107,8 @@ def _ids(ids: list[int], limit: int = 20) -> str:
 
 
 def run_check(args: argparse.Namespace) -> int:
+    from bemlearn.data.trajectory_io import read_trajectory
+
     traj = read_trajectory(args.file, robot=args.robot, min_trial_samples=args.min_trial_samples,
                            rate_rtol=args.rate_rtol, jitter_rtol=args.jitter_rtol)
     summary = traj.summary()
@@ -119,6 +121,8 @@ def run_check(args: argparse.Namespace) -> int:
 
 
 def run_convert(args: argparse.Namespace) -> int:
+    from bemlearn.data.trajectory_io import SUFFIXES, read_trajectory, write_trajectory
+
     if args.output.suffix.lower() not in SUFFIXES:
         raise ArgumentError(
             f"{args.output}: unsupported output suffix {args.output.suffix!r}; expected one of {list(SUFFIXES)}"
@@ -141,6 +145,7 @@ def run_convert(args: argparse.Namespace) -> int:
 def run_import(args: argparse.Namespace) -> int:
     from bemlearn.data.import_map import load_import_map
     from bemlearn.data.log_import import import_logs
+    from bemlearn.data.trajectory_io import SUFFIXES, write_trajectory
 
     if args.out.suffix.lower() not in SUFFIXES:
         raise ArgumentError(f"{args.out}: unsupported output suffix {args.out.suffix!r}; expected one of {list(SUFFIXES)}")

@@ -13,9 +13,8 @@ import argparse
 from pathlib import Path
 
 from bemlearn.errors import ArgumentError
-from bemlearn.export.export_run import export_run, export_targets
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "check_args", "run"]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -39,7 +38,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     _add_c_arguments(parser)
     parser.add_argument("--no-verify", action="store_true", help="skip reloading and checking the written file(s)")
     parser.add_argument("--force", action="store_true", help="replace existing predictor file(s) (any --format)")
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=run, check=check_args)
 
 
 def _add_c_arguments(parser: argparse.ArgumentParser) -> None:
@@ -48,13 +47,20 @@ def _add_c_arguments(parser: argparse.ArgumentParser) -> None:
     c.add_argument("--dtype", choices=("float64", "float32"), default="float64", help="C floating type (default float64)")
 
 
+def check_args(args: argparse.Namespace) -> None:
+    """The rules between options that argparse cannot state, checked before any work (and by the
+    README's test of the commands it shows)."""
+    if args.fmt == "c" and args.out is None:
+        raise ArgumentError("--format c: give the output folder with --out DIR")
+    if args.fmt != "c" and (args.prefix != "bem" or args.dtype != "float64"):
+        raise ArgumentError("--prefix and --dtype apply to --format c only")
+
+
 def _run_c(args: argparse.Namespace) -> int:
     from bemlearn.export.c_export import export_c
     from bemlearn.export.c_source import check_prefix
     from bemlearn.outputs import claim_outputs
 
-    if args.out is None:
-        raise ArgumentError("--format c: give the output folder with --out DIR")
     names = [f"{check_prefix(args.prefix)}_predictor.h", f"{args.prefix}_predictor.c"]
     # the folder is checked writable and locked before the work; both files or neither
     with claim_outputs(args.out, entries=names, force=args.force, what="export") as out:
@@ -65,10 +71,10 @@ def _run_c(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_args(args)
     if args.fmt == "c":
         return _run_c(args)
-    if args.prefix != "bem" or args.dtype != "float64":
-        raise ArgumentError("--prefix and --dtype apply to --format c only")
+    from bemlearn.export.export_run import export_run, export_targets
     from bemlearn.outputs import claim_outputs
 
     targets = export_targets(args.run_dir, out=args.out, fmt=args.fmt)

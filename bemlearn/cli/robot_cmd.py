@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 __all__ = ["add_parser"]
 
 
@@ -120,6 +118,8 @@ def _lemma1(args) -> int:
 
 def _units(robot) -> tuple[str, str, str]:
     """Units of q_a, of the unactuated row's generalized force, and of q_u (by joint kind)."""
+    import numpy as np
+
     kinds = getattr(robot, "joint_kinds", None)
     if kinds is None or not np.allclose(robot.T.numpy(), np.eye(robot.n)):
         return "rad", "N·m", "rad"
@@ -130,6 +130,8 @@ def _units(robot) -> tuple[str, str, str]:
 
 
 def _lqr(args) -> int:
+    import numpy as np
+
     from bemlearn.control.lqr import discrete_lqr
     from bemlearn.pipeline.derive import control_rate, design_region, input_units
     from bemlearn.robots import load

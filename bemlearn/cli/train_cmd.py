@@ -29,6 +29,11 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    # torch loads its compiler (torch._dynamo, ~1 s) when the first optimizer is built, i.e. at the
+    # start of the fit; load it with the rest of the training stack instead, so that the fit, once
+    # the dataset is logged, starts at once (and a Ctrl-C soon after lands inside it: checkpoint kept)
+    import torch._dynamo  # noqa: F401
+
     from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.config import load_pipeline_config
     from bemlearn.pipeline.preflight import preflight

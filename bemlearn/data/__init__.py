@@ -12,51 +12,56 @@
   :func:`write_rig_logs` (logger-style test logs); units by joint kind (:func:`joint_unit`).
 """
 
-from bemlearn.data.dataset import DatasetConfig, build_datasets, split_trials
-from bemlearn.data.dataset_types import BEMDataset, GPDatasets
-from bemlearn.data.derivatives import (
-    DERIVATIVE_ESTIMATORS,
-    DerivativeEstimator,
-    estimate_derivatives,
-    make_estimator,
-)
-from bemlearn.data.features import gp_input_names, gp_inputs, gp_output_name
-from bemlearn.data.finite_difference import CentralDifference
-from bemlearn.data.import_map import ImportMap, load_import_map
-from bemlearn.units import JOINT_KINDS, gp_input_units, joint_unit
-from bemlearn.data.log_import import import_logs
-from bemlearn.data.log_table import LogTable, read_log_table
-from bemlearn.data.normalization import Normalization
-from bemlearn.data.quantization import (
-    counts_per_revolution,
-    detect_quantization_step,
-    snap_to_grid,
-)
-from bemlearn.data.resample import GridSegment, place_on_grid
-from bemlearn.data.rig_logs import RigLogStyle, rig_log_map, write_rig_logs
-from bemlearn.data.savitzky_golay import SavitzkyGolay
-from bemlearn.data.trajectory import (
-    DEFAULT_UNITS,
-    Trajectory,
-    TrajectoryFormatError,
-    TrajectoryMeta,
-    TrialSlice,
-)
-from bemlearn.data.trajectory_io import (
-    ground_truth_path,
-    read_ground_truth,
-    read_trajectory,
-    write_trajectory,
-)
-from bemlearn.data.validation import (
-    JITTER_RTOL,
-    MIN_TRIAL_SAMPLES,
-    RATE_RTOL,
-    RobotLike,
-    check_robot,
-    column_names,
-    validate,
-)
+from typing import TYPE_CHECKING
+
+from bemlearn._lazy import lazy_namespace
+
+if TYPE_CHECKING:  # imported on first use: bemlearn._lazy
+    from bemlearn.data.dataset import DatasetConfig, build_datasets, split_trials
+    from bemlearn.data.dataset_types import BEMDataset, GPDatasets
+    from bemlearn.data.derivatives import (
+        DERIVATIVE_ESTIMATORS,
+        DerivativeEstimator,
+        estimate_derivatives,
+        make_estimator,
+    )
+    from bemlearn.data.features import gp_input_names, gp_inputs, gp_output_name
+    from bemlearn.data.finite_difference import CentralDifference
+    from bemlearn.data.import_map import ImportMap, load_import_map
+    from bemlearn.data.log_import import import_logs
+    from bemlearn.data.log_table import LogTable, read_log_table
+    from bemlearn.data.normalization import Normalization
+    from bemlearn.data.quantization import (
+        counts_per_revolution,
+        detect_quantization_step,
+        snap_to_grid,
+    )
+    from bemlearn.data.resample import GridSegment, place_on_grid
+    from bemlearn.data.rig_logs import RigLogStyle, rig_log_map, write_rig_logs
+    from bemlearn.data.savitzky_golay import SavitzkyGolay
+    from bemlearn.data.trajectory import (
+        DEFAULT_UNITS,
+        Trajectory,
+        TrajectoryFormatError,
+        TrajectoryMeta,
+        TrialSlice,
+    )
+    from bemlearn.data.trajectory_io import (
+        ground_truth_path,
+        read_ground_truth,
+        read_trajectory,
+        write_trajectory,
+    )
+    from bemlearn.data.validation import (
+        JITTER_RTOL,
+        MIN_TRIAL_SAMPLES,
+        RATE_RTOL,
+        RobotLike,
+        check_robot,
+        column_names,
+        validate,
+    )
+    from bemlearn.units import JOINT_KINDS, gp_input_units, joint_unit
 
 __all__ = [
     # trajectories
@@ -111,3 +116,5 @@ __all__ = [
     "BEMDataset",
     "GPDatasets",
 ]
+
+__getattr__, __dir__ = lazy_namespace(__name__, __file__)

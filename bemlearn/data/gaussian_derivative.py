@@ -38,8 +38,6 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from scipy.ndimage import convolve1d
-from scipy.signal import oaconvolve
 
 from bemlearn.errors import ArgumentError, ConfigError
 
@@ -70,6 +68,9 @@ def gaussian_kernels(sigma_s: float, sample_rate_hz: float, truncate: float = 5.
 def apply_kernel(q: np.ndarray, w: np.ndarray) -> np.ndarray:
     """``(T, n)`` Σ_k w[K + k] q_{i−k}, the ends padded with the end values; overlap-add FFT for
     long kernels (the same numbers to rounding)."""
+    from scipy.ndimage import convolve1d
+    from scipy.signal import oaconvolve
+
     K = w.size // 2
     if K <= 64 or q.shape[0] < 4 * K:
         return convolve1d(q, w, axis=0, mode="nearest")

@@ -23,7 +23,6 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from bemlearn.errors import ArgumentError, ConfigError
 
@@ -110,6 +109,8 @@ class SavitzkyGolay:
         Returns:
             qd (T, n) rad/s and qdd (T, n) rad/s² (m/s, m/s² for slides).
         """
+        from scipy.signal import savgol_filter  # SciPy's signal package takes ~0.5 s to import
+
         q = np.asarray(q, dtype=np.float64)
         w = self.window_samples(sample_rate_hz)
         dt = 1.0 / sample_rate_hz

@@ -23,20 +23,13 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from bemlearn.units import q_unit_label
+from bemlearn.data.limits import JITTER_RTOL, MIN_TRIAL_SAMPLES, RATE_RTOL
 from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, TrajectoryMeta
+from bemlearn.units import q_unit_label
 
 __all__ = [
     "validate", "check_robot", "column_names", "RobotLike", "MIN_TRIAL_SAMPLES", "RATE_RTOL", "JITTER_RTOL",
 ]
-
-#: Default shortest accepted trial, samples (shorter ones are almost surely truncated recordings).
-MIN_TRIAL_SAMPLES = 10
-#: Default relative tolerance on each trial's median time step against 1 / sample_rate_hz.
-RATE_RTOL = 1e-2
-#: Default relative tolerance on every single time step against 1 / sample_rate_hz
-#: (timestamp jitter: 10 % is 200 µs at 500 Hz, ten times what a real logger writes).
-JITTER_RTOL = 0.1
 
 
 class RobotLike(Protocol):

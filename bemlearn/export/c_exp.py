@@ -2,7 +2,7 @@
 
 The mean (eq. 12) needs exp(e_j) for every support point; libm's ``exp`` is a scalar call
 that the compiler cannot vectorize, and it dominates a query.  The float64 block below is
-branch-free with a fixed trip count, so compilers vectorize it at -O2 (docs/c-export.md gives
+branch-free with a fixed trip count, so compilers vectorize it at -O2 (docs/c-export-measured.md gives
 its accuracy and speed); float32 keeps libm's ``expf``.
 """
 

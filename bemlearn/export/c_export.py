@@ -57,7 +57,8 @@ def export_c(
         prefix: C identifier prefixed to every public name.
         dtype: ``"float64"`` or ``"float32"``.
         force: overwrite existing files.
-        f32_mean_tol, f32_std_rtol: float32 accuracy tolerances (see :func:`c_sources`).
+        f32_mean_tol: float32 tolerance on the mean, rad (see :func:`c_sources`).
+        f32_std_rtol: float32 tolerance on the std, relative (see :func:`c_sources`).
 
     Returns:
         The two paths written (header first).

@@ -191,9 +191,10 @@ def c_sources(
         metadata: its validated metadata (``m`` fixes the input widths).
         prefix: C identifier prefixed to every public name (``bem_mean``, ``BEM_OK``, ...).
         dtype: ``"float64"`` (``double``) or ``"float32"`` (``float``, for FPUs without double).
-        f32_mean_tol, f32_std_rtol: float32 only: refuse when the emulated float32 predictor
+        f32_mean_tol: float32 only: refuse when the emulated float32 predictor
             (:func:`~bemlearn.export.c_float32.float32_errors`) differs from float64 by more
-            than this in the mean (rad) or the std (relative) on in-range inputs.
+            than this in the mean (rad) on in-range inputs.
+        f32_std_rtol: float32 only: the same for the std (relative).
 
     Raises:
         ArgumentError: (a ValueError) a bad prefix or dtype, or float32 too inaccurate for this posterior

@@ -32,12 +32,15 @@ import dataclasses
 import logging
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
 from bemlearn.errors import ArgumentError, DataError
-from bemlearn.models.predictor_state import PredictorState
+
+if TYPE_CHECKING:  # bemlearn.models loads GPyTorch: not needed for gaussian_quantile
+    from bemlearn.models.predictor_state import PredictorState
 
 __all__ = ["ReplicaCalibration", "calibrate_replicas", "condition_state", "gaussian_quantile"]
 

@@ -43,7 +43,8 @@ def fit_exact(
         max_iter: iterations / steps.
         lr: learning rate (``None``: 1.0 for L-BFGS, 0.05 for Adam).
         tol: convergence tolerance on the loss (nats per point).
-        jitter, max_tries: Cholesky retry policy.
+        jitter: Cholesky retry policy: the first jitter j₀ (:func:`~bemlearn.models.solver.robust_cholesky`).
+        max_tries: Cholesky retry policy: the number of jittered retries.
         callback: ``callback(step, metrics)`` after every step.
         progress: show a progress bar.
 

@@ -30,7 +30,8 @@ def fit_gp(
     """Fit ``model`` with the optimizer settings of ``config`` (svgp streams ``train_x``, ``train_y``).
 
     Args:
-        model, likelihood: from :func:`~bemlearn.fitting.build.build_gp`.
+        model: from :func:`~bemlearn.fitting.build.build_gp`.
+        likelihood: from :func:`~bemlearn.fitting.build.build_gp`.
         train_x: ``(N, d)`` normalized inputs (used by svgp; exact/sgpr hold their data).
         train_y: ``(N,)`` normalized outputs.
         config: optimizer, max_iter, lr, tol, fit_subset, batch_size, epochs, ngd_lr, seed, jitter.

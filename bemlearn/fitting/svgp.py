@@ -65,7 +65,8 @@ def fit_svgp(
         refresh_q: after the last epoch, set q(v) to its optimum for the final θ and Z
             (:func:`~bemlearn.fitting.variational.optimal_variational`, one streamed O(N M²) pass).
         seed: seed of the minibatch order.
-        jitter, max_tries: Cholesky retry policy.
+        jitter: Cholesky retry policy: the first jitter j₀ (:func:`~bemlearn.models.solver.robust_cholesky`).
+        max_tries: Cholesky retry policy: the number of jittered retries.
         callback: ``callback(step, metrics)`` after every minibatch (metrics also has ``epoch``).
         progress: show a progress bar.
 

@@ -63,7 +63,9 @@ class LearnedBEM:
 
     Args:
         state: the frozen posterior.
-        robot, actuated_names, unactuated_name: what the columns mean.
+        robot: the robot's name (what the columns mean).
+        actuated_names: the actuated joints' names.
+        unactuated_name: the unactuated joint's name.
     """
 
     name = "learned"

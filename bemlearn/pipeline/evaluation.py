@@ -10,17 +10,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
 
 from bemlearn.errors import CheckpointError, ConfigError
-from bemlearn.models.band import band_reference
-from bemlearn.models.predictor_state import PredictorState
 from bemlearn.pipeline.reliability import reliability_table
 from bemlearn.robots.protocol import BalanceRobot
 from bemlearn.robots.reference import CompositeSinusoid
+
+if TYPE_CHECKING:  # bemlearn.models loads GPyTorch: not needed to read an EvaluationConfig
+    from bemlearn.models.predictor_state import PredictorState
 
 __all__ = ["EvaluationConfig", "held_out_references", "reference_queries", "evaluate_bem", "run_truth_robot", "BEMEvaluation",
            "BEMCurves", "ReferenceErrors", "DesignRegionErrors", "BoundViolation"]
@@ -261,6 +262,8 @@ class _ReferencePoints:
 def _reference_points(state: PredictorState, robot: BalanceRobot, ref: CompositeSinusoid, t: np.ndarray,
                       design_bound: float) -> _ReferencePoints:
     """Learned (eq. 14) vs model (eq. 9) BEM along ``ref`` at times ``t``."""
+    from bemlearn.models.band import band_reference  # GPyTorch: loaded when a BEM is evaluated
+
     qa, qad, qadd = ref.evaluate(t)
     bem = robot.bem(qa, qad, qadd)
     ok = bem.valid.numpy()

@@ -102,7 +102,8 @@ def fit_bem_gp(
             rad/s² or m/s², q̇ in rad/s or m/s, q in rad or m, by joint kind).
         y: ``(N,)`` float64 q_u, in its joint's unit.
         normalization: the training split's normalization (applied here).
-        input_names, units: the columns and their units (``{column: unit}``).
+        input_names: the columns.
+        units: their units (``{column: unit}``).
         config: the GP options (kind, optimizer, device, dtype).
         provenance: the robot, coordinates and data file, recorded in the checkpoint's metadata.
         writer: a TensorBoard ``SummaryWriter`` (loss, noise, outputscale, lengthscale/<input>).

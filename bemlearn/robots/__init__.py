@@ -1,10 +1,15 @@
 """Robot models: dynamics, partition, model-based BEM and zero dynamics (eq. 1–10)."""
 
-from bemlearn.robots.bem import BEMResult, solve_bem
-from bemlearn.robots.mujoco_robot import MujocoRobot, RobotModelError
-from bemlearn.robots.protocol import BalanceRobot, ControlRobot
-from bemlearn.robots.registry import ROBOTS, RobotRef, load, register_robot, registered_robots, resolve_robot
-from bemlearn.robots.robot import Robot
+from typing import TYPE_CHECKING
+
+from bemlearn._lazy import lazy_namespace
+
+if TYPE_CHECKING:  # imported on first use: bemlearn._lazy
+    from bemlearn.robots.bem import BEMResult, solve_bem
+    from bemlearn.robots.mujoco_robot import MujocoRobot, RobotModelError
+    from bemlearn.robots.protocol import BalanceRobot, ControlRobot
+    from bemlearn.robots.registry import ROBOTS, RobotRef, load, register_robot, registered_robots, resolve_robot
+    from bemlearn.robots.robot import Robot
 
 __all__ = [
     "BEMResult",
@@ -21,3 +26,5 @@ __all__ = [
     "resolve_robot",
     "solve_bem",
 ]
+
+__getattr__, __dir__ = lazy_namespace(__name__, __file__)

@@ -60,7 +60,8 @@ def solve_bem(
             ``rows`` (``(R,)`` int64) row r uses the ``rows[r]``-th problem's parameters, so only
             unresolved problems are evaluated; without it ``R = B`` and row b is problem b.
         batch: B.
-        lo, hi: admissible range, ``lo < hi``.
+        lo: lower end of the admissible range.
+        hi: upper end, ``lo < hi``.
         nominal: preferred value; among bracketed roots the one nearest it is returned.
         n_grid: grid nodes for bracketing (≥ 3).
         xtol: absolute tolerance on the root.

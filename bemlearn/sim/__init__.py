@@ -1,9 +1,14 @@
 """Closed-loop MuJoCo simulation of the EIC loop with a BEM source, the sensed plant it runs, figures, rendering."""
 
-from bemlearn.sim.closed_loop import NominalConfig, ReferenceConfig, SimResult, SimulateConfig, nominal_robot, simulate
-from bemlearn.sim.figures import plot_run
-from bemlearn.sim.plant import SensedPlant
-from bemlearn.sim.render import render_gif
+from typing import TYPE_CHECKING
+
+from bemlearn._lazy import lazy_namespace
+
+if TYPE_CHECKING:  # imported on first use: bemlearn._lazy
+    from bemlearn.sim.closed_loop import NominalConfig, ReferenceConfig, SimResult, SimulateConfig, nominal_robot, simulate
+    from bemlearn.sim.figures import plot_run
+    from bemlearn.sim.plant import SensedPlant
+    from bemlearn.sim.render import render_gif
 
 __all__ = [
     "NominalConfig",
@@ -16,3 +21,5 @@ __all__ = [
     "render_gif",
     "simulate",
 ]
+
+__getattr__, __dir__ = lazy_namespace(__name__, __file__)

@@ -25,8 +25,9 @@ def plot_run(result, path: str | Path, *, model_bem: np.ndarray | None = None, b
         model_bem: ``(T,)`` model-based BEM at the loop's BEM inputs, in q_u's unit.
         band: ``(mean, std)`` of the learned BEM, ``(T,)`` each, in q_u's unit.
         lemma: ``{"t", "delta_gamma", "hdot"}`` arrays for panel (c).
-        joint_names, units, indices: name, unit (rad or m, by joint kind) and column in ``result.q`` of
-            the (first) actuated joint and of the unactuated joint.
+        joint_names: names of the (first) actuated joint and of the unactuated joint.
+        units: their units (rad or m, by joint kind).
+        indices: their columns in ``result.q``.
         input_label: axis label of the actuator command (with its unit).
     """
     import matplotlib.pyplot as plt

@@ -101,7 +101,9 @@ def render_gif(robot: MujocoRobot, q: np.ndarray, path: str | Path, *, rate_hz: 
         fps: frames per second of the animation (frames are subsampled from the log).
         seconds: only the first ``seconds`` of the log (``None``: all).
         size: ``(width, height)`` pixels.
-        distance, elevation, azimuth: the free camera around the model centre (m, deg, deg).
+        distance: the free camera's distance from the model centre (m).
+        elevation: its elevation (deg).
+        azimuth: its azimuth (deg).
     """
     from PIL import Image
 

@@ -10,13 +10,18 @@ and writes ``results.csv`` / ``results.json`` / ``summary.png`` (:mod:`~bemlearn
 Ray is optional (``pip install "bemlearn[ray]"``) and imported only by the Ray backend.
 """
 
-from bemlearn.sweep.backends import RayBackend, SerialBackend, make_backend, ray_available
-from bemlearn.sweep.cell_runner import CellJob, CellOutcome, read_outcome, run_cell
-from bemlearn.sweep.cells import Cell, cell_id, expand_cells
-from bemlearn.sweep.config import LoadedSweep, SweepConfig, SweepResources, load_sweep
-from bemlearn.sweep.driver import CellTiming, SweepResult, run_sweep
-from bemlearn.sweep.results import result_rows, summary_figure, write_results
-from bemlearn.sweep.stage import SweepStage, core_stages, get_stage, stage_names
+from typing import TYPE_CHECKING
+
+from bemlearn._lazy import lazy_namespace
+
+if TYPE_CHECKING:  # imported on first use: bemlearn._lazy
+    from bemlearn.sweep.backends import RayBackend, SerialBackend, make_backend, ray_available
+    from bemlearn.sweep.cell_runner import CellJob, CellOutcome, read_outcome, run_cell
+    from bemlearn.sweep.cells import Cell, cell_id, expand_cells
+    from bemlearn.sweep.config import LoadedSweep, SweepConfig, SweepResources, load_sweep
+    from bemlearn.sweep.driver import CellTiming, SweepResult, run_sweep
+    from bemlearn.sweep.results import result_rows, summary_figure, write_results
+    from bemlearn.sweep.stage import SweepStage, core_stages, get_stage, stage_names
 
 __all__ = [
     "Cell",
@@ -45,3 +50,5 @@ __all__ = [
     "summary_figure",
     "write_results",
 ]
+
+__getattr__, __dir__ = lazy_namespace(__name__, __file__)
