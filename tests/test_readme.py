@@ -118,7 +118,7 @@ def test_readme_commands_run(tmp_path, monkeypatch, capsys):
 
 def _repo_paths() -> set[str]:
     """Repository paths the README names in code (inline, blocks) and links; outputs (``runs/…``),
-    the reader's own files (:data:`PLACEHOLDERS`) and paths outside the clone (``../…``, absent
+    the docs build (``site/``), the reader's own files (:data:`PLACEHOLDERS`) and paths outside the clone (``../…``, absent
     from a clean clone in CI) left out.  A token is a path if it has a
     ``/`` and a file extension, a trailing ``/``, or a first folder that exists (``.ci/run``)."""
     code = re.findall(r"```\w*\n(.*?)```", README, flags=re.S) + re.findall(r"(?<!`)`([^`\n]+)`(?!`)", README)
@@ -127,7 +127,7 @@ def _repo_paths() -> set[str]:
     out = set()
     for t in tokens:
         t = t.rstrip(".,;:")
-        if (t in PLACEHOLDERS or t.startswith(("runs/", "../")) or "://" in t
+        if (t in PLACEHOLDERS or t.startswith(("runs/", "site/", "../")) or "://" in t
                 or not re.fullmatch(r"(\.\./)*[\w.-]+(/[\w.-]+)*/?", t) or "/" not in t):
             continue
         if t.endswith("/") or re.search(r"\.[A-Za-z]+$", t) or (ROOT / t.split("/")[0]).is_dir():
