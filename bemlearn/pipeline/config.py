@@ -45,7 +45,8 @@ config_limits(CollectConfig, n_trials=Limit(ge=1, le=10**6), duration_s=Limit(gt
               physics_timestep=Limit(gt=0, le=1, unit="s"))
 config_limits(EvaluationConfig, n_references=Limit(ge=1, le=10**5), n_sines=Limit(ge=1, le=1000, ordered=True),
               amplitude_max=Limit(gt=0), amplitude_min=Limit(ge=0), frequency_hz=Limit(gt=0, le=1e6, ordered=True, unit="Hz"),
-              duration_s=Limit(gt=0, le=1e6, unit="s"), rate_hz=Limit(gt=0, le=1e6, unit="Hz"), seed=Limit(ge=0))
+              duration_s=Limit(gt=0, le=1e6, unit="s"), rate_hz=Limit(gt=0, le=1e6, unit="Hz"), seed=Limit(ge=0),
+              design_points=Limit(ge=0, le=10**6))
 
 
 @dataclass(frozen=True)
