@@ -28,8 +28,8 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     from bemlearn.outputs import claim_outputs
-    from bemlearn.pipeline.config import load_pipeline_config
     from bemlearn.pipeline.preflight import preflight
+    from bemlearn.pipeline.resolve import load_pipeline_config
     from bemlearn.pipeline.train import train_run
 
     preflight(config=args.config, device=args.device)

@@ -1,12 +1,12 @@
 """Orchestration of the stages: configs (resolved from the model), training runs, evaluation, closed-loop runs, reports."""
 
-from bemlearn.pipeline.config import PipelineConfig, load_pipeline_config
+from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.data_evaluation import SliceSpec, bem_slice_figure, bem_slices, heldout_prediction
 from bemlearn.pipeline.evaluation import EvaluationConfig, evaluate_bem, held_out_references, run_truth_robot
 from bemlearn.pipeline.gp_stage import GPStageResult, fit_bem_gp
 from bemlearn.pipeline.lemma import learned_lemma1
 from bemlearn.pipeline.reliability import reliability_figure, reliability_table
-from bemlearn.pipeline.resolve import ResolvedConfig, complete_section, resolve_pipeline_config
+from bemlearn.pipeline.resolve import ResolvedConfig, complete_section, load_pipeline_config, resolve_pipeline_config
 from bemlearn.pipeline.run import run_pipeline
 from bemlearn.pipeline.train import train_run
 

@@ -24,7 +24,7 @@ import numpy as np
 from bemlearn.apps.furuta.model import AnalyticFuruta, FurutaParameters
 from bemlearn.data.plant import SensedPlant
 from bemlearn.export.c_build import STRICT_FLAGS, compile_shared
-from bemlearn.pipeline.config import load_pipeline_config
+from bemlearn.pipeline.resolve import load_pipeline_config
 from bemlearn.robots import load
 from bemlearn.sim.closed_loop import SimulateConfig
 
@@ -63,8 +63,9 @@ def build(bem_c_dir: Path, out: Path) -> Path:
                           flags=(*STRICT_FLAGS, "-O2", f"-I{bem_c_dir}", f"-I{HERE}"))
 
 
-def furuta_params(p: FurutaParameters = FurutaParameters()) -> Params:
-    """The controller's nominal model: the rigid-body rows of AnalyticFuruta."""
+def furuta_params(p: FurutaParameters | None = None) -> Params:
+    """The controller's nominal model: the rigid-body rows of AnalyticFuruta (default ``FurutaParameters()``)."""
+    p = FurutaParameters() if p is None else p
     a = AnalyticFuruta(p)
     return Params(a._Daa0, a._sin2, a._cos2, a._mLl, a._Duu, a._mgl, p.B_r, p.B_p, p.k_u, p.b_emf, p.V_max)
 

@@ -14,14 +14,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from bemlearn.config import to_dict
 from bemlearn.apps.biped.gait import stance_frame
+from bemlearn.config import to_dict
 from bemlearn.data.features import gp_inputs
 from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
 from bemlearn.data.validation import MIN_TRIAL_SAMPLES
 
 if TYPE_CHECKING:
-    from bemlearn.apps.biped.walker import WalkResult
+    from bemlearn.apps.biped.walk_result import WalkResult
 
 __all__ = ["walk_trajectories", "stance_per_sample", "walking_data"]
 
