@@ -2,7 +2,6 @@
 
 import dataclasses
 import json
-
 import os
 
 import pytest
@@ -102,3 +101,41 @@ def test_predict_bench_small_run(posterior):
 def test_bench_cli_rejects_bad_counts(capsys):
     assert main(["bench", "predict", "--repeats", "0"]) == 2
     assert "--repeats: expected a positive integer" in capsys.readouterr().err
+
+
+class _VarScaled(_Shifted):
+    """A predictor whose latent variance is off by the factor ``1 + rel``."""
+
+    def __init__(self, state, rel):
+        super().__init__(state, 0.0)
+        self.rel = rel
+
+    def predict_full(self, x):
+        mean, std, _ = reference_posterior(self.state, x)
+        return mean, std * (1.0 + self.rel) ** 0.5
+
+
+def test_exact_rounding_bound_covers_an_ill_conditioned_export(tmp_path):
+    """Inputs that barely vary along four of five lengthscales and little noise (κ₂(K) ≈ 1e9, as on a
+    reaction wheel's small runs): the exported predictor's variance (Cholesky factor, then one
+    triangular solve) stays inside the reference's per-input rounding bound, the check passes,
+    and a variance off by 1e-3 relative is still refused."""
+    from bemlearn.export.variance_factor import condition_number
+
+    state, meta = synthetic_posterior(n_train=500, m=1, seed=3, noise=1e-7)
+    state = dataclasses.replace(state, lengthscale=torch.tensor([0.3, 1e4, 1e4, 1.0, 1e4], dtype=F64))
+    L = torch.linalg.cholesky(state.gram())
+    y = state.Z[:, 2].sin()  # any smooth target: the check concerns the variance
+    state = dataclasses.replace(state, alpha=torch.cholesky_solve(y[:, None], L)[:, 0], S=torch.cholesky_inverse(L))
+    assert condition_number(state.gram()) > 1e8
+    write_checkpoint(tmp_path / "run", model_state={}, predictor_state=state, metadata=meta)
+    (path,) = export_run(tmp_path / "run" / "checkpoint.pt", out=tmp_path / "p.pt", fmt="torchscript", verify=False)
+    module = load_torchscript(path)
+    x = state.x_mean[:3] + 2 * state.x_std[:3] * torch.randn(256, 3, generator=torch.Generator().manual_seed(0), dtype=F64)
+    x0 = torch.cat([x, torch.zeros(256, 2, dtype=F64)], 1)
+    _, std = module.forward_latent(x)
+    _, ref_std, bound = reference_posterior(state, x0)
+    assert bool(((std.square() - ref_std.square()).abs() <= bound).all())
+    verify_predictor(module, state, where="p.pt")
+    with pytest.raises(ValueError, match="relative"):
+        verify_predictor(_VarScaled(state, 1e-3), state, where="scaled")

@@ -28,7 +28,7 @@ import time
 from typing import Any
 
 from bemlearn.errors import EnvironmentProblem, SweepError
-from bemlearn.sweep.cell_runner import CellJob, CellOutcome, failed_outcome, run_cell
+from bemlearn.sweep.cell_runner import CellJob, CellOutcome, failed_outcome, run_cell, warm_worker
 from bemlearn.sweep.config import SweepResources
 
 __all__ = ["SerialBackend", "RayBackend", "make_backend", "ray_available"]
@@ -63,7 +63,7 @@ class SerialBackend:
         self._queue.append((self._next, job))
         return self._next
 
-    def wait(self, timeout: float) -> list[tuple[int, CellOutcome]]:  # noqa: ARG002 - runs the next job at once
+    def wait(self, timeout: float) -> list[tuple[int, CellOutcome]]:
         """Run the next queued job; returns ``[(handle, outcome)]`` (empty when nothing is queued)."""
         if not self._queue:
             return []
@@ -140,6 +140,12 @@ class RayBackend:
         self.slots = max(1, min(fit, max_parallel) if max_parallel else fit)
         self._remote = ray.remote(run_cell).options(num_cpus=resources.cpus, num_gpus=resources.gpus, max_retries=0,
                                                     name="bemlearn-sweep-cell")
+        t1 = time.perf_counter()  # start the workers and their imports once, before any cell (counted in startup_s)
+        warm = ray.remote(warm_worker).options(num_cpus=resources.cpus, num_gpus=resources.gpus, max_retries=0,
+                                               name="bemlearn-sweep-warm-up")
+        pids = ray.get([warm.remote() for _ in range(self.slots)])
+        self.startup_s += time.perf_counter() - t1
+        log.info("Ray: %d worker(s) ready in %.1f s", len(set(pids)), time.perf_counter() - t1)
         self._pending: dict[Any, CellJob] = {}
         self._submitted: dict[Any, float] = {}
         log.info("Ray: %g CPU(s), %g GPU(s); %d cell(s) at once", cpus, gpus, self.slots)

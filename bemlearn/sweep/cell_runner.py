@@ -234,6 +234,21 @@ def _verdict(metrics: dict[str, Any]) -> tuple[str | None, list[str]]:
     return (str(v["status"]) if v.get("status") is not None else None), [str(r) for r in reasons]
 
 
+def warm_worker() -> int:
+    """Import what every cell needs (torch, the stages and the pipeline) in this worker process.
+
+    Run once per Ray worker when the backend starts, so that a cell's wall time holds its own
+    work and not the worker's one-time imports; returns the worker's process id.
+    """
+    import numpy  # noqa: F401
+    import torch  # noqa: F401
+
+    import bemlearn.pipeline.run
+    import bemlearn.sweep.stage  # noqa: F401
+
+    return os.getpid()
+
+
 def run_cell(job: CellJob) -> CellOutcome:
     """Run one attempt at a cell (module docstring); returns its record (also in ``cell.json``)."""
     from bemlearn.files import atomic_write_text
