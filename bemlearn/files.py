@@ -175,7 +175,8 @@ def check_free_space(sizes: Mapping[str | os.PathLike[str], int], *, margin: int
 
 def atomic_write_files(files: Mapping[str | os.PathLike[str], bytes]) -> list[Path]:
     """Write several files all or none: room is checked (:func:`check_free_space`), every temporary
-    is written and synced, and only then are they renamed over their targets; returns the paths.
+    is written and synced (one :func:`atomic_path` per file), and only then are they renamed over
+    their targets; returns the paths.
 
     Raises:
         EnvironmentProblem: no room, or a full / read-only disk during the writes (nothing replaced,
@@ -183,26 +184,15 @@ def atomic_write_files(files: Mapping[str | os.PathLike[str], bytes]) -> list[Pa
     """
     items = [(Path(p), data) for p, data in files.items()]
     check_free_space({p: len(d) for p, d in items})
-    staged: list[tuple[Path, Path]] = []    # (target, temporary folder)
-    current = items[0][0] if items else Path(".")
-    try:
-        for path, data in items:
-            current = path
-            path.parent.mkdir(parents=True, exist_ok=True)
-            tmp_dir = path.parent / f".{path.name}.tmp-{os.getpid()}-{time.monotonic_ns() % 10**9}"
-            tmp_dir.mkdir()
-            staged.append((path, tmp_dir))
-            _write_data(tmp_dir / path.name, data)
-        for path, tmp_dir in staged:
-            current = path
-            os.replace(tmp_dir / path.name, path)
-        for folder in {p.parent for p, _ in items}:
-            _fsync_dir(folder)
-    except OSError as exc:
-        raise (write_problem(current, exc) or exc) from None
-    finally:
-        for _, tmp_dir in staged:
-            shutil.rmtree(tmp_dir, ignore_errors=True)
+    with contextlib.ExitStack() as stack:
+        # one atomic_path per file, entered last-first so that on a normal exit the renames run in
+        # the given order; an error while writing unwinds them all with nothing renamed
+        temporaries = [stack.enter_context(atomic_path(p)) for p, _ in reversed(items)][::-1]
+        for (path, data), tmp in zip(items, temporaries):
+            try:
+                _write_data(tmp, data)
+            except OSError as exc:   # named after the file that failed, not the first of the set
+                raise (write_problem(path, exc) or exc) from None
     return [p for p, _ in items]
 
 

@@ -48,7 +48,7 @@ def main() -> int:
     args = p.parse_args()
     if args.collect is not None:
         from bemlearn.data.collect import collect
-        from bemlearn.pipeline.config import load_pipeline_config
+        from bemlearn.pipeline.resolve import load_pipeline_config
 
         cfg = dataclasses.replace(load_pipeline_config(args.config).collect, n_trials=args.collect, seed=args.seed)
         traj, _ = collect("furuta", cfg)

@@ -30,6 +30,6 @@ def furuta_section(name: str, **overrides):
     """A section of the shipped ``configs/furuta.yaml`` (resolved), with ``overrides`` replaced."""
     import dataclasses
 
-    from bemlearn.pipeline.config import load_pipeline_config
+    from bemlearn.pipeline.resolve import load_pipeline_config
 
     return dataclasses.replace(getattr(load_pipeline_config(FURUTA_CONFIG), name), **overrides)

@@ -19,7 +19,6 @@ from bemlearn.apps.furuta.model import AnalyticFuruta
 from bemlearn.export import BEMPredictor, PredictorMetadata, c_sources, save_torchscript
 from bemlearn.export.c_build import find_cc
 from bemlearn.export.c_export import write_files
-from bemlearn.export.variance_factor import kernel_gram
 from bemlearn.models.predictor_state import PredictorState
 from bemlearn.robots import load
 from bemlearn.sim.closed_loop import simulate
@@ -60,7 +59,7 @@ def _furuta_bem_gp(n: int = 300, seed: int = 0) -> tuple[PredictorState, Predict
         noise=torch.tensor(1e-4, dtype=F64), x_mean=Xt.mean(0), x_std=Xt.std(0), y_mean=y.mean(), y_std=y.std(),
         input_names=names, n_train=n,
     )
-    L = torch.linalg.cholesky(kernel_gram(state))
+    L = torch.linalg.cholesky(state.gram())
     alpha = torch.cholesky_solve(((y - y.mean()) / y.std())[:, None], L)[:, 0]
     state = PredictorState(**{**state.__dict__, "alpha": alpha, "S": torch.cholesky_inverse(L)})
     meta = PredictorMetadata(

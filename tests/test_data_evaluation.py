@@ -11,6 +11,7 @@ import torch
 
 from bemlearn.data import BEMDataset, Normalization, TrajectoryMeta
 from bemlearn.models import LearnedBEM
+from bemlearn.models.kernels import se_gram
 from bemlearn.models.predictor_state import PredictorState
 from bemlearn.pipeline.data_evaluation import (
     SliceSpec,
@@ -43,8 +44,7 @@ def exact_state(train: BEMDataset, lengthscale: np.ndarray, noise: float = 1e-3)
     """An exact-GP posterior built with a dense solve (the reference formulas of eq. 12)."""
     Z = train.x_normalized
     ls = torch.as_tensor(lengthscale, dtype=torch.float64)
-    d = (Z[:, None] - Z[None]) / ls
-    K = torch.exp(-0.5 * (d**2).sum(-1)) + noise * torch.eye(len(Z), dtype=torch.float64)
+    K = se_gram(Z, ls, torch.tensor(1.0, dtype=torch.float64)) + noise * torch.eye(len(Z), dtype=torch.float64)
     Kinv = torch.linalg.inv(K)
     return PredictorState(
         kind="exact", Z=Z, alpha=Kinv @ train.y_normalized, S=Kinv, lengthscale=ls,
@@ -57,8 +57,7 @@ def exact_state(train: BEMDataset, lengthscale: np.ndarray, noise: float = 1e-3)
 def numpy_posterior(state: PredictorState, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean and predictive std in physical units, from the formulas, in NumPy."""
     s = {k: v.numpy() for k, v in state.tensors().items()}
-    xt = (x - s["x_mean"]) / s["x_std"]
-    k = np.exp(-0.5 * (((xt[:, None] - s["Z"][None]) / s["lengthscale"]) ** 2).sum(-1))
+    k = state.kernel_row(torch.from_numpy(x)).numpy()   # σ_f² = 1 here
     mean = s["y_mean"] + s["y_std"] * (k @ s["alpha"])
     var = 1.0 - np.einsum("bi,ij,bj->b", k, s["S"], k) + s["noise"]
     return mean, s["y_std"] * np.sqrt(np.maximum(var, 0.0))

@@ -17,8 +17,8 @@ from bemlearn.data import DatasetConfig, build_datasets
 from bemlearn.data.finite_difference import CentralDifference
 from bemlearn.data.savitzky_golay import SavitzkyGolay
 from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
-from bemlearn.export.variance_factor import kernel_gram
 from bemlearn.fitting.estimator_sensitivity import estimator_sensitivity, projected_weights
+from bemlearn.models.kernels import se_gram, se_kernel
 from bemlearn.models.predictor_state import PredictorState
 
 F64 = torch.float64
@@ -35,7 +35,7 @@ def _exact_state(X: torch.Tensor, y: torch.Tensor, *, x_mean, x_std, noise=1e-3)
         noise=torch.tensor(noise, dtype=F64), x_mean=x_mean, x_std=x_std, y_mean=ym, y_std=ys,
         input_names=NAMES, n_train=n,
     )
-    L = torch.linalg.cholesky(kernel_gram(base))
+    L = torch.linalg.cholesky(base.gram())
     return dataclasses.replace(base, alpha=torch.cholesky_solve(((y - ym) / ys)[:, None], L)[:, 0], S=torch.cholesky_inverse(L))
 
 
@@ -57,11 +57,7 @@ def test_projected_weights_are_the_sgpr_weights_on_other_data():
                              kind="sgpr")
     yn = (y - st.y_mean) / st.y_std
 
-    def k(a, b):
-        d = (a[:, None, :] - b[None, :, :]) / st.lengthscale
-        return st.outputscale * torch.exp(-0.5 * (d**2).sum(-1))
-
-    Kzx, Kzz = k(Z, X), k(Z, Z)
+    Kzx, Kzz = se_kernel(Z, X, st.lengthscale, st.outputscale), se_gram(Z, st.lengthscale, st.outputscale)
     sigma2 = float(st.noise)
     Sigma = torch.linalg.inv(Kzz + Kzx @ Kzx.T / sigma2)                 # Titsias (2009), textbook form
     ref = Sigma @ Kzx @ yn / sigma2

@@ -75,9 +75,7 @@ def _estimator_term(state, x):
     """(1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)², rad², for physical ``x (B, n)`` (columns n.. held at 0), dense."""
     x0 = np.zeros((x.shape[0], state.dim))
     x0[:, : x.shape[1]] = x
-    xt = (torch.from_numpy(x0) - state.x_mean) / state.x_std
-    diff = (xt[:, None, :] - state.Z[None]) / state.lengthscale
-    k = state.outputscale * torch.exp(-0.5 * diff.square().sum(-1))
+    k = state.kernel_row(torch.from_numpy(x0))
     return (state.y_std * (k @ state.estimator_delta)).square().mean(-1).numpy()
 
 

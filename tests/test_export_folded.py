@@ -6,8 +6,9 @@ import pytest
 import torch
 
 from bemlearn.bench.predict_bench import synthetic_posterior
-from bemlearn.export import FoldedPosterior, VarianceFactor, kernel_gram, variance_factor
+from bemlearn.export import FoldedPosterior, VarianceFactor, variance_factor
 from bemlearn.export.variance_factor import condition_number
+from bemlearn.models.kernels import se_kernel
 
 F64 = torch.float64
 
@@ -19,15 +20,14 @@ def posterior():
 
 
 def _kernel_rows(state, xn):
-    """k(x, Z) ``(B, M)`` for normalized ``xn: (B, d)``, by explicit differences."""
-    xt, zs = xn / state.lengthscale, state.Z / state.lengthscale
-    return state.outputscale * torch.exp(-0.5 * ((xt[:, None, :] - zs[None]) ** 2).sum(-1))
+    """k(x, Z) ``(B, M)`` for normalized ``xn: (B, d)``, by explicit differences (eq. 11, checked in test_gp_parity)."""
+    return se_kernel(xn, state.Z, state.lengthscale, state.outputscale)
 
 
 def _refined_kinv_k(state, k):
     """K⁻¹kᵀ ``(M, B)`` by a Cholesky solve with three steps of iterative refinement
     (accurate to ~1e-14 relative for a well-conditioned K, independent of S)."""
-    K = kernel_gram(state)
+    K = state.gram()
     L = torch.linalg.cholesky(K)
     v = torch.cholesky_solve(k.T, L)
     for _ in range(3):
@@ -132,7 +132,7 @@ def test_non_finite_input_makes_the_mean_non_finite(posterior, bad):
 def test_exact_factor_is_cholesky_of_k(posterior):
     factor = variance_factor(posterior)
     assert factor.L is not None and factor.signs is None
-    assert torch.allclose(factor.L @ factor.L.T, kernel_gram(posterior), rtol=0, atol=1e-12)
+    assert torch.allclose(factor.L @ factor.L.T, posterior.gram(), rtol=0, atol=1e-12)
     k = torch.rand(5, posterior.n_support, generator=torch.Generator().manual_seed(0), dtype=F64)
     direct = ((k @ posterior.S) * k).sum(1)
     assert torch.allclose(factor.quadratic_form(k), direct, rtol=1e-7, atol=0)
@@ -191,12 +191,12 @@ def _ill_conditioned_exact(noise: float = 1e-12, lengthscale: float = 8.0):
     S that differs from L⁻ᵀL⁻¹ by rounding of order κ·ε."""
     state, _ = synthetic_posterior(n_train=200, m=1, seed=3, noise=noise)
     state = dataclasses.replace(state, lengthscale=torch.full_like(state.lengthscale, lengthscale))
-    return dataclasses.replace(state, S=torch.linalg.inv(kernel_gram(state)))
+    return dataclasses.replace(state, S=torch.linalg.inv(state.gram()))
 
 
 def test_ill_conditioned_exact_state_is_accepted_within_the_rounding_bound(caplog):
     state = _ill_conditioned_exact()
-    K = kernel_gram(state)
+    K = state.gram()
     L = torch.linalg.cholesky(K)
     rel = float(torch.linalg.matrix_norm(torch.cholesky_inverse(L) - state.S) / torch.linalg.matrix_norm(state.S))
     kappa = condition_number(K)
@@ -216,7 +216,7 @@ def test_exact_state_with_a_foreign_S_is_rejected_even_when_ill_conditioned():
     """S of another lengthscale (1 % off) differs far beyond κ·ε: still an error, naming κ."""
     state = _ill_conditioned_exact()
     other = dataclasses.replace(state, lengthscale=state.lengthscale * 1.01)
-    wrong = dataclasses.replace(state, S=torch.linalg.inv(kernel_gram(other)))
+    wrong = dataclasses.replace(state, S=torch.linalg.inv(other.gram()))
     expected = r"is not \(K_ZZ \+ σ_0² I\)⁻¹ .* above the rounding bound κ\(K\)·ε = .*\(κ = "
     with pytest.raises(ValueError, match=expected):
         variance_factor(wrong)

@@ -6,8 +6,9 @@ import gpytorch
 import pytest
 import torch
 
-from bemlearn.models import ExactBEMGP, gaussian_likelihood, kernel_matrix, predict, se_cross_covariance
 from bemlearn.fitting import set_hyperparameters
+from bemlearn.models import ExactBEMGP, gaussian_likelihood, kernel_matrix, predict, se_cross_covariance
+from bemlearn.models.kernels import se_gram, se_kernel
 
 F64 = torch.float64
 LENGTHSCALE = torch.tensor([1.0, 1.5, 2.0, 2.5, 3.0], dtype=F64)
@@ -50,6 +51,23 @@ def test_fused_cross_covariance_matches_eq11() -> None:
     kernel = model.covar_module
     K = se_cross_covariance(xs, model.train_inputs[0], kernel.base_kernel.lengthscale, kernel.outputscale)
     torch.testing.assert_close(K, _se(xs, model.train_inputs[0]), rtol=0, atol=1e-13)
+
+
+def test_the_one_kernel_implementation_matches_eq11_and_gpytorch() -> None:
+    """se_kernel / se_gram (the kernel every frozen posterior, check and bench uses) against eq. (11)
+    written out, and against GPyTorch's RBF kernel, at distances from 0 to far outside the data."""
+    model, _, xs = _problem(50)
+    x = model.train_inputs[0]
+    far = torch.cat([xs, 6.0 * xs], 0)
+    K = se_kernel(far, x, LENGTHSCALE, torch.tensor(OUTPUTSCALE, dtype=F64))
+    ref = _se(far, x)
+    half_d2 = -torch.log(ref / OUTPUTSCALE)          # ½‖(a − b)/ℓ‖², up to ~300 here
+    eps = torch.finfo(F64).eps
+    assert bool(((K - ref).abs() <= 8 * eps * (1 + half_d2) * ref).all())   # exp's error grows with its argument
+    torch.testing.assert_close(K, kernel_matrix(model.covar_module, far, x), rtol=0, atol=1e-13)
+    G = se_gram(x, LENGTHSCALE, torch.tensor(OUTPUTSCALE, dtype=F64))
+    assert torch.equal(G, G.T) and torch.equal(torch.diagonal(G), torch.full((50,), OUTPUTSCALE, dtype=F64))
+    torch.testing.assert_close(G, _se(x, x), rtol=1e-14, atol=0)
 
 
 @pytest.mark.parametrize("n", [800, 801])

@@ -9,6 +9,7 @@ import torch
 
 from bemlearn.fitting import optimal_variational, select_inducing_points, set_hyperparameters
 from bemlearn.models import ExactBEMGP, SGPRBEMGP, SVGPBEMGP, cholesky_policy, gaussian_likelihood, predict
+from bemlearn.models.kernels import se_kernel
 
 F64 = torch.float64
 THETA = {
@@ -26,8 +27,7 @@ def _data(n: int = 300) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
 
 
 def _se(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    ls, sf2 = THETA["lengthscale"], THETA["outputscale"]
-    return sf2 * torch.exp(-0.5 * (((a[:, None, :] - b[None, :, :]) / ls) ** 2).sum(-1))
+    return se_kernel(a, b, THETA["lengthscale"], THETA["outputscale"])
 
 
 def test_sgpr_with_all_training_inputs_is_the_exact_gp() -> None:

@@ -85,27 +85,27 @@ def test_control_rate_whole_physics_steps(name):
     assert not r.timestep_changed and r.timestep == robot.model.opt.timestep  # both files use ≤ 2 ms
 
 
-def _short_loop(name: str, source: str) -> dict:
-    """3 s EIC closed loop with the derived rate, gains, reference and fall window."""
-    from bemlearn.config import from_dict
-    from bemlearn.sim.closed_loop import ReferenceConfig, SimulateConfig, simulate
+def _loop_config(name: str, source: str):
+    """3 s EIC closed loop with the derived rate, gains, reference and fall window (the pipeline's resolution)."""
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
 
-    D = derive.derive_all(_robot(name))
-    ref = {k: list(v) if isinstance(v, tuple) else v for k, v in D["simulate.reference"].value.items()}
-    cfg = SimulateConfig(
-        duration_s=3.0, rate_hz=D["simulate.rate_hz"].value, physics_timestep=D["simulate.physics_timestep"].value,
-        bem_source=source, reference=from_dict(ReferenceConfig, ref),
-        gains=D["simulate.gains"].value, fall_window=D["simulate.fall_window"].value,
-    )
-    return simulate(_robot(name), cfg, progress=False).metrics
+    cfg = {"robot": str(ROBOTS / f"{name}.xml"), "simulate": {"duration_s": 3.0, "bem_source": source}}
+    return resolve_pipeline_config(cfg).config.simulate
+
+
+def _short_loop(name: str, source: str) -> dict:
+    from bemlearn.sim.closed_loop import simulate
+
+    from bemlearn.robots import load
+
+    return simulate(load(str(ROBOTS / f"{name}.xml")), _loop_config(name, source), progress=False).metrics
 
 
 @pytest.mark.parametrize("name", ["pendubot", "xy_cartpole"])
 def test_short_closed_loop_model_bem_stays_up(name):
-    D = derive.derive_all(_robot(name))
     m = _short_loop(name, "model")
     assert not m["fell"] and m["bem_rejected"] == 0 and m["command_rejected"] == 0
-    assert m["qu_max"] < D["simulate.fall_window"].value / 2
+    assert m["qu_max"] < _loop_config(name, "model").fall_window / 2
     assert math.isfinite(m["tracking_rmse"])
 
 
@@ -116,11 +116,26 @@ def test_pendubot_zero_bem_falls():
     assert m["fell"] and m["duration_s"] < 3.0
 
 
-def test_held_out_references_for_two_actuated_joints():
-    from bemlearn.config import from_dict
-    from bemlearn.pipeline.evaluation import EvaluationConfig, held_out_references
+def test_derived_held_out_references_for_two_actuated_joints():
+    """The xy cart-pole's derived evaluation references (the pipeline's resolution): two rows each, Σ|A| of
+    each row inside [amplitude_min, amplitude_max], frequencies in the derived band, and the BEM they
+    exercise, atan(ẍ/g) in closed form, peaking between a quarter of and twice the design bound d
+    (the rule of docs/derived-defaults.md: one sine of Σ|A|/2 at the band's top moves the BEM by d)."""
+    from bemlearn.pipeline.evaluation import held_out_references
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
 
-    robot = _robot("xy_cartpole")
-    ev = {k: list(v) if isinstance(v, tuple) else v for k, v in derive.derive_all(robot)["evaluate"].value.items()}
-    refs = held_out_references(from_dict(EvaluationConfig, ev), robot.m)
-    assert len(refs) == ev["n_references"] and all(r.m == 2 for r in refs)
+    ev = resolve_pipeline_config({"robot": str(ROBOTS / "xy_cartpole.xml")}).config.evaluate
+    refs = held_out_references(ev, 2)
+    assert len(refs) == ev.n_references == 5
+    t = np.arange(0.0, ev.duration_s, 1.0 / ev.rate_hz)
+    peaks = []
+    for ref in refs:
+        assert ref.m == 2
+        for amps, freqs in zip(ref.amplitudes, ref.frequencies):
+            assert ev.amplitude_min - 1e-12 <= sum(map(abs, amps)) <= ev.amplitude_max + 1e-12
+            assert all(ev.frequency_hz[0] <= f <= ev.frequency_hz[1] for f in freqs)
+        qa, _, qadd = ref.evaluate(t)
+        assert np.all(np.abs(qa) <= np.array([sum(map(abs, a)) for a in ref.amplitudes]) + 1e-12)
+        peaks.append(float(np.abs(np.arctan(qadd[:, 0] / G)).max()))
+    d = 0.2
+    assert d / 4 <= max(peaks) <= 2 * d, peaks

@@ -6,7 +6,6 @@ second command writing it fails at once, naming the first), a hard-link snapshot
 """
 
 import json
-import os
 import signal
 import subprocess
 import sys

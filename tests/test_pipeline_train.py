@@ -35,7 +35,7 @@ def small(tmp_path_factory):
     path = write_trajectory(data, root / "data.npz")
     from conftest import FURUTA_CONFIG
 
-    from bemlearn.pipeline.config import load_pipeline_config
+    from bemlearn.pipeline.resolve import load_pipeline_config
 
     cfg = load_pipeline_config(FURUTA_CONFIG)
     cfg = dataclasses.replace(cfg, dataset=dataclasses.replace(cfg.dataset, n_points=150), train=dataclasses.replace(cfg.train, max_iter=30))

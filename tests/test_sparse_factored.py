@@ -29,6 +29,7 @@ from bemlearn.export.c_export import write_files
 from bemlearn.export.c_source import c_sources
 from bemlearn.export.verify import reference_posterior, verify_predictor
 from bemlearn.models import predictor_state
+from bemlearn.models.kernels import se_gram
 from bemlearn.models.predict import predict
 from bemlearn.models.sgpr import SGPRBEMGP
 from bemlearn.models.svgp import SVGPBEMGP
@@ -127,8 +128,7 @@ def test_sgpr_factor_is_I_minus_B_inverse(frozen):
     lam = torch.linalg.eigvalsh(state.S_inner)
     if state.kind == "sgpr":
         assert float(lam.min()) >= -1e-12 and float(lam.max()) < 1.0
-    zs = state.Z / state.lengthscale
-    Kzz = state.outputscale * torch.exp(-0.5 * torch.cdist(zs, zs).square())
+    Kzz = se_gram(state.Z, state.lengthscale, state.outputscale)
     D = state.S_chol @ state.S_chol.T - Kzz
     assert float((D - torch.diag(torch.diagonal(D))).abs().max()) <= 1e-10 * OUTPUTSCALE
     assert float(torch.diagonal(D).min()) >= 0.0
@@ -216,8 +216,7 @@ def test_old_checkpoint_without_the_factor_loads_and_predicts_as_before(tmp_path
     assert "S_chol" not in raw and "S_inner" not in raw
     loaded = load_checkpoint(path).predictor_state
     assert loaded.S_chol is None and not loaded.factored
-    diff = (x - loaded.Z[:, None, :]).div(loaded.lengthscale).square().sum(-1).T   # (N, M)
-    k = loaded.outputscale * torch.exp(-0.5 * diff)
+    k = loaded.kernel_row(x)   # (N, M)
     dense = loaded.y_std * (loaded.outputscale - ((k @ loaded.S) * k).sum(-1)).clamp_min(0).sqrt()
     assert torch.allclose(loaded.predict_reference(x)[1], dense, rtol=1e-12, atol=0)
     predictor = BEMPredictor(loaded, _metadata(loaded, 1))

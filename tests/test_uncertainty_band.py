@@ -25,7 +25,7 @@ from bemlearn.export import (
 )
 from bemlearn.export.checkpoint import load_checkpoint, write_checkpoint
 from bemlearn.export.folded_posterior import FoldedPosterior
-from bemlearn.export.variance_factor import kernel_gram, variance_factor
+from bemlearn.export.variance_factor import variance_factor
 from bemlearn.export.verify import verify_predictor
 from bemlearn.fitting.calibration import (
     calibrate_replicas,
@@ -63,7 +63,7 @@ def _state(n=120, seed=0, x_mean=None, std_scale=1.3, input_std=(0.4, 0.05, 0.01
         y_std=torch.tensor(0.05, dtype=F64), input_names=NAMES, n_train=n,
         std_scale=torch.tensor(std_scale, dtype=F64), input_std=torch.tensor(input_std, dtype=F64),
     )
-    L = torch.linalg.cholesky(kernel_gram(base))
+    L = torch.linalg.cholesky(base.gram())
     alpha = torch.cholesky_solve(y[:, None], L)[:, 0]
     delta = 0.004 * alpha.abs().max() * torch.randn(n, n_estimators, generator=g, dtype=F64)
     return dataclasses.replace(base, alpha=alpha, S=torch.cholesky_inverse(L), estimator_delta=delta)

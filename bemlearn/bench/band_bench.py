@@ -45,8 +45,8 @@ def _terms(state, x: torch.Tensor) -> dict[str, np.ndarray]:
 def run_band_bench(runs: list[str | Path], *, progress=print) -> list[dict]:
     """Score the band's terms on each run (module docstring); one dict per run."""
     from bemlearn.export.checkpoint import load_checkpoint
-    from bemlearn.pipeline.config import load_pipeline_config
     from bemlearn.pipeline.evaluation import reference_queries, run_truth_robot
+    from bemlearn.pipeline.resolve import load_pipeline_config
 
     out = []
     for run in runs:

@@ -31,7 +31,6 @@ from bemlearn.bench.predict_bench import synthetic_posterior
 from bemlearn.errors import EnvironmentProblem
 from bemlearn.export.c_build import find_cc
 from bemlearn.export.c_source import c_sources
-from bemlearn.export.variance_factor import kernel_gram
 
 __all__ = ["Footprint", "measure_footprints", "format_footprints", "SIZES"]
 
@@ -65,7 +64,7 @@ def _sparse_state(kind: str, M: int, seed: int = 0):
     """A synthetic sgpr/svgp posterior: M support points, S = K⁻¹ − K⁻¹ S_u K⁻¹ with S_u = ½ K, held
     factored as trained sparse posteriors are: S = L⁻ᵀ C L⁻¹, L Lᵀ = K, C = ½ I."""
     state, meta = synthetic_posterior(n_train=M, seed=seed, noise=1e-3)
-    K = kernel_gram(state)
+    K = state.gram()
     L = torch.linalg.cholesky(K)
     Ki = torch.cholesky_inverse(L)
     S = Ki - Ki @ (0.5 * K) @ Ki

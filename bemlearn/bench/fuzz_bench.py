@@ -58,8 +58,8 @@ def _read_trajectory(path: Path) -> Any:
 
 
 def _read_config(path: Path) -> Any:
-    from bemlearn.pipeline.config import load_pipeline_config
     from bemlearn.pipeline.preflight import check_config_file, check_robot
+    from bemlearn.pipeline.resolve import load_pipeline_config
 
     raw = check_config_file(path)
     cfg = load_pipeline_config(path)

@@ -55,7 +55,6 @@ from bemlearn.export.checkpoint import load_checkpoint
 from bemlearn.export.metadata import PredictorMetadata
 from bemlearn.export.pt2 import load_pt2_predictor, save_pt2
 from bemlearn.export.torchscript import load_torchscript, save_torchscript
-from bemlearn.export.variance_factor import kernel_gram
 from bemlearn.models.predictor_state import PredictorState
 
 __all__ = ["Latency", "PredictBenchResult", "run_predict_bench", "format_predict_bench", "synthetic_posterior"]
@@ -114,7 +113,7 @@ def synthetic_posterior(*, n_train: int = 500, m: int = 1, seed: int = 0, noise:
         lengthscale=torch.full((d,), 1.5, **f64), outputscale=torch.tensor(1.0, **f64), noise=torch.tensor(noise, **f64),
         x_mean=x_mean, x_std=x_std, y_mean=y_mean, y_std=y_std, input_names=names, n_train=n_train,
     )
-    L = torch.linalg.cholesky(kernel_gram(state))
+    L = torch.linalg.cholesky(state.gram())
     alpha = torch.cholesky_solve(((y - y_mean) / y_std)[:, None], L)[:, 0]
     state = dataclasses.replace(state, alpha=alpha, S=torch.cholesky_inverse(L))
     units = {n: "rad/s^2" if n.startswith("qdd") else "rad/s" if n.startswith("qd") else "rad" for n in names}
@@ -144,7 +143,7 @@ def _gpytorch_exact(state: PredictorState) -> Callable[[torch.Tensor], tuple[tor
             return gpytorch.distributions.MultivariateNormal(self.mean_module(x), self.covar_module(x))
 
     lik = gpytorch.likelihoods.GaussianLikelihood(noise_constraint=gpytorch.constraints.GreaterThan(1e-12)).double()
-    targets = kernel_gram(state) @ state.alpha
+    targets = state.gram() @ state.alpha
     model = _ExactGP(state.Z, targets, lik).double()
     model.covar_module.base_kernel.lengthscale = state.lengthscale
     model.covar_module.outputscale = state.outputscale
@@ -168,7 +167,7 @@ def _numpy_baselines(predictor: BEMPredictor, state: PredictorState) -> dict[str
     a, nb, c, w, W = (t.numpy() for t in (b.a, b.nb, b.c, b.w, b.W))
     offset, var0, centered = float(b.offset[0]), b.var0, b.centered
     gain = float(state.y_std * state.outputscale)
-    L = torch.linalg.cholesky(kernel_gram(state))
+    L = torch.linalg.cholesky(state.gram())
     R = np.zeros((state.n_support, state.n_support + 1))
     R[:, :-1] = gain * torch.linalg.solve_triangular(L, torch.eye(state.n_support, dtype=torch.float64), upper=False).numpy()
     zs = (state.Z / state.lengthscale).numpy()
@@ -357,7 +356,7 @@ def run_predict_bench(
                     "std_rel": float(((s_ts - s_ref) / s_ref).abs().max()),
                     "mean_abs_ours_vs_extended": float(np.abs(m_ts.numpy() - m_ld).max()),
                     "mean_abs_gpytorch_vs_extended": float(np.abs(m_ref.numpy() - m_ld).max()),
-                    "cond_K": float(torch.linalg.cond(kernel_gram(state))),
+                    "cond_K": float(torch.linalg.cond(state.gram())),
                 }
             else:
                 with _threads(n_batch):

@@ -1,6 +1,7 @@
 """``bemlearn bench robots``: the whole chain on MJCF robots with derived values only.
 
-Per robot (no per-robot tuning; every value from :func:`bemlearn.pipeline.derive.derive_all`):
+Per robot (no per-robot tuning; every value derived from the model exactly as ``bemlearn run`` derives it for a
+config naming only the file, :func:`~bemlearn.pipeline.resolve.resolve_pipeline_config`):
 collect → write → train (exact GP) → export → learned vs model BEM on the derived held-out
 references, errors over |q_u^e − nominal| ≤ d (the design bound) → closed loop with the
 BEM sources ``predictor``, ``model`` and ``zero`` at the derived rate, gains and reference.
@@ -26,29 +27,17 @@ if TYPE_CHECKING:
 __all__ = ["robot_chain", "format_robots_bench"]
 
 
-def _configs(robot_path: str, robot: BalanceRobot, *, n_trials: int, duration_s: float, sim_duration_s: float, workers: int, seed: int):
-    from bemlearn.config import from_dict, to_dict
-    from bemlearn.data.collect import CollectConfig
-    from bemlearn.pipeline.config import PipelineConfig
-    from bemlearn.pipeline.derive import derive_all
-    from bemlearn.pipeline.evaluation import EvaluationConfig
-    from bemlearn.sim.closed_loop import ReferenceConfig, SimulateConfig
+def _configs(robot_path: str, *, n_trials: int, duration_s: float, sim_duration_s: float, workers: int, seed: int):
+    """The pipeline config of ``robot_path`` with derived values only (as ``bemlearn run`` resolves a config
+    naming just the file), and the run length of the bench; returns ``(config, resolved)``."""
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
 
-    D = derive_all(robot)
-    col = {k.split(".", 1)[1]: v.value for k, v in D.items() if k.startswith("collect.")}
-    col.update(n_trials=n_trials, duration_s=duration_s, workers=workers, seed=seed)
-    ccfg = from_dict(CollectConfig, to_dict(col), where=f"derived:{robot_path}:collect")
-    ecfg = from_dict(EvaluationConfig, to_dict(D["evaluate"].value), where=f"derived:{robot_path}:evaluate")
-    scfg = SimulateConfig(
-        duration_s=sim_duration_s,
-        rate_hz=D["simulate.rate_hz"].value,
-        physics_timestep=D["simulate.physics_timestep"].value,
-        reference=from_dict(ReferenceConfig, to_dict(D["simulate.reference"].value), where="derived:reference"),
-        gains=D["simulate.gains"].value,
-        sensor=from_dict(type(ccfg.sensor), to_dict(D["simulate.sensor"].value), where="derived:sensor"),
-        fall_window=D["simulate.fall_window"].value,
-    )
-    return PipelineConfig(robot=robot_path, collect=ccfg, evaluate=ecfg, simulate=scfg), D
+    resolved = resolve_pipeline_config({
+        "robot": robot_path,
+        "collect": {"n_trials": n_trials, "duration_s": duration_s, "workers": workers, "seed": seed},
+        "simulate": {"duration_s": sim_duration_s},
+    }, source=f"bench robots: {robot_path}")
+    return resolved.config, resolved
 
 
 def heldout_bem_errors(state: PredictorState, robot: BalanceRobot, references: list[CompositeSinusoid], *, bound: float, duration_s: float, rate_hz: float) -> dict:
@@ -84,8 +73,10 @@ def robot_chain(robot_path: str, out_dir: str | Path, *, n_trials: int = 24, dur
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     robot = load(robot_path)
-    cfg, D = _configs(robot_path, robot, n_trials=n_trials, duration_s=duration_s, sim_duration_s=sim_duration_s, workers=workers, seed=seed)
-    row: dict = {"robot": robot.name, "path": robot_path, "derived": {k: {"value": repr(v.value), "note": v.note} for k, v in D.items()}}
+    cfg, resolved = _configs(robot_path, n_trials=n_trials, duration_s=duration_s, sim_duration_s=sim_duration_s, workers=workers, seed=seed)
+    rows = resolved.to_json_dict()
+    row: dict = {"robot": robot.name, "path": robot_path,
+                 "derived": {k: {"value": repr(r["value"]), "note": r["note"]} for k, r in rows.items() if r["origin"] == "derived"}}
     t0 = time.perf_counter()
     data, truth = collect(robot_path, cfg.collect, progress=False)
     data_path = write_trajectory(data, out / "data.npz")
@@ -101,7 +92,7 @@ def robot_chain(robot_path: str, out_dir: str | Path, *, n_trials: int = 24, dur
     row["train"] = {"val_rmse": train.get("val_rmse"), "seconds": time.perf_counter() - t0}
     state = load_checkpoint(out).predictor_state
     refs = held_out_references(cfg.evaluate, robot.m)
-    bound = D["collect.fall_window"].value / 3
+    bound = cfg.collect.fall_window / 3
     row["bem"] = heldout_bem_errors(state, robot, refs, bound=bound, duration_s=cfg.evaluate.duration_s, rate_hz=cfg.evaluate.rate_hz)
     progress(f"{robot.name}: held-out BEM {row['bem']}")
     row["closed_loop"] = {}

@@ -43,6 +43,7 @@ from bemlearn.fitting.calibration import gaussian_quantile
 from bemlearn.fitting.estimator_sensitivity import estimator_sensitivity
 from bemlearn.models.band import band_reference
 from bemlearn.models.input_noise import mean_gradient, quantization_input_std
+from bemlearn.models.kernels import se_gram, se_kernel
 from bemlearn.pipeline.reliability import reliability_table
 from bemlearn.pipeline.uncertainty import calibrate_band
 
@@ -51,15 +52,9 @@ __all__ = ["format_seed_sweep", "format_uncertainty_bench", "run_case", "run_see
 def _nigp(state, x, y, g_train):
     """(b): per-column input variances s² (physical) maximizing the marginal likelihood with
     noise σ_0² + Σ_i s_i² g_i(x_n)² (kernel fixed); returns (s², posterior function)."""
-    from bemlearn.export.variance_factor import kernel_gram
-
-    xn = (x - state.x_mean) / state.x_std
+    xn = state.normalize(x)
     yn = (y - state.y_mean) / state.y_std
-    probe = dataclasses.replace(state, Z=xn, alpha=torch.zeros(len(xn), dtype=torch.float64),
-                                S=torch.zeros(len(xn), len(xn), dtype=torch.float64), n_train=len(xn),
-                                S_chol=None, S_inner=None)
-    Kf = kernel_gram(probe)
-    Kf.diagonal().sub_(state.noise)
+    Kf = se_gram(xn, state.lengthscale, state.outputscale)
     gn = g_train / state.y_std                                      # ∂μ̃/∂x (physical x)
     log_s2 = torch.full((state.dim,), -12.0, dtype=torch.float64, requires_grad=True)
     log_n = torch.log(state.noise.clone()).requires_grad_(True)
@@ -82,9 +77,7 @@ def _nigp(state, x, y, g_train):
         s2 = log_s2.exp() * 1.0
 
     def latent_std(xq):
-        xq_n = (xq - state.x_mean) / state.x_std
-        diff = (xq_n[:, None, :] - xn[None]) / state.lengthscale
-        k = state.outputscale * torch.exp(-0.5 * (diff**2).sum(-1))
+        k = se_kernel(state.normalize(xq), xn, state.lengthscale, state.outputscale)
         v = torch.linalg.solve_triangular(L, k.T, upper=False)
         return state.y_std * (state.outputscale - (v**2).sum(0)).clamp_min(0).sqrt()
 

@@ -47,7 +47,7 @@ class BenchCase:
 
 def config_case(config_path: str | Path, data_path: str | Path) -> BenchCase:
     """A pipeline config and its excitation data, with the config's held-out references."""
-    from bemlearn.pipeline.config import load_pipeline_config
+    from bemlearn.pipeline.resolve import load_pipeline_config
 
     cfg = load_pipeline_config(config_path)
     return BenchCase(Path(cfg.robot).stem, cfg, Path(data_path), cfg.evaluate)

@@ -184,7 +184,7 @@ def run_predict(args: argparse.Namespace) -> int:
 
 def _train(args: argparse.Namespace) -> int:
     from bemlearn.bench.bem_train_bench import bench_bem_training
-    from bemlearn.pipeline.config import load_pipeline_config
+    from bemlearn.pipeline.resolve import load_pipeline_config
 
     cfg = load_pipeline_config(args.config)
     rows = bench_bem_training(cfg, args.data, svgp=not args.no_svgp, progress=lambda r: None)
@@ -209,7 +209,7 @@ def _sim(args: argparse.Namespace) -> int:
 
 def _derivatives(args: argparse.Namespace) -> int:
     from bemlearn.bench.derivatives_bench import TABLE_HEAD, run_derivatives_bench
-    from bemlearn.pipeline.config import load_pipeline_config
+    from bemlearn.pipeline.resolve import load_pipeline_config
 
     cfg = load_pipeline_config(args.config)
     head = TABLE_HEAD[0] + ("" if args.no_gp else TABLE_HEAD[1])
@@ -245,7 +245,7 @@ def _import(args: argparse.Namespace) -> int:
     result = {"load_average_1min": os.getloadavg()[0],
               "speed": bench_import_speed(source, rows=args.rows, trials=args.files, repeats=args.repeats)}
     if args.accuracy:
-        from bemlearn.pipeline.config import load_pipeline_config
+        from bemlearn.pipeline.resolve import load_pipeline_config
 
         if args.config is None:
             raise ArgumentError("--accuracy: needs --config (the robot whose model BEM is the reference, and the dataset/train sections)")

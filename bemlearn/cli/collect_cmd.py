@@ -35,8 +35,8 @@ def run(args) -> int:
     from bemlearn.data.collect import collect
     from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
     from bemlearn.outputs import claim_outputs
-    from bemlearn.pipeline.config import load_pipeline_config
     from bemlearn.pipeline.preflight import preflight
+    from bemlearn.pipeline.resolve import load_pipeline_config
 
     target = args.out or Path("data.npz")   # without --out: data.npz in a new runs/collect-<timestamp>
     if target.suffix.lower() not in (".npz", ".csv"):

@@ -35,8 +35,8 @@ def run(args) -> int:
     import torch._dynamo  # noqa: F401
 
     from bemlearn.outputs import claim_outputs
-    from bemlearn.pipeline.config import load_pipeline_config
     from bemlearn.pipeline.preflight import preflight
+    from bemlearn.pipeline.resolve import load_pipeline_config
     from bemlearn.pipeline.train import train_run
 
     preflight(config=args.config, device=args.device)

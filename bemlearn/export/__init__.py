@@ -22,7 +22,7 @@ from bemlearn.export.metadata import ARTIFACT_FORMAT, PredictorMetadata, artifac
 from bemlearn.export.pt2 import Pt2Predictor, load_pt2_predictor, save_pt2
 from bemlearn.export.staleness import check_predictor_matches, check_run_predictors, remove_stale_predictors
 from bemlearn.export.torchscript import load_torchscript, save_torchscript, script_predictor
-from bemlearn.export.variance_factor import VarianceFactor, kernel_gram, variance_factor
+from bemlearn.export.variance_factor import VarianceFactor, variance_factor
 from bemlearn.export.verify import reference_posterior, verify_predictor
 
 __all__ = [
@@ -43,7 +43,6 @@ __all__ = [
     "check_predictor_matches",
     "check_run_predictors",
     "export_run",
-    "kernel_gram",
     "load_checkpoint",
     "load_learned_bem",
     "load_pt2_predictor",

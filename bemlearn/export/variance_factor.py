@@ -33,9 +33,10 @@ from dataclasses import dataclass
 import torch
 
 from bemlearn.errors import ArgumentError, CheckpointError
+from bemlearn.models.kernels import se_gram
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["VarianceFactor", "variance_factor", "kernel_gram", "condition_number", "GRAM_RTOL"]
+__all__ = ["VarianceFactor", "variance_factor", "condition_number", "GRAM_RTOL"]
 
 log = logging.getLogger(__name__)
 
@@ -82,11 +83,6 @@ class VarianceFactor:
         return (v * v).sum(-1) if self.signs is None else (v * v) @ self.signs
 
 
-def kernel_gram(state: PredictorState) -> torch.Tensor:
-    """K = K_ZZ + σ_0² I (eq. 11); ``(M, M)`` float64 (:meth:`PredictorState.gram`)."""
-    return state.gram()
-
-
 def condition_number(K: torch.Tensor) -> float:
     """κ₂(K) = λ_max / λ_min of a symmetric ``(M, M)`` matrix; ``inf`` if λ_min ≤ 0."""
     lam = torch.linalg.eigvalsh(K)
@@ -108,7 +104,7 @@ def variance_factor(state: PredictorState, *, exact_rtol: float = 1e-6, psd_rtol
             ``exact_rtol`` and κ(K)·ε (exact).
     """
     if state.kind == "exact":
-        K = kernel_gram(state)
+        K = state.gram()
         L, info = torch.linalg.cholesky_ex(K)
         if int(info) != 0:
             raise CheckpointError(
@@ -156,8 +152,7 @@ def _factored(state: PredictorState, psd_rtol: float) -> VarianceFactor:
     diagonal (the jitter): off-diagonal |L Lᵀ − K_ZZ| ≤ GRAM_RTOL σ_f², else ValueError.
     """
     L, C = state.S_chol, state.S_inner
-    K = kernel_gram(state)
-    K.diagonal().sub_(state.noise)
+    K = se_gram(state.Z, state.lengthscale, state.outputscale)
     D = L @ L.T - K
     off = float((D - torch.diag(torch.diagonal(D))).abs().max()) if D.numel() else 0.0
     if not off <= GRAM_RTOL * float(state.outputscale):

@@ -1,7 +1,8 @@
 """Check an exported predictor against an independent dense evaluation of eq. (12).
 
 The reference evaluates the kernel row by explicit differences,
-k_j = σ_f² exp(−½ ‖(x̃ − z_j)/ℓ‖²), and
+k_j = σ_f² exp(−½ ‖(x̃ − z_j)/ℓ‖²) (:meth:`PredictorState.kernel_row`), not by the folded
+exponent the exported predictor uses, and
 
     exact:       μ = y_mean + y_std kᵀα,   σ² = y_std² (σ_f² − kᵀ v),  K v = k solved by Cholesky
                  with two steps of iterative refinement (accurate even when K is ill-conditioned,
@@ -23,20 +24,12 @@ from __future__ import annotations
 import torch
 
 from bemlearn.errors import CheckpointError
-from bemlearn.export.variance_factor import kernel_gram
 from bemlearn.models.band import band_extra_variance
 from bemlearn.models.predictor_state import PredictorState
 
 __all__ = ["reference_posterior", "verify_predictor"]
 
 _EPS = float(torch.finfo(torch.float64).eps)
-
-
-def _kernel_row(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
-    """k_j = σ_f² exp(−½ ‖(x̃ − z_j)/ℓ‖²) by explicit differences (``cdist``): ``(B, M)``."""
-    xt = (x - state.x_mean) / state.x_std / state.lengthscale
-    return state.outputscale * torch.exp(-0.5 * torch.cdist(xt, state.Z / state.lengthscale,
-                                                            compute_mode="donot_use_mm_for_euclid_dist").square())
 
 
 def reference_posterior(state: PredictorState, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, float | torch.Tensor]:
@@ -49,8 +42,8 @@ def reference_posterior(state: PredictorState, x: torch.Tensor) -> tuple[torch.T
         s_norm = float(torch.linalg.matrix_norm(state.S, ord=2))
         bound = 64 * state.n_support * _EPS * s_norm * float(state.outputscale) ** 2 * float(state.y_std) ** 2
         return mean, std, bound
-    k = _kernel_row(state, x)
-    K = kernel_gram(state)
+    k = state.kernel_row(x)
+    K = state.gram()
     L = torch.linalg.cholesky(K)
     v = torch.cholesky_solve(k.T, L)
     for _ in range(2):
@@ -84,7 +77,7 @@ def _cholesky_route_bound(state: PredictorState, L: torch.Tensor, k: torch.Tenso
 
 def _factored_reference(state: PredictorState, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, float]:
     """μ, σ and the rounding bound of a factored sparse state (module docstring)."""
-    k = _kernel_row(state, x)
+    k = state.kernel_row(x)
     L, C = state.S_chol, state.S_inner
     v = torch.linalg.solve_triangular(L, k.T, upper=False)
     v = v + torch.linalg.solve_triangular(L, k.T - L @ v, upper=False)
@@ -100,7 +93,7 @@ def _estimator_rounding(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
     error is up to M ε y_std |k|ᵀ|δ_k|, and its square's up to 2 |shift| times that."""
     if not state.n_estimators:
         return torch.zeros(x.shape[0], dtype=torch.float64)
-    k = _kernel_row(state, x)
+    k = state.kernel_row(x)
     shift = state.y_std * (k @ state.estimator_delta)
     err = state.n_support * _EPS * state.y_std * (k @ state.estimator_delta.abs())
     return (2 * shift.abs() * err + err**2).mean(-1)

@@ -91,15 +91,13 @@ def condition_state(state: PredictorState, x: torch.Tensor, y: torch.Tensor) -> 
     Returns:
         an exact-kind state (α = K⁻¹ỹ, S = K⁻¹, K = K_XX + σ_0² I on normalized data).
     """
-    from bemlearn.export.variance_factor import kernel_gram
-
     xn = (x.to(torch.float64) - state.x_mean) / state.x_std
     yn = (y.to(torch.float64) - state.y_mean) / state.y_std
     n = xn.shape[0]
     probe = dataclasses.replace(state, kind="exact", Z=xn, alpha=torch.zeros(n, dtype=torch.float64),
                                 S=torch.zeros(n, n, dtype=torch.float64), n_train=n, estimator_delta=None,
                                 S_chol=None, S_inner=None)
-    K = kernel_gram(probe)
+    K = probe.gram()
     L, info = torch.linalg.cholesky_ex(K)
     jitter = 1e-10 * float(state.outputscale)
     while int(info) != 0:

@@ -38,6 +38,7 @@ import torch
 
 from bemlearn.data.trajectory import Trajectory
 from bemlearn.errors import ArgumentError
+from bemlearn.models.kernels import se_kernel
 from bemlearn.models.predictor_state import PredictorState
 
 __all__ = ["EstimatorSensitivity", "estimator_sensitivity", "projected_weights"]
@@ -47,9 +48,7 @@ log = logging.getLogger(__name__)
 
 def _cross(state: PredictorState, xn: torch.Tensor) -> torch.Tensor:
     """K_ZX: ``(M, N)`` kernel between the support and normalized inputs ``xn (N, d)``."""
-    zs, xs = state.Z / state.lengthscale, xn / state.lengthscale
-    sq = torch.cdist(zs, xs, compute_mode="donot_use_mm_for_euclid_dist").square()
-    return state.outputscale * torch.exp(-0.5 * sq)
+    return se_kernel(state.Z, xn, state.lengthscale, state.outputscale)
 
 
 def projected_weights(state: PredictorState, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:

@@ -5,13 +5,17 @@ the best parameters evaluated so far; L-BFGS then restarts from them with a fres
 history (a line-search trial far out, such as an overflowing lengthscale, is the usual cause),
 up to three times, and otherwise the fit stops with a logged warning.  It never leaves NaN
 parameters behind.
+
+:class:`KeptParameters` is that keep-best / Ctrl-C logic on its own: :func:`minimize` and the
+minibatch loop of :func:`~bemlearn.fitting.svgp.fit_svgp` both run inside it.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 
 import torch
 from linear_operator.utils.errors import NanError, NotPSDError
@@ -21,7 +25,7 @@ from bemlearn.errors import ArgumentError, NumericalError
 from bemlearn.fitting.result import Callback
 from bemlearn.interrupts import check_interrupt, interruptible
 
-__all__ = ["minimize", "checked_loss", "default_lr", "NumericalFailure"]
+__all__ = ["minimize", "KeptParameters", "checked_loss", "default_lr", "NumericalFailure"]
 
 logger = logging.getLogger(__name__)
 
@@ -49,6 +53,70 @@ def checked_loss(loss_fn: Callable[[], torch.Tensor]) -> torch.Tensor:
     if not bool(torch.isfinite(loss)):
         raise NumericalFailure(f"loss is {float(loss.detach())}")
     return loss
+
+
+class KeptParameters:
+    """The values a fit falls back to, and how a fit ends early (one implementation for every loop).
+
+    ``keep()`` copies the parameters' current values; ``offer(loss)`` keeps them when ``loss`` is the
+    lowest seen (keep-best), and ``restore()`` writes the kept values back.  Inside :meth:`guard`:
+
+    * a :class:`NumericalFailure` restores the kept values, logs a warning and ends the block
+      (``failed`` is then true: the fit's stop reason is ``"numerical failure"``);
+    * Ctrl-C or SIGTERM (:mod:`bemlearn.interrupts`; the loop calls
+      :func:`~bemlearn.interrupts.check_interrupt` between evaluations) restores them and re-raises
+      :class:`KeyboardInterrupt`, so the caller can save what it has.
+
+    Args:
+        params: the parameters to keep (the initial values are kept at the start).
+        desc: the fit's name in log messages.
+        kept: what the kept values are, for the messages (``"best"`` or ``"last good"``).
+        unit: what :attr:`count` counts, for the messages (``"evaluations"``, ``"steps"``).
+    """
+
+    def __init__(self, params: Iterable[torch.nn.Parameter], *, desc: str, kept: str = "best", unit: str = "evaluations") -> None:
+        self.params = list(params)
+        self.values = [p.detach().clone() for p in self.params]
+        self.best = math.inf
+        self.count = 0
+        self.failed = False
+        self.desc, self.kept, self.unit = desc, kept, unit
+
+    def keep(self) -> None:
+        """Keep the parameters' current values."""
+        with torch.no_grad():
+            for p, v in zip(self.params, self.values):
+                v.copy_(p)
+
+    def offer(self, loss: float) -> None:
+        """Keep the current values if ``loss`` is the lowest offered so far."""
+        if loss < self.best:
+            self.best = loss
+            self.keep()
+
+    def restore(self) -> None:
+        """Write the kept values back into the parameters."""
+        with torch.no_grad():
+            for p, v in zip(self.params, self.values):
+                p.copy_(v)
+
+    @contextmanager
+    def guard(self) -> Iterator[KeptParameters]:
+        """The fit loop's block: interruptible, restoring the kept values on a numerical failure or Ctrl-C."""
+        with interruptible():
+            try:
+                yield self
+            except NumericalFailure as exc:
+                self.restore()
+                self.failed = True
+                logger.warning("%s: numerical failure after %d %s (%s); keeping the %s parameters",
+                               self.desc, self.count, self.unit, exc, self.kept)
+            except KeyboardInterrupt:
+                self.restore()
+                loss = f" (loss {self.best:.6g})" if math.isfinite(self.best) else ""
+                logger.warning("%s: interrupted after %d %s; keeping the %s parameters%s",
+                               self.desc, self.count, self.unit, self.kept, loss)
+                raise
 
 
 def default_lr(optimizer: str, lr: float | None) -> float:
@@ -97,18 +165,15 @@ def minimize(
     params = [p for p in params if p.requires_grad]
     if optimizer not in ("lbfgs", "adam"):
         raise ArgumentError(f"optimizer: unknown {optimizer!r}; valid are ['adam', 'lbfgs']")
-    best_params = [p.detach().clone() for p in params]
-    state = {"best": math.inf, "evals": 0, "since_best": 0}
+    kept = KeptParameters(params, desc=desc)
+    state = {"since_best": 0}
     max_eval = int(max_iter * 1.5) if optimizer == "lbfgs" else max_iter
-    bar = tqdm(total=max_eval, desc=desc, disable=not progress, leave=False)
 
-    if optimizer == "lbfgs":
-        opt: torch.optim.Optimizer = torch.optim.LBFGS(
-            params, lr=lr, max_iter=max_iter, max_eval=max_eval, history_size=50,
-            line_search_fn="strong_wolfe", tolerance_grad=1e-9, tolerance_change=tol,
-        )
-    else:
-        opt = torch.optim.Adam(params, lr=lr)
+    def lbfgs(max_iter: int, max_eval: int) -> torch.optim.LBFGS:
+        return torch.optim.LBFGS(params, lr=lr, max_iter=max_iter, max_eval=max_eval, history_size=50,
+                                 line_search_fn="strong_wolfe", tolerance_grad=1e-9, tolerance_change=tol)
+
+    opt: torch.optim.Optimizer = lbfgs(max_iter, max_eval) if optimizer == "lbfgs" else torch.optim.Adam(params, lr=lr)
 
     def closure() -> torch.Tensor:
         check_interrupt()  # between evaluations, also inside one L-BFGS iteration's line search
@@ -116,71 +181,47 @@ def minimize(
         loss = checked_loss(loss_fn)
         loss.backward()
         value = float(loss.detach())
-        if value < state["best"] - tol:
-            state["since_best"] = 0
-        else:
-            state["since_best"] += 1
-        if value < state["best"]:
-            state["best"] = value
-            with torch.no_grad():
-                for p, b in zip(params, best_params):
-                    b.copy_(p)
+        state["since_best"] = 0 if value < kept.best - tol else state["since_best"] + 1
+        kept.offer(value)
         metrics = {"loss": value, **metrics_fn(), "lr": float(opt.param_groups[0]["lr"])}
         if callback is not None:
-            callback(state["evals"], metrics)
-        state["evals"] += 1
+            callback(kept.count, metrics)
+        kept.count += 1
         bar.update(1)
         bar.set_postfix(loss=f"{value:.5f}")
         return loss
 
     stop = "max_iter"
-    with interruptible():
-        try:
-            if optimizer == "lbfgs":
-                # a line-search trial far out (e.g. an overflowing lengthscale) fails numerically:
-                # restart from the best point with a fresh curvature history, up to 3 times
-                for restart in range(4):
-                    try:
-                        opt.step(closure)
-                    except NumericalFailure as exc:
-                        if restart == 3 or state["evals"] >= max_eval or not math.isfinite(state["best"]):
-                            raise
-                        logger.info("%s: numerical failure after %d evaluations (%s); restarting L-BFGS from the best "
-                                    "parameters", desc, state["evals"], exc)
-                        with torch.no_grad():
-                            for p, b in zip(params, best_params):
-                                p.copy_(b)
-                        left = max_eval - state["evals"]
-                        opt = torch.optim.LBFGS(params, lr=lr, max_iter=max(1, int(left / 1.5)), max_eval=left, history_size=50,
-                                                line_search_fn="strong_wolfe", tolerance_grad=1e-9, tolerance_change=tol)
-                        continue
-                    n_iter = opt.state[opt._params[0]].get("n_iter", 0)
-                    if n_iter < opt.defaults["max_iter"] and state["evals"] < max_eval:
-                        stop = "converged"
-                    break
-            else:
-                for _ in range(max_iter):
+    with tqdm(total=max_eval, desc=desc, disable=not progress, leave=False) as bar, kept.guard():
+        if optimizer == "lbfgs":
+            # a line-search trial far out (e.g. an overflowing lengthscale) fails numerically:
+            # restart from the best point with a fresh curvature history, up to 3 times
+            for restart in range(4):
+                try:
                     opt.step(closure)
-                    if tol > 0 and state["since_best"] >= 50:
-                        stop = "converged"
-                        break
-        except NumericalFailure as exc:
-            logger.warning("%s: numerical failure after %d evaluations (%s); keeping the best parameters", desc, state["evals"], exc)
-            stop = "numerical failure"
-        except KeyboardInterrupt:
-            logger.warning("%s: interrupted after %d evaluations; keeping the best parameters (loss %.6g)", desc, state["evals"], state["best"])
-            if state["evals"] > 0:
-                with torch.no_grad():
-                    for p, b in zip(params, best_params):
-                        p.copy_(b)
-            raise
-        finally:
-            bar.close()
-    if state["evals"] > 0:
-        with torch.no_grad():
-            for p, b in zip(params, best_params):
-                p.copy_(b)
+                except NumericalFailure as exc:
+                    if restart == 3 or kept.count >= max_eval or not math.isfinite(kept.best):
+                        raise
+                    logger.info("%s: numerical failure after %d evaluations (%s); restarting L-BFGS from the best "
+                                "parameters", desc, kept.count, exc)
+                    kept.restore()
+                    left = max_eval - kept.count
+                    opt = lbfgs(max(1, int(left / 1.5)), left)
+                    continue
+                n_iter = opt.state[opt._params[0]].get("n_iter", 0)
+                if n_iter < opt.defaults["max_iter"] and kept.count < max_eval:
+                    stop = "converged"
+                break
+        else:
+            for _ in range(max_iter):
+                opt.step(closure)
+                if tol > 0 and state["since_best"] >= 50:
+                    stop = "converged"
+                    break
+    if kept.failed:
+        stop = "numerical failure"
+    kept.restore()
     with torch.no_grad():
         final = float(checked_loss(loss_fn))
     metrics = {"loss": final, **metrics_fn(), "lr": float(opt.param_groups[0]["lr"])}
-    return final, state["evals"], stop, metrics
+    return final, kept.count, stop, metrics

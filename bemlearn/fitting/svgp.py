@@ -11,10 +11,10 @@ import torch
 from tqdm.auto import tqdm
 
 from bemlearn.errors import ArgumentError
-from bemlearn.fitting.optimize import NumericalFailure, checked_loss
+from bemlearn.fitting.optimize import KeptParameters, NumericalFailure, checked_loss
 from bemlearn.fitting.result import Callback, FitResult, hyperparameter_metrics
 from bemlearn.fitting.variational import optimal_variational
-from bemlearn.interrupts import check_interrupt, interruptible
+from bemlearn.interrupts import check_interrupt
 from bemlearn.models.solver import DEFAULT_JITTER, DEFAULT_MAX_TRIES, cholesky_policy
 from bemlearn.models.svgp import SVGPBEMGP
 from bemlearn.models.validation import check_inputs, check_targets
@@ -89,66 +89,62 @@ def fit_svgp(
     for name, value in (("lr", lr), ("ngd_lr", ngd_lr)):
         if not value > 0.0:
             raise ArgumentError(f"{name}: expected a positive step size, got {value}")
-    variational = list(model.variational_parameters())
-    hyper = list(model.hyperparameters()) + [p for p in likelihood.parameters() if all(p is not q for q in model.parameters())]
-    params = variational + hyper
-    ngd = gpytorch.optim.NGD(variational, num_data=N, lr=ngd_lr)
-    opt = torch.optim.Adam(hyper, lr=lr)
+    step = _MinibatchStep(model, likelihood, elbo, lr=lr, ngd_lr=ngd_lr)
+    kept = KeptParameters(step.params, desc="SVGP", kept="last good", unit="steps")
     gen = torch.Generator(device="cpu").manual_seed(seed)
-    n_batches = math.ceil(N / batch_size)
-    good = [p.detach().clone() for p in params]
-    step, stop, epoch_loss = 0, "epochs", math.nan
+    epoch_loss = math.nan
     metrics: dict[str, float] = {}
     start = time.perf_counter()
-    bar = tqdm(total=epochs * n_batches, desc="SVGP", disable=not progress, leave=False)
-    with interruptible():
-        try:
-            with cholesky_policy(jitter=jitter, max_tries=max_tries):
-                for epoch in range(epochs):
-                    order = torch.randperm(N, generator=gen)
-                    total = 0.0
-                    for b in range(n_batches):
-                        check_interrupt()  # between mini-batch steps
-                        idx = order[b * batch_size : (b + 1) * batch_size]
-                        xb = train_x[idx.to(train_x.device)].to(device)
-                        yb = train_y[idx.to(train_y.device)].to(device)
-                        ngd.zero_grad(set_to_none=True)
-                        opt.zero_grad(set_to_none=True)
-                        loss = checked_loss(lambda xb=xb, yb=yb: -elbo(model(xb), yb))
-                        loss.backward()
-                        ngd.step()
-                        opt.step()
-                        if any(not bool(torch.isfinite(p).all()) for p in params):
-                            raise NumericalFailure("non-finite parameters after an Adam step")
-                        with torch.no_grad():
-                            for p, g in zip(params, good):
-                                g.copy_(p)
-                        value = float(loss.detach())
-                        total += value * idx.numel()
-                        metrics = {"loss": value, **hyperparameter_metrics(model, likelihood), "lr": lr, "epoch": float(epoch)}
-                        if callback is not None:
-                            callback(step, metrics)
-                        step += 1
-                        bar.update(1)
-                        bar.set_postfix(epoch=epoch, loss=f"{value:.4f}")
-                    epoch_loss = total / N
-                    logger.debug("SVGP epoch %d: mean -ELBO per point %.6f", epoch, epoch_loss)
-        except NumericalFailure as exc:
-            with torch.no_grad():
-                for p, g in zip(params, good):
-                    p.copy_(g)
-            logger.warning("SVGP: numerical failure at step %d (%s); restored the last good parameters", step, exc)
-            stop = "numerical failure"
-        except KeyboardInterrupt:
-            with torch.no_grad():
-                for p, g in zip(params, good):
-                    p.copy_(g)
-            logger.warning("SVGP: interrupted at step %d; keeping the last good parameters", step)
-            raise
-        finally:
-            bar.close()
+    with (tqdm(total=epochs * math.ceil(N / batch_size), desc="SVGP", disable=not progress, leave=False) as bar,
+          kept.guard(), cholesky_policy(jitter=jitter, max_tries=max_tries)):
+        for epoch in range(epochs):
+            total = 0.0
+            for idx in torch.randperm(N, generator=gen).split(batch_size):
+                check_interrupt()  # between mini-batch steps
+                value = step(train_x[idx.to(train_x.device)].to(device), train_y[idx.to(train_y.device)].to(device))
+                kept.keep()
+                total += value * idx.numel()
+                metrics = {"loss": value, **hyperparameter_metrics(model, likelihood), "lr": lr, "epoch": float(epoch)}
+                if callback is not None:
+                    callback(kept.count, metrics)
+                kept.count += 1
+                bar.update(1)
+                bar.set_postfix(epoch=epoch, loss=f"{value:.4f}")
+            epoch_loss = total / N
+            logger.debug("SVGP epoch %d: mean -ELBO per point %.6f", epoch, epoch_loss)
     if refresh_q:
         optimal_variational(model, likelihood, train_x.to(device), train_y.to(device))
         model.train()
     metrics = {**metrics, "loss": epoch_loss, **hyperparameter_metrics(model, likelihood)}
-    return FitResult("svgp", epoch_loss, step, time.perf_counter() - start, stop, metrics)
+    stop = "numerical failure" if kept.failed else "epochs"
+    return FitResult("svgp", epoch_loss, kept.count, time.perf_counter() - start, stop, metrics)
+
+
+class _MinibatchStep:
+    """One minibatch step: natural gradient on q(v) (``variational``), Adam on θ and Z (``hyper``).
+
+    ``step(x_b, y_b)`` returns the minibatch's −ELBO per point before the step.
+
+    Raises:
+        NumericalFailure: the loss is not finite, its Cholesky failed, or a parameter is not finite after the step.
+    """
+
+    def __init__(self, model: SVGPBEMGP, likelihood: gpytorch.likelihoods.GaussianLikelihood,
+                 elbo: gpytorch.mlls.VariationalELBO, *, lr: float, ngd_lr: float) -> None:
+        variational = list(model.variational_parameters())
+        hyper = list(model.hyperparameters()) + [p for p in likelihood.parameters() if all(p is not q for q in model.parameters())]
+        self.model, self.elbo = model, elbo
+        self.params = variational + hyper
+        self.ngd = gpytorch.optim.NGD(variational, num_data=elbo.num_data, lr=ngd_lr)
+        self.adam = torch.optim.Adam(hyper, lr=lr)
+
+    def __call__(self, xb: torch.Tensor, yb: torch.Tensor) -> float:
+        self.ngd.zero_grad(set_to_none=True)
+        self.adam.zero_grad(set_to_none=True)
+        loss = checked_loss(lambda: -self.elbo(self.model(xb), yb))
+        loss.backward()
+        self.ngd.step()
+        self.adam.step()
+        if any(not bool(torch.isfinite(p).all()) for p in self.params):
+            raise NumericalFailure("non-finite parameters after an Adam step")
+        return float(loss.detach())

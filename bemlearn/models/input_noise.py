@@ -37,9 +37,9 @@ __all__ = ["estimator_noise_gains", "estimator_noise_gains3", "mean_gradient", "
 
 def mean_gradient(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
     """∇μ of (N2): ``x (B, d)`` physical inputs → ``(B, d)`` q_u's unit per input unit."""
-    xt = (x.to(torch.float64) - state.x_mean) / state.x_std
-    diff = (xt[:, None, :] - state.Z[None, :, :]) / state.lengthscale        # (B, M, d)
-    k = state.outputscale * torch.exp(-0.5 * (diff**2).sum(-1))              # (B, M)
+    x = x.to(torch.float64)
+    diff = (state.normalize(x)[:, None, :] - state.Z[None, :, :]) / state.lengthscale   # (B, M, d)
+    k = state.kernel_row(x)                                                  # (B, M)
     ak = k * state.alpha                                                     # (B, M)
     g = -(ak[:, :, None] * diff).sum(1) / state.lengthscale                  # ∂μ̃/∂x̃
     return state.y_std * g / state.x_std

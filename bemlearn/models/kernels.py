@@ -15,7 +15,7 @@ from gpytorch.constraints import GreaterThan, Positive
 
 from bemlearn.errors import ArgumentError
 
-__all__ = ["ard_se_kernel", "gaussian_likelihood", "kernel_matrix", "se_cross_covariance", "se_gram"]
+__all__ = ["ard_se_kernel", "gaussian_likelihood", "kernel_matrix", "se_cross_covariance", "se_gram", "se_kernel"]
 
 
 def ard_se_kernel(dim: int, *, dtype: torch.dtype = torch.float64) -> gpytorch.kernels.ScaleKernel:
@@ -63,12 +63,30 @@ def kernel_matrix(kernel: gpytorch.kernels.Kernel, x1: torch.Tensor, x2: torch.T
         return kernel(x1, x2).to_dense()
 
 
+def se_kernel(x1: torch.Tensor, x2: torch.Tensor, lengthscale: torch.Tensor, outputscale: torch.Tensor) -> torch.Tensor:
+    """K_ij = σ_f² exp(−½ ‖(x1_i − x2_j)/ℓ‖²) (eq. 11): the one evaluation of the ARD kernel on
+    frozen hyperparameters that every posterior, check, bench and test shares.
+
+    The differences are formed directly (``cdist`` without the ‖a‖² + ‖b‖² − 2aᵀb expansion, so
+    no cancellation near the data) and no ``(A, B, d)`` tensor is built.
+
+    Args:
+        x1: ``(A, d)`` normalized inputs.
+        x2: ``(B, d)`` normalized inputs.
+        lengthscale: ``(d,)`` ℓ, normalized input units.
+        outputscale: ``()`` σ_f², normalized output units squared.
+
+    Returns:
+        ``(A, B)`` kernel matrix, normalized output units squared.
+    """
+    d2 = torch.cdist(x1 / lengthscale, x2 / lengthscale, compute_mode="donot_use_mm_for_euclid_dist").square()
+    return outputscale * torch.exp(-0.5 * d2)
+
+
 def se_gram(z: torch.Tensor, lengthscale: torch.Tensor, outputscale: torch.Tensor) -> torch.Tensor:
-    """K_ij = σ_f² exp(−½ ‖(z_i − z_j)/ℓ‖²) (eq. 11), ``(M, M)`` for ``z (M, d)`` normalized inputs, with the
-    differences formed directly (no ‖a‖² + ‖b‖² − 2aᵀb cancellation): the Gram matrix every frozen
-    exact posterior, its checks and its exports share (:meth:`PredictorState.gram`)."""
-    zs = z / lengthscale
-    return outputscale * torch.exp(-0.5 * torch.cdist(zs, zs, compute_mode="donot_use_mm_for_euclid_dist").square())
+    """K_ZZ = :func:`se_kernel` ``(z, z)``: ``(M, M)`` for ``z (M, d)`` normalized inputs (no noise term;
+    :meth:`~bemlearn.models.predictor_state.PredictorState.gram` adds σ_0² I)."""
+    return se_kernel(z, z, lengthscale, outputscale)
 
 
 def se_cross_covariance(

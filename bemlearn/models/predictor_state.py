@@ -57,6 +57,7 @@ from typing import Literal
 import torch
 
 from bemlearn.errors import CheckpointError
+from bemlearn.models.kernels import se_gram, se_kernel
 
 __all__ = ["PredictorState", "GPKind"]
 
@@ -197,18 +198,20 @@ class PredictorState:
         return self.S_chol is not None
 
     def gram(self) -> torch.Tensor:
-        """K = K_ZZ + σ_0² I, K_ij = σ_f² exp(−½ ‖(z_i − z_j)/ℓ‖²) (eq. 11); ``(M, M)``, normalized units."""
-        from bemlearn.models.kernels import se_gram
-
+        """K = K_ZZ + σ_0² I, K_ij = σ_f² exp(−½ ‖(z_i − z_j)/ℓ‖²) (eq. 11, :func:`~bemlearn.models.kernels.se_gram`);
+        ``(M, M)``, normalized units."""
         K = se_gram(self.Z, self.lengthscale, self.outputscale)
         K.diagonal().add_(self.noise)
         return K
 
+    def normalize(self, x: torch.Tensor) -> torch.Tensor:
+        """x̃ = (x − x_mean) / x_std: ``(B, d)`` normalized inputs for ``x: (B, d)`` physical inputs."""
+        return (x - self.x_mean) / self.x_std
+
     def kernel_row(self, x: torch.Tensor) -> torch.Tensor:
-        """k_Z(x̃) = σ_f² exp(−½ ‖(x̃ − z_j)/ℓ‖²): ``(B, M)`` for ``x: (B, d)`` physical inputs."""
-        xt = (x - self.x_mean) / self.x_std
-        diff = (xt[:, None, :] - self.Z[None, :, :]) / self.lengthscale
-        return self.outputscale * torch.exp(-0.5 * (diff**2).sum(-1))
+        """k_Z(x̃) = σ_f² exp(−½ ‖(x̃ − z_j)/ℓ‖²) (eq. 11, :func:`~bemlearn.models.kernels.se_kernel`):
+        ``(B, M)`` for ``x: (B, d)`` physical inputs."""
+        return se_kernel(self.normalize(x), self.Z, self.lengthscale, self.outputscale)
 
     def gram_cholesky(self) -> torch.Tensor | None:
         """L with L Lᵀ = K_ZZ + σ_0² I (exact kind; computed once per state), or ``None`` for the

@@ -5,13 +5,13 @@ from typing import TYPE_CHECKING
 from bemlearn._lazy import lazy_namespace
 
 if TYPE_CHECKING:  # imported on first use: bemlearn._lazy
-    from bemlearn.pipeline.config import PipelineConfig, load_pipeline_config
+    from bemlearn.pipeline.config import PipelineConfig
     from bemlearn.pipeline.data_evaluation import SliceSpec, bem_slice_figure, bem_slices, heldout_prediction
     from bemlearn.pipeline.evaluation import BEMEvaluation, EvaluationConfig, evaluate_bem, held_out_references, run_truth_robot
     from bemlearn.pipeline.gp_stage import CheckpointProvenance, GPStageResult, fit_bem_gp
     from bemlearn.pipeline.lemma import LearnedLemma1, learned_lemma1
     from bemlearn.pipeline.reliability import reliability_figure, reliability_table
-    from bemlearn.pipeline.resolve import ResolvedConfig, complete_section, resolve_pipeline_config
+    from bemlearn.pipeline.resolve import ResolvedConfig, complete_section, load_pipeline_config, resolve_pipeline_config
     from bemlearn.pipeline.run import run_pipeline
     from bemlearn.pipeline.train import train_run
 

@@ -16,13 +16,13 @@ anywhere is an error naming the file and the key path, as is a value outside the
 component declares (:func:`bemlearn.config.config_limits`).  :class:`PipelineConfig` adds the
 rules between sections (``__post_init__``): amplitude and sample budgets, a validation split
 that needs two trials, and so on; :func:`bemlearn.pipeline.resolve.resolve_pipeline_config`
-those that need the robot (the gain matrix's size, the mismatched bodies).
+those that need the robot (the gain matrix's size, the mismatched bodies).  Reading a file with
+the derived values filled in is :func:`bemlearn.pipeline.resolve.load_pipeline_config`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 from bemlearn.config import Limit, config_limits
 from bemlearn.data.collect import CollectConfig
@@ -32,7 +32,7 @@ from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.pipeline.evaluation import EvaluationConfig
 from bemlearn.sim.closed_loop import SimulateConfig
 
-__all__ = ["PipelineConfig", "load_pipeline_config", "MAX_SAMPLES"]
+__all__ = ["PipelineConfig", "MAX_SAMPLES"]
 
 #: Most samples a stage may produce (collect: trials × duration × rate; evaluate and simulate alike).
 MAX_SAMPLES = 10**9
@@ -96,10 +96,3 @@ class PipelineConfig:
             raise ConfigError(f"dataset.val_fraction = {self.dataset.val_fraction:g} holds out whole trials for validation: "
                              f"collect.n_trials must be at least 2, got {c.n_trials} (or set dataset.val_fraction: 0)")
 
-
-def load_pipeline_config(path: str | Path) -> PipelineConfig:
-    """Parse a pipeline YAML file strictly (unknown keys and bad types are errors naming the key) and
-    fill in the values derived from the robot's model (:func:`~bemlearn.pipeline.resolve.resolve_pipeline_config`)."""
-    from bemlearn.pipeline.resolve import resolve_pipeline_config
-
-    return resolve_pipeline_config(path).config

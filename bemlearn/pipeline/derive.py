@@ -14,7 +14,11 @@ of how it was derived, for ``config show``.  The model scales used
 Frequencies are kept below ~λ/2π, where the BEM is a quasi-static balance and the
 momentum correction of the EIC converges (eq. 10); amplitudes are chosen so that one
 sine component at the top frequency moves the BEM by 1.5× the design bound, within the
-joint ranges.
+joint ranges.  The closed loop gets critically damped EIC gains (eq. 3, 8) and a reference
+whose linearised BEM peaks at half the design bound.
+
+:func:`~bemlearn.pipeline.derived_defaults.derive_pipeline_values` assembles these into the
+config keys the pipeline fills in (``config show`` prints each with its note).
 """
 
 from __future__ import annotations
@@ -43,7 +47,6 @@ __all__ = [
     "evaluation",
     "eic_gains",
     "closed_loop_reference",
-    "derive_all",
 ]
 
 log = logging.getLogger(__name__)
@@ -238,36 +241,79 @@ def evaluation(robot, signals: dict, *, n_references: int = 5) -> Derived:
     return Derived(out, note)
 
 
-def derive_all(robot) -> dict[str, Derived]:
-    """Every derived default of ``robot``, keyed ``collect.<field>``, ``evaluate``, ``simulate.<field>``."""
-    rate = control_rate(robot)
-    r = rate.value
-    sig = excitation_signals(robot, r)
-    gains = excitation_gains(robot, r)
-    init = initial_ranges(robot)
-    fw = fall_window(robot)
-    sen = sensor(robot, r)
-    out = {
-        "collect.rate_hz": Derived(r.rate_hz, rate.note),
-        "collect.physics_timestep": Derived(r.timestep if r.timestep_changed else None, rate.note),
-        "collect.gains": Derived(gains.value["gains"], gains.note),
-        "collect.gain_scale": Derived(gains.value["gain_scale"], gains.note),
-        "collect.fall_window": fw,
-        "collect.input_units": input_units(robot),
-        "collect.sensor": sen,
-        "evaluate": evaluation(robot, sig.value),
-        "simulate.rate_hz": Derived(r.rate_hz, rate.note),
-        "simulate.physics_timestep": Derived(r.timestep if r.timestep_changed else None, rate.note),
-        "simulate.gains": eic_gains(robot, r),
-        "simulate.reference": closed_loop_reference(robot, sig.value),
-        "simulate.fall_window": fw,
-        "simulate.sensor": Derived({**sen.value, "velocity_cutoff": 2 * sen.value["velocity_cutoff"]}, sen.note + "; × 2 in the closed loop"),
-    }
-    for k in ("n_sines", "amplitude", "frequency_hz"):
-        out[f"collect.{k}"] = Derived(sig.value[k], sig.note)
-    for k in ("initial_qa", "initial_qu"):
-        out[f"collect.{k}"] = Derived(init.value[k], init.note)
-    return out
+def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None) -> Derived:
+    """EIC gains from the model (eq. 3, 8): critically damped loops
+
+        internal: ω_u = min(2.2 λ, 2π·rate/20),  k_p,u = ω_u², k_d,u = 2 ω_u
+        external: ω_a = ω_u / 7,                 k_p,a = ω_a², k_d,a = 2 ω_a
+
+    (λ = √(Γ_q/D_uu)).  ω_u is lowered (down to 1.2 λ) while the linearised command for a
+    q_u error of ``qu_error`` (default d/4) would exceed the ``ctrlrange``.
+
+    Returns:
+        ``Derived(EICGains, note)``.
+    """
+    from bemlearn.control.eic import EICGains
+
+    lam = instability_rate(robot)
+    d = design_region(robot).value
+    e0 = d / 4 if qu_error is None else qu_error
+    w_u = min(2.2 * lam, 2 * math.pi * rate.rate_hz / 20)
+    peak = _eic_peak(robot, w_u, e0)
+    while peak > 1.0 and w_u > 1.2 * lam:
+        w_u = max(1.2 * lam, 0.9 * w_u)
+        peak = _eic_peak(robot, w_u, e0)
+    w_a = w_u / 7
+    g = EICGains(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u)
+    note = (f"ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/7, critically damped; "
+            f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × ctrlrange")
+    if robot.m == 1:
+        from bemlearn.control.eic_linear import eic_linear_abscissa
+
+        ab = eic_linear_abscissa(robot, g)
+        note += f"; linearised EIC loop max Re λ = {ab:.3g} 1/s"
+        if ab >= 0:
+            log.warning("%s: the EIC with the derived gains is unstable in its linearisation at upright (max Re λ = %.3g 1/s)", robot.name, ab)
+    return Derived(g, note)
 
 
-from bemlearn.pipeline.derive_loop import closed_loop_reference, eic_gains  # noqa: E402  (re-export; derive_loop imports this module)
+def _eic_peak(robot, w_u: float, e0: float) -> float:
+    """|ctrl| / ctrl_max of the EIC's first tick for a q_u error e0 at rest at upright (linearised)."""
+    import torch
+
+    from bemlearn.control.actuator_inverse import MujocoActuatorInverse
+
+    n, iu, ia = robot.n, robot.unactuated_index, list(robot.actuated_index)
+    q = np.zeros(n)
+    q[iu] = robot.qu_nominal
+    D = robot.mass_matrix(torch.from_numpy(q[None]))[0].numpy()
+    v_u = -(w_u**2) * e0
+    D_ua = D[iu, ia]
+    v_a = -D_ua / (D_ua @ D_ua) * (D[iu, iu] * v_u)
+    tau = D[np.ix_(ia, ia)] @ v_a + D[ia, iu] * v_u
+    inv = MujocoActuatorInverse(robot)
+    raw = inv.B_pinv @ tau / inv.gainprm[:, 0]
+    umax = np.where(inv.limited, inv.limit, np.inf)
+    return float(np.max(np.abs(raw) / umax))
+
+
+def closed_loop_reference(robot, signals: dict) -> Derived:
+    """The closed-loop reference: two components at 0.2 and 0.4 × λ/2π (clipped to the
+    excitation band) with amplitudes 3 : 2 scaled so that the linearised BEM peaks at d/2.
+
+    Returns:
+        ``Derived(dict of ReferenceConfig fields, note)``.
+    """
+    d = design_region(robot).value
+    lam = instability_rate(robot)
+    f_lo, f_hi = signals["frequency_hz"]
+    f = np.clip(np.array([0.2, 0.4]) * lam / (2 * math.pi), f_lo, f_hi)
+    g = np.max(bem_gain(bem_slopes(robot), 2 * math.pi * f), axis=0)
+    w = np.array([0.6, 0.4])
+    s = 0.5 * d / max(float(w @ g), 1e-12)
+    limited = _limited_actuated(robot)
+    cap = float(np.min(0.5 * qa_half_ranges(robot)[limited])) if limited.any() else math.inf
+    s = min(s, cap, signals["n_sines"][1] * signals["amplitude"][1])
+    A = tuple(float(f"{a:.4g}") for a in s * w)
+    out = {"amplitudes": A, "frequencies_hz": tuple(float(f"{x:.4g}") for x in f), "phases": (0.0, 0.0), "offset": 0.0}
+    return Derived(out, f"A = {A} at {tuple(round(float(x), 3) for x in f)} Hz: linearised BEM peak ≈ {s * float(w @ g):.3g}")

@@ -3,17 +3,24 @@
 :func:`derive_pipeline_values` turns the model-derived values of :mod:`bemlearn.pipeline.derive`
 into ``{"collect.rate_hz": (value, note), ...}`` leaves for
 :func:`~bemlearn.pipeline.resolve.resolve_pipeline_config`, which fills in only the keys the
-config does not give.  Values that depend on each other are derived consistently with what the
-config *does* give: a given control rate is used for the excitation LQR, the velocity filter and
-the EIC gains, and the closed loop runs at the collection's rate unless told otherwise.
+config does not give.  It is the one assembly of the derived defaults: ``bemlearn run``,
+``config show``, ``bench robots`` and the tests all go through it.  Values that depend on each
+other are derived consistently with what the config *does* give: a given control rate is used for
+the excitation LQR, the velocity filter and the EIC gains, and the closed loop runs at the
+collection's rate unless told otherwise.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bemlearn.config import to_dict
+from bemlearn.pipeline import derive
+from bemlearn.pipeline.derive import Derived, RateChoice, control_rate
+
+if TYPE_CHECKING:
+    from bemlearn.pipeline.config import PipelineConfig
 
 __all__ = ["DERIVED_KEYS", "derive_pipeline_values"]
 
@@ -49,7 +56,6 @@ def _rate(robot, rate_hz: float | None, timestep: float | None, *, section: str 
     largest step h' ≤ h_file with 1/(rate·h') whole; a given step must divide the rate's tick.
     """
     from bemlearn.errors import ConfigError
-    from bemlearn.pipeline.derive import Derived, RateChoice, control_rate
 
     if rate_hz is None:
         return control_rate(robot)
@@ -70,27 +76,26 @@ def _rate(robot, rate_hz: float | None, timestep: float | None, *, section: str 
     return Derived(RateChoice(rate_hz, N, fine, True), note)
 
 
-def derive_pipeline_values(robot, config, given: set[str] | frozenset[str] = frozenset()) -> dict[str, tuple[Any, str]]:
+def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | frozenset[str] = frozenset()) -> dict[str, tuple[Any, str]]:
     """``{dotted key: (value, how it was derived)}`` for every derivable key of ``config`` (docs/config.md).
 
     Args:
         robot: the config's robot (a :class:`~bemlearn.robots.MujocoRobot`; other robots derive nothing).
-        config: the config as given (its given values steer the derivation: see module docstring).
-        given: the dotted keys the config gives.
+        config: the :class:`~bemlearn.pipeline.config.PipelineConfig` as given (its given values steer the
+            derivation: see module docstring).
+        given: the dotted keys the config gives (none: every key is derived from the model alone).
     """
-    from bemlearn.pipeline import derive
     from bemlearn.robots import MujocoRobot
 
     if not isinstance(robot, MujocoRobot):
         return {}
     out: dict[str, tuple[Any, str]] = {}
-    c, s = config.collect, config.simulate
-    given_collect_rate = c.rate_hz if _given(given, "collect.rate_hz") else None
-    given_sim_rate = s.rate_hz if _given(given, "simulate.rate_hz") else given_collect_rate
-    given_collect_step = c.physics_timestep if _given(given, "collect.physics_timestep") else None
+    given_collect_rate = config.collect.rate_hz if _given(given, "collect.rate_hz") else None
+    given_sim_rate = config.simulate.rate_hz if _given(given, "simulate.rate_hz") else given_collect_rate
+    given_collect_step = config.collect.physics_timestep if _given(given, "collect.physics_timestep") else None
     crate = _rate(robot, given_collect_rate, given_collect_step)
     if _given(given, "simulate.physics_timestep"):
-        srate = _rate(robot, given_sim_rate, s.physics_timestep, section="simulate")
+        srate = _rate(robot, given_sim_rate, config.simulate.physics_timestep, section="simulate")
     elif not _given(given, "simulate.rate_hz"):   # the closed loop follows the collection's rate and step
         srate = crate
     else:

@@ -22,7 +22,7 @@ from bemlearn.config import ConfigError, from_dict, load_yaml, set_dotted, to_di
 from bemlearn.errors import BemlearnError
 from bemlearn.pipeline.config import PipelineConfig
 
-__all__ = ["ResolvedConfig", "resolve_pipeline_config", "complete_section", "format_resolved", "flatten"]
+__all__ = ["ResolvedConfig", "resolve_pipeline_config", "load_pipeline_config", "complete_section", "format_resolved", "flatten"]
 
 Origin = str  # "given" | "derived" | "default"
 
@@ -122,6 +122,12 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
         else:
             origins[key] = "default"
     return ResolvedConfig(parsed, origins, {k: v for k, v in notes.items()}, source)
+
+
+def load_pipeline_config(path: str | Path) -> PipelineConfig:
+    """Parse a pipeline YAML file strictly (unknown keys and bad types are errors naming the key) and
+    fill in the values derived from the robot's model (:func:`resolve_pipeline_config`)."""
+    return resolve_pipeline_config(path).config
 
 
 def _check_for_robot(cfg: PipelineConfig, robot, source: str) -> None:

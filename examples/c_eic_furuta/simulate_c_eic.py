@@ -23,7 +23,7 @@ import numpy as np
 
 from bemlearn.apps.furuta.model import AnalyticFuruta, FurutaParameters
 from bemlearn.export.c_build import STRICT_FLAGS, compile_shared
-from bemlearn.pipeline.config import load_pipeline_config
+from bemlearn.pipeline.resolve import load_pipeline_config
 from bemlearn.robots import load
 from bemlearn.sim.closed_loop import SimulateConfig
 from bemlearn.sim.plant import SensedPlant

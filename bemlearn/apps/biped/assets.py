@@ -9,12 +9,23 @@ a test checks the shipped files equal the generators' output.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-__all__ = ["ASSETS", "PINNED_XML", "PLANAR_XML", "generated_assets", "write_assets"]
+if TYPE_CHECKING:
+    import mujoco
+
+__all__ = ["ASSETS", "PINNED_XML", "PLANAR_XML", "planar_model", "generated_assets", "write_assets"]
 
 ASSETS = Path(__file__).parent / "assets"
 PINNED_XML = ASSETS / "biped_pinned.xml"
 PLANAR_XML = ASSETS / "biped_planar.xml"
+
+
+def planar_model() -> mujoco.MjModel:
+    """The floating planar walker (``assets/biped_planar.xml``), as simulated by :mod:`bemlearn.apps.biped.walker`."""
+    import mujoco
+
+    return mujoco.MjModel.from_xml_path(str(PLANAR_XML))
 
 
 def generated_assets() -> dict[str, str]:

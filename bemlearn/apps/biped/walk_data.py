@@ -22,7 +22,7 @@ from bemlearn.data.validation import MIN_TRIAL_SAMPLES
 from bemlearn.errors import DataError, TrajectoryFormatError
 
 if TYPE_CHECKING:
-    from bemlearn.apps.biped.walker import WalkResult
+    from bemlearn.apps.biped.walk_result import WalkResult
 
 __all__ = ["walk_trajectories", "stance_per_sample", "walking_data"]
 

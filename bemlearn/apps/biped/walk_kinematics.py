@@ -17,16 +17,10 @@ import torch
 
 from bemlearn.errors import ArgumentError
 
-__all__ = ["foot_positions"]
+__all__ = ["FOOT_SITES", "foot_positions"]
 
-_FOOT_SITES = ("foot1", "foot2")
-
-
-def _planar_model() -> mujoco.MjModel:
-    """The floating planar walker (``assets/biped_planar.xml``), as simulated by :mod:`bemlearn.apps.biped.walker`."""
-    from bemlearn.apps.biped.assets import PLANAR_XML
-
-    return mujoco.MjModel.from_xml_path(str(PLANAR_XML))
+#: The sites of the two point feet in the walker's model (leg 1, leg 2).
+FOOT_SITES = ("foot1", "foot2")
 
 
 @functools.lru_cache(maxsize=1)
@@ -71,6 +65,6 @@ def foot_positions(qpos: np.ndarray) -> np.ndarray:
     qpos = np.asarray(qpos, dtype=np.float64)
     if qpos.ndim != 2 or qpos.shape[1] != model.nq:
         raise ArgumentError(f"foot_positions: qpos must have shape (T, {model.nq}), got {qpos.shape}")
-    fk = frame_positions(chain, model, torch.from_numpy(qpos), _FOOT_SITES)
-    return np.stack([fk[n].numpy() for n in _FOOT_SITES], 1)
+    fk = frame_positions(chain, model, torch.from_numpy(qpos), FOOT_SITES)
+    return np.stack([fk[n].numpy() for n in FOOT_SITES], 1)
 

@@ -11,10 +11,11 @@ from typing import TYPE_CHECKING
 import mujoco
 import numpy as np
 
-from bemlearn.apps.biped.walk_kinematics import _planar_model, foot_positions
+from bemlearn.apps.biped.assets import planar_model
+from bemlearn.apps.biped.walk_kinematics import foot_positions
 
 if TYPE_CHECKING:
-    from bemlearn.apps.biped.walker import WalkResult
+    from bemlearn.apps.biped.walk_result import WalkResult
 
 __all__ = ["walk_metrics"]
 
@@ -32,7 +33,7 @@ def walk_metrics(result: WalkResult) -> dict:
     out: dict = {"steps": n, "fell": r.fell, "duration_s": float(len(r.t) / r.config.rate_hz)}
     if len(r.t) == 0:
         return out
-    model = _planar_model()
+    model = planar_model()
     radius = float(model.geom_size[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "foot1"), 0])
     feet = foot_positions(r.qpos)
     touch = foot_positions(r.touchdown_qpos) if n else np.zeros((0, 2, 3))

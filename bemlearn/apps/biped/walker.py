@@ -16,124 +16,35 @@ logged states (:func:`foot_positions`, :mod:`bemlearn.apps.biped.walk_kinematics
 lengths and swing-foot clearance (:func:`walk_metrics`, :mod:`bemlearn.apps.biped.walk_metrics`).
 :func:`walk_trajectories`, :func:`stance_per_sample` and :func:`walking_data`
 (:mod:`bemlearn.apps.biped.walk_data`) turn the logged run into trajectory files and GP inputs
-x ∈ R^14 (eq. 11, n = 5); all are re-exported here.
+x ∈ R^14 (eq. 11, n = 5); all are re-exported here, as are the options (:class:`WalkConfig`,
+:mod:`~bemlearn.apps.biped.walk_config`) and the log (:class:`WalkResult`, :mod:`~bemlearn.apps.biped.walk_result`).
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
 from tqdm.auto import tqdm
 
-from bemlearn.apps.biped.controller import WalkExcitation, WalkingController, WalkingGains
-from bemlearn.apps.biped.gait import GaitConfig, build_gait
+from bemlearn.apps.biped.assets import planar_model
+from bemlearn.apps.biped.controller import WalkingController
+from bemlearn.apps.biped.gait import build_gait
+from bemlearn.apps.biped.walk_config import WalkConfig, load_walk_config
 from bemlearn.apps.biped.walk_data import stance_per_sample, walk_trajectories, walking_data
-from bemlearn.apps.biped.walk_kinematics import _FOOT_SITES, _planar_model, foot_positions
+from bemlearn.apps.biped.walk_kinematics import FOOT_SITES, foot_positions
 from bemlearn.apps.biped.walk_metrics import walk_metrics
-from bemlearn.config import ConfigError, from_dict, load_yaml
+from bemlearn.apps.biped.walk_result import WalkResult
 from bemlearn.control.bem_sources import make_bem_source
-from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
+from bemlearn.data.sensors import Encoder, FilteredDifferentiator
+from bemlearn.errors import ConfigError
 
 __all__ = ["WalkConfig", "WalkResult", "load_walk_config", "simulate_walk", "foot_positions", "walk_metrics",
            "walk_trajectories", "stance_per_sample", "walking_data"]
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class WalkConfig:
-    """Walking simulation options (``walk:`` section of ``configs/biped.yaml``).
-
-    Attributes:
-        duration_s: simulated time limit, s.  rate_hz: control rate, Hz.
-        max_steps: stop after this many steps (0: no limit).
-        gait: which gait.  gains: controller gains.
-        bem_source: ``"model"``, ``"zero"`` or ``"predictor"`` (torso BEM in the loop).
-        predictor: exported predictor file for ``"predictor"``.
-        sensor: encoder and velocity filter (set ``counts_per_rev: 0`` for exact angles).
-        initial_phase: s at the start.  initial_phase_rate: ϑ̇ at the start, rad/s.
-        initial_noise: std of a seeded perturbation of the initial actuated angles (at the same phase), rad.
-        contact_height: foot-switch threshold above the foot sphere, m.
-        min_step_phase: earliest phase at which a touchdown counts as a step.
-        fall_hip_height: m.  fall_torso: rad.  max_step_time: s.
-        seed: seeds the initial perturbation and the sensor noise.
-        excitation: sum-of-sines excitation of the references (data collection; off by default).
-    """
-
-    duration_s: float = 10.0
-    rate_hz: float = 115.0
-    max_steps: int = 0
-    gait: GaitConfig = field(default_factory=GaitConfig)
-    gains: WalkingGains = field(default_factory=WalkingGains)
-    bem_source: str = "model"
-    predictor: str | None = None
-    sensor: SensorConfig = field(default_factory=SensorConfig)
-    initial_phase: float = 0.02
-    initial_phase_rate: float = 1.0
-    initial_noise: float = 0.0
-    contact_height: float = 0.0005
-    min_step_phase: float = 0.5
-    fall_hip_height: float = 0.25
-    fall_torso: float = 1.0
-    max_step_time: float = 2.0
-    seed: int = 0
-    excitation: WalkExcitation = field(default_factory=WalkExcitation)
-
-    def __post_init__(self) -> None:
-        if self.duration_s <= 0 or self.rate_hz <= 0:
-            raise ConfigError(f"walk: duration_s and rate_hz must be > 0, got {self.duration_s}, {self.rate_hz}")
-        if self.max_steps < 0:
-            raise ConfigError(f"walk.max_steps must be >= 0, got {self.max_steps}")
-
-
-def load_walk_config(path) -> WalkConfig:
-    """The ``walk:`` section of a biped config file (e.g. ``configs/biped.yaml``), parsed strictly.
-
-    Other top-level sections are left to their own parsers; ``robot``, when present, must be ``biped``.
-    """
-    data = load_yaml(path)
-    if data.get("application", "biped") != "biped":
-        raise ConfigError(f"{path}: application: the walking simulation needs 'biped', got {data['application']!r}")
-    if data.get("robot", "biped") != "biped":
-        raise ConfigError(f"{path}: robot: the walking simulation needs 'biped', got {data['robot']!r}")
-    return from_dict(WalkConfig, data.get("walk"), where=f"{path}:walk")
-
-
-@dataclass(frozen=True)
-class WalkResult:
-    """Logged signals at the control rate (``(T, ·)``) and summary metrics.
-
-    Attributes:
-        t: (T,) s.  qpos, qvel, qacc: (T, 7) true [x m, z m, q1..q5 rad] and rates.
-        q_meas, qd_est: (T, 5) what the controller saw, rad, rad/s.
-        u: (T, 4) torques on [q2, q3, q4, q5], N·m.  stance: (T,) stance leg (1 or 2).
-        phase: (T,) s.  qu_e: (T,) the BEM q1^e, rad.  bem_x: (T, 12) BEM queries.
-        steps: (K,) tick index at which each step ended (its touchdown).
-        touchdown_qpos: (K, 7) true state right after each touchdown.
-        fell: whether the run ended in a fall.  metrics: :func:`walk_metrics`.
-        config: the configuration of the run.
-    """
-
-    t: np.ndarray
-    qpos: np.ndarray
-    qvel: np.ndarray
-    qacc: np.ndarray
-    q_meas: np.ndarray
-    qd_est: np.ndarray
-    u: np.ndarray
-    stance: np.ndarray
-    phase: np.ndarray
-    qu_e: np.ndarray
-    bem_x: np.ndarray
-    steps: np.ndarray
-    touchdown_qpos: np.ndarray
-    fell: bool
-    metrics: dict
-    config: WalkConfig
 
 
 def _initial_state(model, data, gait, config: WalkConfig, rng: np.random.Generator) -> None:
@@ -162,22 +73,23 @@ def _initial_state(model, data, gait, config: WalkConfig, rng: np.random.Generat
     mujoco.mj_forward(model, data)
 
 
-def simulate_walk(config: WalkConfig = WalkConfig(), *, bem=None, progress: bool = True) -> WalkResult:
+def simulate_walk(config: WalkConfig | None = None, *, bem=None, progress: bool = True) -> WalkResult:
     """Walk the planar biped (module docstring) and return logs and metrics.
 
     Args:
-        config: :class:`WalkConfig`.
+        config: :class:`WalkConfig` (default: ``WalkConfig()``).
         bem: a BEM source object overriding ``config.bem_source`` (``x (B, 12) -> (B,)``).
         progress: show a tqdm bar.
     """
     from bemlearn.robots import load
 
+    config = WalkConfig() if config is None else config
     nominal = load("biped")
     gait = build_gait(config.gait)
     if bem is None:
         bem = make_bem_source(config.bem_source, robot=nominal, predictor=config.predictor)
     ctrl = WalkingController(nominal, bem, gait, gains=config.gains, excitation=config.excitation)
-    model = _planar_model()
+    model = planar_model()
     data = mujoco.MjData(model)
     dt = 1.0 / config.rate_hz
     substeps = int(round(dt / model.opt.timestep))
@@ -188,7 +100,7 @@ def simulate_walk(config: WalkConfig = WalkConfig(), *, bem=None, progress: bool
     enc = Encoder(config.sensor, rng)
     vf = FilteredDifferentiator(5, cutoff=config.sensor.velocity_cutoff, dt=dt)
     vf.v = data.qvel[2:].copy()
-    sites = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, n) for n in _FOOT_SITES]
+    sites = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, n) for n in FOOT_SITES]
     hip = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "hip")
     radius = float(model.geom_size[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "foot1"), 0])
     T = int(round(config.duration_s * config.rate_hz))
