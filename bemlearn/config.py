@@ -1,7 +1,7 @@
 """Strict, typed configuration: YAML parsed into frozen dataclasses.
 
 Every component defines its own dataclass next to the component (e.g.
-:class:`bemlearn.data.collect.CollectConfig`); this module only knows how to turn a
+:class:`bemlearn.sim.collect.CollectConfig`); this module only knows how to turn a
 mapping into such a dataclass, rejecting unknown keys and wrongly typed values with an
 error that names the offending key path, and how to write the resolved config back.
 

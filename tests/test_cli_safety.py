@@ -6,7 +6,7 @@ import pytest
 import yaml
 
 from bemlearn.cli.main import main
-from bemlearn.data.collect import collect
+from bemlearn.sim.collect import collect
 from conftest import furuta_section
 from bemlearn.data.trajectory_io import write_trajectory
 from bemlearn.export.staleness import check_predictor_matches, predictor_checkpoint_sha256

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bemlearn.data.collect import CollectConfig, collect
+from bemlearn.sim.collect import CollectConfig, collect
 from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
 from bemlearn.data.trajectory_io import ground_truth_path, read_ground_truth, read_trajectory, write_trajectory
 from conftest import furuta_section

@@ -19,7 +19,7 @@ from bemlearn.data import (
     detect_quantization_step,
     read_trajectory,
 )
-from bemlearn.data.collect import collect
+from bemlearn.sim.collect import collect
 from bemlearn.data.import_map import ImportMap, load_import_map
 from bemlearn.data.log_import import import_logs
 from bemlearn.data.rig_logs import RigLogStyle, rig_log_map, write_rig_logs

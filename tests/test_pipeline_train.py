@@ -18,7 +18,7 @@ import yaml
 from conftest import furuta_section
 
 from bemlearn.cli.main import main
-from bemlearn.data.collect import collect
+from bemlearn.sim.collect import collect
 from bemlearn.data.trajectory_io import write_trajectory
 from bemlearn.export import load_learned_bem
 from bemlearn.models.learned_bem import LearnedBEM, srinivas_kappa

@@ -61,7 +61,7 @@ def test_bad_configs_are_named_errors(raw, message):
 
 
 def test_library_calls_complete_their_section():
-    from bemlearn.data.collect import CollectConfig, collect
+    from bemlearn.sim.collect import CollectConfig, collect
 
     with pytest.raises(ValueError, match="not set; derive them"):
         collect(str(CARTPOLE), CollectConfig(n_trials=1, duration_s=0.5, workers=1))

@@ -58,7 +58,7 @@ def bench_bem_training(config, data_path: str | Path, *, sgpr_points: int = 50_0
     rows.append(_fit_and_eval(ds_big, dataclasses.replace(config.train, kind="sgpr", n_inducing=n_inducing, max_iter=None), config, threads=2))
     progress(rows[-1])
     if svgp:
-        from bemlearn.data.collect import collect
+        from bemlearn.sim.collect import collect
 
         cc = dataclasses.replace(config.collect, n_trials=svgp_trials, duration_s=svgp_duration_s, seed=config.collect.seed + 1000)
         big, _ = collect(config.robot, cc, progress=False)

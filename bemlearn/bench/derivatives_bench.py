@@ -68,7 +68,7 @@ def load_or_collect(config, data_path: str | Path):
     data_path = Path(data_path)
     gt = ground_truth_path(data_path)
     if not gt.is_file():
-        from bemlearn.data.collect import collect
+        from bemlearn.sim.collect import collect
 
         data, truth = collect(config.robot, config.collect, progress=False)
         old = read_trajectory(data_path)

@@ -78,7 +78,7 @@ def cartpole_case(workdir: str | Path, *, n_trials: int = 24, progress: bool = F
     """A cart-pole (actuated slide x, m; unactuated hinge φ, rad) written to ``workdir``, LQR
     gains, 24 × 20 s of excitation collected at 400 Hz (4096-count encoders, 1.53 mm / mrad);
     held-out references of 5–10 cm, 0.1–1 Hz (|φ^e| ≲ 0.4 rad)."""
-    from bemlearn.data.collect import collect
+    from bemlearn.sim.collect import collect
     from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
     from bemlearn.pipeline.config import PipelineConfig
     from bemlearn.pipeline.evaluation import EvaluationConfig

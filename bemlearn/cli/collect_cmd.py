@@ -32,7 +32,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    from bemlearn.data.collect import collect
+    from bemlearn.sim.collect import collect
     from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
     from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.preflight import preflight

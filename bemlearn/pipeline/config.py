@@ -5,7 +5,7 @@
     robot: furuta          # registry name or MJCF path (or leave it out and give data:)
     data: FILE             # train on this trajectory file instead of collecting (model-free without robot:)
     model: path/to/robot.xml  # model-free runs only: an MJCF to compare the learned BEM with
-    collect: {...}         # bemlearn.data.collect.CollectConfig
+    collect: {...}         # bemlearn.sim.collect.CollectConfig
     dataset: {...}         # bemlearn.data.dataset.DatasetConfig
     train: {...}           # bemlearn.fitting.GPConfig
     evaluate: {...}        # bemlearn.pipeline.evaluation.EvaluationConfig
@@ -25,7 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from bemlearn.config import Limit, config_limits
-from bemlearn.data.collect import CollectConfig
+from bemlearn.sim.collect import CollectConfig
 from bemlearn.data.dataset import DatasetConfig
 from bemlearn.errors import ConfigError
 from bemlearn.fitting.gp_config import GPConfig

@@ -174,7 +174,7 @@ def _strip_none(data: Any) -> Any:
 
 
 def complete_section(robot: str, section: str, value):
-    """A config section (e.g. a :class:`~bemlearn.data.collect.CollectConfig`) with its ``None``
+    """A config section (e.g. a :class:`~bemlearn.sim.collect.CollectConfig`) with its ``None``
     fields derived from ``robot``'s model, as :func:`resolve_pipeline_config` would.
 
     Library calls (``collect(robot, CollectConfig(n_trials=4))``) get the same derived values

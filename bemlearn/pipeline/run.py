@@ -39,7 +39,7 @@ log = logging.getLogger(__name__)
 def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | None = None, *,
                  device: str | None = None, progress: bool = True) -> Path:
     """Run every stage of ``config`` into ``out_dir`` (default: a new ``runs/<robot or data stem>-<timestamp>``, :func:`~bemlearn.files.new_run_dir`); returns the folder."""
-    from bemlearn.data.collect import collect
+    from bemlearn.sim.collect import collect
     from bemlearn.data.trajectory_io import ground_truth_path, read_trajectory, write_trajectory
     from bemlearn.export.export_run import export_run
     from bemlearn.pipeline.report import write_report

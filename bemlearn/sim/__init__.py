@@ -1,4 +1,4 @@
-"""Closed-loop MuJoCo simulation of the EIC loop with a BEM source, the sensed plant it runs, figures, rendering."""
+"""Closed-loop MuJoCo simulation: the excitation experiment that collects data (`collect`), the EIC loop with a BEM source, the sensed plant both run, figures, rendering."""
 
 from typing import TYPE_CHECKING
 

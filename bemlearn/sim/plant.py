@@ -1,6 +1,6 @@
 """A MuJoCo robot stepped at a control rate and observed like a real rig.
 
-Both the excitation collector (:mod:`bemlearn.data.collect`) and the closed-loop simulator
+Both the excitation collector (:mod:`bemlearn.sim.collect`) and the closed-loop simulator
 (:mod:`bemlearn.sim.closed_loop`) run the same plant: per control tick the true coordinates
 are read, measured through the encoder and the velocity filter (:mod:`bemlearn.data.sensors`),
 the controller's command is held over ``round(1 / (rate · timestep))`` physics steps, and the

@@ -189,7 +189,7 @@ def _execute_train(resolved, out: Path, cpus: int) -> None:
     cfg = resolved.config
     _write_configs(resolved, out)
     if cfg.data is None:
-        from bemlearn.data.collect import collect
+        from bemlearn.sim.collect import collect
         from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
 
         data, truth = collect(cfg.robot, cfg.collect, progress=False)

@@ -130,7 +130,7 @@ def _robot_and_model(robot_name: str):
 
 def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, seed_seq: np.random.SeedSequence) -> TrialResult:
     """Run one excitation trial (module docstring) and return its logged and true signals."""
-    from bemlearn.sim.plant import SensedPlant  # here: importing the simulator loads torch and MuJoCo's closed loop
+    from bemlearn.sim.plant import SensedPlant  # here: the plant loads torch
 
     rng = np.random.default_rng(seed_seq)
     model, n, m = robot.model, robot.n, robot.m
