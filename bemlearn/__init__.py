@@ -9,10 +9,14 @@ predictors) → ``control`` / ``sim`` (EIC controller, closed loop) → ``cli``.
 
 from bemlearn._version import __version__
 from bemlearn.errors import (
+    ArgumentError,
     BemlearnError,
     CheckpointError,
     ConfigError,
+    DataError,
     EnvironmentProblem,
+    MissingFileError,
+    NumericalError,
     OutputBusyError,
     OutputExistsError,
     PredictorInputError,
@@ -24,10 +28,14 @@ from bemlearn.errors import (
 
 __all__ = [
     "__version__",
+    "ArgumentError",
     "BemlearnError",
     "CheckpointError",
     "ConfigError",
+    "DataError",
     "EnvironmentProblem",
+    "MissingFileError",
+    "NumericalError",
     "OutputBusyError",
     "OutputExistsError",
     "PredictorInputError",

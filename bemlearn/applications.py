@@ -23,6 +23,8 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from bemlearn.errors import ArgumentError, ConfigError
+
 __all__ = ["Application", "ENTRY_POINT_GROUP", "applications", "get_application", "register_application"]
 
 log = logging.getLogger(__name__)
@@ -69,7 +71,7 @@ _LOADED = False
 def register_application(app: Application) -> None:
     """Add ``app`` (normally done by discovery; tests and scripts may call it directly)."""
     if not isinstance(app, Application):
-        raise TypeError(f"register_application: expected an Application, got {type(app).__name__}")
+        raise ArgumentError(f"register_application: expected an Application, got {type(app).__name__}")
     _APPS[app.name] = app
 
 
@@ -100,5 +102,5 @@ def get_application(name: str) -> Application:
     """The application called ``name``; the error lists the installed ones."""
     apps = applications()
     if name not in apps:
-        raise ValueError(f"unknown application {name!r}; installed applications: {sorted(apps) or 'none'}")
+        raise ConfigError(f"unknown application {name!r}; installed applications: {sorted(apps) or 'none'}")
     return apps[name]

@@ -37,7 +37,7 @@ from typing import Any, TypeVar
 
 import yaml
 
-from bemlearn.errors import ConfigError
+from bemlearn.errors import ArgumentError, ConfigError
 from bemlearn.files import atomic_write_text
 
 __all__ = ["ConfigError", "from_dict", "to_dict", "load_yaml", "save_yaml", "replace_path", "Limit", "config_limits",
@@ -115,7 +115,7 @@ def config_limits(cls: type, **limits: Limit) -> None:
     """Declare the :class:`Limit` of fields of the config dataclass ``cls`` (checked by :func:`from_dict`)."""
     unknown = sorted(set(limits) - {f.name for f in dataclasses.fields(cls)})
     if unknown:
-        raise TypeError(f"config_limits({cls.__name__}): no field(s) {unknown}")
+        raise ArgumentError(f"config_limits({cls.__name__}): no field(s) {unknown}")
     LIMITS.setdefault(cls, {}).update(limits)
 
 

@@ -31,7 +31,7 @@ import time
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 
-from bemlearn.errors import EnvironmentProblem, OutputExistsError
+from bemlearn.errors import EnvironmentProblem, MissingFileError, OutputExistsError
 
 __all__ = [
     "atomic_path",
@@ -107,7 +107,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     try:
         yield tmp
         if not tmp.is_file():
-            raise FileNotFoundError(f"{path}: the writer did not create the temporary file {tmp}")
+            raise MissingFileError(f"{path}: the writer did not create the temporary file {tmp}")
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, path)

@@ -42,7 +42,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
-from bemlearn.errors import EnvironmentProblem, OutputBusyError, OutputExistsError
+from bemlearn.errors import ArgumentError, EnvironmentProblem, OutputBusyError, OutputExistsError
 from bemlearn.files import INTERNAL_PREFIX, check_writable, new_run_dir, write_problem
 
 try:  # POSIX
@@ -108,14 +108,16 @@ def _acquire(path: Path, *, exclusive: bool, folder: Path) -> tuple[int, dict | 
             fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as exc:
             raise (write_problem(path, exc) or exc) from None
+        busy = False
         try:
             if fcntl is not None:
                 fcntl.flock(fd, (fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH) | fcntl.LOCK_NB)
             else:  # pragma: no cover - no flock: a live PID in the record holds the file
                 other = _read_record(fd)
-                if other and other.get("pid") != os.getpid() and _pid_alive(other.get("pid")):
-                    raise BlockingIOError
+                busy = bool(other and other.get("pid") != os.getpid() and _pid_alive(other.get("pid")))
         except BlockingIOError:
+            busy = True
+        if busy:
             other = _read_record(fd)
             os.close(fd)
             raise OutputBusyError(f"{folder}: {_describe(other)} is writing there right now; "
@@ -377,7 +379,7 @@ def claim_outputs(
     keep = tuple(keep_on_interrupt)
     if folder is None:
         if default_name is None:
-            raise ValueError("claim_outputs: give a folder or a default_name")
+            raise ArgumentError("claim_outputs: give a folder or a default_name")
         check_writable(root)
         first_new = _first_new(Path(root))
         out = new_run_dir(default_name, root=root, create=True)

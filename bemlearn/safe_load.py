@@ -34,7 +34,7 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
-from bemlearn.errors import CheckpointError
+from bemlearn.errors import CheckpointError, MissingFileError
 
 __all__ = ["torch_load_weights", "check_pt2_archive", "read_pt2_archive", "load_script_module", "open_npz",
            "PT2_MEMBERS"]
@@ -130,7 +130,7 @@ def read_pt2_archive(source: str | os.PathLike[str] | bytes, *, where: str | os.
     :func:`check_pt2_archive` passed on them.
 
     Raises:
-        FileNotFoundError: no such file.
+        MissingFileError: (a FileNotFoundError) no such file.
         CheckpointError: refused by :func:`check_pt2_archive`, or torch cannot read it.
     """
     from torch.export.pt2_archive._package import load_pt2
@@ -140,7 +140,7 @@ def read_pt2_archive(source: str | os.PathLike[str] | bytes, *, where: str | os.
     else:
         path = Path(source)
         if not path.is_file():
-            raise FileNotFoundError(f"{path}: no such .pt2 predictor file")
+            raise MissingFileError(f"{path}: no such .pt2 predictor file")
         data = path.read_bytes()
     check_pt2_archive(data, where=path)
     try:
@@ -155,7 +155,7 @@ def load_script_module(source: str | os.PathLike[str] | bytes, extra_files: dict
     ``source`` is a path or the bytes of a TorchScript file (``where`` names it in errors).
 
     Raises:
-        FileNotFoundError: no such file.
+        MissingFileError: (a FileNotFoundError) no such file.
         CheckpointError: not a TorchScript archive, or its pickles name anything but
             TorchScript classes and tensors.
     """
@@ -168,7 +168,7 @@ def load_script_module(source: str | os.PathLike[str] | bytes, extra_files: dict
     else:
         path = Path(source)
         if not path.is_file():
-            raise FileNotFoundError(f"{path}: no such TorchScript predictor file")
+            raise MissingFileError(f"{path}: no such TorchScript predictor file")
         f = str(path)
     try:
         with warnings.catch_warnings():

@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["JOINT_KINDS", "joint_unit", "q_unit_label", "gp_input_units", "generalized_force_unit", "resolution_text"]
 
 #: Valid joint kinds and their (q, q̇, q̈) units.
@@ -28,14 +30,14 @@ _FORCE = {"hinge": "N·m", "slide": "N"}
 
 def _check(kind: str) -> str:
     if kind not in JOINT_KINDS:
-        raise ValueError(f"joint kind {kind!r}: expected one of {sorted(JOINT_KINDS)}")
+        raise ArgumentError(f"joint kind {kind!r}: expected one of {sorted(JOINT_KINDS)}")
     return kind
 
 
 def joint_unit(kind: str, order: int = 0) -> str:
     """Unit of the ``order``-th time derivative (0, 1, 2) of a ``kind`` joint's coordinate."""
     if order not in (0, 1, 2):
-        raise ValueError(f"derivative order {order!r}: expected 0, 1 or 2")
+        raise ArgumentError(f"derivative order {order!r}: expected 0, 1 or 2")
     return JOINT_KINDS[_check(kind)][order]
 
 
@@ -54,7 +56,7 @@ def gp_input_units(input_names: Sequence[str], joint_names: Sequence[str], kinds
         prefix, _, joint = name.partition("_")
         order = {"q": 0, "qd": 1, "qdd": 2}.get(prefix)
         if order is None or joint not in kind_of:
-            raise ValueError(f"GP input {name!r}: expected qdd_<joint>, qd_<joint> or q_<joint> of {list(joint_names)}")
+            raise ArgumentError(f"GP input {name!r}: expected qdd_<joint>, qd_<joint> or q_<joint> of {list(joint_names)}")
         out[name] = joint_unit(kind_of[joint], order)
     return out
 

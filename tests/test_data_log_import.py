@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import furuta_section
 
 from bemlearn.cli.main import main
 from bemlearn.config import ConfigError, from_dict
@@ -23,7 +24,7 @@ from bemlearn.data.import_map import ImportMap, load_import_map
 from bemlearn.data.log_import import import_logs
 from bemlearn.data.rig_logs import RigLogStyle, rig_log_map, write_rig_logs
 from bemlearn.data.sensors import SensorConfig
-from conftest import furuta_section
+from bemlearn.errors import ArgumentError
 
 STEP = 2 * math.pi / 2048
 
@@ -101,7 +102,7 @@ def test_channels_round_trip_npz_csv(rig, tmp_path):
         assert x.meta == y.meta
     assert "x:target_theta" in (tmp_path / "a.csv").read_text().splitlines()[2].split(",")
     assert b.channel("saturation").shape == (traj.n_samples,)
-    with pytest.raises(KeyError, match=r"no channel 'torque'"):
+    with pytest.raises(ArgumentError, match=r"no channel 'torque'"):
         b.channel("torque")
 
 

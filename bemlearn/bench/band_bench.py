@@ -23,6 +23,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["format_band_bench", "run_band_bench"]
 
 
@@ -50,7 +52,7 @@ def run_band_bench(runs: list[str | Path], *, progress=print) -> list[dict]:
     for run in runs:
         run = Path(run)
         if not (run / "config.yaml").is_file():
-            raise ValueError(f"{run}: not a run folder (no config.yaml; expected the output of `bemlearn run` or `bemlearn train`)")
+            raise ArgumentError(f"{run}: not a run folder (no config.yaml; expected the output of `bemlearn run` or `bemlearn train`)")
         state = load_checkpoint(run).predictor_state
         cfg = load_pipeline_config(run / "config.yaml")
         robot, _ = run_truth_robot(run)

@@ -28,6 +28,7 @@ from pathlib import Path
 import torch
 
 from bemlearn.bench.predict_bench import synthetic_posterior
+from bemlearn.errors import EnvironmentProblem
 from bemlearn.export.c_build import find_cc
 from bemlearn.export.c_source import c_sources
 from bemlearn.export.variance_factor import kernel_gram
@@ -92,7 +93,7 @@ def measure_footprints(sizes: dict[str, tuple[int, ...]] = SIZES, dtypes: tuple[
     """Compile and measure every (kind, M, dtype); needs ``cc`` and binutils ``size``."""
     cc = find_cc()
     if cc is None or shutil.which("size") is None:
-        raise RuntimeError("bench c-footprint: needs a C compiler and binutils `size` on PATH")
+        raise EnvironmentProblem("bench c-footprint: needs a C compiler and binutils `size` on PATH")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for kind, Ms in sizes.items():

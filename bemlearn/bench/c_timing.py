@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bemlearn.errors import EnvironmentProblem
 from bemlearn.export.c_build import find_cc
 
 __all__ = ["CTiming", "time_c_predictor", "HARNESS", "FLAG_SETS"]
@@ -175,7 +176,7 @@ def time_c_predictor(sources: dict[str, str], x: np.ndarray, *, kind: str, prefi
     """
     cc = find_cc()
     if cc is None:
-        raise RuntimeError("time_c_predictor: no C compiler found (set $CC or install cc)")
+        raise EnvironmentProblem("time_c_predictor: no C compiler found (set $CC or install cc)")
     header = next(t for k, t in sources.items() if k.endswith(".h"))
     n, M = x.shape[1], int(re.search(r"_N_SUPPORT (\d+)", header).group(1))
     n_fma_mean = M * (n + 1)
@@ -196,7 +197,7 @@ def time_c_predictor(sources: dict[str, str], x: np.ndarray, *, kind: str, prefi
             cmd = [cc, *flags, "-o", str(exe), str(Path(tmp) / "harness.c"), "-lm"]
             res = subprocess.run(cmd, capture_output=True, text=True)
             if res.returncode != 0:
-                raise RuntimeError(f"time_c_predictor: {' '.join(cmd)} failed:\n{res.stderr}")
+                raise EnvironmentProblem(f"time_c_predictor: {' '.join(cmd)} failed:\n{res.stderr}")
             res = subprocess.run([str(exe), str(len(x)), str(calls), str(batches), str(n_fma_forward)],
                                  input=stdin, check=True, capture_output=True, text=True)
             vals = dict(line.split()[:2] for line in res.stdout.splitlines())

@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from bemlearn.data import build_datasets, make_estimator
+from bemlearn.errors import DataError
 
 __all__ = ["ESTIMATOR_GRID", "TABLE_HEAD", "derivative_errors", "format_row", "resolve_setting", "run_derivatives_bench",
            "load_or_collect"]
@@ -72,7 +73,7 @@ def load_or_collect(config, data_path: str | Path):
         data, truth = collect(config.robot, config.collect, progress=False)
         old = read_trajectory(data_path)
         if not (np.array_equal(old.q, data.q) and np.array_equal(old.t, data.t)):
-            raise ValueError(f"{data_path}: does not match what the config's collect section produces; cannot rebuild its ground truth")
+            raise DataError(f"{data_path}: does not match what the config's collect section produces; cannot rebuild its ground truth")
         write_trajectory(truth, gt)
     return read_trajectory(data_path), read_ground_truth(gt)
 

@@ -5,8 +5,8 @@ checkpoints, TorchScript and ``.pt2`` predictors).  A *bad-input class*
 (:class:`BadInput`) writes one malformed file of a kind (truncated NPZ, non-UTF-8 YAML,
 MJCF with two unactuated joints, …) from a seed.  :func:`run_case` feeds it to its
 reader; the outcome is *named* when the reader raises a
-:class:`~bemlearn.errors.BemlearnError` (or the documented ``FileNotFoundError`` for a
-missing file) whose message names the file.  Anything else — another exception, a message
+:class:`~bemlearn.errors.BemlearnError` (a missing file is a
+:class:`~bemlearn.errors.MissingFileError`) whose message names the file.  Anything else — another exception, a message
 without the file, or no error at all — counts against the target (zero).
 
 The bad-input classes are in :mod:`bemlearn.bench.fuzz_inputs`.  Extend with one more
@@ -116,7 +116,7 @@ def run_case(bad: BadInput, folder: Path, seed: int, base: dict) -> Outcome:
     path = bad.make(folder, seed, base)
     try:
         READERS[bad.reader](path)
-    except (BemlearnError, FileNotFoundError) as exc:
+    except BemlearnError as exc:
         msg = str(exc)
         named = path.name in msg
         return Outcome(bad.reader, bad.name, named, type(exc).__name__, msg)

@@ -23,12 +23,14 @@ import argparse
 import json
 import math
 import os
+import sys
 import time
 from dataclasses import dataclass
 
 import torch
 
 from bemlearn.bench.train_bench import peak_rss_mib
+from bemlearn.errors import ArgumentError
 from bemlearn.fitting.gpdm_fit import GPDMConfig, fit_gpdm
 from bemlearn.models.gpdm import compare_latents
 
@@ -77,7 +79,7 @@ def synthetic_gait(
         seed: seeds c_true (n ≠ 5), U, q_0, χ_0 and ε.
     """
     if n_seq < 1 or steps < 2 or n_joints < 2 or not abs(speed_variation) < 1:
-        raise ValueError("synthetic_gait: expected n_seq ≥ 1, steps ≥ 2, n_joints ≥ 2, |speed_variation| < 1")
+        raise ArgumentError("synthetic_gait: expected n_seq ≥ 1, steps ≥ 2, n_joints ≥ 2, |speed_variation| < 1")
     gen = torch.Generator().manual_seed(seed)
     f64 = torch.float64
     if n_joints == len(PAPER_ROBOT_C):
@@ -178,4 +180,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main())
+    sys.exit(main())

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import yaml
 
+from bemlearn.errors import EnvironmentProblem
+
 __all__ = ["measure_sigint", "format_sigint"]
 
 
@@ -78,10 +80,10 @@ def measure_sigint(
         reader.start()
         if not started.wait(timeout_s):
             proc.kill()
-            raise RuntimeError(f"bench sigint: the fit did not start within {timeout_s} s: {''.join(lines)[-2000:]}")
+            raise EnvironmentProblem(f"bench sigint: the fit did not start within {timeout_s} s: {''.join(lines)[-2000:]}")
         time.sleep(delay_s)
         if proc.poll() is not None:
-            raise RuntimeError(f"bench sigint: the fit ended before the signal; raise max_iter ({''.join(lines)[-2000:]})")
+            raise EnvironmentProblem(f"bench sigint: the fit ended before the signal; raise max_iter ({''.join(lines)[-2000:]})")
         t0 = time.perf_counter()
         proc.send_signal(signum)
         t_second = None

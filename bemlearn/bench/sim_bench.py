@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from bemlearn.control.bem_sources import PredictorBEM
+from bemlearn.errors import MissingFileError
 from bemlearn.pipeline.evaluation import held_out_references
 from bemlearn.pipeline.lemma import learned_lemma1
 from bemlearn.sim.closed_loop import NominalConfig, ReferenceConfig, SimulateConfig, nominal_robot, simulate
@@ -65,7 +66,7 @@ def run_sim_bench(run_dir: str | Path, *, n_refs: int = 5, n_seeds: int = 5, dur
     run_dir = Path(run_dir)
     predictor = run_dir / "bem_predictor.pt"
     if not predictor.is_file():
-        raise FileNotFoundError(f"{run_dir}: no bem_predictor.pt (export the run first: bemlearn export {run_dir})")
+        raise MissingFileError(f"{run_dir}: no bem_predictor.pt (export the run first: bemlearn export {run_dir})")
     truth, ref_rec = run_truth_robot(run_dir)
     robot = ref_rec["mjcf"] or ref_rec["registry"]
     cfg = from_dict(PipelineConfig, load_yaml(run_dir / "config.yaml"), where=str(run_dir / "config.yaml"))

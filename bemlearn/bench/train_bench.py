@@ -15,6 +15,7 @@ import time
 import numpy as np
 import torch
 
+from bemlearn.errors import ArgumentError
 from bemlearn.fitting.build import build_gp
 from bemlearn.fitting.fit import fit_gp
 from bemlearn.fitting.gp_config import GPConfig
@@ -36,7 +37,7 @@ def smooth_target(x: torch.Tensor) -> torch.Tensor:
         ``(N,)`` values.
     """
     if x.ndim != 2 or x.shape[1] < 5:
-        raise ValueError(f"x: expected shape (N, d) with d >= 5, got {tuple(x.shape)}")
+        raise ArgumentError(f"x: expected shape (N, d) with d >= 5, got {tuple(x.shape)}")
     y = torch.sin(1.5 * x[:, 0]) + 0.5 * x[:, 1] + 0.3 * x[:, 2] * x[:, 3] + 0.2 * torch.cos(2.0 * x[:, 4])
     if x.shape[1] > 5:
         y = y + 0.1 * torch.sin(x[:, 5:]).sum(1)
@@ -63,7 +64,7 @@ def _as_tensor(a: object, name: str, dtype: torch.dtype) -> torch.Tensor:
     if isinstance(a, np.ndarray):
         a = torch.from_numpy(a)
     if not isinstance(a, torch.Tensor):
-        raise TypeError(f"{name}: expected a numpy array or torch tensor, got {type(a).__name__}")
+        raise ArgumentError(f"{name}: expected a numpy array or torch tensor, got {type(a).__name__}")
     return a.to(dtype)
 
 
@@ -116,7 +117,7 @@ def bench_train(
     }
     if test_x is not None:
         if test_y is None:
-            raise ValueError("test_y: required when test_x is given")
+            raise ArgumentError("test_y: required when test_x is given")
         tx = _as_tensor(test_x, "test_x", config.torch_dtype).to(config.device)
         ty = _as_tensor(test_y, "test_y", config.torch_dtype).to(config.device)
         t3 = time.perf_counter()

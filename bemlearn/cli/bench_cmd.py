@@ -24,6 +24,7 @@ import argparse
 from pathlib import Path
 
 from bemlearn.bench.predict_bench import format_predict_bench, run_predict_bench
+from bemlearn.errors import ArgumentError
 
 __all__ = ["add_parser", "run_predict"]
 
@@ -161,7 +162,7 @@ def _c_footprint(args: argparse.Namespace) -> int:
 def run_predict(args: argparse.Namespace) -> int:
     for name in ("n_train", "repeats", "gpytorch_repeats", "batch", "threads", "batch_threads"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
-            raise ValueError(f"--{name.replace('_', '-')}: expected a positive integer, got {getattr(args, name)}")
+            raise ArgumentError(f"--{name.replace('_', '-')}: expected a positive integer, got {getattr(args, name)}")
     result = run_predict_bench(
         checkpoint=args.checkpoint,
         n_train=args.n_train,
@@ -206,10 +207,8 @@ def _sim(args: argparse.Namespace) -> int:
 
 
 def _derivatives(args: argparse.Namespace) -> int:
-    from bemlearn.bench.derivatives_bench import run_derivatives_bench
+    from bemlearn.bench.derivatives_bench import TABLE_HEAD, run_derivatives_bench
     from bemlearn.pipeline.config import load_pipeline_config
-
-    from bemlearn.bench.derivatives_bench import TABLE_HEAD
 
     cfg = load_pipeline_config(args.config)
     head = TABLE_HEAD[0] + ("" if args.no_gp else TABLE_HEAD[1])
@@ -240,7 +239,7 @@ def _import(args: argparse.Namespace) -> int:
 
     for name in ("rows", "files", "repeats"):
         if getattr(args, name) < 1:
-            raise ValueError(f"--{name}: expected a positive integer, got {getattr(args, name)}")
+            raise ArgumentError(f"--{name}: expected a positive integer, got {getattr(args, name)}")
     source = read_trajectory(args.data)
     result = {"load_average_1min": os.getloadavg()[0],
               "speed": bench_import_speed(source, rows=args.rows, trials=args.files, repeats=args.repeats)}
@@ -248,7 +247,7 @@ def _import(args: argparse.Namespace) -> int:
         from bemlearn.pipeline.config import load_pipeline_config
 
         if args.config is None:
-            raise ValueError("--accuracy: needs --config (the robot whose model BEM is the reference, and the dataset/train sections)")
+            raise ArgumentError("--accuracy: needs --config (the robot whose model BEM is the reference, and the dataset/train sections)")
 
         result["accuracy"] = bench_model_free_accuracy(source, load_pipeline_config(args.config), figure_dir=args.figures)
     print(json.dumps(result, indent=2, default=float))
@@ -285,7 +284,7 @@ def _uncertainty(args: argparse.Namespace) -> int:
     from bemlearn.files import atomic_write_text, check_outputs
 
     if args.seeds < 0:
-        raise ValueError(f"--seeds: expected a non-negative integer, got {args.seeds}")
+        raise ArgumentError(f"--seeds: expected a non-negative integer, got {args.seeds}")
     if args.json is not None:   # refused before minutes of fitting, not after
         check_outputs([args.json], args.force, what="bench uncertainty --json")
     results, sweep = run_uncertainty_bench(config=args.config, data=args.data, cartpole=not args.no_cartpole,

@@ -6,6 +6,8 @@ import dataclasses
 import logging
 from pathlib import Path
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["add_parser"]
 
 log = logging.getLogger(__name__)
@@ -38,7 +40,7 @@ def run(args) -> int:
 
     target = args.out or Path("data.npz")   # without --out: data.npz in a new runs/collect-<timestamp>
     if target.suffix.lower() not in (".npz", ".csv"):
-        raise ValueError(f"--out: expected a .npz or .csv file name, got {args.out}")
+        raise ArgumentError(f"--out: expected a .npz or .csv file name, got {args.out}")
     names = (target.name, ground_truth_path(target).name)
     preflight(config=args.config, outputs=[args.out, ground_truth_path(args.out)] if args.out else [],
               out_dir=args.out.parent if args.out else Path("runs"), force=args.force)

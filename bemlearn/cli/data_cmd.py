@@ -18,9 +18,9 @@ from pathlib import Path
 from typing import Any
 
 from bemlearn.data.quantization import counts_per_revolution
-from bemlearn.errors import OutputExistsError
 from bemlearn.data.trajectory_io import SUFFIXES, read_trajectory, write_trajectory
 from bemlearn.data.validation import JITTER_RTOL, MIN_TRIAL_SAMPLES, RATE_RTOL
+from bemlearn.errors import ArgumentError, OutputExistsError
 
 __all__ = ["add_parser", "format_summary"]
 
@@ -120,7 +120,7 @@ def run_check(args: argparse.Namespace) -> int:
 
 def run_convert(args: argparse.Namespace) -> int:
     if args.output.suffix.lower() not in SUFFIXES:
-        raise ValueError(
+        raise ArgumentError(
             f"{args.output}: unsupported output suffix {args.output.suffix!r}; expected one of {list(SUFFIXES)}"
         )
     from bemlearn.files import check_outputs
@@ -128,7 +128,7 @@ def run_convert(args: argparse.Namespace) -> int:
 
     check_outputs([args.output], args.force, what="data convert")
     if args.output.resolve() == args.input.resolve():
-        raise ValueError(f"{args.output}: output is the input file")
+        raise ArgumentError(f"{args.output}: output is the input file")
     limits = {"min_trial_samples": args.min_trial_samples, "rate_rtol": args.rate_rtol, "jitter_rtol": args.jitter_rtol}
     # the output folder is checked writable and locked before the input is read
     with claim_outputs(args.output.parent, entries=[args.output.name], force=args.force, what="data convert"):
@@ -143,13 +143,13 @@ def run_import(args: argparse.Namespace) -> int:
     from bemlearn.data.log_import import import_logs
 
     if args.out.suffix.lower() not in SUFFIXES:
-        raise ValueError(f"{args.out}: unsupported output suffix {args.out.suffix!r}; expected one of {list(SUFFIXES)}")
+        raise ArgumentError(f"{args.out}: unsupported output suffix {args.out.suffix!r}; expected one of {list(SUFFIXES)}")
     from bemlearn.outputs import claim_outputs
 
     if args.out.exists() and not args.force:
         raise OutputExistsError(f"{args.out}: already exists (use --force to overwrite)")
     if any(args.out.resolve() == p.resolve() for p in args.raw):
-        raise ValueError(f"{args.out}: output is one of the input files")
+        raise ArgumentError(f"{args.out}: output is one of the input files")
     # the output folder is checked writable and locked before the map and the logs are read
     with claim_outputs(args.out.parent, entries=[args.out.name], force=args.force, what="data import"):
         imap = load_import_map(args.map)

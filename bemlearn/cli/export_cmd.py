@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from bemlearn.errors import ArgumentError
 from bemlearn.export.export_run import export_run, export_targets
 
 __all__ = ["add_parser", "run"]
@@ -53,7 +54,7 @@ def _run_c(args: argparse.Namespace) -> int:
     from bemlearn.outputs import claim_outputs
 
     if args.out is None:
-        raise ValueError("--format c: give the output folder with --out DIR")
+        raise ArgumentError("--format c: give the output folder with --out DIR")
     names = [f"{check_prefix(args.prefix)}_predictor.h", f"{args.prefix}_predictor.c"]
     # the folder is checked writable and locked before the work; both files or neither
     with claim_outputs(args.out, entries=names, force=args.force, what="export") as out:
@@ -67,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     if args.fmt == "c":
         return _run_c(args)
     if args.prefix != "bem" or args.dtype != "float64":
-        raise ValueError("--prefix and --dtype apply to --format c only")
+        raise ArgumentError("--prefix and --dtype apply to --format c only")
     from bemlearn.outputs import claim_outputs
 
     targets = export_targets(args.run_dir, out=args.out, fmt=args.fmt)

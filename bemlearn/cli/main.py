@@ -3,6 +3,12 @@
 Each subcommand lives in its own module of this package exposing
 ``add_parser(subparsers)``, which registers the parser and sets ``func`` (a callable
 taking the parsed namespace and returning an exit code).
+
+Errors: a :class:`~bemlearn.errors.BemlearnError` (a bad config, a missing file, data that
+cannot be used, ...) is one line ``bemlearn COMMAND: error: MESSAGE`` and exit status 2; any
+other exception is a bug and keeps its traceback (exit status 1).  ``-v`` prints the traceback
+of every error.  Ctrl-C / SIGTERM exit with 130 / 143; a command's own status (e.g. 3 or 4
+for a verdict) is returned as it is.
 """
 
 from __future__ import annotations
@@ -13,10 +19,10 @@ import logging
 import os
 import signal
 import sys
+import traceback
 
 from bemlearn._version import __version__
 from bemlearn.applications import applications
-from bemlearn.config import ConfigError
 from bemlearn.errors import BemlearnError
 from bemlearn.interrupts import exit_status, interrupt_signal, sigint_handling
 
@@ -44,7 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
         "and use it in an EIC control loop.",
     )
     parser.add_argument("--version", action="version", version=f"bemlearn {__version__}")
-    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    parser.add_argument("-v", "--verbose", action="store_true",
+                        help="debug logging, and the traceback of every error (not only of bugs)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in SUBCOMMANDS:
         importlib.import_module(name).add_parser(sub)
@@ -73,10 +80,16 @@ def main(argv: list[str] | None = None) -> int:
             except KeyboardInterrupt:
                 received = interrupt_signal()
                 raise
-    except (BemlearnError, ConfigError, ValueError, FileNotFoundError, KeyError) as exc:
-        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
-        print(f"bemlearn {args.command}: error: {msg}", file=sys.stderr)
+    except BemlearnError as exc:  # a deliberate error: one line (the traceback with -v)
+        if args.verbose:
+            traceback.print_exc()
+        print(f"bemlearn {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except Exception as exc:  # anything else is a bug in bemlearn: keep its traceback
+        traceback.print_exc()
+        print(f"bemlearn {args.command}: internal error ({type(exc).__name__}), a bug in bemlearn: "
+              "please report it with the traceback above", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         status = exit_status(received)
         what = "interrupted" if received in (None, signal.SIGINT) else f"terminated ({received.name})"

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from bemlearn.errors import ConfigError
+
 __all__ = ["add_parser"]
 
 
@@ -51,7 +53,7 @@ def _run(args) -> int:
     if raw.get("application") is not None:  # a config of an application (e.g. the biped's): it runs its own stages
         app = get_application(str(raw["application"]))
         if app.run is None:
-            raise ValueError(f"{args.config}: application {raw['application']!r} has no pipeline of its own; remove the 'application' key")
+            raise ConfigError(f"{args.config}: application {raw['application']!r} has no pipeline of its own; remove the 'application' key")
         resolved = None
     else:
         from bemlearn.pipeline.resolve import resolve_pipeline_config
@@ -100,7 +102,7 @@ def _simulate(args) -> int:
     preflight(config=args.config, out_dir=args.out or Path("runs"), outputs=[args.out / "simulate"] if args.out else [], force=args.force)
     cfg = resolve_pipeline_config(args.config).config
     if cfg.robot is None:
-        raise ValueError(f"{args.config}: simulate needs a robot (a model to simulate); the config names only data")
+        raise ConfigError(f"{args.config}: simulate needs a robot (a model to simulate); the config names only data")
     pred = args.predictor or (Path(cfg.simulate.predictor) if getattr(cfg.simulate, "predictor", None) else None)
     if pred is not None and pred.is_file() and (pred.parent / "checkpoint.pt").is_file():
         check_predictor_matches(pred, pred.parent / "checkpoint.pt")

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["add_parser"]
 
 
@@ -35,7 +37,7 @@ def _sweep(args) -> int:
     from bemlearn.sweep import run_sweep
 
     if args.resume and args.force:
-        raise ValueError("--resume and --force: give one (keep the complete cells, or run every cell again)")
+        raise ArgumentError("--resume and --force: give one (keep the complete cells, or run every cell again)")
     if args.dry_run:
         return _dry_run(args)
     result = run_sweep(args.sweep, args.out, backend=args.backend, address=args.address, resume=args.resume,

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from bemlearn.errors import ArgumentError, MissingFileError
+
 __all__ = ["add_parser"]
 
 
@@ -36,14 +38,14 @@ def run(args) -> int:
     cfg = load_pipeline_config(args.config)
     data = args.data or (Path(cfg.data) if cfg.data else None)
     if data is None:
-        raise ValueError(f"--data: no trajectory file given and {args.config} has no 'data:' key "
+        raise ArgumentError(f"--data: no trajectory file given and {args.config} has no 'data:' key "
                          f"(collect one with `bemlearn collect {args.config} --out FILE`)")
     if not data.is_file():
-        raise FileNotFoundError(f"--data: trajectory file {data} not found (collect one with `bemlearn collect {args.config} --out {data}`)")
+        raise MissingFileError(f"--data: trajectory file {data} not found (collect one with `bemlearn collect {args.config} --out {data}`)")
     if args.resume and args.out is None:
-        raise ValueError("--resume: give the run folder to continue with --out RUN")
+        raise ArgumentError("--resume: give the run folder to continue with --out RUN")
     if args.resume and not (args.out / "checkpoint.pt").is_file():
-        raise FileNotFoundError(f"--resume: no checkpoint in {args.out}")
+        raise MissingFileError(f"--resume: no checkpoint in {args.out}")
     preflight(data=data, out_dir=args.out or Path("runs"), outputs=[] if args.resume or args.out is None else [args.out], force=args.force)
     # the run folder is claimed (created exclusively, locked); a failed --force / --resume puts it back as it was
     with claim_outputs(args.out, default_name="train", force=args.force, resume=args.resume,

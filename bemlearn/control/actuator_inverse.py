@@ -20,6 +20,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from bemlearn.errors import RobotModelError
+
 __all__ = ["MujocoActuatorInverse"]
 
 _GAIN_OK = (int(mujoco.mjtGain.mjGAIN_FIXED), int(mujoco.mjtGain.mjGAIN_AFFINE))
@@ -42,9 +44,9 @@ class MujocoActuatorInverse:
         for i in range(model.nu):
             name = model.actuator(i).name or f"#{i}"
             if int(model.actuator_dyntype[i]) != int(mujoco.mjtDyn.mjDYN_NONE):
-                raise ValueError(f"{robot.source}: actuator {name!r} has activation dynamics; the EIC needs dyntype='none'")
+                raise RobotModelError(f"{robot.source}: actuator {name!r} has activation dynamics; the EIC needs dyntype='none'")
             if int(model.actuator_gaintype[i]) not in _GAIN_OK or int(model.actuator_biastype[i]) not in _BIAS_OK:
-                raise ValueError(f"{robot.source}: actuator {name!r} needs gaintype fixed/affine and biastype none/affine")
+                raise RobotModelError(f"{robot.source}: actuator {name!r} needs gaintype fixed/affine and biastype none/affine")
         self.Tinv = robot.Tinv.numpy()
         self.B_pinv = np.linalg.pinv(robot.input_matrix[list(robot.actuated_index)].numpy())  # (nu, m)
         self.gear = model.actuator_gear[:, 0].copy()

@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from bemlearn.errors import ArgumentError, ConfigError, MissingFileError
+
 __all__ = ["BEM_SOURCES", "PredictorBEM", "ModelBEM", "ZeroBEM", "make_bem_source"]
 
 
@@ -32,12 +34,12 @@ class PredictorBEM:
 
         path = Path(path)
         if not path.is_file():
-            raise FileNotFoundError(f"BEM predictor file {path} not found (run `bemlearn export RUN_DIR` first)")
+            raise MissingFileError(f"BEM predictor file {path} not found (run `bemlearn export RUN_DIR` first)")
         self.module = load_script_module(path)  # CheckpointError (a ValueError) for a foreign or tampered file
         self.meta = json.loads(self.module.metadata())
         if robot is not None:
             if self.meta.get("robot") != robot.name or int(self.meta.get("m", -1)) != robot.m:
-                raise ValueError(
+                raise ArgumentError(
                     f"{path}: predictor is for robot {self.meta.get('robot')!r} (m = {self.meta.get('m')}), "
                     f"but the controller runs {robot.name!r} (m = {robot.m})"
                 )
@@ -136,10 +138,10 @@ def make_bem_source(name: str, *, robot, predictor: str | Path | None = None):
     """Build a BEM source by name for ``robot`` (the nominal robot for ``model``)."""
     if name == "predictor":
         if predictor is None:
-            raise ValueError("BEM source 'predictor' needs a predictor file (simulate.predictor or --predictor)")
+            raise ConfigError("BEM source 'predictor' needs a predictor file (simulate.predictor or --predictor)")
         return PredictorBEM(predictor, robot=robot)
     if name == "model":
         return ModelBEM(robot)
     if name == "zero":
         return ZeroBEM(robot.qu_nominal)
-    raise ValueError(f"unknown BEM source {name!r}; choose one of {list(BEM_SOURCES)}")
+    raise ConfigError(f"unknown BEM source {name!r}; choose one of {list(BEM_SOURCES)}")

@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bemlearn.config import Limit, config_limits
+from bemlearn.errors import ArgumentError, ConfigError
 from bemlearn.robots.reference import CompositeSinusoid
 
 __all__ = ["EICGains", "EICController"]
@@ -88,10 +89,10 @@ class EICController:
     def __init__(self, nominal, bem, reference: CompositeSinusoid, actuator, gains: EICGains = EICGains(), *, rate_hz: float | None = None, chunk: int = 400,
                  qu_limits: tuple[float, float] | None = None) -> None:
         if reference.m != nominal.m:
-            raise ValueError(f"EICController: reference has {reference.m} actuated joints, robot {nominal.name!r} has {nominal.m}")
+            raise ArgumentError(f"EICController: reference has {reference.m} actuated joints, robot {nominal.name!r} has {nominal.m}")
         unset = [n for n in ("kp_a", "kd_a", "kp_u", "kd_u") if getattr(gains, n) is None]
         if unset:
-            raise ValueError(f"EICController: gains {unset} not set; derive them from the model "
+            raise ConfigError(f"EICController: gains {unset} not set; derive them from the model "
                              "(bemlearn.pipeline.derive.eic_gains) or give them")
         self.nominal, self.bem, self.reference, self.actuator, self.gains = nominal, bem, reference, actuator, gains
         self.ia = np.array(nominal.actuated_index)

@@ -20,6 +20,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from bemlearn.errors import RobotModelError
+
 __all__ = ["eic_linear_matrix", "eic_linear_abscissa"]
 
 
@@ -46,7 +48,7 @@ def _model_terms(robot, eps: float = 1e-6):
 def eic_linear_matrix(robot, gains, *, terms=None) -> np.ndarray:
     """The ``(4, 4)`` matrix A of ẋ = A x (module docstring) for a robot with m = 1 (1/s, 1/s²)."""
     if robot.m != 1:
-        raise ValueError(f"eic_linear_matrix: needs one actuated joint, robot {robot.name!r} has {robot.m}")
+        raise RobotModelError(f"eic_linear_matrix: needs one actuated joint, robot {robot.name!r} has {robot.m}")
     Duu, Dua, Hq, (sp, sv, sa) = terms if terms is not None else _model_terms(robot)
     g = gains
     vext = np.array([0.0, -g.kp_a, 0.0, -g.kd_a])

@@ -31,6 +31,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["LQRResult", "linearize", "discrete_lqr"]
 
 log = logging.getLogger(__name__)
@@ -84,7 +86,7 @@ def linearize(robot, *, rate_hz: float, timestep: float | None = None, eps: floa
     h = float(model.opt.timestep)
     steps = 1.0 / (rate_hz * h)
     if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
-        raise ValueError(f"linearize: 1/rate_hz = {1 / rate_hz} s is not a whole number of physics steps ({h} s)")
+        raise ArgumentError(f"linearize: 1/rate_hz = {1 / rate_hz} s is not a whole number of physics steps ({h} s)")
     N = int(round(steps))
     data = mujoco.MjData(model)
     n = robot.n

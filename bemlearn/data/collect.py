@@ -22,11 +22,11 @@ does not depend on the number of worker processes.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import os
 from concurrent.futures import ProcessPoolExecutor
-import dataclasses
 from dataclasses import dataclass, field
 
 import mujoco
@@ -38,6 +38,7 @@ from bemlearn.config import to_dict
 from bemlearn.data.plant import SensedPlant
 from bemlearn.data.sensors import SensorConfig
 from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
+from bemlearn.errors import ConfigError, DataError, RobotModelError
 from bemlearn.units import q_unit_label
 
 __all__ = ["CollectConfig", "TrialResult", "collect", "simulate_trial"]
@@ -88,17 +89,17 @@ class CollectConfig:
 
     def __post_init__(self) -> None:
         if self.n_trials < 1:
-            raise ValueError(f"collect.n_trials must be ≥ 1, got {self.n_trials}")
+            raise ConfigError(f"collect.n_trials must be ≥ 1, got {self.n_trials}")
         if self.duration_s <= 0 or (self.rate_hz is not None and self.rate_hz <= 0) or (self.fall_window is not None and self.fall_window <= 0):
-            raise ValueError("collect.duration_s, rate_hz and fall_window must be > 0")
+            raise ConfigError("collect.duration_s, rate_hz and fall_window must be > 0")
         for name in ("gain_scale", "n_sines", "amplitude", "frequency_hz", "initial_qa", "initial_qu"):
             if getattr(self, name) is None:
                 continue
             lo, hi = getattr(self, name)
             if lo > hi:
-                raise ValueError(f"collect.{name}: expected (min, max) with min ≤ max, got {(lo, hi)}")
+                raise ConfigError(f"collect.{name}: expected (min, max) with min ≤ max, got {(lo, hi)}")
         if self.n_sines is not None and self.n_sines[0] < 1:
-            raise ValueError(f"collect.n_sines: need at least one sine, got {self.n_sines}")
+            raise ConfigError(f"collect.n_sines: need at least one sine, got {self.n_sines}")
 
 
 @dataclass(frozen=True)
@@ -120,7 +121,7 @@ def _robot_and_model(robot_name: str):
 
     robot = load(robot_name)
     if not isinstance(robot, MujocoRobot):
-        raise ValueError(f"collect: robot {robot_name!r} has no MuJoCo model to simulate; give an MJCF robot (a registry name or a path to an .xml file)")
+        raise RobotModelError(f"collect: robot {robot_name!r} has no MuJoCo model to simulate; give an MJCF robot (a registry name or a path to an .xml file)")
     return robot
 
 
@@ -132,7 +133,7 @@ def simulate_trial(robot, config: CollectConfig, trial_id: int, seed_seq: np.ran
     dt = plant.dt
     K = np.asarray(config.gains, dtype=np.float64)
     if K.size != m * 2 * n:
-        raise ValueError(f"collect.gains: expected m·2n = {m * 2 * n} values for robot {robot.name!r}, got {K.size}")
+        raise ConfigError(f"collect.gains: expected m·2n = {m * 2 * n} values for robot {robot.name!r}, got {K.size}")
     K = K.reshape(m, 2 * n) * rng.uniform(*config.gain_scale, size=(m, 2 * n))
     # reference: per actuated joint a random sum of sines
     n_sines = rng.integers(config.n_sines[0], config.n_sines[1] + 1, size=m)
@@ -202,7 +203,7 @@ def collect(robot_name: str, config: CollectConfig, *, progress: bool = True) ->
     robot = _robot_and_model(robot_name)
     unset = [f.name for f in dataclasses.fields(config) if getattr(config, f.name) is None and f.name != "physics_timestep"]
     if unset:
-        raise ValueError(f"collect: {unset} not set; derive them from the model with "
+        raise ConfigError(f"collect: {unset} not set; derive them from the model with "
                          "bemlearn.pipeline.complete_section(robot, 'collect', config) (as every pipeline command does) or give them")
     seqs = np.random.SeedSequence(config.seed).spawn(config.n_trials)
     jobs = [(config, i, s) for i, s in enumerate(seqs)]
@@ -236,7 +237,7 @@ def collect(robot_name: str, config: CollectConfig, *, progress: bool = True) ->
     if dropped:
         log.warning("collect: dropped %d trial(s) that fell within 10 samples: %s", len(dropped), dropped)
     if not kept:
-        raise RuntimeError("collect: every trial fell immediately; check the gains and initial ranges")
+        raise DataError("collect: every trial fell immediately; check the gains and initial ranges")
     n_failed = sum(r.failed for r in kept)
     log.info("collect: %d trials, %d fell, %d samples", len(kept), n_failed, sum(r.t.size for r in kept))
     cat = lambda name: np.concatenate([getattr(r, name) for r in kept])  # noqa: E731

@@ -40,6 +40,7 @@ from bemlearn.data.features import gp_input_names, gp_inputs, gp_output_name
 from bemlearn.data.normalization import Normalization
 from bemlearn.data.trajectory import Trajectory
 from bemlearn.data.validation import validate
+from bemlearn.errors import ConfigError, DataError
 
 __all__ = ["DatasetConfig", "build_datasets", "split_trials"]
 
@@ -80,15 +81,15 @@ class DatasetConfig:
     def __post_init__(self) -> None:
         self.estimator()  # validates the name and options
         if self.qu_window is not None and not (math.isfinite(self.qu_window) and self.qu_window > 0):
-            raise ValueError(f"qu_window: expected a positive angle in rad or null, got {self.qu_window!r}")
+            raise ConfigError(f"qu_window: expected a positive angle in rad or null, got {self.qu_window!r}")
         for key in ("n_points", "n_val_points"):
             value = getattr(self, key)
             if value is not None and value < 1:
-                raise ValueError(f"{key}: expected a positive integer or null, got {value!r}")
+                raise ConfigError(f"{key}: expected a positive integer or null, got {value!r}")
         if not 0.0 <= self.val_fraction < 1.0:
-            raise ValueError(f"val_fraction: expected 0 <= val_fraction < 1, got {self.val_fraction!r}")
+            raise ConfigError(f"val_fraction: expected 0 <= val_fraction < 1, got {self.val_fraction!r}")
         if self.short_trials not in ("drop", "error"):
-            raise ValueError(f"short_trials: expected 'drop' or 'error', got {self.short_trials!r}")
+            raise ConfigError(f"short_trials: expected 'drop' or 'error', got {self.short_trials!r}")
 
     def estimator(self) -> DerivativeEstimator:
         """The configured derivative estimator (options left to the data still unset)."""
@@ -118,7 +119,7 @@ def split_trials(
     if val_fraction <= 0:
         return ids, []
     if len(ids) < 2:
-        raise ValueError(f"val_fraction = {val_fraction} needs at least 2 trials to split by trial, got {len(ids)}")
+        raise DataError(f"val_fraction = {val_fraction} needs at least 2 trials to split by trial, got {len(ids)}")
     n_val = min(max(1, round(val_fraction * len(ids))), len(ids) - 1)
     perm = rng.permutation(ids)
     return sorted(int(i) for i in perm[n_val:]), sorted(int(i) for i in perm[:n_val])
@@ -170,7 +171,7 @@ def build_datasets(traj: Trajectory, config: DatasetConfig, *, progress: bool = 
     need = est.min_samples(rate)
     short = [s.trial_id for s in traj.trial_slices() if s.n_samples < need]
     if short and config.short_trials == "error":
-        raise ValueError(
+        raise DataError(
             f"trial(s) {short} are shorter than the {need} samples the {est.name!r} estimator needs "
             "(set short_trials: drop to drop them)"
         )
@@ -179,7 +180,7 @@ def build_datasets(traj: Trajectory, config: DatasetConfig, *, progress: bool = 
     kept &= _drop_trials(traj, failed, "failed", report, "failed")
     source_rows = np.flatnonzero(kept)  # row in the caller's trajectory of each kept row
     if len(source_rows) == 0:
-        raise ValueError("no trials left to build a dataset from (all were dropped; see the log)")
+        raise DataError("no trials left to build a dataset from (all were dropped; see the log)")
     traj = traj.select_rows(kept) if len(source_rows) < traj.n_samples else traj
 
     raw_inside = None if config.qu_window is None else np.abs(traj.q[:, meta.unactuated_index]) <= config.qu_window
@@ -221,7 +222,7 @@ def build_datasets(traj: Trajectory, config: DatasetConfig, *, progress: bool = 
     train_rows = _draw(train_pool, config.n_points, train_rng, "train", report)
     val_rows = _draw(val_pool, config.n_val_points, val_rng, "val", report)
     if len(train_rows) == 0:
-        raise ValueError(
+        raise DataError(
             f"no training samples left after the |{meta.unactuated}| <= {config.qu_window} rad window "
             f"(training trials {train_ids})"
         )

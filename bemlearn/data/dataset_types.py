@@ -20,6 +20,7 @@ from torch.utils.data import Dataset
 
 from bemlearn.data.normalization import Normalization
 from bemlearn.data.trajectory import TrajectoryMeta
+from bemlearn.errors import ArgumentError
 
 __all__ = ["BEMDataset", "GPDatasets"]
 
@@ -52,13 +53,13 @@ class BEMDataset(Dataset):
     ) -> None:
         N = x.shape[0]
         if x.ndim != 2 or x.shape[1] != len(input_names) or x.shape[1] != normalization.dim:
-            raise ValueError(
+            raise ArgumentError(
                 f"BEMDataset: x must be (N, {len(input_names)}) to match input_names and the normalization, "
                 f"got {tuple(x.shape)}"
             )
         for name, t in (("y", y), ("trial", trial), ("row", row)):
             if tuple(t.shape) != (N,):
-                raise ValueError(f"BEMDataset: {name} must have shape ({N},), got {tuple(t.shape)}")
+                raise ArgumentError(f"BEMDataset: {name} must have shape ({N},), got {tuple(t.shape)}")
         self.x = x.to(torch.float64)
         self.y = y.to(torch.float64)
         self.normalization = normalization

@@ -28,6 +28,7 @@ from bemlearn.data.finite_difference import CentralDifference
 from bemlearn.data.gaussian_derivative import GaussianDerivative
 from bemlearn.data.savitzky_golay import SavitzkyGolay
 from bemlearn.data.trajectory import Trajectory
+from bemlearn.errors import ConfigError, DataError
 
 __all__ = ["DerivativeEstimator", "DERIVATIVE_ESTIMATORS", "make_estimator", "estimate_derivatives"]
 
@@ -82,7 +83,7 @@ def make_estimator(
         ConfigError: unknown or badly typed option.
     """
     if name not in DERIVATIVE_ESTIMATORS:
-        raise ValueError(
+        raise ConfigError(
             f"{where}: unknown derivative estimator {name!r}; valid names are {sorted(DERIVATIVE_ESTIMATORS)}"
         )
     return from_dict(DERIVATIVE_ESTIMATORS[name], dict(options or {}), where=f"{where} ({name})")
@@ -112,7 +113,7 @@ def estimate_derivatives(
     slices = traj.trial_slices()
     for s in tqdm(slices, desc=f"derivatives ({estimator.name})", disable=not progress, leave=False):
         if s.n_samples < need:
-            raise ValueError(
+            raise DataError(
                 f"trial {s.trial_id} (rows {s.rows.start}..{s.rows.stop - 1}) has {s.n_samples} samples; "
                 f"the {estimator.name!r} estimator needs at least {need}"
             )

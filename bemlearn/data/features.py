@@ -17,6 +17,8 @@ from typing import TypeVar
 import numpy as np
 import torch
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["gp_input_names", "gp_output_name", "gp_inputs"]
 
 ArrayT = TypeVar("ArrayT", np.ndarray, torch.Tensor)
@@ -25,7 +27,7 @@ ArrayT = TypeVar("ArrayT", np.ndarray, torch.Tensor)
 def gp_input_names(joint_names: Sequence[str], unactuated: str) -> tuple[str, ...]:
     """The 3n − 1 column names of x (eq. 11) for ``joint_names`` with unactuated joint ``unactuated``."""
     if unactuated not in joint_names:
-        raise ValueError(f"unactuated joint {unactuated!r} is not one of {list(joint_names)}")
+        raise ArgumentError(f"unactuated joint {unactuated!r} is not one of {list(joint_names)}")
     act = [j for j in joint_names if j != unactuated]
     return (
         *(f"qdd_{j}" for j in act),
@@ -55,13 +57,13 @@ def gp_inputs(q: ArrayT, qd: ArrayT, qdd: ArrayT, *, unactuated_index: int) -> A
         :func:`gp_input_names` (units rad/s², rad/s, rad, rad/s², rad/s).
     """
     if not (q.shape == qd.shape == qdd.shape) or q.ndim < 1:
-        raise ValueError(
+        raise ArgumentError(
             "gp_inputs: q, qd, qdd must share one shape (..., n), got "
             f"{tuple(q.shape)}, {tuple(qd.shape)}, {tuple(qdd.shape)}"
         )
     n = q.shape[-1]
     if not -n <= unactuated_index < n or n < 2:
-        raise ValueError(f"gp_inputs: unactuated_index {unactuated_index} out of range for n = {n} joints (n >= 2)")
+        raise ArgumentError(f"gp_inputs: unactuated_index {unactuated_index} out of range for n = {n} joints (n >= 2)")
     u = unactuated_index % n
     act = [i for i in range(n) if i != u]
     parts = [qdd[..., act], qd[..., act], q[..., act], qdd[..., u:u + 1], qd[..., u:u + 1]]

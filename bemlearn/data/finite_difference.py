@@ -21,6 +21,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["CentralDifference"]
 
 
@@ -55,7 +57,7 @@ class CentralDifference:
         """
         q = np.asarray(q, dtype=np.float64)
         if q.ndim != 2 or q.shape[0] < 4:
-            raise ValueError(f"CentralDifference: q must have shape (T >= 4, n), got {q.shape}")
+            raise ArgumentError(f"CentralDifference: q must have shape (T >= 4, n), got {q.shape}")
         dt = 1.0 / sample_rate_hz
         qd = np.empty_like(q)
         qdd = np.empty_like(q)

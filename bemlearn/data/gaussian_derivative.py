@@ -41,7 +41,7 @@ import numpy as np
 from scipy.ndimage import convolve1d
 from scipy.signal import oaconvolve
 
-from bemlearn.errors import ConfigError
+from bemlearn.errors import ArgumentError, ConfigError
 
 __all__ = ["GaussianDerivative", "gaussian_kernels", "apply_kernel"]
 
@@ -148,7 +148,7 @@ class GaussianDerivative:
         """
         q = np.asarray(q, dtype=np.float64)
         if q.ndim != 2 or q.shape[0] < 1:
-            raise ValueError(f"GaussianDerivative: q must have shape (T, n), got {q.shape}")
+            raise ArgumentError(f"GaussianDerivative: q must have shape (T, n), got {q.shape}")
         w0, w1, w2 = gaussian_kernels(self._sigma(sample_rate_hz), sample_rate_hz, self.truncate)
         return tuple(apply_kernel(q, w) for w in (w0, w1, w2))  # type: ignore[return-value]
 

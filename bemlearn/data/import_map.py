@@ -74,15 +74,15 @@ class TimeMap:
 
     def __post_init__(self) -> None:
         if self.column is None and self.rate_hz is None:
-            raise ValueError("give a time column (time.column) or the sample rate (time.rate_hz)")
+            raise ConfigError("give a time column (time.column) or the sample rate (time.rate_hz)")
         if self.column is None and self.resample != "none":
-            raise ValueError("resample: linear needs the time stamps (time.column) to interpolate from")
+            raise ConfigError("resample: linear needs the time stamps (time.column) to interpolate from")
         if self.rate_hz is not None and not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
-            raise ValueError(f"rate_hz: expected a positive number of Hz, got {self.rate_hz!r}")
+            raise ConfigError(f"rate_hz: expected a positive number of Hz, got {self.rate_hz!r}")
         if not 0 < self.max_jitter < 0.5:
-            raise ValueError(f"max_jitter: expected a fraction of a step in (0, 0.5), got {self.max_jitter!r}")
+            raise ConfigError(f"max_jitter: expected a fraction of a step in (0, 0.5), got {self.max_jitter!r}")
         if self.max_fill < 0:
-            raise ValueError(f"max_fill: expected a number of samples >= 0, got {self.max_fill!r}")
+            raise ConfigError(f"max_fill: expected a number of samples >= 0, got {self.max_fill!r}")
 
 
 @dataclass(frozen=True)
@@ -108,9 +108,9 @@ class JointMap:
     def __post_init__(self) -> None:
         self.kind_and_scale()
         if self.sign not in (1, -1):
-            raise ValueError(f"sign: expected 1 or -1, got {self.sign!r}")
+            raise ConfigError(f"sign: expected 1 or -1, got {self.sign!r}")
         if not math.isfinite(self.offset):
-            raise ValueError(f"offset: expected a finite number, got {self.offset!r}")
+            raise ConfigError(f"offset: expected a finite number, got {self.offset!r}")
 
     def kind_and_scale(self) -> tuple[str, float]:
         """(``"hinge"`` or ``"slide"``, scale to rad or m)."""
@@ -124,7 +124,7 @@ class JointMap:
                 n = 0
             if n > 0:
                 return "hinge", 2.0 * math.pi / n
-        raise ValueError(
+        raise ConfigError(
             f"unit: expected one of {sorted(_JOINT_UNITS)} or counts:<per_rev> (e.g. counts:2048), got {self.unit!r}"
         )
 
@@ -181,15 +181,15 @@ class ImportMap:
 
     def __post_init__(self) -> None:
         if len(self.joints) < 2:
-            raise ValueError(f"joints: expected at least 2 joints, got {len(self.joints)}")
+            raise ConfigError(f"joints: expected at least 2 joints, got {len(self.joints)}")
         names = [j.name for j in self.joints]
         if len(set(names)) != len(names):
-            raise ValueError(f"joints: duplicate joint names {names}")
+            raise ConfigError(f"joints: duplicate joint names {names}")
         unact = [j.name for j in self.joints if j.unactuated]
         if len(unact) != 1:
-            raise ValueError(f"joints: expected exactly one joint with unactuated: true, got {unact or 'none'}")
+            raise ConfigError(f"joints: expected exactly one joint with unactuated: true, got {unact or 'none'}")
         if len(self.inputs) != len(self.joints) - 1:
-            raise ValueError(
+            raise ConfigError(
                 f"inputs: expected {len(self.joints) - 1} inputs (n − 1 for {len(self.joints)} joints), got {len(self.inputs)}"
             )
         if self.delimiter == "tab":
@@ -199,21 +199,21 @@ class ImportMap:
         ):
             hint = (" (for fields separated by spaces write delimiter: whitespace)" if self.delimiter.strip() == "" else
                     ' (a tab is written "\\t" in double quotes, or tab)' if self.delimiter == "\\t" else "")
-            raise ValueError(f"delimiter: expected one character (',', ';', '\\t', …), tab or whitespace, got {self.delimiter!r}{hint}")
+            raise ConfigError(f"delimiter: expected one character (',', ';', '\\t', …), tab or whitespace, got {self.delimiter!r}{hint}")
         if len(set(self.keep)) != len(self.keep):
-            raise ValueError(f"keep: duplicate columns {list(self.keep)}")
+            raise ConfigError(f"keep: duplicate columns {list(self.keep)}")
         if self.columns is None:
             if not self.header:
-                raise ValueError("header: false needs columns: [name, …] naming the file's columns in order")
+                raise ConfigError("header: false needs columns: [name, …] naming the file's columns in order")
             return
         if not self.columns or any(not c.strip() for c in self.columns):
-            raise ValueError(f"columns: expected a list of non-empty names, got {list(self.columns)}")
+            raise ConfigError(f"columns: expected a list of non-empty names, got {list(self.columns)}")
         dup = sorted({c for c in self.columns if self.columns.count(c) > 1})
         if dup:
-            raise ValueError(f"columns: duplicate names {dup}")
+            raise ConfigError(f"columns: duplicate names {dup}")
         for col, key in self.used_columns().items():
             if col not in self.columns:
-                raise ValueError(f"{key}: {col!r} is not one of columns: {list(self.columns)}")
+                raise ConfigError(f"{key}: {col!r} is not one of columns: {list(self.columns)}")
 
     @property
     def unactuated(self) -> str:

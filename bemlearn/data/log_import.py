@@ -25,12 +25,13 @@ import numpy as np
 from bemlearn._version import __version__
 from bemlearn.config import to_dict
 from bemlearn.data.import_map import TIME_UNITS, ImportMap, delimiter_name
-from bemlearn.units import q_unit_label
 from bemlearn.data.log_table import LogTable, check_finite, read_log_table
 from bemlearn.data.quantization import counts_per_revolution, detect_quantization_step, snap_to_grid
 from bemlearn.data.resample import GridSegment, ResampleReport, place_on_grid, resample_linear
 from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, TrajectoryMeta
 from bemlearn.data.validation import MIN_TRIAL_SAMPLES
+from bemlearn.errors import ArgumentError
+from bemlearn.units import q_unit_label
 
 __all__ = ["import_logs"]
 
@@ -136,7 +137,7 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
             :func:`bemlearn.data.resample.place_on_grid`).
     """
     if not paths:
-        raise ValueError("import_logs: no input files")
+        raise ArgumentError("import_logs: no input files")
     tables = [read_log_table(p, imap) for p in paths]
     value_cols = [j.column for j in imap.joints] + [u.column for u in imap.inputs] + list(imap.keep)
     for table in tables:

@@ -37,6 +37,7 @@ import numpy as np
 
 from bemlearn.data.import_map import DELIMITERS, WHITESPACE, ImportMap, delimiter_name
 from bemlearn.data.trajectory import TrajectoryFormatError
+from bemlearn.errors import MissingFileError
 
 __all__ = ["LogTable", "check_finite", "detect_delimiter", "read_log_table"]
 
@@ -321,14 +322,14 @@ def read_log_table(path: str | Path, imap: ImportMap) -> LogTable:
     """Read the columns ``imap`` names from one logger file (module docstring).
 
     Raises:
-        FileNotFoundError: no such file.
+        MissingFileError: (a FileNotFoundError) no such file.
         TrajectoryFormatError: a missing or duplicated column, a line with another field
             count, a non-numeric or missing cell, naming the file, the column (and its map
             key) and the row / line, and the map key that fixes it where one does.
     """
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: log file not found")
+        raise MissingFileError(f"{path}: log file not found")
     raw = path.read_bytes()
     first = _first_lines(raw, imap.comment, 2)
     if not first:

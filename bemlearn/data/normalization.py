@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import torch
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["Normalization"]
 
 logger = logging.getLogger(__name__)
@@ -39,19 +41,19 @@ class Normalization:
     def __post_init__(self) -> None:
         d = self.x_mean.shape
         if self.x_mean.ndim != 1 or self.x_std.shape != d or self.y_mean.shape != () or self.y_std.shape != ():
-            raise ValueError(
+            raise ArgumentError(
                 f"Normalization: expected x_mean (d,), x_std (d,), y_mean (), y_std (); got "
                 f"{tuple(self.x_mean.shape)}, {tuple(self.x_std.shape)}, "
                 f"{tuple(self.y_mean.shape)}, {tuple(self.y_std.shape)}"
             )
         if not (bool((self.x_std > 0).all()) and float(self.y_std) > 0):
-            raise ValueError("Normalization: x_std and y_std must be positive")
+            raise ArgumentError("Normalization: x_std and y_std must be positive")
 
     @classmethod
     def fit(cls, x: torch.Tensor, y: torch.Tensor, *, names: Sequence[str] | None = None) -> Normalization:
         """Means and standard deviations (ddof = 0) of ``x`` (N, d) and ``y`` (N,), N ≥ 1."""
         if x.ndim != 2 or y.shape != (x.shape[0],) or x.shape[0] == 0:
-            raise ValueError(
+            raise ArgumentError(
                 f"Normalization.fit: expected x (N >= 1, d) and y (N,), got {tuple(x.shape)}, {tuple(y.shape)}"
             )
         x_mean = x.mean(0)

@@ -19,6 +19,7 @@ import mujoco
 import numpy as np
 
 from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
+from bemlearn.errors import ConfigError, NumericalError
 
 __all__ = ["SensedPlant"]
 
@@ -40,14 +41,14 @@ class SensedPlant:
         self.model = robot.model
         if timestep is not None and timestep != self.model.opt.timestep:
             if not timestep > 0:
-                raise ValueError(f"{where}: physics_timestep must be > 0 s, got {timestep}")
+                raise ConfigError(f"{where}: physics_timestep must be > 0 s, got {timestep}")
             self.model = copy.deepcopy(robot.model)
             self.model.opt.timestep = timestep
         self.data = mujoco.MjData(self.model)
         self.dt = 1.0 / rate_hz
         steps = self.dt / self.model.opt.timestep
         if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
-            raise ValueError(f"{where}: 1/rate_hz = {self.dt} s is not a whole number of physics steps ({self.model.opt.timestep} s)")
+            raise ConfigError(f"{where}: 1/rate_hz = {self.dt} s is not a whole number of physics steps ({self.model.opt.timestep} s)")
         self.substeps = int(round(steps))
         self.T, self.Tinv = robot.T.numpy(), robot.Tinv.numpy()
         self.encoder = Encoder(sensor, rng, kinds=_coordinate_kinds(robot))
@@ -72,7 +73,7 @@ class SensedPlant:
         """Hold command ``u (nu,)`` for one tick; returns the true ``(q̇, q̈)`` at the tick, ``(n,)`` each."""
         m, d = self.model, self.data
         if not np.all(np.isfinite(u)):
-            raise FloatingPointError(f"SensedPlant.apply: non-finite command {u}; it must not reach MuJoCo's ctrl")
+            raise NumericalError(f"SensedPlant.apply: non-finite command {u}; it must not reach MuJoCo's ctrl")
         d.ctrl[:] = u
         mujoco.mj_forward(m, d)
         qd, qdd = self.T @ d.qvel, self.T @ d.qacc

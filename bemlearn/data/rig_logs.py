@@ -40,6 +40,7 @@ import numpy as np
 
 from bemlearn.data.quantization import detect_quantization_step, snap_to_grid
 from bemlearn.data.trajectory import Trajectory
+from bemlearn.errors import ArgumentError
 
 __all__ = ["RigLogStyle", "log_columns", "rig_log_map", "write_rig_logs"]
 
@@ -121,12 +122,12 @@ def write_rig_logs(traj: Trajectory, folder: str | Path, style: RigLogStyle = Ri
     """
     meta = traj.meta
     if meta.n_joints - 1 != 1 or any(k != "hinge" for k in meta.joint_kinds):
-        raise ValueError("write_rig_logs: expects one input and hinge joints (a rotary-pendulum-like rig)")
+        raise ArgumentError("write_rig_logs: expects one input and hinge joints (a rotary-pendulum-like rig)")
     unknown = sorted(set(style.flip) - set(meta.joint_names))
     if unknown:
-        raise ValueError(f"write_rig_logs: flip names unknown joint(s) {unknown}; joints are {list(meta.joint_names)}")
+        raise ArgumentError(f"write_rig_logs: flip names unknown joint(s) {unknown}; joints are {list(meta.joint_names)}")
     if style.delimiter not in (",", ";", "\t", " "):
-        raise ValueError(f"write_rig_logs: delimiter must be ',', ';', '\\t' or ' ', got {style.delimiter!r}")
+        raise ArgumentError(f"write_rig_logs: delimiter must be ',', ';', '\\t' or ' ', got {style.delimiter!r}")
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(style.seed)

@@ -25,6 +25,8 @@ from typing import ClassVar
 import numpy as np
 from scipy.signal import savgol_filter
 
+from bemlearn.errors import ArgumentError, ConfigError
+
 __all__ = ["SavitzkyGolay"]
 
 #: Window used when neither ``window_s`` nor ``window`` is given, s.
@@ -50,15 +52,15 @@ class SavitzkyGolay:
 
     def __post_init__(self) -> None:
         if self.window_s is not None and self.window is not None:
-            raise ValueError("SavitzkyGolay: give window_s (seconds) or window (samples), not both")
+            raise ConfigError("SavitzkyGolay: give window_s (seconds) or window (samples), not both")
         if self.window_s is not None and not (math.isfinite(self.window_s) and self.window_s > 0):
-            raise ValueError(f"SavitzkyGolay.window_s: expected a positive number of seconds, got {self.window_s!r}")
+            raise ConfigError(f"SavitzkyGolay.window_s: expected a positive number of seconds, got {self.window_s!r}")
         if self.window is not None and (self.window < 3 or self.window % 2 == 0):
-            raise ValueError(f"SavitzkyGolay.window: expected an odd number of samples >= 3, got {self.window}")
+            raise ConfigError(f"SavitzkyGolay.window: expected an odd number of samples >= 3, got {self.window}")
         if self.polyorder < 2:
-            raise ValueError(f"SavitzkyGolay.polyorder: q̈ needs a polynomial degree >= 2, got {self.polyorder}")
+            raise ConfigError(f"SavitzkyGolay.polyorder: q̈ needs a polynomial degree >= 2, got {self.polyorder}")
         if self.window is not None and self.polyorder >= self.window:
-            raise ValueError(f"SavitzkyGolay: polyorder {self.polyorder} must be below window {self.window}")
+            raise ConfigError(f"SavitzkyGolay: polyorder {self.polyorder} must be below window {self.window}")
 
     def window_samples(self, sample_rate_hz: float) -> int:
         """The odd window length w in samples at ``sample_rate_hz``."""
@@ -67,7 +69,7 @@ class SavitzkyGolay:
         seconds = DEFAULT_WINDOW_S if self.window_s is None else self.window_s
         w = 2 * int(math.floor(seconds * sample_rate_hz / 2.0 + 1e-9)) + 1
         if w <= self.polyorder or w < 3:
-            raise ValueError(
+            raise ConfigError(
                 f"SavitzkyGolay: window_s = {seconds} s is only {w} samples at {sample_rate_hz} Hz; "
                 f"need more than polyorder = {self.polyorder} and at least 3"
             )
@@ -112,7 +114,7 @@ class SavitzkyGolay:
         w = self.window_samples(sample_rate_hz)
         dt = 1.0 / sample_rate_hz
         if q.ndim != 2 or q.shape[0] < w:
-            raise ValueError(f"SavitzkyGolay: q must have shape (T >= window = {w}, n), got {q.shape}")
+            raise ArgumentError(f"SavitzkyGolay: q must have shape (T >= window = {w}, n), got {q.shape}")
         qd = savgol_filter(q, w, self.polyorder, deriv=1, delta=dt, axis=0, mode="interp")
         qdd = savgol_filter(q, w, self.polyorder, deriv=2, delta=dt, axis=0, mode="interp")
         return qd, qdd

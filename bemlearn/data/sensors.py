@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bemlearn.config import Limit, config_limits
+from bemlearn.errors import ConfigError
 
 __all__ = ["SensorConfig", "Encoder", "FilteredDifferentiator"]
 
@@ -39,13 +40,13 @@ class SensorConfig:
 
     def __post_init__(self) -> None:
         if self.counts_per_rev < 0:
-            raise ValueError(f"sensor.counts_per_rev must be ≥ 0, got {self.counts_per_rev}")
+            raise ConfigError(f"sensor.counts_per_rev must be ≥ 0, got {self.counts_per_rev}")
         if self.noise_std < 0:
-            raise ValueError(f"sensor.noise_std must be ≥ 0, got {self.noise_std}")
+            raise ConfigError(f"sensor.noise_std must be ≥ 0, got {self.noise_std}")
         if self.velocity_cutoff <= 0:
-            raise ValueError(f"sensor.velocity_cutoff must be > 0 rad/s, got {self.velocity_cutoff}")
+            raise ConfigError(f"sensor.velocity_cutoff must be > 0 rad/s, got {self.velocity_cutoff}")
         if self.m_per_count < 0:
-            raise ValueError(f"sensor.m_per_count must be ≥ 0 m, got {self.m_per_count}")
+            raise ConfigError(f"sensor.m_per_count must be ≥ 0 m, got {self.m_per_count}")
 
     @property
     def step(self) -> float:

@@ -25,9 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from bemlearn.units import JOINT_KINDS
 from bemlearn.data.quantization import detect_quantization_step
-from bemlearn.errors import TrajectoryFormatError
+from bemlearn.errors import ArgumentError, TrajectoryFormatError
+from bemlearn.units import JOINT_KINDS
 
 __all__ = ["TrajectoryMeta", "Trajectory", "TrialSlice", "TrajectoryFormatError", "DEFAULT_UNITS"]
 
@@ -163,7 +163,7 @@ class TrajectoryMeta:
         try:
             return json.dumps(self.to_json_dict(), sort_keys=False, allow_nan=False)
         except (TypeError, ValueError) as exc:
-            raise TypeError(
+            raise ArgumentError(
                 f"TrajectoryMeta.extra must be JSON-serializable (finite numbers, str, lists, dicts): {exc}"
             ) from exc
 
@@ -313,7 +313,7 @@ class Trajectory:
     def channel(self, name: str) -> np.ndarray:
         """(T,) float64 samples of the extra channel ``name`` (``meta.channel_names``)."""
         if name not in self.meta.channel_names:
-            raise KeyError(f"no channel {name!r}; the trajectory has {list(self.meta.channel_names)}")
+            raise ArgumentError(f"no channel {name!r}; the trajectory has {list(self.meta.channel_names)}")
         return self.channels[:, self.meta.channel_names.index(name)]
 
     def trial_slices(self) -> list[TrialSlice]:

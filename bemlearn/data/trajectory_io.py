@@ -19,10 +19,11 @@ from typing import Any
 
 import numpy as np
 
-from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, TrajectoryMeta
+from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
+from bemlearn.data.validation import JITTER_RTOL, MIN_TRIAL_SAMPLES, RATE_RTOL, RobotLike, column_names, validate
+from bemlearn.errors import MissingFileError, TrajectoryFormatError
 from bemlearn.files import atomic_path
 from bemlearn.safe_load import open_npz
-from bemlearn.data.validation import JITTER_RTOL, MIN_TRIAL_SAMPLES, RATE_RTOL, RobotLike, column_names, validate
 
 __all__ = ["read_trajectory", "read_ground_truth", "write_trajectory", "ground_truth_path", "CSV_MAGIC", "SUFFIXES"]
 
@@ -82,14 +83,14 @@ def read_trajectory(
         extra channels of ``meta.channel_names``).
 
     Raises:
-        FileNotFoundError: no such file.
+        MissingFileError: (a FileNotFoundError) no such file.
         ValueError: unsupported suffix.
         TrajectoryFormatError: malformed file, naming file, column and row.
     """
     path = Path(path)
     suffix = _suffix(path)
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: trajectory file not found")
+        raise MissingFileError(f"{path}: trajectory file not found")
     if suffix == ".npz":
         traj, first_line = _read_npz(path), None
     else:
@@ -237,7 +238,7 @@ def _write_csv(traj: Trajectory, path: Path) -> None:
     blocks.append(traj.channels)
     table = np.concatenate(blocks, axis=1) if traj.n_samples else np.zeros((0, len(cols)))
     if traj.n_samples and np.abs(traj.trial).max() >= 2**53:
-        raise ValueError(f"{path}: trial ids must be below 2**53 in magnitude to be written as CSV")
+        raise TrajectoryFormatError(f"{path}: trial ids must be below 2**53 in magnitude to be written as CSV")
     fmt = ["%.17g", "%d"] + ["%.17g"] * (len(cols) - 2)
     with open(path, "w", newline="\n", encoding="utf-8") as fh:
         fh.write(f"{CSV_MAGIC}\n{_CSV_META_PREFIX}{traj.meta.to_json()}\n{','.join(cols)}\n")

@@ -27,6 +27,7 @@ import math
 import torch
 from torch import nn
 
+from bemlearn.errors import PredictorInputError
 from bemlearn.export.folded_posterior import FoldedPosterior
 from bemlearn.export.metadata import PredictorMetadata, artifact_metadata
 from bemlearn.export.variance_factor import variance_factor
@@ -95,7 +96,7 @@ class BEMPredictor(nn.Module):
                     "[{}]; got shape {} and dtype {}".format(method, n, columns, x.shape, _dtype_name(x))
                 )
             else:
-                raise ValueError(
+                raise PredictorInputError(
                     f"BEMPredictor.{method}: expected x of shape (B, {n}), B >= 1, and dtype torch.float64 with columns "
                     f"[{columns}]; got shape {list(x.shape)} and dtype {x.dtype}"
                 )
@@ -124,7 +125,7 @@ class BEMPredictor(nn.Module):
                 f"BEMPredictor.{method}: x has non-finite entries (NaN or inf) or entries too large to evaluate",
             )
         elif not bool(torch.isfinite(mean).all()):
-            raise ValueError(self._nonfinite_message(x, method))
+            raise PredictorInputError(self._nonfinite_message(x, method))
 
     # ---- the contract --------------------------------------------------------------------
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

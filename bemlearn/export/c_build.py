@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bemlearn.errors import EnvironmentProblem
+
 __all__ = ["find_cc", "compile_shared", "CPredictorLibrary", "PORTABLE_FLAGS", "STRICT_FLAGS"]
 
 #: Recommended, portable build flags (no -march, no -ffast-math: results independent of the CPU).
@@ -36,12 +38,12 @@ def compile_shared(sources: Sequence[str | os.PathLike[str]], out: str | os.Path
     """``cc FLAGS -fPIC -shared SOURCES -o OUT -lm``; RuntimeError with the compiler output on failure."""
     cc = cc or find_cc()
     if cc is None:
-        raise RuntimeError("compile_shared: no C compiler found (set $CC or install cc)")
+        raise EnvironmentProblem("compile_shared: no C compiler found (set $CC or install cc)")
     out = Path(out)
     cmd = [cc, *flags, "-fPIC", "-shared", *map(str, sources), "-o", str(out), "-lm"]
     res = subprocess.run(cmd, capture_output=True, text=True)
     if res.returncode != 0:
-        raise RuntimeError(f"compile_shared: {' '.join(cmd)} failed:\n{res.stderr}")
+        raise EnvironmentProblem(f"compile_shared: {' '.join(cmd)} failed:\n{res.stderr}")
     return out
 
 

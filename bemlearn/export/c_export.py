@@ -14,8 +14,8 @@ import logging
 import os
 from pathlib import Path
 
-from bemlearn.export.c_source import F32_MEAN_TOL, F32_STD_RTOL, CDtype, c_sources
 from bemlearn.errors import OutputExistsError
+from bemlearn.export.c_source import F32_MEAN_TOL, F32_STD_RTOL, CDtype, c_sources
 from bemlearn.export.checkpoint import load_checkpoint
 from bemlearn.files import atomic_write_files
 
@@ -63,8 +63,9 @@ def export_c(
         The two paths written (header first).
 
     Raises:
-        FileExistsError: a target exists and ``force`` is False.
-        ValueError: bad prefix/dtype, or float32 too inaccurate for this posterior.
+        OutputExistsError: (a FileExistsError) a target exists and ``force`` is False.
+        ArgumentError: bad prefix or dtype, or float32 too inaccurate for this posterior.
+        CheckpointError: the checkpoint cannot be read.
     """
     ckpt = load_checkpoint(run_dir_or_checkpoint)
     files = c_sources(ckpt.predictor_state, ckpt.metadata, prefix=prefix, dtype=dtype,

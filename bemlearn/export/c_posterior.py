@@ -45,6 +45,7 @@ from typing import Literal
 import numpy as np
 import torch
 
+from bemlearn.errors import ArgumentError
 from bemlearn.export.folded_posterior import FoldedPosterior
 
 __all__ = ["CPosterior", "c_posterior", "support_box", "RANGE_LENGTHSCALES"]
@@ -139,15 +140,15 @@ def c_posterior(post: FoldedPosterior, *, form: Literal["folded", "distance"] = 
     M = W.shape[0] - 1                              # the last row is the sentinel (the C code checks x itself)
     lin, quad, c = W[:M, :n], W[:M, n:], _np(post.c)[:M]
     if M > 0 and not np.all(quad == quad[0]):
-        raise ValueError("FoldedPosterior.W: quadratic weights differ between support points")
+        raise ArgumentError("FoldedPosterior.W: quadratic weights differ between support points")
     W2 = quad[0] if M > 0 else np.zeros(n)
     if form == "distance":
         if not post.centered:
-            raise ValueError("c_posterior(form='distance'): needs a centered FoldedPosterior (form='centered')")
+            raise ArgumentError("c_posterior(form='distance'): needs a centered FoldedPosterior (form='centered')")
         c = c + 0.5 * (lin**2).sum(1)               # −½‖z_j‖² + fixed part, back to the fixed part only
         W2 = np.zeros(n)
     elif form != "folded":
-        raise ValueError(f"form: expected 'folded' or 'distance', got {form!r}")
+        raise ArgumentError(f"form: expected 'folded' or 'distance', got {form!r}")
     FT = _np(post.FT)
     if post.triangular:
         Lg = FT[:M, :M].T                           # FT = (L / gain)ᵀ
@@ -158,7 +159,7 @@ def c_posterior(post: FoldedPosterior, *, form: Literal["folded", "distance"] = 
     w = _np(post.w)[:M]
     G = _np(post.G)                                 # (M + 1, n + 1 + K): [P | w | E]
     if G.shape[1] < n + 1 or not np.array_equal(G[:M, n], w) or np.any(G[M:] != 0):
-        raise ValueError(f"FoldedPosterior.G: expected (M + 1, n + 1 + K) = ({M + 1}, {n + 1} + K) with column n the "
+        raise ArgumentError(f"FoldedPosterior.G: expected (M + 1, n + 1 + K) = ({M + 1}, {n + 1} + K) with column n the "
                          f"mean weights w and the sentinel row zero, got shape {G.shape}")
     gamma, P = _np(post.gamma), np.ascontiguousarray(G[:M, :n].T)
     y0 = float(_np(post.offset)[0])                 # = y_mean: the sentinel adds exactly 0 to evaluable inputs

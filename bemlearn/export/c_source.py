@@ -32,12 +32,21 @@ import numpy as np
 import torch
 
 from bemlearn import __version__
+from bemlearn.errors import ArgumentError
 from bemlearn.export.bem_predictor import BEMPredictor
+from bemlearn.export.c_exp import EXP_BLOCK_F64, EXP_BLOCK_LIBM
 from bemlearn.export.c_float32 import Float32Errors, float32_errors, sample_inputs
 from bemlearn.export.c_posterior import RANGE_LENGTHSCALES, CPosterior, c_posterior, support_box
-from bemlearn.export.c_exp import EXP_BLOCK_F64, EXP_BLOCK_LIBM
-from bemlearn.export.c_std_templates import (BAND_GRADIENT, DENSE_STD, ESTIMATOR_TERM, FACTORED_STD, KERNELS, NO_BAND_GRADIENT,
-                                             NO_ESTIMATOR_TERM, TRIANGULAR_STD)
+from bemlearn.export.c_std_templates import (
+    BAND_GRADIENT,
+    DENSE_STD,
+    ESTIMATOR_TERM,
+    FACTORED_STD,
+    KERNELS,
+    NO_BAND_GRADIENT,
+    NO_ESTIMATOR_TERM,
+    TRIANGULAR_STD,
+)
 from bemlearn.export.c_templates import DISTANCE_EXPONENTS, FOLDED_EXPONENTS, HEADER, POSTERIOR, SOURCE
 from bemlearn.export.folded_posterior import SENTINEL_BOUND, FoldedPosterior
 from bemlearn.export.metadata import PredictorMetadata
@@ -64,9 +73,9 @@ _PER_LINE = 4
 def check_prefix(prefix: str) -> str:
     """``prefix`` if it is a C identifier not reserved to the implementation, else ValueError."""
     if not isinstance(prefix, str) or not _IDENT.match(prefix):
-        raise ValueError(f"prefix: expected a C identifier ([A-Za-z_][A-Za-z0-9_]*), got {prefix!r}")
+        raise ArgumentError(f"prefix: expected a C identifier ([A-Za-z_][A-Za-z0-9_]*), got {prefix!r}")
     if prefix.startswith("__") or re.match(r"^_[A-Z]", prefix):
-        raise ValueError(f"prefix: {prefix!r} is reserved in C (leading __ or _ and a capital)")
+        raise ArgumentError(f"prefix: {prefix!r} is reserved in C (leading __ or _ and a capital)")
     return prefix
 
 
@@ -154,7 +163,7 @@ def _check_float32(predictor: BEMPredictor, state: PredictorState, bem: CPosteri
             for post, ref in ((bem, predictor.bem), (full, predictor.full))]
     err = Float32Errors(**{f.name: max(getattr(e, f.name) for e in errs) for f in dataclasses.fields(Float32Errors)})
     if err.mean_abs > mean_tol or max(err.std_rel, err.latent_std_rel) > std_rtol:
-        raise ValueError(
+        raise ArgumentError(
             f"dtype float32: this {state.kind} posterior cannot be evaluated accurately in float32: on {err.n} in-range "
             f"inputs each of the BEM and the full map the float32 mean is off by up to {err.mean_abs:.2g} rad (tolerance {mean_tol:g}), the std (calibrated "
             f"band) by {err.std_rel:.2g} and the latent std by {err.latent_std_rel:.2g} relative (tolerance "
@@ -187,12 +196,12 @@ def c_sources(
             than this in the mean (rad) or the std (relative) on in-range inputs.
 
     Raises:
-        ValueError: a bad prefix or dtype, or float32 too inaccurate for this posterior
+        ArgumentError: (a ValueError) a bad prefix or dtype, or float32 too inaccurate for this posterior
             (the message gives the measured errors and why).
     """
     p = check_prefix(prefix)
     if dtype not in ("float64", "float32"):
-        raise ValueError(f"dtype: expected 'float64' or 'float32', got {dtype!r}")
+        raise ArgumentError(f"dtype: expected 'float64' or 'float32', got {dtype!r}")
     P = p.upper()
     real, exp, sqrt = ("double", "exp", "sqrt") if dtype == "float64" else ("float", "expf", "sqrtf")
     predictor = BEMPredictor(state, metadata)

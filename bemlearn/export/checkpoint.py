@@ -24,10 +24,10 @@ from typing import Any, get_args
 import torch
 
 from bemlearn.config import ConfigError
-from bemlearn.errors import CheckpointError
+from bemlearn.errors import CheckpointError, MissingFileError
 from bemlearn.export.metadata import PredictorMetadata, artifact_metadata
-from bemlearn.models.learned_bem import LearnedBEM
 from bemlearn.files import atomic_write_files
+from bemlearn.models.learned_bem import LearnedBEM
 from bemlearn.models.predictor_state import GPKind, PredictorState
 
 __all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_NAME", "Checkpoint", "load_checkpoint", "load_learned_bem", "write_checkpoint"]
@@ -74,9 +74,9 @@ def _checkpoint_path(run_dir_or_file: str | os.PathLike[str]) -> Path:
     if path.is_dir():
         path = path / CHECKPOINT_NAME
         if not path.is_file():
-            raise FileNotFoundError(f"{path}: no checkpoint in run directory {path.parent}")
+            raise MissingFileError(f"{path}: no checkpoint in run directory {path.parent}")
     elif not path.is_file():
-        raise FileNotFoundError(f"{path}: no such checkpoint file or run directory")
+        raise MissingFileError(f"{path}: no such checkpoint file or run directory")
     return path
 
 
@@ -152,7 +152,7 @@ def load_checkpoint(run_dir_or_file: str | os.PathLike[str]) -> Checkpoint:
     """Read and validate ``RUN_DIR/checkpoint.pt`` (or a checkpoint file given directly).
 
     Raises:
-        FileNotFoundError: no such file, or a run directory without ``checkpoint.pt``.
+        MissingFileError: (a FileNotFoundError) no such file, or a run directory without ``checkpoint.pt``.
         CheckpointError: (a ValueError) not loadable with ``weights_only=True``, wrong ``format``, a missing key,
             a bad value, or metadata inconsistent with the posterior; the message names the
             file and the key.

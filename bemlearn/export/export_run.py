@@ -18,11 +18,12 @@ import os
 from pathlib import Path
 from typing import Literal
 
+from bemlearn.errors import ArgumentError
 from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.export.checkpoint import load_checkpoint
 from bemlearn.export.pt2 import load_pt2_predictor, pt2_bytes
-from bemlearn.export.torchscript import load_torchscript, torchscript_bytes
 from bemlearn.export.staleness import file_sha256
+from bemlearn.export.torchscript import load_torchscript, torchscript_bytes
 from bemlearn.export.verify import verify_predictor
 from bemlearn.files import atomic_write_files, check_outputs, check_writable
 
@@ -38,7 +39,7 @@ def export_targets(run_dir_or_file: str | os.PathLike[str], *, out: str | os.Pat
                    fmt: ExportFormat = "torchscript") -> list[Path]:
     """The files :func:`export_run` writes for these arguments (TorchScript first)."""
     if fmt not in ("torchscript", "pt2", "both"):
-        raise ValueError(f"fmt: expected 'torchscript', 'pt2' or 'both', got {fmt!r}")
+        raise ArgumentError(f"fmt: expected 'torchscript', 'pt2' or 'both', got {fmt!r}")
     src = Path(run_dir_or_file)
     base = Path(out) if out is not None else (src if src.is_dir() else src.parent) / f"{DEFAULT_NAME}.pt"
     targets = []

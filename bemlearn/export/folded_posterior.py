@@ -52,6 +52,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from bemlearn.errors import ArgumentError
 from bemlearn.export.variance_factor import VarianceFactor
 from bemlearn.models.predictor_state import PredictorState
 
@@ -108,11 +109,11 @@ class FoldedPosterior(nn.Module):
         super().__init__()
         d, M = state.dim, state.n_support
         if not 1 <= n_inputs <= d:
-            raise ValueError(f"n_inputs: expected 1..{d}, got {n_inputs}")
+            raise ArgumentError(f"n_inputs: expected 1..{d}, got {n_inputs}")
         if chunk < 1:
-            raise ValueError(f"chunk: expected a positive row count, got {chunk}")
+            raise ArgumentError(f"chunk: expected a positive row count, got {chunk}")
         if form not in ("auto", "raw", "centered"):
-            raise ValueError(f"form: expected 'auto', 'raw' or 'centered', got {form!r}")
+            raise ArgumentError(f"form: expected 'auto', 'raw' or 'centered', got {form!r}")
         f64 = dict(dtype=torch.float64)
         free, fixed = slice(0, n_inputs), slice(n_inputs, d)
         a = 1.0 / (state.x_std * state.lengthscale)

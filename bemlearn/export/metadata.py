@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from bemlearn.config import ConfigError, from_dict
+from bemlearn.errors import ArgumentError, CheckpointError
 from bemlearn.models.predictor_state import PredictorState
 
 __all__ = ["PredictorMetadata", "artifact_metadata", "ARTIFACT_FORMAT", "jsonable"]
@@ -68,30 +69,30 @@ class PredictorMetadata:
 
     def __post_init__(self) -> None:
         if self.m < 1:
-            raise ValueError(f"m: expected an integer >= 1, got {self.m}")
+            raise CheckpointError(f"m: expected an integer >= 1, got {self.m}")
         if len(self.actuated_names) != self.m:
-            raise ValueError(
+            raise CheckpointError(
                 f"actuated_names: expected m = {self.m} names, got {list(self.actuated_names)}"
             )
         missing = [n for n in (*self.actuated_names, self.unactuated_name) if n not in self.joint_names]
         if missing:
-            raise ValueError(f"joint_names: {list(self.joint_names)} lacks {missing}")
+            raise CheckpointError(f"joint_names: {list(self.joint_names)} lacks {missing}")
         if self.unactuated_name in self.actuated_names:
-            raise ValueError(f"unactuated_name: {self.unactuated_name!r} is also actuated")
+            raise CheckpointError(f"unactuated_name: {self.unactuated_name!r} is also actuated")
         if len(self.input_names) != 3 * self.m + 2:
-            raise ValueError(
+            raise CheckpointError(
                 f"input_names: expected 3m + 2 = {3 * self.m + 2} column names "
                 f"[q̈_a, q̇_a, q_a, q̈_u, q̇_u], got {len(self.input_names)}: {list(self.input_names)}"
             )
         no_unit = [n for n in self.input_names if n not in self.units]
         if no_unit:
-            raise ValueError(f"units: no unit for input column(s) {no_unit}")
+            raise CheckpointError(f"units: no unit for input column(s) {no_unit}")
         if self.n_train < 1:
-            raise ValueError(f"n_train: expected an integer >= 1, got {self.n_train}")
+            raise CheckpointError(f"n_train: expected an integer >= 1, got {self.n_train}")
         if self.n_inducing is not None and self.n_inducing < 1:
-            raise ValueError(f"n_inducing: expected null or an integer >= 1, got {self.n_inducing}")
+            raise CheckpointError(f"n_inducing: expected null or an integer >= 1, got {self.n_inducing}")
         if not _SHA256.match(self.data_sha256):
-            raise ValueError(f"data_sha256: expected 64 lowercase hex digits, got {self.data_sha256!r}")
+            raise CheckpointError(f"data_sha256: expected 64 lowercase hex digits, got {self.data_sha256!r}")
         # plain JSON types from here on: no tensors or NumPy scalars, which would also make
         # the checkpoint unreadable with torch.load(weights_only=True)
         object.__setattr__(self, "hyperparameters", jsonable(self.hyperparameters, where="hyperparameters"))
@@ -164,16 +165,16 @@ def jsonable(value: Any, *, where: str) -> Any:
         out = {}
         for k, v in value.items():
             if not isinstance(k, str):
-                raise TypeError(f"{where}: keys must be strings for JSON, got {k!r}")
+                raise ArgumentError(f"{where}: keys must be strings for JSON, got {k!r}")
             out[k] = jsonable(v, where=f"{where}.{k}")
         return out
     if isinstance(value, (list, tuple)):
         return [jsonable(v, where=f"{where}[{i}]") for i, v in enumerate(value)]
     if isinstance(value, float) and not math.isfinite(value):
-        raise TypeError(f"{where}: {value} is not valid JSON (non-finite number)")
+        raise ArgumentError(f"{where}: {value} is not valid JSON (non-finite number)")
     if value is None or isinstance(value, (str, int, float, bool)):
         return value
-    raise TypeError(f"{where}: cannot store a {type(value).__name__} in JSON metadata")
+    raise ArgumentError(f"{where}: cannot store a {type(value).__name__} in JSON metadata")
 
 
 def artifact_metadata(meta: PredictorMetadata, state: PredictorState) -> dict[str, Any]:
@@ -189,22 +190,22 @@ def artifact_metadata(meta: PredictorMetadata, state: PredictorState) -> dict[st
     """
     d = 3 * meta.m + 2
     if state.dim != d:
-        raise ValueError(f"PredictorState.Z: expected d = 3m + 2 = {d} input columns (m = {meta.m}), got {state.dim}")
+        raise CheckpointError(f"PredictorState.Z: expected d = 3m + 2 = {d} input columns (m = {meta.m}), got {state.dim}")
     if tuple(state.input_names) != tuple(meta.input_names):
-        raise ValueError(
+        raise CheckpointError(
             f"PredictorState.input_names {list(state.input_names)} differ from metadata.input_names "
             f"{list(meta.input_names)}"
         )
     if state.kind == "exact":
         if meta.n_inducing is not None:
-            raise ValueError(f"metadata.n_inducing: expected null for an exact GP, got {meta.n_inducing}")
+            raise CheckpointError(f"metadata.n_inducing: expected null for an exact GP, got {meta.n_inducing}")
     elif meta.n_inducing != state.n_support:
-        raise ValueError(
+        raise CheckpointError(
             f"metadata.n_inducing: expected {state.n_support} (rows of PredictorState.Z) for a "
             f"{state.kind} GP, got {meta.n_inducing}"
         )
     if state.n_train != meta.n_train:
-        raise ValueError(f"metadata.n_train = {meta.n_train} but PredictorState.n_train = {state.n_train}")
+        raise CheckpointError(f"metadata.n_train = {meta.n_train} but PredictorState.n_train = {state.n_train}")
     n = 3 * meta.m
     noise_std = float(state.y_std) * math.sqrt(max(float(state.noise), 0.0))
     # the output q_u is in its joint's unit: the unit of the q̇_u column without "/s" (rad or m)

@@ -33,9 +33,8 @@ from typing import Any
 import torch
 from torch import nn
 
-from bemlearn.errors import PredictorInputError
+from bemlearn.errors import CheckpointError, PredictorInputError
 from bemlearn.export.bem_predictor import BEMPredictor
-from bemlearn.errors import CheckpointError
 from bemlearn.files import atomic_write_files
 
 __all__ = ["save_pt2", "pt2_bytes", "load_pt2_predictor", "Pt2Predictor", "PT2_PROGRAMS", "PT2_METADATA_FILE"]
@@ -205,7 +204,7 @@ def load_pt2_predictor(path: str | os.PathLike[str] | bytes, *, where: str | os.
     or native libraries (:func:`bemlearn.safe_load.read_pt2_archive`).
 
     Raises:
-        FileNotFoundError: no such file.
+        MissingFileError: (a FileNotFoundError) no such file.
         CheckpointError: a foreign or tampered archive, or not a bemlearn predictor.
     """
     from bemlearn.safe_load import read_pt2_archive
@@ -219,8 +218,9 @@ def load_pt2_predictor(path: str | os.PathLike[str] | bytes, *, where: str | os.
     try:
         meta_text = meta.decode() if isinstance(meta, bytes) else str(meta)
         doc = json.loads(meta_text)
-        if not isinstance(doc, dict) or not all(isinstance(doc.get(k), list) for k in ("inputs", "full_inputs")):
-            raise ValueError("expected a JSON object with lists 'inputs' and 'full_inputs'")
-    except ValueError as exc:  # also UnicodeDecodeError and JSONDecodeError
+    except ValueError as exc:  # UnicodeDecodeError and JSONDecodeError
         raise CheckpointError(f"{path}: extra/{PT2_METADATA_FILE} is not the bemlearn predictor metadata ({exc})") from None
+    if not isinstance(doc, dict) or not all(isinstance(doc.get(k), list) for k in ("inputs", "full_inputs")):
+        raise CheckpointError(f"{path}: extra/{PT2_METADATA_FILE} is not the bemlearn predictor metadata "
+                              "(expected a JSON object with lists 'inputs' and 'full_inputs')")
     return Pt2Predictor(programs=dict(contents.exported_programs), metadata_json=meta_text)

@@ -73,7 +73,7 @@ def load_torchscript(path: str | os.PathLike[str] | bytes, *, where: str | os.Pa
     """``torch.jit.load(path)`` with a clear error for a missing, foreign or tampered file (:mod:`bemlearn.safe_load`).
 
     Raises:
-        FileNotFoundError: no such file.
+        MissingFileError: (a FileNotFoundError) no such file.
         CheckpointError: not a TorchScript file, or not a bemlearn predictor.
     """
     from bemlearn.safe_load import load_script_module

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import torch
 
+from bemlearn.errors import ArgumentError, CheckpointError
 from bemlearn.models.predictor_state import PredictorState
 
 __all__ = ["VarianceFactor", "variance_factor", "kernel_gram", "condition_number", "GRAM_RTOL"]
@@ -60,9 +61,9 @@ class VarianceFactor:
 
     def __post_init__(self) -> None:
         if self.F is None and self.L is None:
-            raise ValueError("VarianceFactor: give F, L or both")
+            raise ArgumentError("VarianceFactor: give F, L or both")
         if self.F is None and self.signs is not None:
-            raise ValueError("VarianceFactor: a Cholesky factor alone has no signs")
+            raise ArgumentError("VarianceFactor: a Cholesky factor alone has no signs")
 
     @property
     def factored(self) -> bool:
@@ -110,7 +111,7 @@ def variance_factor(state: PredictorState, *, exact_rtol: float = 1e-6, psd_rtol
         K = kernel_gram(state)
         L, info = torch.linalg.cholesky_ex(K)
         if int(info) != 0:
-            raise ValueError(
+            raise CheckpointError(
                 "PredictorState (exact): K_ZZ + σ_0² I is not positive definite "
                 f"(Cholesky failed at column {int(info)}); noise = {float(state.noise):.3g}"
             )
@@ -119,7 +120,7 @@ def variance_factor(state: PredictorState, *, exact_rtol: float = 1e-6, psd_rtol
             kappa = condition_number(K)
             rounding = kappa * torch.finfo(K.dtype).eps
             if not rel <= rounding:
-                raise ValueError(
+                raise CheckpointError(
                     "PredictorState.S (exact) is not (K_ZZ + σ_0² I)⁻¹ rebuilt from its own Z, lengthscale, "
                     f"outputscale and noise: relative difference {rel:.3g} > {exact_rtol:g}, and above the "
                     f"rounding bound κ(K)·ε = {rounding:.3g} (κ = {kappa:.3g})"
@@ -160,7 +161,7 @@ def _factored(state: PredictorState, psd_rtol: float) -> VarianceFactor:
     D = L @ L.T - K
     off = float((D - torch.diag(torch.diagonal(D))).abs().max()) if D.numel() else 0.0
     if not off <= GRAM_RTOL * float(state.outputscale):
-        raise ValueError(
+        raise CheckpointError(
             f"PredictorState.S_chol ({state.kind}): L Lᵀ is not K_ZZ (+ jitter) rebuilt from its own Z, lengthscale and "
             f"outputscale: off-diagonal difference {off:.3g} > {GRAM_RTOL:g} σ_f² = {GRAM_RTOL * float(state.outputscale):.3g}"
         )

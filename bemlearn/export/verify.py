@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import torch
 
+from bemlearn.errors import CheckpointError
 from bemlearn.export.variance_factor import kernel_gram
 from bemlearn.models.band import band_extra_variance
 from bemlearn.models.predictor_state import PredictorState
@@ -156,12 +157,12 @@ def verify_predictor(
         dv = float(((std.square() - ref_std.square()).abs() / (ref_std.square() + bound / var_rtol)).max())
         worst_mean, worst_var = max(worst_mean, dm), max(worst_var, dv)
         if not (dm <= mean_tol and dv <= var_rtol):
-            raise ValueError(
+            raise CheckpointError(
                 f"{where}: {name} disagrees with the dense posterior (eq. 12): max |Δmean| = {dm:.3g} rad "
                 f"(tol {mean_tol:.3g}), max relative |Δvar| = {dv:.3g} (tol {var_rtol:g})"
             )
         if name == "forward":
             dbm = float((predictor.bem_mean(x) - mean).abs().max())
             if not dbm <= mean_tol:
-                raise ValueError(f"{where}: bem_mean differs from forward's mean by {dbm:.3g} rad")
+                raise CheckpointError(f"{where}: bem_mean differs from forward's mean by {dbm:.3g} rad")
     return worst_mean, worst_var

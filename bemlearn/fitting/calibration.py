@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from bemlearn.errors import ArgumentError, DataError
 from bemlearn.models.predictor_state import PredictorState
 
 __all__ = ["ReplicaCalibration", "calibrate_replicas", "condition_state", "gaussian_quantile"]
@@ -46,7 +47,7 @@ log = logging.getLogger(__name__)
 def gaussian_quantile(level: float) -> float:
     """κ with P(|N(0, 1)| ≤ κ) = ``level`` (0 < level < 1): 1.96 for 0.95, 2.576 for 0.99."""
     if not 0.0 < level < 1.0:
-        raise ValueError(f"level: expected 0 < level < 1, got {level}")
+        raise ArgumentError(f"level: expected 0 < level < 1, got {level}")
     return math.sqrt(2.0) * float(torch.special.erfinv(torch.tensor(level, dtype=torch.float64)))
 
 
@@ -139,11 +140,11 @@ def calibrate_replicas(
     kappa = gaussian_quantile(level)
     ids = np.unique(trial.numpy())
     if len(ids) < 2:
-        raise ValueError(f"calibrate_replicas: trial: need at least 2 distinct trials to split, got {len(ids)}")
+        raise DataError(f"calibrate_replicas: trial: need at least 2 distinct trials to split, got {len(ids)}")
     if queries.ndim != 2 or queries.shape[0] == 0 or queries.shape[1] != state.dim:
-        raise ValueError(f"calibrate_replicas: queries: expected shape (Q >= 1, {state.dim}), got {tuple(queries.shape)}")
+        raise ArgumentError(f"calibrate_replicas: queries: expected shape (Q >= 1, {state.dim}), got {tuple(queries.shape)}")
     if n_pairs < 1:
-        raise ValueError(f"calibrate_replicas: n_pairs: expected a positive integer, got {n_pairs}")
+        raise ArgumentError(f"calibrate_replicas: n_pairs: expected a positive integer, got {n_pairs}")
     rng = np.random.default_rng(seed)
     tr = trial.numpy()
     n = min(n_points or state.n_train, 2000)

@@ -40,6 +40,7 @@ import numpy as np
 import torch
 
 from bemlearn.data.trajectory import Trajectory
+from bemlearn.errors import ArgumentError
 from bemlearn.models.predictor_state import PredictorState
 
 __all__ = ["EstimatorSensitivity", "estimator_sensitivity", "projected_weights"]
@@ -143,7 +144,7 @@ def estimator_sensitivity(state: PredictorState, traj: Trajectory, estimator, ro
     q0, qd0, qdd0, valid0 = estimate_states(traj, estimator, within=within)
     if not valid0[rows_np].all():
         bad = int(rows_np[~valid0[rows_np]][0])
-        raise ValueError(f"estimator_sensitivity: rows: trial {int(traj.trial[bad])} holds training rows (row {bad}) where "
+        raise ArgumentError(f"estimator_sensitivity: rows: trial {int(traj.trial[bad])} holds training rows (row {bad}) where "
                          f"the chosen estimator {_describe(estimator)} has no valid estimate (the trial is too short, or the "
                          "row lies within its edge)")
 

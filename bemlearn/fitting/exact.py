@@ -7,6 +7,7 @@ import time
 import gpytorch
 import torch
 
+from bemlearn.errors import ArgumentError
 from bemlearn.fitting.exact_mll import gaussian_nll
 from bemlearn.fitting.optimize import default_lr, minimize
 from bemlearn.fitting.result import Callback, FitResult, hyperparameter_metrics
@@ -50,7 +51,7 @@ def fit_exact(
         a :class:`FitResult`; the model and likelihood are left in train mode with the fitted θ.
     """
     if not isinstance(model, ExactBEMGP):
-        raise TypeError(f"model: expected ExactBEMGP, got {type(model).__name__}")
+        raise ArgumentError(f"model: expected ExactBEMGP, got {type(model).__name__}")
     model.train()
     likelihood.train()
     X, Y = model.train_inputs[0], model.train_targets

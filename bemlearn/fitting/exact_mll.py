@@ -18,6 +18,7 @@ import math
 import torch
 from linear_operator.utils.cholesky import psd_safe_cholesky
 
+from bemlearn.errors import ArgumentError
 from bemlearn.interrupts import check_interrupt
 
 __all__ = ["gaussian_nll"]
@@ -51,5 +52,5 @@ def gaussian_nll(K: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
     (:func:`~bemlearn.models.solver.cholesky_policy`).
     """
     if K.dim() != 2 or K.shape[0] != K.shape[1] or r.shape != K.shape[:1]:
-        raise ValueError(f"gaussian_nll: expected K (N, N) and r (N,), got {tuple(K.shape)} and {tuple(r.shape)}")
+        raise ArgumentError(f"gaussian_nll: expected K (N, N) and r (N,), got {tuple(K.shape)} and {tuple(r.shape)}")
     return _GaussianNLL.apply(K, r)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import gpytorch
 import torch
 
+from bemlearn.errors import ConfigError
 from bemlearn.fitting.build import build_gp
 from bemlearn.fitting.exact import fit_exact
 from bemlearn.fitting.gp_config import GPConfig
@@ -38,7 +39,7 @@ def fit_gp(
     """
     kind = gp_kind_of(model)
     if kind != config.kind:
-        raise ValueError(f"config.kind: {config.kind!r} does not match the model kind {kind!r}")
+        raise ConfigError(f"config.kind: {config.kind!r} does not match the model kind {kind!r}")
     common = dict(jitter=config.jitter, callback=callback, progress=progress)
     if kind == "exact":
         return fit_exact(model, likelihood, optimizer=config.optimizer, max_iter=config.resolved_max_iter, lr=config.resolved_lr, tol=config.tol, **common)

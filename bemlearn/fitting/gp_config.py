@@ -8,6 +8,7 @@ from typing import Literal
 import torch
 
 from bemlearn.config import Limit, config_limits
+from bemlearn.errors import ConfigError
 
 __all__ = ["GPConfig"]
 
@@ -69,21 +70,21 @@ class GPConfig:
     def __post_init__(self) -> None:
         for name in ("n_inducing", "max_iter", "batch_size", "epochs"):
             if getattr(self, name) is not None and getattr(self, name) < 1:
-                raise ValueError(f"{name}: expected a positive integer, got {getattr(self, name)}")
+                raise ConfigError(f"{name}: expected a positive integer, got {getattr(self, name)}")
         for name in ("init_subset", "fit_subset"):
             if getattr(self, name) < 0:
-                raise ValueError(f"{name}: expected a non-negative integer, got {getattr(self, name)}")
+                raise ConfigError(f"{name}: expected a non-negative integer, got {getattr(self, name)}")
         if self.lr is not None and not self.lr > 0.0:
-            raise ValueError(f"lr: expected a positive number, got {self.lr}")
+            raise ConfigError(f"lr: expected a positive number, got {self.lr}")
         for name in ("ngd_lr", "min_noise", "jitter"):
             if not getattr(self, name) > 0.0:
-                raise ValueError(f"{name}: expected a positive number, got {getattr(self, name)}")
+                raise ConfigError(f"{name}: expected a positive number, got {getattr(self, name)}")
         if self.tol < 0.0:
-            raise ValueError(f"tol: expected a non-negative number, got {self.tol}")
+            raise ConfigError(f"tol: expected a non-negative number, got {self.tol}")
         try:
             torch.device(self.device)
         except RuntimeError as exc:
-            raise ValueError(f"device: not a torch device string: {self.device!r}") from exc
+            raise ConfigError(f"device: not a torch device string: {self.device!r}") from exc
 
     @property
     def resolved_max_iter(self) -> int:

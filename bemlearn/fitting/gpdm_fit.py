@@ -18,6 +18,7 @@ from typing import Literal
 
 import torch
 
+from bemlearn.errors import ConfigError
 from bemlearn.fitting.optimize import minimize
 from bemlearn.fitting.result import Callback
 from bemlearn.models.gpdm import GPDM, GPDMObjective
@@ -64,11 +65,11 @@ class GPDMConfig:
     def __post_init__(self) -> None:
         for name in ("max_iter", "warmup_iter", "penalty", "tolerance", "jitter"):
             if not getattr(self, name) >= 0:
-                raise ValueError(f"{name}: expected ≥ 0, got {getattr(self, name)}")
+                raise ConfigError(f"{name}: expected ≥ 0, got {getattr(self, name)}")
         if self.dynamics_weight is not None and not self.dynamics_weight >= 0:
-            raise ValueError(f"dynamics_weight: expected ≥ 0 or null, got {self.dynamics_weight}")
+            raise ConfigError(f"dynamics_weight: expected ≥ 0 or null, got {self.dynamics_weight}")
         if self.lr is not None and not self.lr > 0:
-            raise ValueError(f"lr: expected > 0 or null, got {self.lr}")
+            raise ConfigError(f"lr: expected > 0 or null, got {self.lr}")
 
 
 def gpdm_metrics(model: GPDM, terms: GPDMObjective | None = None) -> dict[str, float]:

@@ -6,6 +6,7 @@ import logging
 
 import torch
 
+from bemlearn.errors import ArgumentError
 from bemlearn.models.validation import check_inputs, check_targets
 
 __all__ = ["data_hyperparameters", "set_hyperparameters", "select_inducing_points"]
@@ -86,9 +87,9 @@ def select_inducing_points(
     """
     check_inputs(train_x, name="train_x")
     if num < 1:
-        raise ValueError(f"num: expected a positive number of inducing points, got {num}")
+        raise ArgumentError(f"num: expected a positive number of inducing points, got {num}")
     if method not in ("kmeans++", "random"):
-        raise ValueError(f"method: unknown inducing-point method {method!r}; valid are ['kmeans++', 'random']")
+        raise ArgumentError(f"method: unknown inducing-point method {method!r}; valid are ['kmeans++', 'random']")
     N = train_x.shape[0]
     if num >= N:
         return train_x.clone()

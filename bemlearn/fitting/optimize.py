@@ -17,6 +17,7 @@ import torch
 from linear_operator.utils.errors import NanError, NotPSDError
 from tqdm.auto import tqdm
 
+from bemlearn.errors import ArgumentError, NumericalError
 from bemlearn.fitting.result import Callback
 from bemlearn.interrupts import check_interrupt, interruptible
 
@@ -25,15 +26,25 @@ __all__ = ["minimize", "checked_loss", "default_lr", "NumericalFailure"]
 logger = logging.getLogger(__name__)
 
 
-class NumericalFailure(RuntimeError):
+class NumericalFailure(NumericalError):
     """A loss evaluation produced NaN/inf or an unrecoverable Cholesky failure."""
 
 
+#: What a loss evaluation raises when its numbers fail (and nothing else: a shape bug or a
+#: ``ValueError`` in the loss is a bug and propagates).
+NUMERICAL_ERRORS: tuple[type[BaseException], ...] = (NotPSDError, NanError, torch.linalg.LinAlgError, NumericalError)
+
+
 def checked_loss(loss_fn: Callable[[], torch.Tensor]) -> torch.Tensor:
-    """``loss_fn()``, raising :class:`NumericalFailure` if it is not finite or its Cholesky failed."""
+    """``loss_fn()``, raising :class:`NumericalFailure` if it is not finite or its Cholesky failed.
+
+    Only numerical failures (:data:`NUMERICAL_ERRORS`: linear_operator's ``NotPSDError`` and
+    ``NanError``, ``torch.linalg.LinAlgError``, :class:`~bemlearn.errors.NumericalError`) become a
+    :class:`NumericalFailure`; any other exception of ``loss_fn`` propagates unchanged.
+    """
     try:
         loss = loss_fn()
-    except (NotPSDError, NanError, ValueError, torch.linalg.LinAlgError) as exc:
+    except NUMERICAL_ERRORS as exc:
         raise NumericalFailure(str(exc)) from exc
     if not bool(torch.isfinite(loss)):
         raise NumericalFailure(f"loss is {float(loss.detach())}")
@@ -85,7 +96,7 @@ def minimize(
     """
     params = [p for p in params if p.requires_grad]
     if optimizer not in ("lbfgs", "adam"):
-        raise ValueError(f"optimizer: unknown {optimizer!r}; valid are ['adam', 'lbfgs']")
+        raise ArgumentError(f"optimizer: unknown {optimizer!r}; valid are ['adam', 'lbfgs']")
     best_params = [p.detach().clone() for p in params]
     state = {"best": math.inf, "evals": 0, "since_best": 0}
     max_eval = int(max_iter * 1.5) if optimizer == "lbfgs" else max_iter

@@ -7,6 +7,7 @@ import time
 import gpytorch
 import torch
 
+from bemlearn.errors import ArgumentError
 from bemlearn.fitting.optimize import default_lr, minimize
 from bemlearn.fitting.result import Callback, FitResult, hyperparameter_metrics
 from bemlearn.models.sgpr import SGPRBEMGP
@@ -55,13 +56,13 @@ def fit_sgpr(
         a :class:`FitResult`; the model is left in train mode.
     """
     if not isinstance(model, SGPRBEMGP):
-        raise TypeError(f"model: expected SGPRBEMGP, got {type(model).__name__}")
+        raise ArgumentError(f"model: expected SGPRBEMGP, got {type(model).__name__}")
     if likelihood is not model.likelihood:
-        raise ValueError("likelihood: must be the likelihood the SGPR model was built with")
+        raise ArgumentError("likelihood: must be the likelihood the SGPR model was built with")
     model.train()
     likelihood.train()
     if subset < 0:
-        raise ValueError(f"subset: expected a non-negative integer, got {subset}")
+        raise ArgumentError(f"subset: expected a non-negative integer, got {subset}")
     full_x, full_y = model.train_x, model.train_y
     if 0 < subset < full_x.shape[0]:
         gen = torch.Generator(device="cpu").manual_seed(seed)

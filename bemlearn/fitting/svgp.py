@@ -10,10 +10,11 @@ import gpytorch
 import torch
 from tqdm.auto import tqdm
 
+from bemlearn.errors import ArgumentError
 from bemlearn.fitting.optimize import NumericalFailure, checked_loss
-from bemlearn.interrupts import check_interrupt, interruptible
 from bemlearn.fitting.result import Callback, FitResult, hyperparameter_metrics
 from bemlearn.fitting.variational import optimal_variational
+from bemlearn.interrupts import check_interrupt, interruptible
 from bemlearn.models.solver import DEFAULT_JITTER, DEFAULT_MAX_TRIES, cholesky_policy
 from bemlearn.models.svgp import SVGPBEMGP
 from bemlearn.models.validation import check_inputs, check_targets
@@ -74,13 +75,13 @@ def fit_svgp(
         a :class:`FitResult` whose loss is the mean −ELBO per point over the last epoch.
     """
     if not isinstance(model, SVGPBEMGP):
-        raise TypeError(f"model: expected SVGPBEMGP, got {type(model).__name__}")
+        raise ArgumentError(f"model: expected SVGPBEMGP, got {type(model).__name__}")
     dtype = next(model.parameters()).dtype
     check_inputs(train_x, name="train_x", dim=model.dim, dtype=dtype)
     check_targets(train_y, name="train_y", n=train_x.shape[0], dtype=dtype)
     for name, value in (("batch_size", batch_size), ("epochs", epochs)):
         if value < 1:
-            raise ValueError(f"{name}: expected a positive integer, got {value}")
+            raise ArgumentError(f"{name}: expected a positive integer, got {value}")
     device = next(model.parameters()).device
     N = train_x.shape[0]
     model.train()
@@ -88,7 +89,7 @@ def fit_svgp(
     elbo = gpytorch.mlls.VariationalELBO(likelihood, model, num_data=N)
     for name, value in (("lr", lr), ("ngd_lr", ngd_lr)):
         if not value > 0.0:
-            raise ValueError(f"{name}: expected a positive step size, got {value}")
+            raise ArgumentError(f"{name}: expected a positive step size, got {value}")
     variational = list(model.variational_parameters())
     hyper = list(model.hyperparameters()) + [p for p in likelihood.parameters() if all(p is not q for q in model.parameters())]
     params = variational + hyper

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import torch
 
+from bemlearn.errors import ArgumentError
 from bemlearn.models.input_noise import mean_gradient
 from bemlearn.models.predictor_state import PredictorState
 
@@ -47,7 +48,7 @@ def band_extra_variance(state: PredictorState, x: torch.Tensor, *, n_inputs: int
     max(Σ_{i < n} (s_i ∂μ/∂x_i)², (1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)²)."""
     n = state.dim if n_inputs is None else n_inputs
     if not 1 <= n <= state.dim:
-        raise ValueError(f"band_reference: n_inputs: expected 1..{state.dim}, got {n}")
+        raise ArgumentError(f"band_reference: n_inputs: expected 1..{state.dim}, got {n}")
     s = state.input_std.clone()
     s[n:] = 0.0
     var_in = torch.zeros(x.shape[0], dtype=torch.float64, device=x.device)

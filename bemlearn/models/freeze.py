@@ -8,6 +8,7 @@ from collections.abc import Sequence
 import gpytorch
 import torch
 
+from bemlearn.errors import ArgumentError
 from bemlearn.models.exact_gp import ExactBEMGP
 from bemlearn.models.gp_kinds import gp_kind_of
 from bemlearn.models.kernels import kernel_matrix, se_gram
@@ -62,7 +63,7 @@ def posterior_weights(
             Li = torch.linalg.solve_triangular(L, eye, upper=False)
             S = Li.mT @ (eye - Sv) @ Li
             return Z.detach().clone(), alpha, 0.5 * (S + S.mT)
-    raise TypeError(f"model: unsupported GP class {type(model).__name__}")
+    raise ArgumentError(f"model: unsupported GP class {type(model).__name__}")
 
 
 def variance_cholesky_factor(
@@ -95,7 +96,7 @@ def variance_cholesky_factor(
             L, _ = robust_cholesky(Kzz, what="SVGP K_ZZ", jitter=jitter, max_tries=max_tries)
             C = eye - model.variational_strategy.variational_distribution.covariance_matrix
             return L.detach(), (0.5 * (C + C.mT)).detach()
-    raise TypeError(f"model: unsupported GP class {type(model).__name__}")
+    raise ArgumentError(f"model: unsupported GP class {type(model).__name__}")
 
 
 def predictor_state(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import torch
 
+from bemlearn.errors import ArgumentError, ConfigError
 from bemlearn.models.exact_gp import ExactBEMGP
 from bemlearn.models.sgpr import SGPRBEMGP
 from bemlearn.models.svgp import SVGPBEMGP
@@ -20,21 +21,21 @@ def gp_class(kind: str) -> type[torch.nn.Module]:
     """The model class registered under ``kind``.
 
     Raises:
-        ValueError: unknown kind; the message lists the valid names.
+        ConfigError: (a ValueError) unknown kind; the message lists the valid names.
     """
     try:
         return GP_KINDS[kind]
     except (KeyError, TypeError):
-        raise ValueError(f"GP kind: unknown {kind!r}; valid kinds are {sorted(GP_KINDS)}") from None
+        raise ConfigError(f"GP kind: unknown {kind!r}; valid kinds are {sorted(GP_KINDS)}") from None
 
 
 def gp_kind_of(model: object) -> str:
     """The registered kind name of a model instance.
 
     Raises:
-        TypeError: ``model`` is none of the registered classes.
+        ArgumentError: (a TypeError) ``model`` is none of the registered classes.
     """
     for name, cls in GP_KINDS.items():
         if isinstance(model, cls):
             return name
-    raise TypeError(f"model: expected one of {[c.__name__ for c in GP_KINDS.values()]}, got {type(model).__name__}")
+    raise ArgumentError(f"model: expected one of {[c.__name__ for c in GP_KINDS.values()]}, got {type(model).__name__}")

@@ -47,6 +47,7 @@ import torch
 from gpytorch.constraints import GreaterThan, Interval, Positive
 from torch import Tensor, nn
 
+from bemlearn.errors import ArgumentError, DataError
 from bemlearn.models.solver import robust_cholesky
 from bemlearn.models.validation import check_inputs
 
@@ -79,13 +80,13 @@ def _cholesky(K: Tensor, noise: Tensor, jitter: float, what: str) -> Tensor:
 def _as_sequences(Q_list: Sequence, order: int) -> list[Tensor]:
     """Check and convert ``Q_list`` (sequences of (T_i, n) joint angles) to float64 tensors."""
     if isinstance(Q_list, (Tensor, str, bytes)) or not isinstance(Q_list, Sequence) or len(Q_list) == 0:
-        raise TypeError("Q_list: expected a non-empty list of (T_i, n) arrays, one per sequence")
+        raise ArgumentError("Q_list: expected a non-empty list of (T_i, n) arrays, one per sequence")
     seqs: list[Tensor] = []
     for i, q in enumerate(Q_list):
         n = seqs[0].shape[1] if seqs else None
         q = check_inputs(torch.as_tensor(q, dtype=_DTYPE), name=f"Q_list[{i}]", dim=n)
         if q.shape[0] < order + 1:
-            raise ValueError(
+            raise DataError(
                 f"Q_list[{i}]: a sequence needs at least order + 1 = {order + 1} samples for one "
                 f"transition of the order-{order} dynamics, got {q.shape[0]}"
             )
@@ -125,12 +126,12 @@ class GPDM(nn.Module):
     ) -> None:
         super().__init__()
         if order not in (1, 2):
-            raise ValueError(f"order: expected 1 or 2, got {order!r}")
+            raise ArgumentError(f"order: expected 1 or 2, got {order!r}")
         if init not in ("slow", "pca", "random"):
-            raise ValueError(f"init: expected 'slow', 'pca' or 'random', got {init!r}")
+            raise ArgumentError(f"init: expected 'slow', 'pca' or 'random', got {init!r}")
         for name, value in (("penalty", penalty), ("dynamics_weight", dynamics_weight), ("jitter", jitter)):
             if value is not None and not value >= 0:
-                raise ValueError(f"{name}: expected ≥ 0, got {value}")
+                raise ArgumentError(f"{name}: expected ≥ 0, got {value}")
         seqs = _as_sequences(Q_list, order)
         Q = torch.cat(seqs)
         n = Q.shape[1]
@@ -141,7 +142,7 @@ class GPDM(nn.Module):
         q_mean, q_std = Q.mean(0), Q.std(0)
         const = (q_std <= 1e-12 * (1.0 + q_mean.abs())).nonzero().flatten().tolist()
         if const:
-            raise ValueError(f"Q_list: joint column(s) {const} are constant over all samples; remove them")
+            raise DataError(f"Q_list: joint column(s) {const} are constant over all samples; remove them")
         q_scale = q_std if scale_joints else torch.ones_like(q_std)
         self.register_buffer("q_mean", q_mean)  # (n,) rad
         self.register_buffer("q_scale", q_scale)  # (n,) rad
@@ -316,7 +317,7 @@ class GPDM(nn.Module):
         """χ = c·(q − q̄) for q: (T, n) or (n,) joint angles, rad → (T,) or () latent."""
         q = torch.as_tensor(q, dtype=_DTYPE)
         if q.shape[-1] != len(self.q_mean):
-            raise ValueError(f"q: expected last dimension {len(self.q_mean)} (joints), got shape {tuple(q.shape)}")
+            raise ArgumentError(f"q: expected last dimension {len(self.q_mean)} (joints), got shape {tuple(q.shape)}")
         return (q - self.q_mean) @ self.c
 
     @torch.no_grad()
@@ -347,7 +348,7 @@ class GPDM(nn.Module):
         """
         chi0 = torch.as_tensor(chi0, dtype=_DTYPE).reshape(-1)
         if chi0.numel() != self.order or steps < 0:
-            raise ValueError(
+            raise ArgumentError(
                 f"rollout: expected chi0 of {self.order} latent(s) and steps ≥ 0, got {tuple(chi0.shape)}, {steps}"
             )
         Lx, Z, x_out = self._dyn_chol()
@@ -378,12 +379,12 @@ def reconstruct_latent(
     q_a, q_u_bem, c = (torch.as_tensor(t, dtype=_DTYPE) for t in (q_a, q_u_bem, c))
     n = c.shape[0] if c.ndim == 1 else -1
     if n < 2 or q_a.ndim != 2 or q_a.shape[1] != n - 1 or q_u_bem.shape != (q_a.shape[0],):
-        raise ValueError(
+        raise ArgumentError(
             f"reconstruct_latent: expected c (n,), q_a (T, n−1), q_u_bem (T,), got "
             f"{tuple(c.shape)}, {tuple(q_a.shape)}, {tuple(q_u_bem.shape)}"
         )
     if not 0 <= unactuated_index < n:
-        raise ValueError(f"unactuated_index: expected 0 ≤ index < {n}, got {unactuated_index}")
+        raise ArgumentError(f"unactuated_index: expected 0 ≤ index < {n}, got {unactuated_index}")
     q = torch.cat([q_a[:, :unactuated_index], q_u_bem[:, None], q_a[:, unactuated_index:]], dim=1)
     if q_offset is not None:
         q = q - torch.as_tensor(q_offset, dtype=_DTYPE)
@@ -401,7 +402,7 @@ def compare_latents(chi: Tensor, chi_hat: Tensor) -> LatentComparison:
     """Correlation and RMSE between chi: (T,) and chi_hat: (T,) (paper Fig. 4–5, χ vs χ̂)."""
     chi, chi_hat = (torch.as_tensor(t, dtype=_DTYPE).reshape(-1) for t in (chi, chi_hat))
     if chi.shape != chi_hat.shape or chi.numel() < 2:
-        raise ValueError(
+        raise ArgumentError(
             f"compare_latents: expected two (T,) tensors with T ≥ 2, got {tuple(chi.shape)}, {tuple(chi_hat.shape)}"
         )
     a, b = chi - chi.mean(), chi_hat - chi_hat.mean()

@@ -13,6 +13,8 @@ import gpytorch
 import torch
 from gpytorch.constraints import GreaterThan, Positive
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["ard_se_kernel", "gaussian_likelihood", "kernel_matrix", "se_cross_covariance", "se_gram"]
 
 
@@ -27,7 +29,7 @@ def ard_se_kernel(dim: int, *, dtype: torch.dtype = torch.float64) -> gpytorch.k
         ``ScaleKernel(RBFKernel(ard_num_dims=dim))`` with positive constraints on ℓ and σ_f².
     """
     if dim < 1:
-        raise ValueError(f"dim: expected a positive input dimension, got {dim}")
+        raise ArgumentError(f"dim: expected a positive input dimension, got {dim}")
     base = gpytorch.kernels.RBFKernel(ard_num_dims=dim, lengthscale_constraint=Positive())
     kernel = gpytorch.kernels.ScaleKernel(base, outputscale_constraint=Positive())
     return kernel.to(dtype=dtype)
@@ -41,7 +43,7 @@ def gaussian_likelihood(*, min_noise: float = 1e-6, dtype: torch.dtype = torch.f
         dtype: parameter dtype.
     """
     if not min_noise > 0.0:
-        raise ValueError(f"min_noise: expected a positive noise floor, got {min_noise}")
+        raise ArgumentError(f"min_noise: expected a positive noise floor, got {min_noise}")
     lik = gpytorch.likelihoods.GaussianLikelihood(noise_constraint=GreaterThan(min_noise))
     return lik.to(dtype=dtype)
 

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import torch
 
+from bemlearn.errors import ArgumentError, PredictorInputError
 from bemlearn.models.band import band_reference
 from bemlearn.models.predictor_state import PredictorState
 
@@ -48,7 +49,7 @@ class BEMPrediction:
 def srinivas_kappa(rkhs_norm: float, info_gain: float, n: int, eta: float) -> float:
     """κ = √(2‖q_u‖_k² + 300 γ ln³(N / (1 − η))) of Srinivas et al. (2012), Theorem 6 (eq. 13)."""
     if not 0 < eta < 1:
-        raise ValueError(f"srinivas_kappa: eta must be in (0, 1), got {eta}")
+        raise ArgumentError(f"srinivas_kappa: eta must be in (0, 1), got {eta}")
     return math.sqrt(2 * rkhs_norm**2 + 300 * info_gain * math.log(n / (1 - eta)) ** 3)
 
 
@@ -67,7 +68,7 @@ class LearnedBEM:
         self.unactuated_name = unactuated_name
         self.m = len(self.actuated_names)
         if state.dim != 3 * self.m + 2:
-            raise ValueError(f"LearnedBEM: the posterior has d = {state.dim} inputs, expected 3m + 2 = {3 * self.m + 2}")
+            raise ArgumentError(f"LearnedBEM: the posterior has d = {state.dim} inputs, expected 3m + 2 = {3 * self.m + 2}")
 
     def predict(self, x: torch.Tensor, *, n_inputs: int | None = None) -> BEMPrediction:
         """The full learned map f of eq. (11): ``x (B, 3m + 2)`` = [q̈_a, q̇_a, q_a, q̈_u, q̇_u] → q_u.
@@ -75,9 +76,9 @@ class LearnedBEM:
         ``n_inputs``: columns whose input noise enters ``band_std`` (default all; 3m at x_0^e)."""
         x = torch.as_tensor(x, dtype=torch.float64)
         if x.ndim != 2 or x.shape[1] != 3 * self.m + 2:
-            raise ValueError(f"LearnedBEM.predict: x must have shape (B, {3 * self.m + 2}) [q̈_a, q̇_a, q_a, q̈_u, q̇_u], got {tuple(x.shape)}")
+            raise PredictorInputError(f"LearnedBEM.predict: x must have shape (B, {3 * self.m + 2}) [q̈_a, q̇_a, q_a, q̈_u, q̇_u], got {tuple(x.shape)}")
         if not bool(torch.isfinite(x).all()):
-            raise ValueError("LearnedBEM.predict: x has non-finite values")
+            raise PredictorInputError("LearnedBEM.predict: x has non-finite values")
         out = []
         for chunk in x.split(4096):
             out.append(band_reference(self.state, chunk, n_inputs=n_inputs))
@@ -92,7 +93,7 @@ class LearnedBEM:
         parts = [torch.as_tensor(v, dtype=torch.float64) for v in (qadd, qad, qa)]
         for name, p in zip(("qadd", "qad", "qa"), parts):
             if p.ndim != 2 or p.shape[1] != self.m:
-                raise ValueError(f"LearnedBEM.bem: {name} must have shape (B, {self.m}), got {tuple(p.shape)}")
+                raise PredictorInputError(f"LearnedBEM.bem: {name} must have shape (B, {self.m}), got {tuple(p.shape)}")
         x = torch.cat(parts + [torch.zeros(parts[0].shape[0], 2, dtype=torch.float64)], dim=1)
         return self.predict(x, n_inputs=3 * self.m)
 
@@ -108,5 +109,5 @@ class LearnedBEM:
     def nominal_confidence(kappa: float = 2.0) -> float:
         """η = P(|N(0, 1)| ≤ κ) = erf(κ/√2), the bound's stated confidence (0.9545 for κ = 2)."""
         if not kappa > 0:
-            raise ValueError(f"nominal_confidence: kappa must be > 0, got {kappa}")
+            raise ArgumentError(f"nominal_confidence: kappa must be > 0, got {kappa}")
         return math.erf(kappa / math.sqrt(2.0))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import gpytorch
 import torch
 
+from bemlearn.errors import ArgumentError
 from bemlearn.models.gp_kinds import gp_kind_of
 from bemlearn.models.solver import DEFAULT_JITTER, DEFAULT_MAX_TRIES, cholesky_policy
 from bemlearn.models.validation import check_inputs
@@ -45,7 +46,7 @@ def predict(
     dtype = next(model.parameters()).dtype
     check_inputs(x, name="x", dim=model.dim, dtype=dtype)
     if batch_size < 1:
-        raise ValueError(f"batch_size: expected a positive integer, got {batch_size}")
+        raise ArgumentError(f"batch_size: expected a positive integer, got {batch_size}")
     model.eval()
     likelihood.eval()
     means, variances = [], []

@@ -56,6 +56,8 @@ from typing import Literal
 
 import torch
 
+from bemlearn.errors import CheckpointError
+
 __all__ = ["PredictorState", "GPKind"]
 
 GPKind = Literal["exact", "sgpr", "svgp"]
@@ -129,9 +131,9 @@ class PredictorState:
         }
         for name, (t, shape) in checks.items():
             if tuple(t.shape) != shape:
-                raise ValueError(f"PredictorState.{name}: expected shape {shape}, got {tuple(t.shape)}")
+                raise CheckpointError(f"PredictorState.{name}: expected shape {shape}, got {tuple(t.shape)}")
         if len(self.input_names) != d:
-            raise ValueError(f"PredictorState.input_names: expected {d} names, got {len(self.input_names)}")
+            raise CheckpointError(f"PredictorState.input_names: expected {d} names, got {len(self.input_names)}")
         self._check_factor(M)
 
     def _check_factor(self, M: int) -> None:
@@ -140,19 +142,19 @@ class PredictorState:
         if self.S_chol is None and self.S_inner is None:
             return
         if self.S_chol is None or self.S_inner is None:
-            raise ValueError("PredictorState.S_chol, S_inner: give both (S = L⁻ᵀ C L⁻¹) or neither")
+            raise CheckpointError("PredictorState.S_chol, S_inner: give both (S = L⁻ᵀ C L⁻¹) or neither")
         if self.kind == "exact":
-            raise ValueError("PredictorState.S_chol, S_inner: only for the sparse kinds (sgpr, svgp); an exact "
+            raise CheckpointError("PredictorState.S_chol, S_inner: only for the sparse kinds (sgpr, svgp); an exact "
                              "posterior solves with the Cholesky factor of K_ZZ + σ_0² I (gram_cholesky)")
         for name in ("S_chol", "S_inner"):
             t = getattr(self, name)
             if tuple(t.shape) != (M, M):
-                raise ValueError(f"PredictorState.{name}: expected shape {(M, M)}, got {tuple(t.shape)}")
+                raise CheckpointError(f"PredictorState.{name}: expected shape {(M, M)}, got {tuple(t.shape)}")
         L, C = self.S_chol, self.S_inner
         if bool((torch.triu(L, 1) != 0).any()) or not bool((torch.diagonal(L) > 0).all()):
-            raise ValueError("PredictorState.S_chol: expected a lower-triangular Cholesky factor with a positive diagonal")
+            raise CheckpointError("PredictorState.S_chol: expected a lower-triangular Cholesky factor with a positive diagonal")
         if not bool(torch.equal(C, C.mT)):
-            raise ValueError("PredictorState.S_inner: expected a symmetric matrix (C = Cᵀ exactly)")
+            raise CheckpointError("PredictorState.S_inner: expected a symmetric matrix (C = Cᵀ exactly)")
 
     @property
     def n_support(self) -> int:

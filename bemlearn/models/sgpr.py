@@ -25,6 +25,7 @@ import gpytorch
 import torch
 from linear_operator.operators import DiagLinearOperator
 
+from bemlearn.errors import ArgumentError
 from bemlearn.models.kernels import ard_se_kernel, kernel_matrix, se_cross_covariance
 from bemlearn.models.solver import robust_cholesky
 from bemlearn.models.validation import check_inputs, check_targets
@@ -64,9 +65,9 @@ class SGPRBEMGP(gpytorch.Module):
         check_targets(train_y, name="train_y", n=train_x.shape[0], dtype=train_x.dtype)
         check_inputs(inducing_points, name="inducing_points", dim=train_x.shape[1], dtype=train_x.dtype)
         if jitter < 0.0:
-            raise ValueError(f"jitter: expected a non-negative value, got {jitter}")
+            raise ArgumentError(f"jitter: expected a non-negative value, got {jitter}")
         if chunk_size < 1:
-            raise ValueError(f"chunk_size: expected a positive integer, got {chunk_size}")
+            raise ArgumentError(f"chunk_size: expected a positive integer, got {chunk_size}")
         super().__init__()
         self.register_buffer("train_x", train_x, persistent=False)
         self.register_buffer("train_y", train_y, persistent=False)

@@ -23,6 +23,8 @@ import linear_operator
 import torch
 from linear_operator.utils.warnings import NumericalWarning
 
+from bemlearn.errors import NumericalError
+
 __all__ = ["cholesky_policy", "robust_cholesky", "DEFAULT_JITTER", "DEFAULT_MAX_TRIES"]
 
 logger = logging.getLogger(__name__)
@@ -84,10 +86,10 @@ def robust_cholesky(
         ``(L, j)``: the ``(M, M)`` lower factor of A + j I and the jitter j actually added (0.0 if none).
 
     Raises:
-        ValueError: A contains NaN/inf, or is still not PD after the last retry.
+        NumericalError: (a RuntimeError) A contains NaN/inf, or is still not PD after the last retry.
     """
     if not bool(torch.isfinite(A).all()):
-        raise ValueError(f"{what}: matrix contains NaN or inf; cannot factorize")
+        raise NumericalError(f"{what}: matrix contains NaN or inf; cannot factorize")
     L, info = torch.linalg.cholesky_ex(A)
     if not bool(info.any()):
         return L, 0.0
@@ -98,4 +100,4 @@ def robust_cholesky(
         L, info = torch.linalg.cholesky_ex(A + j * eye)
         if not bool(info.any()):
             return L, j
-    raise ValueError(f"{what}: not positive definite even after adding jitter {jitter * 10 ** (max_tries - 1):.1e}")
+    raise NumericalError(f"{what}: not positive definite even after adding jitter {jitter * 10 ** (max_tries - 1):.1e}")

@@ -17,6 +17,7 @@ import gpytorch
 import torch
 from gpytorch.variational import TrilNaturalVariationalDistribution, VariationalStrategy
 
+from bemlearn.errors import ArgumentError
 from bemlearn.models.kernels import ard_se_kernel
 from bemlearn.models.validation import check_inputs
 
@@ -41,7 +42,7 @@ class SVGPBEMGP(gpytorch.models.ApproximateGP):
     ) -> None:
         check_inputs(inducing_points, name="inducing_points")
         if not jitter > 0.0:
-            raise ValueError(f"jitter: expected a positive value, got {jitter}")
+            raise ArgumentError(f"jitter: expected a positive value, got {jitter}")
         M, d = inducing_points.shape
         dtype = inducing_points.dtype
         q = TrilNaturalVariationalDistribution(M).to(dtype=dtype)
@@ -64,12 +65,12 @@ class SVGPBEMGP(gpytorch.models.ApproximateGP):
         """
         M = self.num_inducing
         if tuple(mean.shape) != (M,):
-            raise ValueError(f"mean: expected shape ({M},), got {tuple(mean.shape)}")
+            raise ArgumentError(f"mean: expected shape ({M},), got {tuple(mean.shape)}")
         if tuple(covariance.shape) != (M, M):
-            raise ValueError(f"covariance: expected shape ({M}, {M}), got {tuple(covariance.shape)}")
+            raise ArgumentError(f"covariance: expected shape ({M}, {M}), got {tuple(covariance.shape)}")
         covariance = 0.5 * (covariance + covariance.mT)
         if bool(torch.linalg.cholesky_ex(covariance)[1].any()):
-            raise ValueError("covariance: not positive definite")
+            raise ArgumentError("covariance: not positive definite")
         strategy = self.variational_strategy
         q = strategy._variational_distribution
         std, q.mean_init_std = q.mean_init_std, 0.0

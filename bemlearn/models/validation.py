@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import torch
 
+from bemlearn.errors import ArgumentError, DataError
+
 __all__ = ["check_inputs", "check_targets"]
 
 
@@ -22,11 +24,11 @@ def check_inputs(x: object, *, name: str, dim: int | None = None, dtype: torch.d
     """
     _check_float_tensor(x, name, "(N, d)", dtype)
     if x.ndim != 2:
-        raise ValueError(f"{name}: expected shape (N, d), got {tuple(x.shape)}")
+        raise ArgumentError(f"{name}: expected shape (N, d), got {tuple(x.shape)}")
     if x.shape[0] == 0:
-        raise ValueError(f"{name}: expected at least one row, got shape {tuple(x.shape)}")
+        raise ArgumentError(f"{name}: expected at least one row, got shape {tuple(x.shape)}")
     if dim is not None and x.shape[1] != dim:
-        raise ValueError(f"{name}: expected {dim} columns, got shape {tuple(x.shape)}")
+        raise ArgumentError(f"{name}: expected {dim} columns, got shape {tuple(x.shape)}")
     _check_finite(x, name)
     return x
 
@@ -46,7 +48,7 @@ def check_targets(y: object, *, name: str, n: int, dtype: torch.dtype | None = N
     """
     _check_float_tensor(y, name, f"({n},)", dtype)
     if tuple(y.shape) != (n,):
-        raise ValueError(f"{name}: expected shape ({n},), got {tuple(y.shape)}")
+        raise ArgumentError(f"{name}: expected shape ({n},), got {tuple(y.shape)}")
     _check_finite(y, name)
     return y
 
@@ -54,17 +56,17 @@ def check_targets(y: object, *, name: str, n: int, dtype: torch.dtype | None = N
 def _check_float_tensor(t: object, name: str, shape: str, dtype: torch.dtype | None) -> None:
     """TypeError naming ``name`` unless ``t`` is a floating tensor (of ``dtype`` if given)."""
     if not isinstance(t, torch.Tensor):
-        raise TypeError(f"{name}: expected a torch.Tensor of shape {shape}, got {type(t).__name__}")
+        raise ArgumentError(f"{name}: expected a torch.Tensor of shape {shape}, got {type(t).__name__}")
     if not t.is_floating_point():
-        raise TypeError(f"{name}: expected a floating-point tensor, got dtype {t.dtype}")
+        raise ArgumentError(f"{name}: expected a floating-point tensor, got dtype {t.dtype}")
     if dtype is not None and t.dtype != dtype:
-        raise TypeError(f"{name}: expected dtype {dtype}, got {t.dtype}")
+        raise ArgumentError(f"{name}: expected dtype {dtype}, got {t.dtype}")
 
 
 def _check_finite(t: torch.Tensor, name: str) -> None:
     bad = ~torch.isfinite(t)
     if bool(bad.any()):
         rows = bad.reshape(t.shape[0], -1).any(dim=1).nonzero().flatten()
-        raise ValueError(
+        raise DataError(
             f"{name}: {int(rows.numel())} row(s) contain NaN or inf, first at row {int(rows[0])}"
         )

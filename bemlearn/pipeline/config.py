@@ -27,6 +27,7 @@ from pathlib import Path
 from bemlearn.config import Limit, config_limits
 from bemlearn.data.collect import CollectConfig
 from bemlearn.data.dataset import DatasetConfig
+from bemlearn.errors import ConfigError
 from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.pipeline.evaluation import EvaluationConfig
 from bemlearn.sim.closed_loop import SimulateConfig
@@ -72,27 +73,27 @@ class PipelineConfig:
 
     def __post_init__(self) -> None:
         if self.robot is None and self.data is None:
-            raise ValueError("the config names neither 'robot:' (a registry name or an MJCF path) nor 'data:' "
+            raise ConfigError("the config names neither 'robot:' (a registry name or an MJCF path) nor 'data:' "
                              "(a trajectory file); a config needs at least one of them")
         if self.model is not None and self.robot is not None:
-            raise ValueError("'model:' is for model-free runs (data: without robot:); with 'robot:' the robot's own "
+            raise ConfigError("'model:' is for model-free runs (data: without robot:); with 'robot:' the robot's own "
                              "model is the ground truth")
         ev, c, sim = self.evaluate, self.collect, self.simulate
         if sim.warmup_s >= sim.duration_s:
-            raise ValueError(f"simulate.warmup_s ({sim.warmup_s:g} s) must be shorter than simulate.duration_s ({sim.duration_s:g} s): "
+            raise ConfigError(f"simulate.warmup_s ({sim.warmup_s:g} s) must be shorter than simulate.duration_s ({sim.duration_s:g} s): "
                              "the tracking RMSE leaves out the samples before warmup_s")
         if ev.amplitude_min is not None and ev.amplitude_max is not None and ev.amplitude_min > ev.amplitude_max:
-            raise ValueError(f"evaluate.amplitude_min ({ev.amplitude_min:g}) must not exceed evaluate.amplitude_max ({ev.amplitude_max:g})")
+            raise ConfigError(f"evaluate.amplitude_min ({ev.amplitude_min:g}) must not exceed evaluate.amplitude_max ({ev.amplitude_max:g})")
         budgets = (("collect", c.n_trials * c.duration_s, c.rate_hz), ("evaluate", ev.n_references * ev.duration_s, ev.rate_hz),
                    ("simulate", sim.duration_s, sim.rate_hz))
         for name, seconds, rate in budgets:
             if rate is not None and seconds * rate > MAX_SAMPLES:
-                raise ValueError(f"{name}: {seconds:g} s at {rate:g} Hz is {seconds * rate:.3g} samples, more than {MAX_SAMPLES:.0e}; "
+                raise ConfigError(f"{name}: {seconds:g} s at {rate:g} Hz is {seconds * rate:.3g} samples, more than {MAX_SAMPLES:.0e}; "
                                  "lower the duration, the number of trials or references, or the rate")
         if ev.rate_hz * ev.duration_s < 2:
-            raise ValueError(f"evaluate: duration_s × rate_hz = {ev.duration_s * ev.rate_hz:g} samples per reference; need at least 2")
+            raise ConfigError(f"evaluate: duration_s × rate_hz = {ev.duration_s * ev.rate_hz:g} samples per reference; need at least 2")
         if self.data is None and self.dataset.val_fraction > 0 and c.n_trials < 2:
-            raise ValueError(f"dataset.val_fraction = {self.dataset.val_fraction:g} holds out whole trials for validation: "
+            raise ConfigError(f"dataset.val_fraction = {self.dataset.val_fraction:g} holds out whole trials for validation: "
                              f"collect.n_trials must be at least 2, got {c.n_trials} (or set dataset.val_fraction: 0)")
 
 

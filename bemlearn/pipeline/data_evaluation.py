@@ -32,9 +32,10 @@ import numpy as np
 import torch
 
 from bemlearn.data.dataset_types import BEMDataset
-from bemlearn.units import joint_unit
+from bemlearn.errors import DataError
 from bemlearn.models.learned_bem import LearnedBEM
 from bemlearn.models.predictor_state import PredictorState
+from bemlearn.units import joint_unit
 
 __all__ = ["SliceSpec", "bem_slice_figure", "bem_slices", "heldout_prediction", "bem_resolution"]
 
@@ -59,7 +60,7 @@ def _predict(state: PredictorState, x: torch.Tensor, chunk: int = 4096) -> tuple
 
 def _check_names(state: PredictorState, dataset: BEMDataset) -> None:
     if tuple(state.input_names) != tuple(dataset.input_names):
-        raise ValueError(
+        raise DataError(
             f"the predictor's inputs {list(state.input_names)} differ from the dataset's {list(dataset.input_names)}"
         )
 
@@ -84,7 +85,7 @@ def heldout_prediction(model: PredictorState | LearnedBEM, heldout: BEMDataset, 
     state = _state(model)
     _check_names(state, heldout)
     if len(heldout) == 0:
-        raise ValueError("heldout_prediction: the held-out dataset is empty (val_fraction = 0?)")
+        raise DataError("heldout_prediction: the held-out dataset is empty (val_fraction = 0?)")
     mean, _, pred = _predict(state, heldout.x)
     y = heldout.y.numpy()
     err = mean - y

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from bemlearn.errors import CheckpointError, ConfigError
 from bemlearn.models.band import band_reference
 from bemlearn.models.predictor_state import PredictorState
 from bemlearn.pipeline.reliability import reliability_table
@@ -55,7 +56,7 @@ def held_out_references(config: EvaluationConfig, m: int) -> list[CompositeSinus
     """Random composite sinusoids within the configured amplitude and frequency ranges."""
     unset = [n for n in ("n_sines", "amplitude_max", "amplitude_min", "frequency_hz") if getattr(config, n) is None]
     if unset:
-        raise ValueError(f"evaluate: {unset} not set; derive them from the model with "
+        raise ConfigError(f"evaluate: {unset} not set; derive them from the model with "
                          "bemlearn.pipeline.complete_section(robot, 'evaluate', config) or give them")
     rng = np.random.default_rng(config.seed)
     refs = []
@@ -107,11 +108,11 @@ def run_truth_robot(run_dir, *, model=None):
         return robot, ref.to_dict()
     rec = ck.metadata.extra.get("robot_ref")
     if rec is None:
-        raise ValueError(f"{ck.path}: the run records no robot (made by bemlearn < 0.2); pass the model to compare "
+        raise CheckpointError(f"{ck.path}: the run records no robot (made by bemlearn < 0.2); pass the model to compare "
                          "with explicitly (--model NAME|PATH)")
     ref = RobotRef.from_dict(rec, where=f"{ck.path}: robot_ref")
     if ref.mjcf is None and ref.registry is None:
-        raise ValueError(f"{ck.path}: a model-free run (trained on data alone); there is no model to compare with "
+        raise CheckpointError(f"{ck.path}: a model-free run (trained on data alone); there is no model to compare with "
                          "unless you give one (--model NAME|PATH)")
     return ref.load(), ref.to_dict()
 

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from bemlearn.errors import NumericalError, RobotModelError
+
 __all__ = ["FeasibilityCheck", "model_feasibility", "hold_effort"]
 
 log = logging.getLogger(__name__)
@@ -132,7 +134,7 @@ def model_feasibility(robot, config) -> list[FeasibilityCheck]:
             f"holding {robot.unactuated_name} {d:g} {qu_unit} from its nominal value (the design region's edge) takes {effort:.2f}× the "
             f"actuator limits at best ({how})" if math.isfinite(effort) else
             f"no pose or acceleration of the actuated joints holds {robot.unactuated_name} {d:g} {qu_unit} from its nominal value"))
-    except (ValueError, RuntimeError) as exc:   # an actuator model the inverse does not cover: no verdict from it
+    except (RobotModelError, NumericalError) as exc:   # an actuator model the inverse does not cover: no verdict from it
         log.info("feasibility: hold check skipped (%s)", exc)
     if robot.m == 1 and config.simulate.gains is not None:
         from bemlearn.control.eic_linear import eic_linear_abscissa

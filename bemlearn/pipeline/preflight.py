@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from bemlearn.config import load_yaml
-from bemlearn.errors import ConfigError, EnvironmentProblem
+from bemlearn.errors import BemlearnError, ConfigError, EnvironmentProblem, MissingFileError
 from bemlearn.files import check_outputs, check_writable
 
 __all__ = ["preflight", "check_config_file", "check_config", "check_robot", "check_device", "check_data_file"]
@@ -61,7 +61,7 @@ def check_config(path: str | os.PathLike[str], data: dict[str, Any]) -> None:
 
         try:
             app = get_application(str(data["application"]))
-        except (KeyError, ValueError) as exc:
+        except ConfigError as exc:
             raise ConfigError(f"{path}: application: {exc}") from None
         if app.parse_config is not None:
             app.parse_config(path)
@@ -90,7 +90,7 @@ def check_robot(name: Any, *, where: str = "robot") -> None:
             raise ConfigError(f"{where}: MJCF file {name} not found")
     try:
         load(name)
-    except (ValueError, FileNotFoundError, OSError) as exc:
+    except (BemlearnError, OSError) as exc:
         raise ConfigError(f"{where}: cannot load robot {name!r}: {exc}") from exc
 
 
@@ -111,14 +111,14 @@ def check_data_file(path: str | os.PathLike[str], *, robot: str | None = None, w
     """The trajectory file exists and reads (its joints match ``robot`` when given).
 
     Raises:
-        FileNotFoundError: no such file.
+        MissingFileError: (a FileNotFoundError) no such file.
         TrajectoryFormatError: the file is not a valid trajectory file.
     """
     from bemlearn.data import read_trajectory
 
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"{where}: trajectory file {path} not found")
+        raise MissingFileError(f"{where}: trajectory file {path} not found")
     read_trajectory(path, robot=robot)
 
 

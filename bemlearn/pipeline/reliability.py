@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from bemlearn.errors import ArgumentError
 from bemlearn.fitting.calibration import gaussian_quantile
 
 __all__ = ["NOMINAL_LEVELS", "reliability_figure", "reliability_table"]
@@ -28,7 +29,7 @@ def reliability_table(errors: np.ndarray, std: np.ndarray, levels=NOMINAL_LEVELS
     e = np.abs(np.asarray(errors, dtype=np.float64))
     s = np.asarray(std, dtype=np.float64)
     if e.shape != s.shape or e.ndim != 1 or e.size == 0:
-        raise ValueError(f"reliability_table: errors and std must be equal-length non-empty 1-D arrays, got {e.shape} and {s.shape}")
+        raise ArgumentError(f"reliability_table: errors and std must be equal-length non-empty 1-D arrays, got {e.shape} and {s.shape}")
     rows = []
     for level in levels:
         kappa = gaussian_quantile(level)

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from bemlearn.config import ConfigError, from_dict, load_yaml, set_dotted, to_dict
+from bemlearn.errors import BemlearnError
 from bemlearn.pipeline.config import PipelineConfig
 
 __all__ = ["ResolvedConfig", "resolve_pipeline_config", "complete_section", "format_resolved", "flatten"]
@@ -95,7 +96,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
 
         try:
             robot = load(parsed.robot)
-        except (ValueError, FileNotFoundError, OSError) as exc:
+        except (BemlearnError, OSError) as exc:
             raise ConfigError(f"{source}: robot: {exc}") from exc
         for key, (value, note) in derive_pipeline_values(robot, parsed, given).items():
             if not _has(raw, key):

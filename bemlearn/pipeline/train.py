@@ -26,8 +26,9 @@ import torch
 from bemlearn.config import save_yaml
 from bemlearn.data import build_datasets, read_trajectory
 from bemlearn.data.validation import check_robot
-from bemlearn.models import predict
+from bemlearn.errors import ArgumentError, EnvironmentProblem
 from bemlearn.files import atomic_path, atomic_write_text, file_sha256
+from bemlearn.models import predict
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.evaluation import evaluate_bem, held_out_references
 from bemlearn.pipeline.reliability import reliability_figure
@@ -41,7 +42,7 @@ log = logging.getLogger(__name__)
 
 def _resolve_device(device: str) -> str:
     if device.startswith("cuda") and not torch.cuda.is_available():
-        raise ValueError(f"--device {device}: CUDA was requested but no CUDA device is available (use --device cpu)")
+        raise EnvironmentProblem(f"--device {device}: CUDA was requested but no CUDA device is available (use --device cpu)")
     return device
 
 
@@ -65,7 +66,7 @@ def train_run(
     previous = torch.get_num_threads()
     if threads is not None:
         if threads < 1:
-            raise ValueError(f"threads: expected a positive integer, got {threads}")
+            raise ArgumentError(f"threads: expected a positive integer, got {threads}")
         torch.set_num_threads(threads)
     try:
         return _train_run(config, data_path, out_dir, device=device, resume=resume, progress=progress)

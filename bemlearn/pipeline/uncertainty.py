@@ -25,6 +25,7 @@ import torch
 
 from bemlearn.data import build_datasets
 from bemlearn.data.derivative_choice import resolve_estimator
+from bemlearn.errors import DataError
 from bemlearn.fitting.calibration import calibrate_replicas
 from bemlearn.fitting.estimator_sensitivity import estimator_sensitivity
 from bemlearn.models.input_noise import quantization_input_std
@@ -70,7 +71,7 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, train_rows: t
                                  n_points=state.n_train, n_pairs=n_pairs, level=level, seed=seed)
         scale = cal.scale
         summary["replicas"] = cal.to_dict()
-    except ValueError as exc:  # a single training trial: nothing to split
+    except DataError as exc:  # a single training trial: nothing to split
         log.warning("band calibration: no replica calibration (%s); std_scale = 1", exc)
         scale = 1.0
         summary["replicas"] = None

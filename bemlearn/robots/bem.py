@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import torch
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["BEMResult", "solve_bem"]
 
 _EPS = torch.finfo(torch.float64).eps
@@ -66,9 +68,9 @@ def solve_bem(
         max_iter: refinement iteration cap.
     """
     if not lo < hi:
-        raise ValueError(f"solve_bem: need lo < hi, got lo={lo}, hi={hi}")
+        raise ArgumentError(f"solve_bem: need lo < hi, got lo={lo}, hi={hi}")
     if n_grid < 3:
-        raise ValueError(f"solve_bem: n_grid must be ≥ 3, got {n_grid}")
+        raise ArgumentError(f"solve_bem: n_grid must be ≥ 3, got {n_grid}")
     import inspect
 
     takes_rows = "rows" in inspect.signature(fun).parameters

@@ -22,6 +22,8 @@ import pytorch_kinematics.transforms as tf
 import torch
 from pytorch_kinematics import frame as pkframe
 
+from bemlearn.errors import ArgumentError, RobotModelError
+
 __all__ = ["chain_from_model", "frame_positions"]
 
 _DT = torch.float64
@@ -62,7 +64,7 @@ def _body_frame(model: mujoco.MjModel, body_id: int) -> pkframe.Frame:
     for j in range(int(model.body_jntadr[body_id]), int(model.body_jntadr[body_id]) + njnt):
         jtype = {int(mujoco.mjtJoint.mjJNT_HINGE): "revolute", int(mujoco.mjtJoint.mjJNT_SLIDE): "prismatic"}.get(int(model.jnt_type[j]))
         if jtype is None:
-            raise ValueError(f"joint {model.joint(j).name!r} is not a hinge or slide")
+            raise RobotModelError(f"joint {model.joint(j).name!r} is not a hinge or slide")
         axis = torch.as_tensor(np.asarray(model.jnt_axis[j], dtype=np.float64), dtype=_DT)
         joints.append((pkframe.Joint(model.joint(j).name, offset=None, joint_type=jtype, axis=axis, dtype=_DT), np.asarray(model.jnt_pos[j], dtype=np.float64)))
     if njnt == 1 and not np.any(joints[0][1]):
@@ -89,11 +91,11 @@ def frame_positions(chain: pk.Chain, model: mujoco.MjModel, qj: torch.Tensor, fr
     index = {model.joint(i).name: i for i in range(model.njnt)}
     missing = [n for n in order if n not in index]
     if missing:
-        raise ValueError(f"forward_kinematics: chain joints {missing} not found in the model (unnamed joints?)")
+        raise RobotModelError(f"forward_kinematics: chain joints {missing} not found in the model (unnamed joints?)")
     th = qj[:, [index[n] for n in order]].to(_DT)
     names = set(chain.get_frame_names(exclude_fixed=False))
     unknown = [f for f in frames if f not in names]
     if unknown:
-        raise ValueError(f"forward_kinematics: unknown frame(s) {unknown}; known bodies/sites: {sorted(names)}")
+        raise ArgumentError(f"forward_kinematics: unknown frame(s) {unknown}; known bodies/sites: {sorted(names)}")
     fk = chain.forward_kinematics(th)
     return {f: fk[f].get_matrix()[:, :3, 3] for f in frames}

@@ -34,7 +34,7 @@ import mujoco
 import numpy as np
 import torch
 
-from bemlearn.errors import RobotModelError
+from bemlearn.errors import MissingFileError, RobotModelError
 from bemlearn.robots._mujoco_compat import full_mass_matrix, make_mass_matrix
 from bemlearn.robots.robot import Robot, as_batch
 
@@ -205,7 +205,7 @@ class MujocoRobot(Robot):
     def from_xml(cls, path: str | Path, *, name: str | None = None) -> "MujocoRobot":
         path = Path(path)
         if not path.is_file():
-            raise FileNotFoundError(f"{path}: MJCF file not found")
+            raise MissingFileError(f"{path}: MJCF file not found")
         try:
             model = mujoco.MjModel.from_xml_path(str(path))
         except ValueError as exc:

@@ -16,6 +16,8 @@ from fractions import Fraction
 import numpy as np
 import torch
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["CompositeSinusoid", "ConstantAcceleration"]
 
 
@@ -40,7 +42,7 @@ class CompositeSinusoid:
         for name in ("amplitudes", "frequencies", "phases"):
             arr = getattr(self, name)
             if len(arr) != m or len({len(r) for r in arr}) > 1:
-                raise ValueError(f"CompositeSinusoid.{name}: expected {m} rows of equal length, got {arr}")
+                raise ArgumentError(f"CompositeSinusoid.{name}: expected {m} rows of equal length, got {arr}")
         # numpy copies for the per-tick fast path (:meth:`evaluate`)
         object.__setattr__(self, "_A", np.asarray(self.amplitudes, dtype=np.float64))
         object.__setattr__(self, "_w", 2 * math.pi * np.asarray(self.frequencies, dtype=np.float64))

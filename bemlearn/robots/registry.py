@@ -15,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from bemlearn.errors import CheckpointError, ConfigError, MissingFileError
 from bemlearn.files import file_sha256
 from bemlearn.robots.mujoco_robot import MujocoRobot
 from bemlearn.robots.robot import Robot
@@ -63,21 +64,21 @@ class RobotRef:
     @classmethod
     def from_dict(cls, data: dict, *, where: str = "robot") -> "RobotRef":
         if not isinstance(data, dict) or "mjcf" not in data:
-            raise ValueError(f"{where}: expected a mapping with keys name, mjcf, sha256, registry; got {data!r}")
+            raise CheckpointError(f"{where}: expected a mapping with keys name, mjcf, sha256, registry; got {data!r}")
         return cls(str(data.get("name") or "robot"), data.get("mjcf"), data.get("sha256"), data.get("registry"))
 
     def load(self, *, check: bool = True) -> Robot:
         """Load the recorded robot; with ``check`` the MJCF must still have the recorded sha256."""
         if self.mjcf is None:
             if self.registry is None:
-                raise ValueError(f"robot {self.name!r}: the run recorded neither an MJCF file nor a registry name")
+                raise CheckpointError(f"robot {self.name!r}: the run recorded neither an MJCF file nor a registry name")
             return load(self.registry)
         path = Path(self.mjcf)
         if not path.is_file():
-            raise FileNotFoundError(f"robot {self.name!r}: the run's MJCF {path} no longer exists")
+            raise MissingFileError(f"robot {self.name!r}: the run's MJCF {path} no longer exists")
         actual = file_sha256(path) if check and self.sha256 else None
         if actual is not None and actual != self.sha256:
-            raise ValueError(
+            raise CheckpointError(
                 f"robot {self.name!r}: {path} changed since the run (sha256 {actual[:12]}… ≠ recorded "
                 f"{self.sha256[:12]}…); the run's results belong to the old file"
             )
@@ -94,12 +95,12 @@ def resolve_robot(name_or_path: str | Path) -> tuple[Robot, RobotRef]:
     path = Path(key)
     if path.suffix.lower() == ".xml" or path.exists() or "/" in key:
         if not path.is_file():
-            raise FileNotFoundError(f"robot: MJCF file {path} not found")
+            raise MissingFileError(f"robot: MJCF file {path} not found")
         robot = MujocoRobot.from_xml(path)
         return robot, RobotRef(robot.name, str(path.resolve()), file_sha256(path), None)
     known = registered_robots()
     if key not in known:
-        raise ValueError(f"unknown robot {key!r}; registered robots are {sorted(known)}, or give the path of an MJCF (.xml) file")
+        raise ConfigError(f"unknown robot {key!r}; registered robots are {sorted(known)}, or give the path of an MJCF (.xml) file")
     robot = known[key]()
     src = getattr(robot, "source", None)
     mjcf = Path(src) if isinstance(robot, MujocoRobot) and src and Path(src).is_file() else None
@@ -110,8 +111,9 @@ def load(name_or_path: str | Path) -> Robot:
     """A registered robot by name or any MJCF file of this class by path.
 
     Raises:
-        ValueError: an unknown name (the message lists the registered names) or a model that is
-            not an underactuated balance robot (exactly one unactuated hinge/slide).
-        FileNotFoundError: a path that does not exist.
+        ConfigError: an unknown name (the message lists the registered names).
+        RobotModelError: a model that is not an underactuated balance robot (exactly one
+            unactuated hinge/slide).
+        MissingFileError: (a FileNotFoundError) a path that does not exist.
     """
     return resolve_robot(name_or_path)[0]

@@ -21,6 +21,7 @@ from collections.abc import Sequence
 
 import torch
 
+from bemlearn.errors import ArgumentError
 from bemlearn.robots.bem import BEMResult, solve_bem
 
 __all__ = ["Robot", "as_batch"]
@@ -35,13 +36,13 @@ def as_batch(x, width: int, name: str, *, func: str, units: str = "") -> torch.T
     """
     t = torch.as_tensor(x, dtype=torch.float64)
     if t.ndim != 2 or t.shape[1] != width:
-        raise ValueError(
+        raise ArgumentError(
             f"{func}: argument {name!r} must have shape (B, {width}){' [' + units + ']' if units else ''}, "
             f"got {tuple(t.shape)}"
         )
     if not torch.isfinite(t).all():
         bad = (~torch.isfinite(t)).nonzero()[0].tolist()
-        raise ValueError(f"{func}: argument {name!r} has a non-finite value at index {tuple(bad)}")
+        raise ArgumentError(f"{func}: argument {name!r} has a non-finite value at index {tuple(bad)}")
     return t
 
 
@@ -186,12 +187,12 @@ class Robot(abc.ABC):
         result = solve_bem(fun, B, lo=lo, hi=hi, nominal=self.qu_nominal, n_grid=n_grid)
         if on_missing == "raise" and not bool(result.valid.all()):
             i = int((~result.valid).nonzero()[0])
-            raise ValueError(
+            raise ArgumentError(
                 f"bem: no root of Γ_0 in q_u ∈ [{lo}, {hi}] for batch index {i} "
                 f"(qa={qa[i].tolist()}, qad={qad[i].tolist()}, qadd={qadd[i].tolist()})"
             )
         if on_missing not in ("nan", "raise"):
-            raise ValueError(f"bem: on_missing must be 'nan' or 'raise', got {on_missing!r}")
+            raise ArgumentError(f"bem: on_missing must be 'nan' or 'raise', got {on_missing!r}")
         return result
 
     # ---- helpers ---------------------------------------------------------------------
@@ -206,7 +207,7 @@ class Robot(abc.ABC):
         units = ("rad", "rad/s", "rad/s²")
         out = tuple(as_batch(a, width, n, func=func, units=u) for a, n, u in zip(args, names, units))
         if len({t.shape[0] for t in out}) != 1:
-            raise ValueError(f"{func}: arguments {list(names[:len(out)])} have different batch sizes {[t.shape[0] for t in out]}")
+            raise ArgumentError(f"{func}: arguments {list(names[:len(out)])} have different batch sizes {[t.shape[0] for t in out]}")
         return out
 
     def __repr__(self) -> str:

@@ -18,6 +18,8 @@ import math
 import numpy as np
 import torch
 
+from bemlearn.errors import RobotModelError
+
 __all__ = ["instability_rate", "bem_slopes", "qu_half_range", "qa_half_ranges", "bem_gain", "UNLIMITED_HALF_RANGE"]
 
 UNLIMITED_HALF_RANGE = 0.5
@@ -49,7 +51,7 @@ def bem_slopes(robot, *, step: float = 1e-4) -> np.ndarray:
     qa, qad, qadd = (torch.from_numpy(rows[:, k].copy()) for k in range(3))
     qu = robot.bem(qa, qad, qadd).qu.numpy()
     if not np.all(np.isfinite(qu)):
-        raise ValueError(f"bem_slopes: robot {robot.name!r} has no BEM near upright")
+        raise RobotModelError(f"bem_slopes: robot {robot.name!r} has no BEM near upright")
     out = np.empty((3, m))
     for k in range(3):
         for j in range(m):

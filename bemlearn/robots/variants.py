@@ -19,6 +19,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["scaled_spec", "scaled_model", "scaled_robot"]
 
 
@@ -30,14 +32,14 @@ def scaled_spec(source: str | Path | mujoco.MjSpec, *, mass_scale: float = 1.0, 
         ValueError: non-positive scales, or a body name not in the model (listing the names).
     """
     if not (mass_scale > 0 and length_scale > 0):
-        raise ValueError(f"scaled_spec: mass_scale and length_scale must be > 0, got {mass_scale}, {length_scale}")
+        raise ArgumentError(f"scaled_spec: mass_scale and length_scale must be > 0, got {mass_scale}, {length_scale}")
     spec = mujoco.MjSpec.from_file(str(source)) if not isinstance(source, mujoco.MjSpec) else source
     model = spec.compile()
     names = [b.name for b in spec.bodies if b.name != "world"]
     if bodies is not None:
         unknown = sorted(set(bodies) - set(names))
         if unknown:
-            raise ValueError(f"scaled_spec: unknown bodies {unknown}; the model has {names}")
+            raise ArgumentError(f"scaled_spec: unknown bodies {unknown}; the model has {names}")
     chosen = set(names if bodies is None else bodies)
     spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
     sL, sm = length_scale, mass_scale

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from bemlearn.errors import ArgumentError, NumericalError
 from bemlearn.robots.reference import CompositeSinusoid
 from bemlearn.robots.robot import Robot
 
@@ -116,15 +117,15 @@ def periodic_zero_dynamics(
         fd_step: finite-difference step of the Jacobian's partial derivatives.
     """
     if reference.m != robot.m:
-        raise ValueError(f"periodic_zero_dynamics: reference has {reference.m} actuated joints, robot {robot.name!r} has {robot.m}")
+        raise ArgumentError(f"periodic_zero_dynamics: reference has {reference.m} actuated joints, robot {robot.name!r} has {robot.m}")
     T = reference.period
     if not np.isfinite(T):
-        raise ValueError("periodic_zero_dynamics: the reference is not periodic (use finite_zero_dynamics)")
+        raise ArgumentError("periodic_zero_dynamics: the reference is not periodic (use finite_zero_dynamics)")
     t = np.arange(n_nodes) * T / n_nodes
     qa, qad, qadd = (x.numpy() for x in reference(t))
     bem = robot.bem(qa, qad, qadd)
     if not bool(bem.valid.all()):
-        raise ValueError("periodic_zero_dynamics: the BEM does not exist along the whole reference (needed as initial guess)")
+        raise ArgumentError("periodic_zero_dynamics: the BEM does not exist along the whole reference (needed as initial guess)")
     u = bem.qu.numpy().copy()
     D1, D2 = _diff_matrix(n_nodes, T, 1), _diff_matrix(n_nodes, T, 2)
     it = 0
@@ -140,7 +141,7 @@ def periodic_zero_dynamics(
         J = np.diag(dq) + dqd[:, None] * D1 + duu[:, None] * D2
         u = u - np.linalg.solve(J, r)
     else:
-        raise RuntimeError(f"periodic_zero_dynamics: no convergence in {max_iter} Newton steps (max |Γ| = {np.max(np.abs(r)):.3e})")
+        raise NumericalError(f"periodic_zero_dynamics: no convergence in {max_iter} Newton steps (max |Γ| = {np.max(np.abs(r)):.3e})")
     ud, udd = D1 @ u, D2 @ u
     r = _gamma(robot, qa, qad, qadd, u, ud, udd)
     return ZeroDynamicsSolution(t, qa, qad, qadd, u, ud, udd, r, it)
@@ -162,9 +163,9 @@ def finite_zero_dynamics(
     from scipy.integrate import solve_bvp
 
     if reference.m != robot.m:
-        raise ValueError(f"finite_zero_dynamics: reference has {reference.m} actuated joints, robot has {robot.m}")
+        raise ArgumentError(f"finite_zero_dynamics: reference has {reference.m} actuated joints, robot has {robot.m}")
     if not t1 > t0:
-        raise ValueError(f"finite_zero_dynamics: need t1 > t0, got t0={t0}, t1={t1}")
+        raise ArgumentError(f"finite_zero_dynamics: need t1 > t0, got t0={t0}, t1={t1}")
 
     def rhs(t, y):
         qa, qad, qadd = (x.numpy() for x in reference(t))
@@ -174,7 +175,7 @@ def finite_zero_dynamics(
 
     ends = robot.bem(*(x.numpy() for x in reference(np.array([t0, t1])))).qu.numpy()
     if not np.all(np.isfinite(ends)):
-        raise ValueError("finite_zero_dynamics: the BEM does not exist at the window ends")
+        raise ArgumentError("finite_zero_dynamics: the BEM does not exist at the window ends")
     t = np.linspace(t0, t1, n_nodes)
     qa, qad, qadd = (x.numpy() for x in reference(t))
     guess = robot.bem(qa, qad, qadd).qu.numpy()
@@ -182,7 +183,7 @@ def finite_zero_dynamics(
     y0 = np.vstack([guess, np.gradient(guess, t)])
     sol = solve_bvp(rhs, lambda ya, yb: np.array([ya[0] - ends[0], yb[0] - ends[1]]), t, y0, tol=tol, max_nodes=100000)
     if not sol.success:
-        raise RuntimeError(f"finite_zero_dynamics: solve_bvp failed: {sol.message}")
+        raise NumericalError(f"finite_zero_dynamics: solve_bvp failed: {sol.message}")
     y = sol.sol(t)
     qudd = rhs(t, y)[1]
     r = _gamma(robot, qa, qad, qadd, y[0], y[1], qudd)

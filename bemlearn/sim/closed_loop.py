@@ -27,6 +27,7 @@ from bemlearn.control.bem_sources import make_bem_source
 from bemlearn.control.eic import EICController, EICGains
 from bemlearn.data.plant import SensedPlant
 from bemlearn.data.sensors import SensorConfig
+from bemlearn.errors import ConfigError, RobotModelError
 from bemlearn.robots.reference import CompositeSinusoid
 
 __all__ = ["ReferenceConfig", "NominalConfig", "SimulateConfig", "SimResult", "simulate", "nominal_robot"]
@@ -50,10 +51,10 @@ class ReferenceConfig:
 
     def build(self, m: int) -> CompositeSinusoid:
         if None in (self.amplitudes, self.frequencies_hz, self.phases, self.offset):
-            raise ValueError("simulate.reference: amplitudes, frequencies_hz, phases and offset must be set "
+            raise ConfigError("simulate.reference: amplitudes, frequencies_hz, phases and offset must be set "
                              "(derive them from the model with bemlearn.pipeline.complete_section)")
         if not (len(self.amplitudes) == len(self.frequencies_hz) == len(self.phases)):
-            raise ValueError("reference: amplitudes, frequencies_hz and phases must have the same length")
+            raise ConfigError("reference: amplitudes, frequencies_hz and phases must have the same length")
         rows = lambda v: tuple(tuple(v) for _ in range(m))  # noqa: E731
         return CompositeSinusoid(rows(self.amplitudes), rows(self.frequencies_hz), rows(self.phases), (self.offset,) * m)
 
@@ -61,7 +62,7 @@ class ReferenceConfig:
         lengths = {k: len(v) for k, v in (("amplitudes", self.amplitudes), ("frequencies_hz", self.frequencies_hz),
                                           ("phases", self.phases)) if v is not None}
         if len(set(lengths.values())) > 1:
-            raise ValueError(f"amplitudes, frequencies_hz and phases need one entry per component, got lengths {lengths}")
+            raise ConfigError(f"amplitudes, frequencies_hz and phases need one entry per component, got lengths {lengths}")
 
 
 @dataclass(frozen=True)
@@ -154,7 +155,7 @@ def nominal_robot(robot_name: str, nominal: NominalConfig):
     if (nominal.mass_scale, nominal.length_scale) == (1.0, 1.0):
         return robot
     if not isinstance(robot, MujocoRobot):
-        raise ValueError(f"simulate.nominal: parameter mismatch needs an MJCF robot, {robot_name!r} is {type(robot).__name__}")
+        raise ConfigError(f"simulate.nominal: parameter mismatch needs an MJCF robot, {robot_name!r} is {type(robot).__name__}")
     out = scaled_robot(robot.source, name=robot.name, mass_scale=nominal.mass_scale, length_scale=nominal.length_scale, bodies=nominal.bodies)
     return out
 
@@ -201,13 +202,13 @@ def _simulate(robot_name: str, config: SimulateConfig, *, progress: bool, refere
     if unset and reference is None:
         unset += [f"reference.{n}" for n in ("amplitudes", "frequencies_hz", "phases", "offset") if getattr(config.reference, n) is None]
     if unset:
-        raise ValueError(f"simulate: {unset} not set; derive them from the model with "
+        raise ConfigError(f"simulate: {unset} not set; derive them from the model with "
                          "bemlearn.pipeline.complete_section(robot, 'simulate', config) (as every pipeline command does) or give them")
     from bemlearn.robots import MujocoRobot, load
 
     plant = load(robot_name)
     if not isinstance(plant, MujocoRobot):
-        raise ValueError(f"simulate: robot {robot_name!r} has no MuJoCo model")
+        raise RobotModelError(f"simulate: robot {robot_name!r} has no MuJoCo model")
     nominal = nominal_robot(robot_name, config.nominal)
     bem = _Timed(make_bem_source(config.bem_source, robot=nominal, predictor=config.predictor))
     ref = reference if reference is not None else config.reference.build(plant.m)

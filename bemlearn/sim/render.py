@@ -18,7 +18,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from bemlearn.errors import EnvironmentProblem
+from bemlearn.errors import DataError, EnvironmentProblem
 
 __all__ = ["render_gif", "require_offscreen_backend", "probe_backend", "BACKENDS"]
 
@@ -129,7 +129,7 @@ def render_gif(robot, q: np.ndarray, path: str | Path, *, rate_hz: float, fps: i
         model.vis.headlight.ambient[:], model.vis.headlight.diffuse[:] = head
         renderer.close()
     if not frames:
-        raise ValueError("render_gif: nothing to render (empty log)")
+        raise DataError("render_gif: nothing to render (empty log)")
     from bemlearn.files import atomic_path
 
     path = Path(path)

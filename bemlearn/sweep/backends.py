@@ -27,7 +27,7 @@ import os
 import time
 from typing import Any
 
-from bemlearn.errors import EnvironmentProblem, SweepError
+from bemlearn.errors import ArgumentError, EnvironmentProblem, SweepError
 from bemlearn.sweep.cell_runner import CellJob, CellOutcome, failed_outcome, run_cell, warm_worker
 from bemlearn.sweep.config import SweepResources
 
@@ -200,7 +200,7 @@ def make_backend(kind: str, resources: SweepResources, *, address: str | None = 
         EnvironmentProblem: ``address`` is given but Ray is not installed.
     """
     if kind not in ("ray", "serial"):
-        raise ValueError(f"--backend: expected 'ray' or 'serial', got {kind!r}")
+        raise ArgumentError(f"--backend: expected 'ray' or 'serial', got {kind!r}")
     if kind == "ray" and not ray_available():
         if address is not None:
             raise EnvironmentProblem(f"--address {address}: Ray is not installed (pip install 'bemlearn[ray]')")

@@ -48,9 +48,9 @@ class SweepResources:
 
     def __post_init__(self) -> None:
         if self.cpus < 1:
-            raise ValueError(f"resources.cpus: expected an integer ≥ 1, got {self.cpus}")
+            raise ConfigError(f"resources.cpus: expected an integer ≥ 1, got {self.cpus}")
         if self.gpus < 0:
-            raise ValueError(f"resources.gpus: expected a number ≥ 0, got {self.gpus}")
+            raise ConfigError(f"resources.gpus: expected a number ≥ 0, got {self.gpus}")
 
 
 @dataclass(frozen=True)
@@ -80,18 +80,18 @@ class SweepConfig:
 
     def __post_init__(self) -> None:
         if self.retries < 0:
-            raise ValueError(f"retries: expected an integer ≥ 0, got {self.retries}")
+            raise ConfigError(f"retries: expected an integer ≥ 0, got {self.retries}")
         for key, values in self.grid.items():
             if not values:
-                raise ValueError(f"grid.{key}: expected a non-empty list of values")
+                raise ConfigError(f"grid.{key}: expected a non-empty list of values")
             seen = []
             for v in values:
                 if v in seen:
-                    raise ValueError(f"grid.{key}: the value {v!r} is listed twice")
+                    raise ConfigError(f"grid.{key}: the value {v!r} is listed twice")
                 seen.append(v)
         both = sorted(set(self.grid) & set(self.overrides))
         if both:
-            raise ValueError(f"{both}: a key is either in grid or in overrides, not both")
+            raise ConfigError(f"{both}: a key is either in grid or in overrides, not both")
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,7 @@ from typing import Any
 
 import yaml
 
-from bemlearn.errors import OutputExistsError, SweepError
+from bemlearn.errors import ArgumentError, OutputExistsError, SweepError
 from bemlearn.files import atomic_write_text, new_run_dir
 from bemlearn.sweep.backends import make_backend
 from bemlearn.sweep.cell_runner import MARKER, CellJob, CellOutcome, cell_folder, cell_lock, read_outcome
@@ -203,7 +203,7 @@ def run_sweep(sweep: str | Path | dict[str, Any], out_dir: str | Path | None = N
     """
     t0 = time.perf_counter()
     if max_parallel is not None and max_parallel < 1:
-        raise ValueError(f"--max-parallel: expected a positive integer, got {max_parallel}")
+        raise ArgumentError(f"--max-parallel: expected a positive integer, got {max_parallel}")
     loaded = load_sweep(sweep)
     cells = expand_cells(loaded)
     stem = Path(loaded.source).stem if loaded.source != "<dict>" else "sweep"

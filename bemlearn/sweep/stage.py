@@ -250,7 +250,7 @@ def get_stage(name: str, application: str | None = None, *, where: str = "stage"
 
         try:
             app = get_application(str(application))
-        except ValueError as exc:
+        except ConfigError as exc:
             raise ConfigError(f"{where}: {exc}") from exc
         stages = dict(app.sweep_stages)
         owner = f"configs of application {application!r}"

@@ -14,6 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from bemlearn.applications import Application
+from bemlearn.errors import ArgumentError
 
 __all__ = ["APPLICATION"]
 
@@ -54,7 +55,7 @@ def _run(config_path, out_dir=None, *, device=None, progress=True) -> Path:
     from bemlearn.apps.biped.pipeline import load_biped_config, run_biped_pipeline
 
     if device not in (None, "cpu"):
-        raise ValueError(f"--device {device}: the biped pipeline trains on the CPU (set train.device in the config)")
+        raise ArgumentError(f"--device {device}: the biped pipeline trains on the CPU (set train.device in the config)")
     return run_biped_pipeline(load_biped_config(config_path), out_dir, progress=progress)
 
 

@@ -31,6 +31,8 @@ from pathlib import Path
 
 from tqdm.auto import tqdm
 
+from bemlearn.errors import ArgumentError, MissingFileError
+
 __all__ = ["BipedBEMSubset", "BipedBEMBenchResult", "run_biped_bem_bench", "format_biped_bem_bench"]
 
 log = logging.getLogger(__name__)
@@ -76,18 +78,24 @@ def run_biped_bem_bench(config, *, data: str | Path | None = None, subsets: int 
             fit ``subsets`` on each; ``None``: one set, ``config.collect.seed``.  Not with ``data``.
         progress: show progress bars.
     """
+    from bemlearn.apps.biped.pipeline import (
+        collect_walks,
+        heldout_bem,
+        heldout_walks,
+        train_walking_gp,
+        walking_gp_data,
+        walks_trajectories,
+    )
     from bemlearn.data import ground_truth_path, read_trajectory, write_trajectory
-    from bemlearn.apps.biped.pipeline import (collect_walks, heldout_bem, heldout_walks, train_walking_gp,
-                                         walking_gp_data, walks_trajectories)
 
     if subsets < 1:
-        raise ValueError(f"subsets: expected a positive integer, got {subsets}")
+        raise ArgumentError(f"subsets: expected a positive integer, got {subsets}")
     if collect_seeds is not None:
         collect_seeds = [int(s) for s in collect_seeds]
         if data is not None:
-            raise ValueError("--collect-seeds and --data: give one (the training walks are either collected or read)")
+            raise ArgumentError("--collect-seeds and --data: give one (the training walks are either collected or read)")
         if not collect_seeds or len(set(collect_seeds)) != len(collect_seeds) or min(collect_seeds) < 0:
-            raise ValueError(f"--collect-seeds: expected distinct non-negative integers, got {collect_seeds}")
+            raise ArgumentError(f"--collect-seeds: expected distinct non-negative integers, got {collect_seeds}")
     with tempfile.TemporaryDirectory() as tmp:
         if data is None:
             draws = collect_seeds if collect_seeds is not None else [config.collect.seed]
@@ -95,7 +103,7 @@ def run_biped_bem_bench(config, *, data: str | Path | None = None, subsets: int 
         else:
             data_path = Path(data)
             if not data_path.is_file():
-                raise FileNotFoundError(f"--data: no such file {data_path} (expected the data.npz of a biped run)")
+                raise MissingFileError(f"--data: no such file {data_path} (expected the data.npz of a biped run)")
             draws, sources = [None], [str(data_path)]
         held = heldout_walks(config, progress=progress)
         rows, pools = [], []

@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from bemlearn.errors import ArgumentError, MissingFileError
+
 __all__ = ["add_bench"]
 
 
@@ -47,7 +49,7 @@ def _biped_bem(args: argparse.Namespace) -> int:
     from bemlearn.apps.biped.pipeline import load_biped_config
 
     if args.subsets < 1:
-        raise ValueError(f"--subsets: expected a positive integer, got {args.subsets}")
+        raise ArgumentError(f"--subsets: expected a positive integer, got {args.subsets}")
     result = run_biped_bem_bench(load_biped_config(args.config), data=args.data, subsets=args.subsets,
                                  collect_seeds=args.collect_seeds, progress=not args.no_progress)
     print(format_biped_bem_bench(result))
@@ -59,9 +61,9 @@ def _walks(args: argparse.Namespace) -> int:
     from bemlearn.apps.biped.walker import load_walk_config
 
     if args.predictor is not None and not args.predictor.is_file():
-        raise FileNotFoundError(f"--predictor: no such file {args.predictor} (expected an exported bem_predictor.pt)")
+        raise MissingFileError(f"--predictor: no such file {args.predictor} (expected an exported bem_predictor.pt)")
     if args.no_model and args.predictor is None:
-        raise ValueError("--no-model: needs --predictor (nothing else to walk with)")
+        raise ArgumentError("--no-model: needs --predictor (nothing else to walk with)")
     rows = run_walk_bench(load_walk_config(args.config), seeds=args.seeds, steps=args.steps, gaits=tuple(args.gaits),
                           predictor=None if args.predictor is None else str(args.predictor), model=not args.no_model,
                           initial_noise=args.initial_noise, sensor_noise=args.sensor_noise,

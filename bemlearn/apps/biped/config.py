@@ -12,12 +12,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from bemlearn.config import from_dict, load_yaml
 from bemlearn.apps.biped.controller import WalkExcitation
 from bemlearn.apps.biped.human_gait import HumanGaitConfig
+from bemlearn.apps.biped.walker import WalkConfig
+from bemlearn.config import from_dict, load_yaml
+from bemlearn.errors import ConfigError
 from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.fitting.gpdm_fit import GPDMConfig
-from bemlearn.apps.biped.walker import WalkConfig
 
 __all__ = ["WalkCollectConfig", "WalkDatasetConfig", "BipedEvaluateConfig", "BipedGPDMConfig", "BipedConfig",
            "load_biped_config", "is_biped_config"]
@@ -49,11 +50,11 @@ class WalkCollectConfig:
 
     def __post_init__(self) -> None:
         if self.walks_per_gait < 1 or self.duration_s <= 0:
-            raise ValueError(f"collect: walks_per_gait >= 1 and duration_s > 0 expected, got "
+            raise ConfigError(f"collect: walks_per_gait >= 1 and duration_s > 0 expected, got "
                              f"{self.walks_per_gait}, {self.duration_s}")
         bad = [g for g in self.gaits if g not in ("default", "human")]
         if bad or not self.gaits:
-            raise ValueError(f"collect.gaits: expected a non-empty list of 'default' / 'human', got {list(self.gaits)}")
+            raise ConfigError(f"collect.gaits: expected a non-empty list of 'default' / 'human', got {list(self.gaits)}")
 
 
 @dataclass(frozen=True)
@@ -84,7 +85,7 @@ class WalkDatasetConfig:
 
         make_estimator(self.derivative, self.derivative_options, where="dataset.derivative_options")
         if min(self.skip_after_impact, self.skip_before_impact) < 0 or self.n_points < 1 or not self.qu_window > 0:
-            raise ValueError(f"dataset: expected skips >= 0, n_points >= 1, qu_window > 0; got {self.skip_after_impact}, "
+            raise ConfigError(f"dataset: expected skips >= 0, n_points >= 1, qu_window > 0; got {self.skip_after_impact}, "
                              f"{self.skip_before_impact}, {self.n_points}, {self.qu_window}")
 
 
@@ -112,9 +113,9 @@ class BipedEvaluateConfig:
 
     def __post_init__(self) -> None:
         if not self.gaits or any(g not in ("default", "human") for g in self.gaits):
-            raise ValueError(f"evaluate.gaits: expected a non-empty list of 'default' / 'human', got {list(self.gaits)}")
+            raise ConfigError(f"evaluate.gaits: expected a non-empty list of 'default' / 'human', got {list(self.gaits)}")
         if self.min_steps < 0 or self.skip_after_impact < 0:
-            raise ValueError(f"evaluate: min_steps and skip_after_impact must be >= 0, got {self.min_steps}, {self.skip_after_impact}")
+            raise ConfigError(f"evaluate: min_steps and skip_after_impact must be >= 0, got {self.min_steps}, {self.skip_after_impact}")
 
 
 @dataclass(frozen=True)
@@ -152,12 +153,12 @@ class BipedConfig:
 
     def __post_init__(self) -> None:
         if self.application != "biped":
-            raise ValueError(f"application: a biped config needs 'biped', got {self.application!r}")
+            raise ConfigError(f"application: a biped config needs 'biped', got {self.application!r}")
         if self.robot != "biped":
-            raise ValueError(f"robot: a biped config needs 'biped', got {self.robot!r}")
+            raise ConfigError(f"robot: a biped config needs 'biped', got {self.robot!r}")
         n = len(self.collect.gaits) * self.collect.walks_per_gait
         if self.collect.seed <= self.evaluate.seed < self.collect.seed + n:
-            raise ValueError(f"evaluate.seed {self.evaluate.seed} is a training seed (collect.seed "
+            raise ConfigError(f"evaluate.seed {self.evaluate.seed} is a training seed (collect.seed "
                              f"{self.collect.seed} … {self.collect.seed + n - 1}); held-out walks must differ")
 
 

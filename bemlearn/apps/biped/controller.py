@@ -47,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bemlearn.apps.biped.gait import BezierGait, stance_frame
+from bemlearn.errors import ConfigError, RobotModelError
 from bemlearn.robots.reference import CompositeSinusoid
 
 __all__ = ["WalkingGains", "WalkExcitation", "WalkingController"]
@@ -75,7 +76,7 @@ class WalkingGains:
     def __post_init__(self) -> None:
         for name in ("kp", "kd", "kp_u", "kd_u", "torque_limit"):
             if getattr(self, name) < 0:
-                raise ValueError(f"gains.{name} must be >= 0, got {getattr(self, name)}")
+                raise ConfigError(f"gains.{name} must be >= 0, got {getattr(self, name)}")
 
 
 @dataclass(frozen=True)
@@ -104,13 +105,13 @@ class WalkExcitation:
 
     def __post_init__(self) -> None:
         if self.torso_amplitude < 0 or self.joint_amplitude < 0:
-            raise ValueError(f"excitation: amplitudes must be >= 0, got {self.torso_amplitude}, {self.joint_amplitude}")
+            raise ConfigError(f"excitation: amplitudes must be >= 0, got {self.torso_amplitude}, {self.joint_amplitude}")
         for name in ("torso_frequency_hz", "joint_frequency_hz"):
             lo, hi = getattr(self, name)
             if not 0 <= lo <= hi:
-                raise ValueError(f"excitation.{name}: expected 0 <= min <= max Hz, got {(lo, hi)}")
+                raise ConfigError(f"excitation.{name}: expected 0 <= min <= max Hz, got {(lo, hi)}")
         if self.n_sines < 1:
-            raise ValueError(f"excitation.n_sines must be >= 1, got {self.n_sines}")
+            raise ConfigError(f"excitation.n_sines must be >= 1, got {self.n_sines}")
 
     @property
     def active(self) -> bool:
@@ -144,7 +145,7 @@ class WalkingController:
     def __init__(self, nominal, bem, gait: BezierGait, *, gains: WalkingGains = WalkingGains(),
                  excitation: WalkExcitation = WalkExcitation()) -> None:
         if nominal.n != 5 or nominal.unactuated_index != 0:
-            raise ValueError(f"WalkingController: needs the 5-link biped with q1 unactuated, got {nominal!r}")
+            raise RobotModelError(f"WalkingController: needs the 5-link biped with q1 unactuated, got {nominal!r}")
         self.nominal, self.bem, self.gait, self.gains = nominal, bem, gait, gains
         self._excite = excitation.signals() if excitation.active else None
         self.qu_e = gait.torso

@@ -13,9 +13,10 @@ import logging
 import numpy as np
 from tqdm.auto import tqdm
 
-from bemlearn.data.trajectory import Trajectory
 from bemlearn.apps.biped.config import BipedConfig, WalkDatasetConfig
 from bemlearn.apps.biped.walker import WalkResult
+from bemlearn.data.trajectory import Trajectory
+from bemlearn.errors import ArgumentError, DataError
 
 __all__ = ["collect_walks", "concat_trajectories", "walks_trajectories", "walking_gp_data"]
 
@@ -51,7 +52,7 @@ def concat_trajectories(parts: list[Trajectory]) -> Trajectory:
     """
     parts = [p for p in parts if p.n_samples]
     if not parts:
-        raise ValueError("concat_trajectories: no samples in any walk")
+        raise DataError("concat_trajectories: no samples in any walk")
     arrays: dict[str, list] = {k: [] for k in ("t", "trial", "q", "u", "qd", "qdd")}
     failed, legs, firsts, offset = {}, {}, [], 0
     for p in parts:
@@ -95,7 +96,7 @@ def walking_gp_data(data: Trajectory, truth: Trajectory | None, config: WalkData
     from bemlearn.data.derivative_choice import estimate_states, resolve_estimator
 
     if data.meta.joint_names != ("q1", "q2", "q3", "q4", "q5") or data.meta.unactuated != "q1":
-        raise ValueError(f"walking_gp_data: expected biped joints q1..q5, q1 unactuated; got {data.meta.joint_names}")
+        raise DataError(f"walking_gp_data: expected biped joints q1..q5, q1 unactuated; got {data.meta.joint_names}")
     est = make_estimator(config.derivative, config.derivative_options, where="dataset.derivative_options")
     est, choice = resolve_estimator(est, data, qu_window=config.qu_window)   # e.g. the Gaussian's σ, from the steps
     need = max(est.min_samples(data.meta.sample_rate_hz), config.skip_after_impact + config.skip_before_impact + 1)
@@ -109,7 +110,7 @@ def walking_gp_data(data: Trajectory, truth: Trajectory | None, config: WalkData
     data = data.select_trials(keep)
     if config.derivatives == "truth":
         if truth is None or not truth.has_ground_truth:
-            raise ValueError("dataset.derivatives = truth needs the ground-truth trajectory")
+            raise ArgumentError("dataset.derivatives = truth needs the ground-truth trajectory")
         truth = truth.select_trials(keep)
         q, qd, qdd = truth.q, truth.qd, truth.qdd
     else:   # an estimator that smooths gives the smoothed q too (inputs and label alike, eq. G2)
@@ -127,7 +128,7 @@ def walking_gp_data(data: Trajectory, truth: Trajectory | None, config: WalkData
     log.info("walking_gp_data: %d samples in the pool (%d with |q1| > %g rad left out)", len(rows),
              report["outside_qu_window"], config.qu_window)
     if len(rows) == 0:
-        raise ValueError("walking_gp_data: no samples left (steps too short for the skips, or |q1| above qu_window)")
+        raise DataError("walking_gp_data: no samples left (steps too short for the skips, or |q1| above qu_window)")
     rng = np.random.default_rng(config.seed)
     if len(rows) > config.n_points:
         rows = np.sort(rng.choice(rows, config.n_points, replace=False))

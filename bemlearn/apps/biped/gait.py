@@ -36,6 +36,7 @@ import numpy as np
 
 from bemlearn.apps.biped.human_gait import HumanGaitConfig, human_step_profile
 from bemlearn.apps.biped.model import BipedParameters
+from bemlearn.errors import ArgumentError, ConfigError, DataError
 
 __all__ = [
     "LEG_SWAP",
@@ -65,7 +66,7 @@ def stance_frame(q: np.ndarray, stance_leg: int) -> np.ndarray:
         return np.array(q, dtype=np.float64, copy=True)
     if stance_leg == 2:
         return np.asarray(q, dtype=np.float64)[..., list(LEG_SWAP)]
-    raise ValueError(f"stance_frame: stance_leg must be 1 or 2, got {stance_leg!r}")
+    raise ArgumentError(f"stance_frame: stance_leg must be 1 or 2, got {stance_leg!r}")
 
 
 def _bernstein(s: float, M: int) -> np.ndarray:
@@ -97,11 +98,11 @@ class BezierGait:
     def __post_init__(self) -> None:
         a = np.asarray(self.coefficients, dtype=np.float64)
         if a.ndim != 2 or a.shape[0] != 4 or a.shape[1] < 3:
-            raise ValueError(f"BezierGait.coefficients: expected shape (4, M + 1) with M >= 2, got {a.shape}")
+            raise ArgumentError(f"BezierGait.coefficients: expected shape (4, M + 1) with M >= 2, got {a.shape}")
         if len(self.phase_weights) != 5:
-            raise ValueError(f"BezierGait.phase_weights: expected 5 weights, got {len(self.phase_weights)}")
+            raise ArgumentError(f"BezierGait.phase_weights: expected 5 weights, got {len(self.phase_weights)}")
         if not self.theta_end > self.theta_start:
-            raise ValueError(f"BezierGait: theta_end ({self.theta_end}) must exceed theta_start ({self.theta_start})")
+            raise ArgumentError(f"BezierGait: theta_end ({self.theta_end}) must exceed theta_start ({self.theta_start})")
         M = a.shape[1] - 1
         object.__setattr__(self, "_a", a)
         object.__setattr__(self, "_d1", M * np.diff(a, axis=1))
@@ -139,7 +140,7 @@ class BezierGait:
         theta = self.theta_start + s * (self.theta_end - self.theta_start)
         c = self._c
         if c[0] == 0:
-            raise ValueError("BezierGait.posture: the phase weight of q1 is 0, q1 is not determined by the phase")
+            raise ArgumentError("BezierGait.posture: the phase weight of q1 is 0, q1 is not determined by the phase")
         return np.r_[(theta - c[1:] @ h) / c[0], h]
 
     @classmethod
@@ -157,14 +158,14 @@ class BezierGait:
         """
         q = np.asarray(q, dtype=np.float64)
         if q.ndim != 2 or q.shape[1] != 5 or q.shape[0] < degree + 1:
-            raise ValueError(f"BezierGait.fit: q must have shape (n, 5) with n > degree = {degree}, got {q.shape}")
+            raise ArgumentError(f"BezierGait.fit: q must have shape (n, 5) with n > degree = {degree}, got {q.shape}")
         if degree < 2:
-            raise ValueError(f"BezierGait.fit: degree must be >= 2, got {degree}")
+            raise ArgumentError(f"BezierGait.fit: degree must be >= 2, got {degree}")
         c = np.asarray(phase_weights, dtype=np.float64)
         theta = q @ c
         bad = np.flatnonzero(np.diff(theta) <= 0)
         if len(bad):
-            raise ValueError(
+            raise DataError(
                 f"BezierGait.fit: the phase ϑ = cᵀq (c = {c.tolist()}) must increase along the step; "
                 f"it does not between samples {bad[0]} and {bad[0] + 1}"
             )
@@ -204,7 +205,7 @@ def leg_ik(dx: np.ndarray, dz: np.ndarray, *, L_t: float, L_s: float) -> tuple[n
     cosk = (r**2 - L_t**2 - L_s**2) / (2 * L_t * L_s)
     if np.any(np.abs(cosk) > 1 + 1e-12):
         i = int(np.argmax(np.abs(cosk)))
-        raise ValueError(f"leg_ik: foot at distance {float(np.ravel(r)[i]):.4f} m is out of the leg's reach "
+        raise ArgumentError(f"leg_ik: foot at distance {float(np.ravel(r)[i]):.4f} m is out of the leg's reach "
                          f"[{abs(L_t - L_s):.3f}, {L_t + L_s:.3f}] m")
     knee = np.arccos(np.clip(cosk, -1.0, 1.0))
     psi = np.arctan2(-dx, -dz)
@@ -309,4 +310,4 @@ def build_gait(config: GaitConfig = GaitConfig(), *, params: BipedParameters = B
     if config.kind == "human":
         return human_gait(config.human, clearance=config.human_clearance, torso=config.human_torso,
                           degree=config.degree, phase_weights=config.phase_weights, params=params)
-    raise ValueError(f"gait.kind must be 'default' or 'human', got {config.kind!r}")
+    raise ConfigError(f"gait.kind must be 'default' or 'human', got {config.kind!r}")

@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from bemlearn.errors import MissingFileError
+
 __all__ = ["add_parser"]
 
 _HUMAN_MAGIC = "# bemlearn human gait"
@@ -42,7 +44,7 @@ def _sequences(args, cfg) -> tuple[list, str]:
         traj = walk_trajectories(simulate_walk(walk, progress=not args.no_progress))[0]
         where = f"simulated walk ({walk.gait.kind} gait, BEM source {walk.bem_source})"
     elif not args.data.is_file():
-        raise FileNotFoundError(f"--data: {args.data} not found")
+        raise MissingFileError(f"--data: {args.data} not found")
     elif args.data.suffix.lower() == ".csv" and args.data.open(encoding="utf-8").readline().startswith(_HUMAN_MAGIC):
         seqs, _ = human_gait_sequences(dataclasses.replace(g.human, path=str(args.data)))
         return seqs, f"human gait {args.data} ({len(seqs)} steps)"
@@ -60,9 +62,8 @@ def _sequences(args, cfg) -> tuple[list, str]:
 def run(args) -> int:
     import dataclasses
 
-    from bemlearn.apps.biped.pipeline import load_biped_config
     from bemlearn.apps.biped.gpdm_study import fit_gpdm_logged
-
+    from bemlearn.apps.biped.pipeline import load_biped_config
     from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.preflight import preflight
 
@@ -70,7 +71,7 @@ def run(args) -> int:
     preflight(config=args.config, out_dir=args.out or Path("runs"), outputs=[args.out / n for n in names] if args.out else [],
               force=args.force)
     if args.data is not None and not args.data.is_file():
-        raise FileNotFoundError(f"--data: {args.data} not found")
+        raise MissingFileError(f"--data: {args.data} not found")
     cfg = load_biped_config(args.config)
     fit = cfg.gpdm.fit if args.max_iter is None else dataclasses.replace(cfg.gpdm.fit, max_iter=args.max_iter)
     seqs, where = _sequences(args, cfg)

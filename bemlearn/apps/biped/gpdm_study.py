@@ -25,6 +25,7 @@ import torch
 
 from bemlearn.apps.biped.figures import fig4, fig5
 from bemlearn.apps.biped.human_gait import HumanGaitConfig, human_step_profile, load_human_gait
+from bemlearn.errors import DataError
 from bemlearn.fitting.gpdm_fit import GPDMConfig
 
 __all__ = ["fit_gpdm_logged", "human_gait_sequences", "latent_study", "PAPER_C_ROBOT", "PAPER_C_HUMAN"]
@@ -112,7 +113,7 @@ def human_gait_sequences(config: HumanGaitConfig = HumanGaitConfig()) -> tuple[l
         seqs.append(np.c_[np.interp(t, g.t, g.trunk), qa])
         phases.append((t - start) / half)
     if not seqs:
-        raise ValueError(f"{g.source}: no complete human step (need a heel strike and a full cycle after it)")
+        raise DataError(f"{g.source}: no complete human step (need a heel strike and a full cycle after it)")
     return seqs, phases
 
 

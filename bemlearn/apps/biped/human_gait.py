@@ -35,6 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bemlearn.errors import ArgumentError, DataError, MissingFileError, TrajectoryFormatError
+
 __all__ = [
     "HUMAN_GAIT_CSV",
     "RAW_COLUMNS",
@@ -64,30 +66,30 @@ _MAGIC = "# bemlearn human gait v1"
 def _parse_raw(text: str, source: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     lines = text.splitlines()
     if not lines or not lines[0].startswith("%"):
-        raise ValueError(f"{source}: line 1: expected a '%'-prefixed header of column names")
+        raise TrajectoryFormatError(f"{source}: line 1: expected a '%'-prefixed header of column names")
     names = lines[0].lstrip("%").split()
     if not names or names[0] != "TimeStamp":
-        raise ValueError(f"{source}: line 1: first column must be 'TimeStamp', got {names[:1]}")
+        raise TrajectoryFormatError(f"{source}: line 1: first column must be 'TimeStamp', got {names[:1]}")
     missing = [c for c in RAW_COLUMNS if c not in names]
     if missing:
-        raise ValueError(f"{source}: line 1: missing column(s) {missing}; found {names}")
+        raise TrajectoryFormatError(f"{source}: line 1: missing column(s) {missing}; found {names}")
     rows = []
     for i, line in enumerate(lines[1:], start=2):
         if not line.strip():
             continue
         fields = line.split()
         if len(fields) != len(names):
-            raise ValueError(f"{source}: line {i}: {len(fields)} fields, expected {len(names)}")
+            raise TrajectoryFormatError(f"{source}: line {i}: {len(fields)} fields, expected {len(names)}")
         try:
             rows.append([float(f) for f in fields])
         except ValueError:
-            raise ValueError(f"{source}: line {i}: a field is not a number: {line.strip()[:80]!r}") from None
+            raise TrajectoryFormatError(f"{source}: line {i}: a field is not a number: {line.strip()[:80]!r}") from None
     table = np.asarray(rows, dtype=np.float64)
     if table.shape[0] < 2:
-        raise ValueError(f"{source}: fewer than two data rows")
+        raise TrajectoryFormatError(f"{source}: fewer than two data rows")
     t = table[:, 0]
     if not np.all(np.isfinite(t)) or not np.all(np.diff(t) > 0):
-        raise ValueError(f"{source}: column 'TimeStamp' must be finite and strictly increasing")
+        raise TrajectoryFormatError(f"{source}: column 'TimeStamp' must be finite and strictly increasing")
     return t, {c: table[:, names.index(c)] for c in RAW_COLUMNS}
 
 
@@ -99,9 +101,9 @@ def _fill_gaps(x: np.ndarray, *, max_gap: int, where: str) -> tuple[np.ndarray, 
     runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
     for r in runs:
         if r[0] == 0 or r[-1] == len(x) - 1:
-            raise ValueError(f"{where}: missing values at the start/end (rows {r[0]}..{r[-1]}) cannot be interpolated")
+            raise TrajectoryFormatError(f"{where}: missing values at the start/end (rows {r[0]}..{r[-1]}) cannot be interpolated")
         if len(r) > max_gap:
-            raise ValueError(f"{where}: gap of {len(r)} samples at rows {r[0]}..{r[-1]} exceeds max_gap = {max_gap}")
+            raise TrajectoryFormatError(f"{where}: gap of {len(r)} samples at rows {r[0]}..{r[-1]} exceeds max_gap = {max_gap}")
     good = np.flatnonzero(~bad)
     out = x.copy()
     out[bad] = np.interp(idx, good, x[good])
@@ -173,7 +175,7 @@ class HumanGait:
         """
         hs = self.heel_strikes(threshold=threshold)
         if len(hs) < 2:
-            raise ValueError(f"{self.source}: need two right heel strikes for a gait cycle, found {len(hs)}")
+            raise DataError(f"{self.source}: need two right heel strikes for a gait cycle, found {len(hs)}")
         phase = np.arange(n) / n
         ang = np.stack([self.trunk, self.hip, self.knee], 1)
         cycles = [np.stack([np.interp(a + phase * (b - a), self.t, ang[:, j]) for j in range(3)], 1)
@@ -203,28 +205,29 @@ def load_human_gait(path: str | Path | None = None) -> HumanGait:
     """Read the converted CSV (default: the shipped :data:`HUMAN_GAIT_CSV`).
 
     Raises:
-        FileNotFoundError: no such file.  ValueError: a malformed file (naming line and column).
+        MissingFileError: (a FileNotFoundError) no such file.
+        TrajectoryFormatError: (a ValueError) a malformed file (naming line and column).
     """
     path = Path(path) if path is not None else HUMAN_GAIT_CSV
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: human gait CSV not found (run scripts/convert_human_gait.py)")
+        raise MissingFileError(f"{path}: human gait CSV not found (run scripts/convert_human_gait.py)")
     lines = path.read_text(encoding="utf-8").splitlines()
     if not lines or lines[0] != _MAGIC:
-        raise ValueError(f"{path}: line 1: expected {_MAGIC!r}")
+        raise TrajectoryFormatError(f"{path}: line 1: expected {_MAGIC!r}")
     header_at = next((i for i, ln in enumerate(lines) if not ln.startswith("#")), None)
     if header_at is None or lines[header_at].split(",") != list(CSV_COLUMNS):
-        raise ValueError(f"{path}: expected the header {','.join(CSV_COLUMNS)}")
+        raise TrajectoryFormatError(f"{path}: expected the header {','.join(CSV_COLUMNS)}")
     body = lines[header_at + 1:]
     try:
         table = np.loadtxt(body, delimiter=",", dtype=np.float64, ndmin=2)
     except ValueError as exc:
-        raise ValueError(f"{path}: data rows from line {header_at + 2}: {exc}") from None
+        raise TrajectoryFormatError(f"{path}: data rows from line {header_at + 2}: {exc}") from None
     if table.shape[1] != len(CSV_COLUMNS):
-        raise ValueError(f"{path}: expected {len(CSV_COLUMNS)} columns, got {table.shape[1]}")
+        raise TrajectoryFormatError(f"{path}: expected {len(CSV_COLUMNS)} columns, got {table.shape[1]}")
     bad = np.argwhere(~np.isfinite(table))
     if len(bad):
         r, c = bad[0]
-        raise ValueError(f"{path}: line {header_at + 2 + r}, column {CSV_COLUMNS[c]!r}: non-finite value")
+        raise TrajectoryFormatError(f"{path}: line {header_at + 2 + r}, column {CSV_COLUMNS[c]!r}: non-finite value")
     return HumanGait(*(table[:, i] for i in range(5)), interpolated=table[:, 5] != 0, source=str(path))
 
 
@@ -255,15 +258,15 @@ def fit_joint_range_map(
     """
     qa = np.asarray(qa, dtype=np.float64)
     if qa.ndim != 2 or qa.shape[1] != 4:
-        raise ValueError(f"fit_joint_range_map: qa must have shape (n, 4), got {qa.shape}")
+        raise ArgumentError(f"fit_joint_range_map: qa must have shape (n, 4), got {qa.shape}")
     out = []
     for cols, (lo, hi), name in (((0, 2), hip_range, "hip_range"), ((1, 3), knee_range, "knee_range")):
         if not lo < hi:
-            raise ValueError(f"fit_joint_range_map: {name} must satisfy lo < hi, got {(lo, hi)}")
+            raise ArgumentError(f"fit_joint_range_map: {name} must satisfy lo < hi, got {(lo, hi)}")
         x = qa[:, cols]
         span = float(x.max() - x.min())
         if span <= 0:
-            raise ValueError(f"fit_joint_range_map: the human {name.split('_')[0]} angle is constant")
+            raise DataError(f"fit_joint_range_map: the human {name.split('_')[0]} angle is constant")
         a = (hi - lo) / span
         out += [a, lo - a * float(x.min())]
     return JointRangeMap(*out)

@@ -35,6 +35,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["BipedParameters", "biped_pinned_mjcf", "biped_planar_mjcf", "PINNED_COORDINATES"]
 
 
@@ -147,7 +149,7 @@ def biped_planar_mjcf(p: BipedParameters = BipedParameters(), *, timestep: float
     0.024 / 0.053 rad with r = 0.002 m (six training subsets each, MuJoCo 3.17).
     """
     if not foot_radius > 0:
-        raise ValueError(f"biped_planar_mjcf: foot_radius must be > 0 m, got {foot_radius}")
+        raise ArgumentError(f"biped_planar_mjcf: foot_radius must be > 0 m, got {foot_radius}")
     lim = _g(p.motor_torque_max)
     dmp = _g(p.joint_damping)
     h0 = p.L_t + p.L_s + 0.002

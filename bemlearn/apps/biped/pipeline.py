@@ -35,12 +35,20 @@ import logging
 import time
 from pathlib import Path
 
-from bemlearn.config import save_yaml
-from bemlearn.apps.biped.controller import WalkExcitation
 from bemlearn.apps.biped.bem import bem_errors, heldout_bem, heldout_walks, train_walking_gp
-from bemlearn.apps.biped.config import (BipedConfig, BipedEvaluateConfig, BipedGPDMConfig, WalkCollectConfig,
-                                            WalkDatasetConfig, is_biped_config, load_biped_config)
+from bemlearn.apps.biped.config import (
+    BipedConfig,
+    BipedEvaluateConfig,
+    BipedGPDMConfig,
+    WalkCollectConfig,
+    WalkDatasetConfig,
+    is_biped_config,
+    load_biped_config,
+)
+from bemlearn.apps.biped.controller import WalkExcitation
 from bemlearn.apps.biped.data import collect_walks, concat_trajectories, walking_gp_data, walks_trajectories
+from bemlearn.config import save_yaml
+from bemlearn.errors import DataError
 
 __all__ = ["WalkCollectConfig", "WalkDatasetConfig", "BipedEvaluateConfig", "BipedGPDMConfig", "BipedConfig",
            "load_biped_config", "is_biped_config", "collect_walks", "concat_trajectories", "walks_trajectories",
@@ -52,11 +60,11 @@ log = logging.getLogger(__name__)
 
 def run_biped_pipeline(config: BipedConfig, out_dir: str | Path | None = None, *, progress: bool = True) -> Path:
     """Run every stage (module docstring) into ``out_dir`` (default ``runs/biped-<timestamp>``); returns it."""
-    from bemlearn.data import ground_truth_path, write_trajectory
     from bemlearn.apps.biped.gpdm_study import fit_gpdm_logged, human_gait_sequences, latent_study
     from bemlearn.apps.biped.report import biped_verdict, write_biped_report
-    from bemlearn.files import atomic_write_text
     from bemlearn.apps.biped.walker import simulate_walk, walk_trajectories
+    from bemlearn.data import ground_truth_path, write_trajectory
+    from bemlearn.files import atomic_write_text
 
     out = Path(out_dir) if out_dir else Path("runs") / time.strftime("biped-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
@@ -95,7 +103,7 @@ def run_biped_pipeline(config: BipedConfig, out_dir: str | Path | None = None, *
     r = loop["default"] if "default" in loop else next(iter(loop.values()))
     sel = range(g.first_step, min(g.first_step + g.steps, len(r.steps)))
     if len(sel) < 1:
-        raise ValueError(f"gpdm: the walk with the predictor has {len(r.steps)} steps; need more than first_step = {g.first_step}")
+        raise DataError(f"gpdm: the walk with the predictor has {len(r.steps)} steps; need more than first_step = {g.first_step}")
     q_steps = walk_trajectories(r)[0]
     Q_robot = [q_steps.q[(q_steps.trial == i)] for i in sel]
     robot_gpdm = fit_gpdm_logged(Q_robot, out / "gpdm" / "robot", config=g.fit, threads=g.threads, progress=progress)

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 from tqdm.auto import tqdm
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["WalkBenchRow", "run_walk_bench", "format_walk_bench"]
 
 
@@ -53,12 +55,12 @@ def run_walk_bench(walk, *, seeds: int = 20, steps: int = 30, gaits: tuple[str, 
     from bemlearn.apps.biped.walker import simulate_walk
 
     if seeds < 1 or steps < 1:
-        raise ValueError(f"seeds and steps: expected positive integers, got seeds={seeds}, steps={steps}")
+        raise ArgumentError(f"seeds and steps: expected positive integers, got seeds={seeds}, steps={steps}")
     if initial_noise < 0 or sensor_noise < 0:
-        raise ValueError(f"initial_noise and sensor_noise: expected >= 0 rad, got {initial_noise}, {sensor_noise}")
+        raise ArgumentError(f"initial_noise and sensor_noise: expected >= 0 rad, got {initial_noise}, {sensor_noise}")
     sources = (["model"] if model else []) + (["predictor"] if predictor else [])
     if not sources:
-        raise ValueError("run_walk_bench: nothing to walk with (model=False and no predictor)")
+        raise ArgumentError("run_walk_bench: nothing to walk with (model=False and no predictor)")
     jobs = [(s, g, k) for s in sources for g in gaits for k in range(seeds)]
     rows = []
     for source, gait, seed in tqdm(jobs, desc="walks", disable=not progress):

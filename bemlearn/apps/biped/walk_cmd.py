@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from bemlearn.errors import ArgumentError, MissingFileError
+
 __all__ = ["add_parser"]
 
 
@@ -37,9 +39,9 @@ def run(args) -> int:
               force=args.force)
     source = args.source or ("predictor" if args.predictor else None)
     if args.predictor is not None and source != "predictor":
-        raise ValueError(f"--predictor is only used with --source predictor, got --source {source}")
+        raise ArgumentError(f"--predictor is only used with --source predictor, got --source {source}")
     if args.predictor is not None and not args.predictor.is_file():
-        raise FileNotFoundError(f"--predictor: {args.predictor} not found (expected an exported bem_predictor.pt)")
+        raise MissingFileError(f"--predictor: {args.predictor} not found (expected an exported bem_predictor.pt)")
     with claim_outputs(args.out, entries=names, default_name="walk", force=args.force, what="walk") as args.out:
         return _walk(args)
 
@@ -47,14 +49,14 @@ def run(args) -> int:
 def _walk(args) -> int:
     import dataclasses
 
+    from bemlearn.apps.biped.walker import load_walk_config, simulate_walk, walk_trajectories
     from bemlearn.data import ground_truth_path, write_trajectory
     from bemlearn.files import atomic_write_text
-    from bemlearn.apps.biped.walker import load_walk_config, simulate_walk, walk_trajectories
 
     cfg = load_walk_config(args.config)
     source = args.source or ("predictor" if args.predictor else cfg.bem_source)
     if args.predictor is not None and source != "predictor":
-        raise ValueError(f"--predictor is only used with --source predictor, got --source {source}")
+        raise ArgumentError(f"--predictor is only used with --source predictor, got --source {source}")
     over = {k: v for k, v in (("duration_s", args.duration), ("max_steps", args.steps), ("seed", args.seed)) if v is not None}
     if args.gait:
         over["gait"] = dataclasses.replace(cfg.gait, kind=args.gait)

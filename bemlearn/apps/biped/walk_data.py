@@ -14,11 +14,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from bemlearn.config import to_dict
 from bemlearn.apps.biped.gait import stance_frame
+from bemlearn.config import to_dict
 from bemlearn.data.features import gp_inputs
 from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
 from bemlearn.data.validation import MIN_TRIAL_SAMPLES
+from bemlearn.errors import DataError, TrajectoryFormatError
 
 if TYPE_CHECKING:
     from bemlearn.apps.biped.walker import WalkResult
@@ -73,7 +74,7 @@ def stance_per_sample(traj: Trajectory) -> np.ndarray:
         legs = {int(k): int(v) for k, v in traj.meta.extra["stance_leg"].items()}
         return np.array([legs[int(i)] for i in traj.trial], dtype=np.int64)
     except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(
+        raise TrajectoryFormatError(
             f"stance_per_sample: meta.extra['stance_leg'] must map every trial id to 1 or 2 ({exc!r})"
         ) from None
 
@@ -90,9 +91,9 @@ def walking_data(truth: Trajectory, *, skip_after_impact: int = 3) -> tuple[np.n
         ``X (N, 14)`` [rad/s², rad/s, rad, rad/s², rad/s] and ``y (N,)`` rad.
     """
     if not truth.has_ground_truth:
-        raise ValueError("walking_data: the trajectory has no qd/qdd (pass the ground-truth file, *.truth.*)")
+        raise DataError("walking_data: the trajectory has no qd/qdd (pass the ground-truth file, *.truth.*)")
     if truth.meta.joint_names != ("q1", "q2", "q3", "q4", "q5") or truth.meta.unactuated != "q1":
-        raise ValueError(f"walking_data: expected biped joints q1..q5 with q1 unactuated, got {truth.meta.joint_names}")
+        raise DataError(f"walking_data: expected biped joints q1..q5 with q1 unactuated, got {truth.meta.joint_names}")
     rows = np.concatenate([np.arange(s.rows.start + skip_after_impact, s.rows.stop) for s in truth.trial_slices()])
     X = gp_inputs(truth.q[rows], truth.qd[rows], truth.qdd[rows], unactuated_index=0)
     return X, truth.q[rows, 0].copy()

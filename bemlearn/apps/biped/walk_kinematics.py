@@ -15,6 +15,8 @@ import mujoco
 import numpy as np
 import torch
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["foot_positions"]
 
 _FOOT_SITES = ("foot1", "foot2")
@@ -68,7 +70,7 @@ def foot_positions(qpos: np.ndarray) -> np.ndarray:
     model, chain = _kinematic_chain()
     qpos = np.asarray(qpos, dtype=np.float64)
     if qpos.ndim != 2 or qpos.shape[1] != model.nq:
-        raise ValueError(f"foot_positions: qpos must have shape (T, {model.nq}), got {qpos.shape}")
+        raise ArgumentError(f"foot_positions: qpos must have shape (T, {model.nq}), got {qpos.shape}")
     fk = frame_positions(chain, model, torch.from_numpy(qpos), _FOOT_SITES)
     return np.stack([fk[n].numpy() for n in _FOOT_SITES], 1)
 

@@ -29,14 +29,14 @@ import mujoco
 import numpy as np
 from tqdm.auto import tqdm
 
-from bemlearn.config import ConfigError, from_dict, load_yaml
-from bemlearn.control.bem_sources import make_bem_source
-from bemlearn.apps.biped.gait import GaitConfig, build_gait
 from bemlearn.apps.biped.controller import WalkExcitation, WalkingController, WalkingGains
-from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
+from bemlearn.apps.biped.gait import GaitConfig, build_gait
 from bemlearn.apps.biped.walk_data import stance_per_sample, walk_trajectories, walking_data
 from bemlearn.apps.biped.walk_kinematics import _FOOT_SITES, _planar_model, foot_positions
 from bemlearn.apps.biped.walk_metrics import walk_metrics
+from bemlearn.config import ConfigError, from_dict, load_yaml
+from bemlearn.control.bem_sources import make_bem_source
+from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
 
 __all__ = ["WalkConfig", "WalkResult", "load_walk_config", "simulate_walk", "foot_positions", "walk_metrics",
            "walk_trajectories", "stance_per_sample", "walking_data"]
@@ -85,9 +85,9 @@ class WalkConfig:
 
     def __post_init__(self) -> None:
         if self.duration_s <= 0 or self.rate_hz <= 0:
-            raise ValueError(f"walk: duration_s and rate_hz must be > 0, got {self.duration_s}, {self.rate_hz}")
+            raise ConfigError(f"walk: duration_s and rate_hz must be > 0, got {self.duration_s}, {self.rate_hz}")
         if self.max_steps < 0:
-            raise ValueError(f"walk.max_steps must be >= 0, got {self.max_steps}")
+            raise ConfigError(f"walk.max_steps must be >= 0, got {self.max_steps}")
 
 
 def load_walk_config(path) -> WalkConfig:
@@ -182,7 +182,7 @@ def simulate_walk(config: WalkConfig = WalkConfig(), *, bem=None, progress: bool
     dt = 1.0 / config.rate_hz
     substeps = int(round(dt / model.opt.timestep))
     if abs(substeps * model.opt.timestep - dt) > 1e-9:
-        raise ValueError(f"walk: 1/rate_hz = {dt} s is not a whole number of physics steps ({model.opt.timestep} s)")
+        raise ConfigError(f"walk: 1/rate_hz = {dt} s is not a whole number of physics steps ({model.opt.timestep} s)")
     rng = np.random.default_rng(config.seed)
     _initial_state(model, data, gait, config, rng)
     enc = Encoder(config.sensor, rng)

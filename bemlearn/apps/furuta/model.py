@@ -38,6 +38,7 @@ from typing import Literal
 import numpy as np
 import torch
 
+from bemlearn.errors import ArgumentError
 from bemlearn.robots.robot import Robot, as_batch
 
 __all__ = ["FurutaParameters", "AnalyticFuruta", "furuta_mjcf", "voltage_to_torque", "torque_to_voltage"]
@@ -149,7 +150,7 @@ class AnalyticFuruta(Robot):
 
     def __init__(self, params: FurutaParameters = FurutaParameters(), *, variant: Literal["rigid", "paper"] = "rigid") -> None:
         if variant not in ("rigid", "paper"):
-            raise ValueError(f"AnalyticFuruta: variant must be 'rigid' or 'paper', got {variant!r}")
+            raise ArgumentError(f"AnalyticFuruta: variant must be 'rigid' or 'paper', got {variant!r}")
         self.params = params
         self.variant = variant
         self.name = "furuta" if variant == "rigid" else "furuta-paper"
