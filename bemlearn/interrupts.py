@@ -64,7 +64,7 @@ def check_interrupt() -> None:
         raise KeyboardInterrupt
 
 
-def _handler(signum, frame) -> None:  # noqa: ARG001 - signal handler signature
+def _handler(signum, frame) -> None:
     _state["requested"] = True
     if _state["signal"] is None:
         _state["signal"] = signal.Signals(signum)

@@ -7,10 +7,16 @@ import numpy as np
 import pytest
 
 from bemlearn.apps.biped.bem_bench import format_biped_bem_bench, run_biped_bem_bench
+from bemlearn.apps.biped.pipeline import (
+    BipedConfig,
+    BipedEvaluateConfig,
+    WalkCollectConfig,
+    WalkDatasetConfig,
+    heldout_bem,
+    heldout_walks,
+)
 from bemlearn.cli import main
 from bemlearn.fitting import GPConfig
-from bemlearn.apps.biped.pipeline import (BipedConfig, BipedEvaluateConfig, WalkCollectConfig, WalkDatasetConfig,
-                                     heldout_bem, heldout_walks)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -51,8 +57,8 @@ def test_collect_seeds_refit_on_each_set_of_walks(small):
 
 def test_heldout_walks_are_shared_bit_identically(small, tmp_path):
     # heldout_bem with precomputed walks equals heldout_bem simulating them itself
-    from bemlearn.data import write_trajectory
     from bemlearn.apps.biped.pipeline import collect_walks, train_walking_gp, walking_gp_data, walks_trajectories
+    from bemlearn.data import write_trajectory
 
     walks = collect_walks(small, progress=False)
     data, truth = walks_trajectories(walks)
@@ -92,10 +98,10 @@ def test_config_dataclass_defaults_match_the_shipped_yaml():
 
 def test_the_sweep_stage_scores_each_draw_exactly_as_the_bench(small, tmp_path):
     # configs/sweeps/biped-bem.yaml's cells (collect.seed × dataset.seed) are the bench's --collect-seeds × --subsets
+    import torch
+
     from bemlearn.config import to_dict
     from bemlearn.sweep import run_sweep
-
-    import torch
 
     torch.set_num_threads(1)  # a cell runs with resources.cpus = 1 thread; the last bits of a fit depend on it
     bench = run_biped_bem_bench(small, subsets=2, collect_seeds=[7], progress=False)

@@ -10,13 +10,10 @@ import numpy as np
 import pytest
 import torch
 
-from bemlearn.config import ConfigError
-from bemlearn.apps.biped.gait import GaitConfig, build_gait
 from bemlearn.apps.biped.controller import WalkExcitation, WalkingController
-from bemlearn.data import gp_inputs, make_estimator, write_trajectory
+from bemlearn.apps.biped.gait import GaitConfig, build_gait
+from bemlearn.apps.biped.gpdm_study import _binned, _chis, fit_gpdm_logged, human_gait_sequences
 from bemlearn.apps.biped.human_gait import HumanGaitConfig, human_step_profile, load_human_gait
-from bemlearn.fitting import GPConfig
-from bemlearn.fitting.gpdm_fit import GPDMConfig
 from bemlearn.apps.biped.pipeline import (
     BipedConfig,
     WalkDatasetConfig,
@@ -28,9 +25,12 @@ from bemlearn.apps.biped.pipeline import (
     train_walking_gp,
     walking_gp_data,
 )
-from bemlearn.apps.biped.gpdm_study import _binned, _chis, fit_gpdm_logged, human_gait_sequences
-from bemlearn.robots import load
 from bemlearn.apps.biped.walker import WalkConfig, simulate_walk, stance_per_sample, walk_trajectories
+from bemlearn.config import ConfigError
+from bemlearn.data import gp_inputs, make_estimator, write_trajectory
+from bemlearn.fitting import GPConfig
+from bemlearn.fitting.gpdm_fit import GPDMConfig
+from bemlearn.robots import load
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -175,7 +175,7 @@ def test_human_sequences_follow_the_half_cycle_assumption():
     assert len(seqs) >= 2 and all(q.shape[1] == 5 for q in seqs)
     q, ph = seqs[0], phases[0]
     t = hs[0] + ph * half  # the first step starts at the first right heel strike
-    assert 0 <= ph.min() and ph.max() < 1
+    assert ph.min() >= 0 and ph.max() < 1
     np.testing.assert_allclose(q[:, 0], np.interp(t, g.t, g.trunk), atol=1e-12)
     right = lambda s: np.c_[np.interp(s, g.t, g.hip), np.interp(s, g.t, g.knee)]  # noqa: E731
     np.testing.assert_allclose(q[:, 1:], jmap.apply(np.c_[right(t), right(t + half)]), atol=1e-12)

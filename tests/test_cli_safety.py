@@ -4,13 +4,12 @@ import time
 
 import pytest
 import yaml
+from conftest import furuta_section
 
 from bemlearn.cli.main import main
 from bemlearn.data.collect import collect
-from conftest import furuta_section
 from bemlearn.data.trajectory_io import write_trajectory
-from bemlearn.export.staleness import check_predictor_matches, predictor_checkpoint_sha256
-from bemlearn.export.staleness import file_sha256
+from bemlearn.export.staleness import check_predictor_matches, file_sha256, predictor_checkpoint_sha256
 
 
 @pytest.fixture(scope="module")

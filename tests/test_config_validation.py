@@ -7,7 +7,6 @@ below passed ``config show`` and the preflight, and failed after collect and tra
 with ``nan`` in the report, were silently ignored, or ended in a traceback naming no key.
 """
 
-import math
 import time
 from pathlib import Path
 

@@ -7,13 +7,13 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
+from conftest import furuta_section
 
+from bemlearn.apps.furuta.model import AnalyticFuruta
 from bemlearn.control.bem_sources import ModelBEM, PredictorBEM, make_bem_source
 from bemlearn.data.sensors import SensorConfig
-from bemlearn.apps.furuta.model import AnalyticFuruta
 from bemlearn.robots.reference import ConstantAcceleration
 from bemlearn.sim.closed_loop import simulate
-from conftest import furuta_section
 
 IDEAL = SensorConfig(counts_per_rev=0, velocity_cutoff=400.0)
 

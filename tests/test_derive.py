@@ -10,11 +10,10 @@ import pytest
 import torch
 
 from bemlearn.control.actuator_inverse import MujocoActuatorInverse
+from bemlearn.control.eic import EICGains
 from bemlearn.control.lqr import discrete_lqr, linearize
 from bemlearn.pipeline import derive
 from bemlearn.robots import MujocoRobot, load
-
-from bemlearn.control.eic import EICGains  # noqa: E402
 
 GAINS = EICGains(kp_a=4.0, kd_a=4.0, kp_u=200.0, kd_u=30.0)
 

@@ -6,8 +6,8 @@ import gpytorch
 import pytest
 import torch
 
-from bemlearn.models import ExactBEMGP, gaussian_likelihood, kernel_matrix, predict, se_cross_covariance
 from bemlearn.fitting import set_hyperparameters
+from bemlearn.models import ExactBEMGP, gaussian_likelihood, kernel_matrix, predict, se_cross_covariance
 
 F64 = torch.float64
 LENGTHSCALE = torch.tensor([1.0, 1.5, 2.0, 2.5, 3.0], dtype=F64)

@@ -6,8 +6,8 @@ The 3,000-point measurement is ``bemlearn bench sigint``; here an 800-point fit 
 import math
 import signal
 
-import pytest
 import numpy as np
+import pytest
 import torch
 
 from bemlearn import interrupts

@@ -6,7 +6,6 @@ second command writing it fails at once, naming the first), a hard-link snapshot
 """
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -283,16 +282,14 @@ def test_a_killed_new_run_is_reported_as_incomplete(tmp_path):
 
 
 def test_a_failed_command_removes_the_folder_it_created_and_keeps_a_users_folder(tmp_path):
-    with pytest.raises(ValueError):
-        with claim_outputs(tmp_path / "a" / "b", what="run") as out:
-            atomic_write_text(out / "x", "x")
-            raise ValueError("boom")
+    with pytest.raises(ValueError), claim_outputs(tmp_path / "a" / "b", what="run") as out:
+        atomic_write_text(out / "x", "x")
+        raise ValueError("boom")
     assert not (tmp_path / "a").exists()
     mine = tmp_path / "mine"
     mine.mkdir()
     (mine / "notes.txt").write_text("keep")
-    with pytest.raises(ValueError):
-        with claim_outputs(mine, entries=["data.npz"]) as out:
-            atomic_write_text(out / "data.npz", "x")
-            raise ValueError("boom")
+    with pytest.raises(ValueError), claim_outputs(mine, entries=["data.npz"]) as out:
+        atomic_write_text(out / "data.npz", "x")
+        raise ValueError("boom")
     assert _tree(mine) == {"notes.txt": b"keep"}

@@ -8,6 +8,7 @@ import json
 import pytest
 import torch
 import yaml
+from conftest import furuta_section
 
 from bemlearn.cli.main import main
 from bemlearn.data.collect import collect
@@ -15,7 +16,6 @@ from bemlearn.data.trajectory_io import write_trajectory
 from bemlearn.export import load_learned_bem
 from bemlearn.models.learned_bem import LearnedBEM, srinivas_kappa
 from bemlearn.pipeline.train import train_run
-from conftest import furuta_section
 
 
 @pytest.fixture(scope="module")
@@ -23,8 +23,9 @@ def small(tmp_path_factory):
     root = tmp_path_factory.mktemp("train")
     data, _ = collect("furuta", furuta_section("collect", n_trials=6, duration_s=6.0, workers=1, seed=1), progress=False)
     path = write_trajectory(data, root / "data.npz")
-    from bemlearn.pipeline.config import load_pipeline_config
     from conftest import FURUTA_CONFIG
+
+    from bemlearn.pipeline.config import load_pipeline_config
 
     cfg = load_pipeline_config(FURUTA_CONFIG)
     cfg = dataclasses.replace(cfg, dataset=dataclasses.replace(cfg.dataset, n_points=150), train=dataclasses.replace(cfg.train, max_iter=30))

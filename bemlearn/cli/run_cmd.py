@@ -121,6 +121,6 @@ def _simulate_into(args, cfg, simulate_stage) -> int:
     res = simulate_stage(cfg, args.out, predictor=args.predictor, sources=sources, progress=not args.no_progress, gif=args.gif)
     print(f"{'source':<10}{'fell':>6}{'duration s':>12}{'RMSE q_a':>10}{'max|u|':>8}{'×real time':>12}")
     for src, m in res.items():
-        print(f"{src:<10}{str(m['fell']):>6}{m['duration_s']:>12.1f}{m['tracking_rmse']:>10.4f}{m['u_max']:>8.2f}{m['real_time_factor']:>12.1f}")
+        print(f"{src:<10}{m['fell']!s:>6}{m['duration_s']:>12.1f}{m['tracking_rmse']:>10.4f}{m['u_max']:>8.2f}{m['real_time_factor']:>12.1f}")
     print(f"wrote {args.out / 'simulate'}")
     return 1 if any(m["fell"] for m in res.values() if m["bem_source"] != "zero") else 0

@@ -23,7 +23,6 @@ from bemlearn.data.derivatives import (
 from bemlearn.data.features import gp_input_names, gp_inputs, gp_output_name
 from bemlearn.data.finite_difference import CentralDifference
 from bemlearn.data.import_map import ImportMap, load_import_map
-from bemlearn.units import JOINT_KINDS, gp_input_units, joint_unit
 from bemlearn.data.log_import import import_logs
 from bemlearn.data.log_table import LogTable, read_log_table
 from bemlearn.data.normalization import Normalization
@@ -57,6 +56,7 @@ from bemlearn.data.validation import (
     column_names,
     validate,
 )
+from bemlearn.units import JOINT_KINDS, gp_input_units, joint_unit
 
 __all__ = [
     # trajectories

@@ -95,7 +95,7 @@ class DatasetConfig:
         """The configured derivative estimator (options left to the data still unset)."""
         return make_estimator(self.derivative, self.derivative_options, where="derivative_options")
 
-    def with_estimator(self, estimator: DerivativeEstimator) -> "DatasetConfig":
+    def with_estimator(self, estimator: DerivativeEstimator) -> DatasetConfig:
         """This config with ``estimator``'s options written out (e.g. a σ chosen from the data)."""
         import dataclasses as dc
 

@@ -52,7 +52,7 @@ class DerivativeEstimator(Protocol):
         """``q`` (T, n) rad → (qd (T, n) rad/s, qdd (T, n) rad/s²)."""
         ...
 
-    def neighbours(self, sample_rate_hz: float) -> tuple["DerivativeEstimator", ...]:
+    def neighbours(self, sample_rate_hz: float) -> tuple[DerivativeEstimator, ...]:
         """The estimators next to this one in its own option space (e.g. a wider and a narrower
         window), each as plausible a choice; the spread of the BEM over them is the estimator
         term of the calibrated band (:mod:`bemlearn.fitting.estimator_sensitivity`).  Empty

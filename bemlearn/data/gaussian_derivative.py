@@ -128,7 +128,7 @@ class GaussianDerivative:
         """Samples at each trial end without a full kernel: K (not valid, dropped by the datasets)."""
         return self.half_width(sample_rate_hz)
 
-    def neighbours(self, sample_rate_hz: float) -> tuple["GaussianDerivative", ...]:
+    def neighbours(self, sample_rate_hz: float) -> tuple[GaussianDerivative, ...]:
         """σ · 2/3 and σ · 3/2 (each only if at least one sample wide): equally plausible choices
         whose BEM spread is the estimator term of the calibrated band."""
         s = self._sigma(sample_rate_hz)

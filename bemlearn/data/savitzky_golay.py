@@ -83,7 +83,7 @@ class SavitzkyGolay:
         """Samples at each trial end estimated from the edge polynomial: (w − 1) / 2."""
         return self.window_samples(sample_rate_hz) // 2
 
-    def neighbours(self, sample_rate_hz: float) -> tuple["SavitzkyGolay", ...]:
+    def neighbours(self, sample_rate_hz: float) -> tuple[SavitzkyGolay, ...]:
         """The four filters next to this one: window w·2/3 and w·3/2 (odd, in samples) at the same
         degree, and degree p − 1 and p + 1 at the same window (each only where valid: w > p ≥ 2).
 

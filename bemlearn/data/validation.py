@@ -23,8 +23,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from bemlearn.units import q_unit_label
 from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, TrajectoryMeta
+from bemlearn.units import q_unit_label
 
 __all__ = [
     "validate", "check_robot", "column_names", "RobotLike", "MIN_TRIAL_SAMPLES", "RATE_RTOL", "JITTER_RTOL",

@@ -92,8 +92,8 @@ class BEMPredictor(nn.Module):
         if x.dim() != 2 or x.size(1) != n or x.size(0) == 0 or x.dtype != torch.float64:
             if torch.jit.is_scripting():
                 raise ValueError(
-                    "BEMPredictor.{}: expected x of shape (B, {}), B >= 1, and dtype torch.float64 with columns "
-                    "[{}]; got shape {} and dtype {}".format(method, n, columns, x.shape, _dtype_name(x))
+                    f"BEMPredictor.{method}: expected x of shape (B, {n}), B >= 1, and dtype torch.float64 with columns "
+                    f"[{columns}]; got shape {x.shape} and dtype {_dtype_name(x)}"
                 )
             else:
                 raise PredictorInputError(
@@ -105,11 +105,9 @@ class BEMPredictor(nn.Module):
         bad = torch.nonzero(~torch.isfinite(x))
         if bad.size(0) > 0:
             r, c = int(bad[0, 0]), int(bad[0, 1])
-            return "BEMPredictor.{}: x[{}, {}] is {}; inputs must be finite ({} non-finite entries)".format(
-                method, r, c, float(x[r, c]), bad.size(0)
-            )
-        return ("BEMPredictor.{}: x has finite entries too large to evaluate: the kernel cannot be evaluated in float64 "
-                "(||(x - x_mean) / (x_std * lengthscale)|| above 1e150)").format(method)
+            return f"BEMPredictor.{method}: x[{r}, {c}] is {float(x[r, c])}; inputs must be finite ({bad.size(0)} non-finite entries)"
+        return (f"BEMPredictor.{method}: x has finite entries too large to evaluate: the kernel cannot be evaluated in float64 "
+                "(||(x - x_mean) / (x_std * lengthscale)|| above 1e150)")
 
     def _check_finite(self, mean: torch.Tensor, x: torch.Tensor, method: str) -> None:
         # A non-finite x, or one too far from the data for float64 (||u|| > 1e150), always makes the mean

@@ -26,7 +26,7 @@ __all__ = ["gaussian_nll"]
 
 class _GaussianNLL(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, K: torch.Tensor, r: torch.Tensor) -> torch.Tensor:  # noqa: ANN001
+    def forward(ctx, K: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
         L = psd_safe_cholesky(K)
         alpha = torch.cholesky_solve(r.unsqueeze(-1), L).squeeze(-1)
         n = r.numel()
@@ -35,7 +35,7 @@ class _GaussianNLL(torch.autograd.Function):
         return loss / n
 
     @staticmethod
-    def backward(ctx, grad: torch.Tensor):  # noqa: ANN001
+    def backward(ctx, grad: torch.Tensor):
         L, alpha = ctx.saved_tensors
         n = alpha.numel()
         check_interrupt()

@@ -97,7 +97,7 @@ def select_inducing_points(
     if method == "random":
         return train_x[torch.randperm(N, generator=gen)[:num].to(train_x.device)].clone()
     cand = train_x
-    if N > max_candidates:
+    if max_candidates < N:
         cand = train_x[torch.randperm(N, generator=gen)[:max_candidates].to(train_x.device)]
     n = cand.shape[0]
     chosen = [int(torch.randint(n, (1,), generator=gen))]

@@ -182,12 +182,12 @@ class PredictorState:
         return out
 
     @classmethod
-    def from_dict(cls, data: dict) -> "PredictorState":
+    def from_dict(cls, data: dict) -> PredictorState:
         kw = dict(data)
         kw["input_names"] = tuple(kw["input_names"])
         return cls(**kw)
 
-    def to(self, device: torch.device | str | None = None, dtype: torch.dtype | None = None) -> "PredictorState":
+    def to(self, device: torch.device | str | None = None, dtype: torch.dtype | None = None) -> PredictorState:
         moved = {k: v.to(device=device, dtype=dtype) for k, v in self.tensors().items()}
         return dataclasses.replace(self, **moved)
 

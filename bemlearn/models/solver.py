@@ -58,7 +58,7 @@ def cholesky_policy(*, jitter: float = DEFAULT_JITTER, max_tries: int = DEFAULT_
         warnings.filterwarnings("always", category=NumericalWarning)
         previous = warnings.showwarning
 
-        def _show(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
+        def _show(message, category, filename, lineno, file=None, line=None):
             if issubclass(category, NumericalWarning):
                 logger.warning("%s", message)
             else:

@@ -53,7 +53,6 @@ def write_report(out: str | Path, *, config, resolved, data: dict | None, train:
             ``None`` for a run stopped after its model checks).
         export: the predictor files written.
     """
-    from bemlearn.files import atomic_write_text
 
     out = Path(out)
     unit = train.get("output_unit", "rad")

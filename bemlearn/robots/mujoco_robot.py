@@ -202,7 +202,7 @@ class MujocoRobot(Robot):
         return self._coordinate_kinds
 
     @classmethod
-    def from_xml(cls, path: str | Path, *, name: str | None = None) -> "MujocoRobot":
+    def from_xml(cls, path: str | Path, *, name: str | None = None) -> MujocoRobot:
         path = Path(path)
         if not path.is_file():
             raise MissingFileError(f"{path}: MJCF file not found")
@@ -213,7 +213,7 @@ class MujocoRobot(Robot):
         return cls(model, name=name or path.stem, source=str(path))
 
     @classmethod
-    def from_xml_string(cls, xml: str, *, name: str | None = None) -> "MujocoRobot":
+    def from_xml_string(cls, xml: str, *, name: str | None = None) -> MujocoRobot:
         try:
             model = mujoco.MjModel.from_xml_string(xml)
         except ValueError as exc:

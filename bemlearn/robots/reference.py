@@ -56,7 +56,7 @@ class CompositeSinusoid:
         return (self._A * s).sum(-1) + self._c, (self._A * self._w * c).sum(-1), -(self._A * self._w**2 * s).sum(-1)
 
     @classmethod
-    def single(cls, amplitudes, frequencies, phases=None, offset: float = 0.0) -> "CompositeSinusoid":
+    def single(cls, amplitudes, frequencies, phases=None, offset: float = 0.0) -> CompositeSinusoid:
         """One actuated joint: ``amplitudes`` (rad), ``frequencies`` (Hz), ``phases`` (rad)."""
         phases = [0.0] * len(amplitudes) if phases is None else phases
         return cls((tuple(map(float, amplitudes)),), (tuple(map(float, frequencies)),), (tuple(map(float, phases)),), (float(offset),))

@@ -62,7 +62,7 @@ class RobotRef:
         return {"name": self.name, "mjcf": self.mjcf, "sha256": self.sha256, "registry": self.registry}
 
     @classmethod
-    def from_dict(cls, data: dict, *, where: str = "robot") -> "RobotRef":
+    def from_dict(cls, data: dict, *, where: str = "robot") -> RobotRef:
         if not isinstance(data, dict) or "mjcf" not in data:
             raise CheckpointError(f"{where}: expected a mapping with keys name, mjcf, sha256, registry; got {data!r}")
         return cls(str(data.get("name") or "robot"), data.get("mjcf"), data.get("sha256"), data.get("registry"))

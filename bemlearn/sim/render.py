@@ -33,7 +33,7 @@ _PROBE = (
 )
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def probe_backend(name: str, *, timeout_s: float = 60.0) -> bool:
     """Whether ``MUJOCO_GL=name`` renders a frame, tried in a child Python process."""
     env = {**os.environ, "MUJOCO_GL": name}

@@ -16,10 +16,10 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from bemlearn.apps.biped.controller import WalkExcitation
-from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.apps.biped.config import BipedConfig
+from bemlearn.apps.biped.controller import WalkExcitation
 from bemlearn.apps.biped.walker import WalkResult
+from bemlearn.fitting.gp_config import GPConfig
 
 __all__ = ["train_walking_gp", "heldout_walks", "bem_errors", "heldout_bem"]
 

@@ -144,7 +144,7 @@ class BezierGait:
         return np.r_[(theta - c[1:] @ h) / c[0], h]
 
     @classmethod
-    def fit(cls, q: np.ndarray, *, degree: int, phase_weights, name: str = "gait") -> "BezierGait":
+    def fit(cls, q: np.ndarray, *, degree: int, phase_weights, name: str = "gait") -> BezierGait:
         """Least-squares Bézier fit of stance-relative samples of one step.
 
         The end coefficients are pinned to the first and last sample (so a gait whose last
