@@ -35,7 +35,7 @@ def test_exact_fit_recovers_sin_plus_linear() -> None:
         x, y, config=GPConfig(kind="exact"), callback=lambda s, m: (steps.append(s), metrics.append(m))
     )
     xs = _test_points()
-    mean, var = predict(model, lik, xs)
+    mean, _var = predict(model, lik, xs)
     rmse = float((mean - _target(xs)).pow(2).mean().sqrt())
     assert rmse < 0.005  # measured 0.0017; the data noise std is 0.01
     assert float(lik.noise.detach()) < 10 * NOISE_STD**2  # noise level recovered to within an order of magnitude
@@ -71,7 +71,7 @@ def test_svgp_fit_recovers_function_and_is_reproducible() -> None:
         model, lik = build_gp(x, y, config=config)
         result = fit_gp(model, lik, x, y, config=config)
         runs.append((model, lik, result))
-    (m1, l1, r1), (m2, l2, r2) = runs
+    (m1, l1, r1), (m2, _l2, _r2) = runs
     assert r1.steps == 2 * 6
     for p1, p2 in zip(m1.parameters(), m2.parameters()):
         assert torch.equal(p1, p2)

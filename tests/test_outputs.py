@@ -155,7 +155,7 @@ def test_different_files_of_one_folder_are_written_side_by_side(tmp_path):
 # ---------------------------------------------------------------- failed --force / --resume
 
 def test_a_failed_train_force_leaves_the_run_as_it_was(trained, tmp_path, monkeypatch, capsys):
-    cfg, run = trained
+    _cfg, run = trained
     copy = _copy(run, tmp_path / "run")
     before = _tree(copy)
 
@@ -211,7 +211,7 @@ def test_an_interrupted_train_force_keeps_its_resumable_checkpoint(trained, tmp_
 
 
 def test_an_interrupted_train_force_before_its_checkpoint_restores_the_run(trained, tmp_path, monkeypatch):
-    cfg, run = trained
+    _cfg, run = trained
     copy = _copy(run, tmp_path / "run")
     before = _tree(copy)
 

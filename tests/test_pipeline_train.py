@@ -35,7 +35,7 @@ def small(tmp_path_factory):
 
 
 def test_run_folder_contents(small):
-    cfg, path, out, metrics = small
+    _cfg, _path, out, _metrics = small
     for name in ("config.yaml", "checkpoint.pt", "metrics.json", "bem_validation.png"):
         assert (out / name).is_file(), name
     assert any((out / "tb").iterdir())

@@ -64,7 +64,7 @@ def test_a_failed_cell_is_retried_once_then_recorded_and_the_sweep_goes_on(seria
 
 
 def test_results_have_one_row_per_cell_with_grid_values_status_and_metrics(serial):
-    out, result = serial
+    out, _result = serial
     header = (out / "results.csv").read_text().splitlines()[0].split(",")
     assert header[:5] == ["cell", "index", "dataset.qu_window", "status", "verdict"]
     rows = _results(out)

@@ -221,7 +221,9 @@ def test_noisy_input_band_covers_truth_with_known_input_noise():
     g = torch.Generator().manual_seed(3)
     s = torch.tensor([0.15, 0.15, 0.15, 0.15, 0.15], dtype=F64)
     w = torch.tensor([0.9, -0.6, 0.5, 0.4, -0.3], dtype=F64)
-    f = lambda x: torch.sin(x @ w)
+    def f(x):
+        return torch.sin(x @ w)
+
     xt = torch.randn(1500, 5, generator=g, dtype=F64)
     xh = xt + s * torch.randn(1500, 5, generator=g, dtype=F64)
     st = _state(n=3, std_scale=1.0, input_std=tuple(s.tolist()))

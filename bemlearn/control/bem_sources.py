@@ -37,12 +37,11 @@ class PredictorBEM:
             raise MissingFileError(f"BEM predictor file {path} not found (run `bemlearn export RUN_DIR` first)")
         self.module = load_script_module(path)  # CheckpointError (a ValueError) for a foreign or tampered file
         self.meta = json.loads(self.module.metadata())
-        if robot is not None:
-            if self.meta.get("robot") != robot.name or int(self.meta.get("m", -1)) != robot.m:
-                raise ArgumentError(
-                    f"{path}: predictor is for robot {self.meta.get('robot')!r} (m = {self.meta.get('m')}), "
-                    f"but the controller runs {robot.name!r} (m = {robot.m})"
-                )
+        if robot is not None and (self.meta.get("robot") != robot.name or int(self.meta.get("m", -1)) != robot.m):
+            raise ArgumentError(
+                f"{path}: predictor is for robot {self.meta.get('robot')!r} (m = {self.meta.get('m')}), "
+                f"but the controller runs {robot.name!r} (m = {robot.m})"
+            )
         self.path = path
 
     def __call__(self, x: np.ndarray) -> np.ndarray:

@@ -158,7 +158,7 @@ def _ladder(traj: Trajectory, truncate: float, within: np.ndarray | None = None)
 
 
 def _detrended_std(v: np.ndarray, trial: np.ndarray) -> float:
-    ids, inv = np.unique(trial, return_inverse=True)
+    _ids, inv = np.unique(trial, return_inverse=True)
     means = np.bincount(inv, weights=v) / np.bincount(inv)
     return float(np.std(v - means[inv]))
 

@@ -17,6 +17,7 @@ the checks in :mod:`bemlearn.data.validation`.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import math
 from collections.abc import Iterator, Mapping
@@ -324,7 +325,7 @@ class Trajectory:
         bounds = np.concatenate([[0], starts, [self.n_samples]])
         return [
             TrialSlice(int(self.trial[a]), self.meta.trial_failed.get(int(self.trial[a]), False), slice(int(a), int(b)))
-            for a, b in zip(bounds[:-1], bounds[1:])
+            for a, b in itertools.pairwise(bounds)
         ]
 
     def iter_trials(self) -> Iterator[TrialSlice]:

@@ -115,7 +115,7 @@ def fit_svgp(
                         yb = train_y[idx.to(train_y.device)].to(device)
                         ngd.zero_grad(set_to_none=True)
                         opt.zero_grad(set_to_none=True)
-                        loss = checked_loss(lambda: -elbo(model(xb), yb))
+                        loss = checked_loss(lambda xb=xb, yb=yb: -elbo(model(xb), yb))
                         loss.backward()
                         ngd.step()
                         opt.step()

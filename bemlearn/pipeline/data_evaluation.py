@@ -192,7 +192,9 @@ def bem_slices(model: PredictorState | LearnedBEM, train: BEMDataset, spec: Slic
                 "units": {"qdd": joint_unit(kind, 2), "qd": joint_unit(kind, 1), "q": joint_unit(kind, 0),
                           "qu": joint_unit(meta.kind_of(meta.unactuated), 0)},
             })
-    cat = lambda parts: float(np.concatenate(parts).mean()) if parts else float("nan")
+    def cat(parts: list) -> float:
+        return float(np.concatenate(parts).mean()) if parts else float("nan")
+
     return {
         "slices": slices,
         "summary": {"std_pred_mean_covered": cat(inside_std), "std_pred_mean_extrapolated": cat(outside_std),

@@ -129,7 +129,7 @@ def periodic_zero_dynamics(
     u = bem.qu.numpy().copy()
     D1, D2 = _diff_matrix(n_nodes, T, 1), _diff_matrix(n_nodes, T, 2)
     it = 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 - the step count is returned after the loop
         ud, udd = D1 @ u, D2 @ u
         r = _gamma(robot, qa, qad, qadd, u, ud, udd)
         if np.max(np.abs(r)) <= tol:

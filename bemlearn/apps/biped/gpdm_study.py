@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import time
@@ -129,7 +130,7 @@ def _stance_q(result) -> np.ndarray:
 def _steady_steps(result, first_step: int) -> list[slice]:
     """Tick slices of the complete steps after the first ``first_step`` ones."""
     ends = np.r_[0, result.steps + 1]
-    return [slice(int(a), int(b)) for a, b in zip(ends[:-1], ends[1:])][first_step:]
+    return [slice(int(a), int(b)) for a, b in itertools.pairwise(ends)][first_step:]
 
 
 def _binned(phase: np.ndarray, values: np.ndarray, bins: int) -> np.ndarray:

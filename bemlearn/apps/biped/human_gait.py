@@ -29,6 +29,7 @@ type (hips share one map, knees another, so both legs stay alike).
 
 from __future__ import annotations
 
+import itertools
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -179,7 +180,7 @@ class HumanGait:
         phase = np.arange(n) / n
         ang = np.stack([self.trunk, self.hip, self.knee], 1)
         cycles = [np.stack([np.interp(a + phase * (b - a), self.t, ang[:, j]) for j in range(3)], 1)
-                  for a, b in zip(hs[:-1], hs[1:])]
+                  for a, b in itertools.pairwise(hs)]
         return phase, np.mean(cycles, axis=0)
 
     def cycle_period(self, *, threshold: float = 20.0) -> float:
