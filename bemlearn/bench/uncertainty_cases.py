@@ -12,8 +12,15 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from bemlearn.errors import ConfigError
+
+if TYPE_CHECKING:
+    from bemlearn.pipeline.config import PipelineConfig
+    from bemlearn.pipeline.evaluation import EvaluationConfig
 
 __all__ = ["CARTPOLE_XML", "BenchCase", "cartpole_case", "config_case"]
 
@@ -40,9 +47,9 @@ class BenchCase:
     """One robot of the bench: pipeline config, data file, held-out references."""
 
     name: str
-    config: object
+    config: PipelineConfig
     data_path: Path
-    evaluation: object
+    evaluation: EvaluationConfig
 
 
 def config_case(config_path: str | Path, data_path: str | Path) -> BenchCase:
@@ -50,6 +57,8 @@ def config_case(config_path: str | Path, data_path: str | Path) -> BenchCase:
     from bemlearn.pipeline.config import load_pipeline_config
 
     cfg = load_pipeline_config(config_path)
+    if cfg.robot is None:
+        raise ConfigError(f"{config_path}: the uncertainty bench needs 'robot:' (it compares with the robot's own BEM)")
     return BenchCase(Path(cfg.robot).stem, cfg, Path(data_path), cfg.evaluate)
 
 

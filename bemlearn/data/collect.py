@@ -128,6 +128,10 @@ def _robot_and_model(robot_name: str):
 def simulate_trial(robot, config: CollectConfig, trial_id: int, seed_seq: np.random.SeedSequence) -> TrialResult:
     """Run one excitation trial (module docstring) and return its logged and true signals."""
     rng = np.random.default_rng(seed_seq)
+    # every field is set (collect() checks it; complete_section derives them)
+    assert config.rate_hz is not None and config.fall_window is not None and config.gains is not None
+    assert config.gain_scale is not None and config.n_sines is not None and config.amplitude is not None
+    assert config.frequency_hz is not None and config.initial_qa is not None and config.initial_qu is not None
     model, n, m = robot.model, robot.n, robot.m
     plant = SensedPlant(robot, rate_hz=config.rate_hz, sensor=config.sensor, rng=rng, where="collect", timestep=config.physics_timestep)
     dt = plant.dt
@@ -172,8 +176,8 @@ def simulate_trial(robot, config: CollectConfig, trial_id: int, seed_seq: np.ran
             break
         qd, qdd = plant.apply(u)
         rec["q_meas"][tick], rec["u"][tick], rec["q"][tick], rec["qd"][tick], rec["qdd"][tick] = y, u, q_true, qd, qdd
-    t = np.arange(k) * dt
-    return TrialResult(trial_id, failed, t, *(rec[name][:k] for name in ("q_meas", "u", "q", "qd", "qdd")))
+    times = np.arange(k) * dt
+    return TrialResult(trial_id, failed, times, *(rec[name][:k] for name in ("q_meas", "u", "q", "qd", "qdd")))
 
 
 _WORKER_ROBOT = None
@@ -205,6 +209,7 @@ def collect(robot_name: str, config: CollectConfig, *, progress: bool = True) ->
     if unset:
         raise ConfigError(f"collect: {unset} not set; derive them from the model with "
                          "bemlearn.pipeline.complete_section(robot, 'collect', config) (as every pipeline command does) or give them")
+    assert config.rate_hz is not None and config.input_units is not None  # checked just above
     seqs = np.random.SeedSequence(config.seed).spawn(config.n_trials)
     jobs = [(config, i, s) for i, s in enumerate(seqs)]
     workers = config.workers or (os.cpu_count() or 1)
