@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 

@@ -104,7 +104,7 @@ class EICController:
         # with a known control rate, the reference-only quantities (q_a^d and the BEM along it at
         # t and t ± h) are evaluated ``chunk`` ticks at a time in one batched call
         self.rate_hz, self.chunk = rate_hz, chunk
-        self._cache_k0 = None
+        self._cache_k0: int | None = None
         self.qu_limits = tuple(qu_limits) if qu_limits is not None else tuple(nominal.qu_range)
         self.bem_rejected = 0
         self.command_rejected = 0

@@ -156,7 +156,9 @@ def _check_finite(traj: Trajectory, source: str, first_line: int | None) -> None
         ("q", traj.q, [f"q:{j}" for j in meta.joint_names]),
         ("u", traj.u, [f"u:{a}" for a in meta.actuator_names]),
     ]
+    assert traj.channels is not None  # Trajectory.__post_init__ fills it
     if traj.has_ground_truth:
+        assert traj.qd is not None and traj.qdd is not None
         blocks += [
             ("qd", traj.qd, [f"qd:{j}" for j in meta.joint_names]),
             ("qdd", traj.qdd, [f"qdd:{j}" for j in meta.joint_names]),

@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable, Sequence
+from typing import Any, cast
 
 import torch
 from linear_operator.utils.errors import NanError, NotPSDError
@@ -98,7 +99,7 @@ def minimize(
     if optimizer not in ("lbfgs", "adam"):
         raise ArgumentError(f"optimizer: unknown {optimizer!r}; valid are ['adam', 'lbfgs']")
     best_params = [p.detach().clone() for p in params]
-    state = {"best": math.inf, "evals": 0, "since_best": 0}
+    state: dict[str, Any] = {"best": math.inf, "evals": 0, "since_best": 0}
     max_eval = int(max_iter * 1.5) if optimizer == "lbfgs" else max_iter
     bar = tqdm(total=max_eval, desc=desc, disable=not progress, leave=False)
 
@@ -141,7 +142,7 @@ def minimize(
                 # restart from the best point with a fresh curvature history, up to 3 times
                 for restart in range(4):
                     try:
-                        opt.step(closure)
+                        opt.step(closure)  # type: ignore[arg-type]  # torch's stub wants a float closure; a Tensor is what LBFGS uses
                     except NumericalFailure as exc:
                         if restart == 3 or state["evals"] >= max_eval or not math.isfinite(state["best"]):
                             raise
@@ -154,13 +155,13 @@ def minimize(
                         opt = torch.optim.LBFGS(params, lr=lr, max_iter=max(1, int(left / 1.5)), max_eval=left, history_size=50,
                                                 line_search_fn="strong_wolfe", tolerance_grad=1e-9, tolerance_change=tol)
                         continue
-                    n_iter = opt.state[opt._params[0]].get("n_iter", 0)
+                    n_iter = opt.state[cast(torch.optim.LBFGS, opt)._params[0]].get("n_iter", 0)
                     if n_iter < opt.defaults["max_iter"] and state["evals"] < max_eval:
                         stop = "converged"
                     break
             else:
                 for _ in range(max_iter):
-                    opt.step(closure)
+                    opt.step(closure)  # type: ignore[arg-type]  # torch's stub wants a float closure; a Tensor works
                     if tol > 0 and state["since_best"] >= 50:
                         stop = "converged"
                         break

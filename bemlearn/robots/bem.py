@@ -42,7 +42,7 @@ class BEMResult:
 
 
 def solve_bem(
-    fun: Callable[[torch.Tensor], torch.Tensor],
+    fun: Callable[..., torch.Tensor],  # fun(qu_grid) or fun(qu_grid, rows=...)
     batch: int,
     *,
     lo: float,

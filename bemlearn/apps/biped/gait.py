@@ -94,6 +94,11 @@ class BezierGait:
     theta_end: float
     torso: float = 0.0
     name: str = "gait"
+    # numpy caches set in __post_init__: coefficients, their first and second differences, c
+    _a: np.ndarray = field(init=False, repr=False, compare=False)
+    _d1: np.ndarray = field(init=False, repr=False, compare=False)
+    _d2: np.ndarray = field(init=False, repr=False, compare=False)
+    _c: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         a = np.asarray(self.coefficients, dtype=np.float64)
