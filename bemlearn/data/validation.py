@@ -42,10 +42,15 @@ JITTER_RTOL = 0.1
 class RobotLike(Protocol):
     """What :func:`check_robot` reads from a robot (``bemlearn.robots.load(name)`` objects)."""
 
-    name: str
-    joint_names: tuple[str, ...]
-    unactuated_name: str
-    actuated_names: tuple[str, ...]
+    # read-only: a robot may give them as attributes or properties
+    @property
+    def name(self) -> str: ...
+    @property
+    def joint_names(self) -> tuple[str, ...]: ...
+    @property
+    def unactuated_name(self) -> str: ...
+    @property
+    def actuated_names(self) -> tuple[str, ...]: ...
 
 
 def column_names(meta: TrajectoryMeta, *, ground_truth: bool = False) -> list[str]:

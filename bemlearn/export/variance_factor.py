@@ -156,6 +156,7 @@ def _factored(state: PredictorState, psd_rtol: float) -> VarianceFactor:
     diagonal (the jitter): off-diagonal |L Lᵀ − K_ZZ| ≤ GRAM_RTOL σ_f², else ValueError.
     """
     L, C = state.S_chol, state.S_inner
+    assert L is not None  # called for states that carry their Cholesky factor
     K = kernel_gram(state)
     K.diagonal().sub_(state.noise)
     D = L @ L.T - K

@@ -20,6 +20,8 @@ k_j = σ_f² exp(−½ ‖(x̃ − z_j)/ℓ‖²), and
 
 from __future__ import annotations
 
+from typing import Any
+
 import torch
 
 from bemlearn.errors import CheckpointError
@@ -101,13 +103,14 @@ def _estimator_rounding(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
     if not state.n_estimators:
         return torch.zeros(x.shape[0], dtype=torch.float64)
     k = _kernel_row(state, x)
+    assert state.estimator_delta is not None  # filled by PredictorState.__post_init__
     shift = state.y_std * (k @ state.estimator_delta)
     err = state.n_support * _EPS * state.y_std * (k @ state.estimator_delta.abs())
     return (2 * shift.abs() * err + err**2).mean(-1)
 
 
 def verify_predictor(
-    predictor: object,
+    predictor: Any,
     state: PredictorState,
     *,
     n: int = 256,
@@ -151,6 +154,7 @@ def verify_predictor(
         mean, std = getattr(predictor, name)(x)
         ref_mean, ref_std, bound = reference_posterior(state, ref_x)
         if band:  # eq. (B1): c² σ² + Σ_{i < n_in} (s_i ∂μ/∂x_i)² + the estimator term
+            assert state.std_scale is not None  # filled by PredictorState.__post_init__
             ref_std = (state.std_scale**2 * ref_std.square() + band_extra_variance(state, ref_x, n_inputs=n_in)).sqrt()
             bound = bound * float(state.std_scale) ** 2 + _estimator_rounding(state, ref_x)
         dm = float((mean - ref_mean).abs().max())

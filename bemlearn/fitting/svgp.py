@@ -79,9 +79,9 @@ def fit_svgp(
     dtype = next(model.parameters()).dtype
     check_inputs(train_x, name="train_x", dim=model.dim, dtype=dtype)
     check_targets(train_y, name="train_y", n=train_x.shape[0], dtype=dtype)
-    for name, value in (("batch_size", batch_size), ("epochs", epochs)):
-        if value < 1:
-            raise ArgumentError(f"{name}: expected a positive integer, got {value}")
+    for name, count in (("batch_size", batch_size), ("epochs", epochs)):
+        if count < 1:
+            raise ArgumentError(f"{name}: expected a positive integer, got {count}")
     device = next(model.parameters()).device
     N = train_x.shape[0]
     model.train()
@@ -115,7 +115,11 @@ def fit_svgp(
                         yb = train_y[idx.to(train_y.device)].to(device)
                         ngd.zero_grad(set_to_none=True)
                         opt.zero_grad(set_to_none=True)
-                        loss = checked_loss(lambda xb=xb, yb=yb: -elbo(model(xb), yb))
+
+                        def batch_loss(xb: torch.Tensor = xb, yb: torch.Tensor = yb) -> torch.Tensor:
+                            return -elbo(model(xb), yb)
+
+                        loss = checked_loss(batch_loss)
                         loss.backward()
                         ngd.step()
                         opt.step()

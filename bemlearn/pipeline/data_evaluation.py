@@ -270,7 +270,7 @@ def bem_resolution(model: PredictorState | LearnedBEM, train: BEMDataset, *, max
     spread, bstd = float(mean.std(correction=0)), float(band.median())
     meta = train.meta
     unit = joint_unit(meta.kind_of(meta.unactuated))
-    inputs = []
+    inputs: list[dict[str, Any]] = []
     for i, name in enumerate(state.input_names[:-2]):
         prefix, joint = name.split("_", 1)
         share = abs(float(grad[i])) * float(amp[i])
