@@ -6,7 +6,7 @@ import dataclasses
 import logging
 from pathlib import Path
 
-from bemlearn.errors import ArgumentError
+from bemlearn.errors import ArgumentError, ConfigError
 
 __all__ = ["add_parser"]
 
@@ -45,6 +45,8 @@ def run(args) -> int:
     preflight(config=args.config, outputs=[args.out, ground_truth_path(args.out)] if args.out else [],
               out_dir=args.out.parent if args.out else Path("runs"), force=args.force)
     cfg = load_pipeline_config(args.config)
+    if cfg.robot is None:
+        raise ConfigError(f"{args.config}: collect needs a robot (a model to simulate); the config names only data")
     overrides = {k: v for k, v in (("n_trials", args.trials), ("seed", args.seed), ("workers", args.workers)) if v is not None}
     ccfg = dataclasses.replace(cfg.collect, **overrides)
     with claim_outputs(args.out.parent if args.out else None, entries=names, default_name="collect", force=args.force,

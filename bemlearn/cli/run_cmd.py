@@ -65,10 +65,12 @@ def _run(args) -> int:
     with claim_outputs(args.out, default_name=stem, force=args.force, keep_on_interrupt=["data.npz", "checkpoint.pt"],
                        what="run") as claimed:
         if app is not None:
+            assert app.run is not None  # checked above
             out = app.run(args.config, claimed, device=args.device, progress=not args.no_progress)
         else:
             from bemlearn.pipeline.run import run_pipeline
 
+            assert resolved is not None  # resolved above when no application runs
             out = run_pipeline(resolved, claimed, device=args.device, progress=not args.no_progress)
     print((out / "report.md").read_text())
     print(f"\nrun folder: {out}")
@@ -103,7 +105,7 @@ def _simulate(args) -> int:
     cfg = resolve_pipeline_config(args.config).config
     if cfg.robot is None:
         raise ConfigError(f"{args.config}: simulate needs a robot (a model to simulate); the config names only data")
-    pred = args.predictor or (Path(cfg.simulate.predictor) if getattr(cfg.simulate, "predictor", None) else None)
+    pred = args.predictor or (Path(cfg.simulate.predictor) if cfg.simulate.predictor else None)
     if pred is not None and pred.is_file() and (pred.parent / "checkpoint.pt").is_file():
         check_predictor_matches(pred, pred.parent / "checkpoint.pt")
     if args.gif:

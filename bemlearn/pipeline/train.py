@@ -192,6 +192,7 @@ class _Named:
 
     def __init__(self, robot, name: str) -> None:
         self.name, self.joint_names, self.unactuated_name = name, robot.joint_names, robot.unactuated_name
+        self.actuated_names = robot.actuated_names
 
 
 def _bem_figure(curves: dict, qu_name: str, unit: str = "rad"):

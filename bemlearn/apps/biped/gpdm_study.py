@@ -20,6 +20,7 @@ import json
 import logging
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -65,15 +66,18 @@ def fit_gpdm_logged(Q_list: list[np.ndarray], out_dir: str | Path, *, config: GP
     try:
         if threads is not None:
             torch.set_num_threads(threads)
-        model = fit_gpdm(Q_list, config=config, progress=progress,
-                         callback=lambda step, m: [writer.add_scalar(f"gpdm/{k}", v, step) for k, v in m.items()])
+        def log_metrics(step: int, m: dict[str, float]) -> None:
+            for k, v in m.items():
+                writer.add_scalar(f"gpdm/{k}", v, step)
+
+        model = fit_gpdm(Q_list, config=config, progress=progress, callback=log_metrics)
     finally:
         torch.set_num_threads(old)
         writer.close()
     seconds = time.perf_counter() - t0
     Q = np.concatenate(Q_list)
     chi, proj = torch.cat(model.latents), model.project(torch.from_numpy(Q))
-    metrics = {"c": model.c.tolist(), "c_normalized": model.c_normalized.detach().tolist(),
+    metrics: dict[str, Any] = {"c": model.c.tolist(), "c_normalized": model.c_normalized.detach().tolist(),
                "q_mean": model.q_mean.tolist(), "fit_seconds": seconds, "sequences": [len(q) for q in Q_list],
                "corr_latent_projection": compare_latents(chi, proj).corr, **gpdm_metrics(model)}
     from bemlearn.files import atomic_path, atomic_write_text
