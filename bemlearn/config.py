@@ -329,7 +329,7 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     if len(raw) > MAX_CONFIG_BYTES:
         raise ConfigError(f"{path}: larger than {MAX_CONFIG_BYTES >> 20} MiB; expected a YAML config")
     try:
-        data = yaml.load(raw.decode("utf-8"), Loader=_StrictLoader)
+        data = yaml.load(raw.decode("utf-8"), Loader=_StrictLoader)  # safe: a SafeLoader subclass
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not a UTF-8 text file (byte {exc.start}); expected a YAML config") from None
     except _StrictYAMLError as exc:

@@ -64,7 +64,7 @@ def check_interrupt() -> None:
         raise KeyboardInterrupt
 
 
-def _handler(signum, frame) -> None:
+def _handler(signum, frame) -> None:  # the signal handler signature
     _state["requested"] = True
     if _state["signal"] is None:
         _state["signal"] = signal.Signals(signum)

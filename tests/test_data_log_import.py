@@ -319,7 +319,7 @@ def test_docs_python_api_snippet_runs(rig, tmp_path, monkeypatch):
     main_write(traj, tmp_path / "rig.npz")
     monkeypatch.chdir(tmp_path)
     code = compile(snippet.replace("DatasetConfig()", "DatasetConfig(n_points=150)"), "log-import.md", "exec")
-    exec(code, {})
+    exec(code, {})  # the documented example, run as written
     assert (tmp_path / "bem_slices.png").stat().st_size > 10_000
 
 
