@@ -83,7 +83,7 @@ def _discover() -> None:
     for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
         try:
             app = ep.load()
-        except Exception as exc:  # a broken plugin must not break the core
+        except Exception as exc:  # noqa: BLE001 - a broken plugin must not break the core
             log.warning("application %r (%s) failed to load: %s", ep.name, ep.value, exc)
             continue
         if not isinstance(app, Application):

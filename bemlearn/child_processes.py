@@ -17,6 +17,7 @@ wake-up fd (inherited through ``fork``): the parent handles Ctrl-C and ends its 
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import os
@@ -59,10 +60,8 @@ def die_with_parent(parent_pid: int, *, poll_s: float = 0.25) -> None:
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # the parent handles Ctrl-C and ends the workers
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # terminate() from the parent ends the worker at once
-    try:
+    with contextlib.suppress(ValueError):  # not the main thread
         signal.set_wakeup_fd(-1)                   # the parent's wake-up pipe is the parent's
-    except ValueError:  # pragma: no cover - not the main thread
-        pass
     _set_parent_death_signal(signal.SIGKILL)
     if os.getppid() != parent_pid:                 # the parent died before the kernel was told
         os._exit(1)

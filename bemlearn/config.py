@@ -33,7 +33,7 @@ import types
 import typing
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import yaml
 
@@ -43,7 +43,10 @@ from bemlearn.files import atomic_write_text
 __all__ = ["ConfigError", "from_dict", "to_dict", "load_yaml", "save_yaml", "replace_path", "Limit", "config_limits",
            "show_value", "MAX_NODES", "MAX_CONFIG_BYTES", "set_dotted", "check_dotted_key"]
 
-T = TypeVar("T")
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+T = TypeVar("T", bound="DataclassInstance")
 
 #: Values (mapping entries, list items, scalars) a YAML document may expand to, aliases counted each time used.
 MAX_NODES = 100_000
@@ -144,7 +147,7 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
         if value not in args:
             raise ConfigError(f"{where}: expected one of {list(args)}, got {show_value(value)}")
         return value
-    if dataclasses.is_dataclass(tp):
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             raise ConfigError(f"{where}: expected a mapping for {tp.__name__}, got {show_value(value)}")
         return from_dict(tp, value, where=where)
@@ -326,7 +329,7 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     if len(raw) > MAX_CONFIG_BYTES:
         raise ConfigError(f"{path}: larger than {MAX_CONFIG_BYTES >> 20} MiB; expected a YAML config")
     try:
-        data = yaml.load(raw.decode("utf-8"), Loader=_StrictLoader)  # noqa: S506 - a SafeLoader subclass
+        data = yaml.load(raw.decode("utf-8"), Loader=_StrictLoader)  # safe: a SafeLoader subclass
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not a UTF-8 text file (byte {exc.start}); expected a YAML config") from None
     except _StrictYAMLError as exc:
@@ -396,12 +399,12 @@ def check_dotted_key(cls: type, dotted: str, *, where: str = "config") -> None:
         tp = typing.get_type_hints(inner)[part]
 
 
-def _dataclass_of(tp: Any) -> type | None:
+def _dataclass_of(tp: Any) -> type[DataclassInstance] | None:
     """``tp`` itself, or the one dataclass of an optional ``X | None``; else ``None``."""
-    if dataclasses.is_dataclass(tp):
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         return tp
     if typing.get_origin(tp) in (typing.Union, types.UnionType):
-        found = [a for a in typing.get_args(tp) if dataclasses.is_dataclass(a)]
+        found = [a for a in typing.get_args(tp) if isinstance(a, type) and dataclasses.is_dataclass(a)]
         return found[0] if len(found) == 1 else None
     return None
 

@@ -64,7 +64,7 @@ def check_interrupt() -> None:
         raise KeyboardInterrupt
 
 
-def _handler(signum, frame) -> None:  # noqa: ARG001 - signal handler signature
+def _handler(signum, frame) -> None:  # the signal handler signature
     _state["requested"] = True
     if _state["signal"] is None:
         _state["signal"] = signal.Signals(signum)
@@ -106,7 +106,7 @@ class _Watcher:
         self.read_fd, self.write_fd = os.pipe()
         os.set_blocking(self.write_fd, False)
         try:
-            self.previous_fd = signal.set_wakeup_fd(self.write_fd, warn_on_full_buffer=False)
+            self.previous_fd: int | None = signal.set_wakeup_fd(self.write_fd, warn_on_full_buffer=False)
         except ValueError:  # pragma: no cover - not the main thread
             self.previous_fd = None
         self.thread = threading.Thread(target=self._run, name="bemlearn-signal-watcher", daemon=True)

@@ -48,7 +48,7 @@ from bemlearn.files import INTERNAL_PREFIX, check_writable, new_run_dir, write_p
 try:  # POSIX
     import fcntl
 except ImportError:  # pragma: no cover - Windows: the lock degrades to the record's PID
-    fcntl = None
+    fcntl = None  # type: ignore[assignment]  # checked before every use
 
 __all__ = ["claim_outputs", "folder_lock", "LOCK_NAME", "BACKUP_PREFIX"]
 

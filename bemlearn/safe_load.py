@@ -163,6 +163,7 @@ def load_script_module(source: str | os.PathLike[str] | bytes, extra_files: dict
 
     import torch
 
+    f: io.BytesIO | str
     if isinstance(source, bytes):
         path, f = where or "<TorchScript bytes>", io.BytesIO(source)
     else:

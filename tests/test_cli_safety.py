@@ -1,16 +1,16 @@
 """Commands never lose a user's work: --force, new run folders, preflight, stale predictors (issue 16)."""
 
 import time
+from pathlib import Path
 
 import pytest
 import yaml
+from conftest import furuta_section
 
 from bemlearn.cli.main import main
-from bemlearn.sim.collect import collect
-from conftest import furuta_section
 from bemlearn.data.trajectory_io import write_trajectory
-from bemlearn.export.staleness import check_predictor_matches, predictor_checkpoint_sha256
-from bemlearn.export.staleness import file_sha256
+from bemlearn.export.staleness import check_predictor_matches, file_sha256, predictor_checkpoint_sha256
+from bemlearn.sim.collect import collect
 
 
 @pytest.fixture(scope="module")
@@ -18,7 +18,7 @@ def small(tmp_path_factory):
     root = tmp_path_factory.mktemp("cli")
     data, _ = collect("furuta", furuta_section("collect", n_trials=6, duration_s=6.0, workers=1, seed=1), progress=False)
     path = write_trajectory(data, root / "data.npz")
-    cfg = yaml.safe_load(open("configs/furuta.yaml"))
+    cfg = yaml.safe_load(Path("configs/furuta.yaml").read_text())
     cfg["dataset"]["n_points"] = 120
     cfg["train"]["max_iter"] = 15
     cfg["collect"].update(n_trials=2, duration_s=2.0, workers=1)
@@ -45,7 +45,7 @@ def test_collect_refuses_to_replace_a_data_file(small, capsys, tmp_path):
 
 
 def test_train_into_an_existing_run_refuses_then_force_removes_stale_predictors(small, capsys, tmp_path):
-    root, cfg, data, run = small
+    _root, cfg, data, run = small
     import shutil
 
     copy = tmp_path / "run"
@@ -145,7 +145,7 @@ def test_failed_train_leaves_no_folder(small, capsys, tmp_path):
 
 
 def test_default_output_is_a_new_timestamped_folder(small, tmp_path, monkeypatch, capsys):
-    _, cfg, data, _ = small
+    _, cfg, _data, _ = small
     monkeypatch.chdir(tmp_path)
     (tmp_path / "configs").mkdir()
     assert main(["collect", str(cfg), "--no-progress", "--trials", "1"]) == 0

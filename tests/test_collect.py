@@ -6,11 +6,11 @@ import dataclasses
 
 import numpy as np
 import pytest
+from conftest import furuta_section
 
-from bemlearn.sim.collect import CollectConfig, collect
 from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
 from bemlearn.data.trajectory_io import ground_truth_path, read_ground_truth, read_trajectory, write_trajectory
-from conftest import furuta_section
+from bemlearn.sim.collect import CollectConfig, collect
 
 SMALL = furuta_section("collect", n_trials=4, duration_s=2.0, workers=1, seed=3)
 

@@ -85,7 +85,7 @@ def _leaves():
 def test_no_numeric_key_takes_a_non_finite_or_huge_value(tmp_path, bad):
     """Every numeric key of every section (not only the ones in CASES)."""
     base = yaml.safe_load((ROOT / "configs/furuta.yaml").read_text())
-    for key, value in _leaves().items():
+    for key in _leaves():
         raw = yaml.safe_load(yaml.safe_dump(base))
         node = raw
         *path, last = key.split(".")

@@ -7,10 +7,10 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from test_data_helpers import make_trajectory
 
 from bemlearn.cli.main import main
 from bemlearn.data import read_trajectory, write_trajectory
-from test_data_helpers import make_trajectory
 
 
 @pytest.fixture

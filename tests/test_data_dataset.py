@@ -8,6 +8,7 @@ import logging
 import numpy as np
 import pytest
 import torch
+from test_data_helpers import QSTEP, make_trajectory
 
 from bemlearn.config import ConfigError, from_dict
 from bemlearn.data import (
@@ -20,7 +21,6 @@ from bemlearn.data import (
 )
 from bemlearn.data.derivative_choice import estimate_states
 from bemlearn.data.gaussian_derivative import gaussian_kernels
-from test_data_helpers import QSTEP, make_trajectory
 
 BIPED = ("q1", "q2", "q3", "q4", "q5")
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_data_helpers import QSTEP, make_trajectory
 
 from bemlearn.config import ConfigError
 from bemlearn.data import (
@@ -22,7 +23,6 @@ from bemlearn.data import (
     estimate_derivatives,
     make_estimator,
 )
-from test_data_helpers import QSTEP, make_trajectory
 
 RATE = 400.0
 

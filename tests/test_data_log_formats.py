@@ -18,8 +18,8 @@ from bemlearn.cli.main import main
 from bemlearn.config import ConfigError, from_dict, to_dict
 from bemlearn.data import TrajectoryFormatError, detect_quantization_step, read_trajectory, write_trajectory
 from bemlearn.data.import_map import ImportMap, load_import_map
-from bemlearn.data.log_table import detect_delimiter
 from bemlearn.data.log_import import import_logs
+from bemlearn.data.log_table import detect_delimiter
 from bemlearn.data.rig_logs import RigLogStyle, log_columns, rig_log_map, write_rig_logs
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "furuta_excitation.npz"

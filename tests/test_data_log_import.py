@@ -19,12 +19,12 @@ from bemlearn.data import (
     detect_quantization_step,
     read_trajectory,
 )
-from bemlearn.sim.collect import collect
 from bemlearn.data.import_map import ImportMap, load_import_map
 from bemlearn.data.log_import import import_logs
 from bemlearn.data.rig_logs import RigLogStyle, rig_log_map, write_rig_logs
 from bemlearn.data.sensors import SensorConfig
 from bemlearn.errors import ArgumentError
+from bemlearn.sim.collect import collect
 
 STEP = 2 * math.pi / 2048
 
@@ -319,7 +319,7 @@ def test_docs_python_api_snippet_runs(rig, tmp_path, monkeypatch):
     main_write(traj, tmp_path / "rig.npz")
     monkeypatch.chdir(tmp_path)
     code = compile(snippet.replace("DatasetConfig()", "DatasetConfig(n_points=150)"), "log-import.md", "exec")
-    exec(code, {})  # noqa: S102 - the documented example, run as written
+    exec(code, {})  # the documented example, run as written
     assert (tmp_path / "bem_slices.png").stat().st_size > 10_000
 
 

@@ -13,6 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
+from test_data_helpers import QSTEP, make_trajectory
 
 from bemlearn.data import (
     Trajectory,
@@ -26,7 +27,6 @@ from bemlearn.data import (
     validate,
     write_trajectory,
 )
-from test_data_helpers import QSTEP, make_trajectory
 
 ARRAYS = ("t", "trial", "q", "u")
 HYP = settings(

@@ -88,7 +88,7 @@ def test_kernels_reproduce_polynomials_and_sines():
     q = np.stack([1.0 + 2.0 * t - 0.75 * t**2, np.sin(3.0 * t)], axis=1)
     qs, qd, qdd = est.filter(q, sample_rate_hz=400.0)
     inner = slice(K, -K)
-    w0, w1, w2 = gaussian_kernels(0.05, 400.0)
+    w0, _w1, _w2 = gaussian_kernels(0.05, 400.0)
     m2 = float(np.sum(w0 * (np.arange(-K, K + 1) / 400.0) ** 2))              # the kernel's second moment
     np.testing.assert_allclose(qs[inner, 0], q[inner, 0] - 0.75 * m2, atol=1e-10)   # S[t²] = t² + m2
     np.testing.assert_allclose(qd[inner, 0], 2.0 - 1.5 * t[inner], atol=1e-10)
@@ -152,7 +152,7 @@ def test_sigma_choice_reports_noise_and_short_trials(cart):
 
 def test_estimate_states_marks_edges_and_short_trials(cart):
     est = GaussianDerivative(sigma_s=0.05)
-    q, qd, qdd, valid = estimate_states(cart, est)
+    _q, _qd, _qdd, valid = estimate_states(cart, est)
     K = est.edge_samples(RATE)
     first = cart.trial_slices()[0].rows
     assert not valid[first.start:first.start + K].any() and valid[first.start + K:first.stop - K].all()

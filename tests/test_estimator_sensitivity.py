@@ -148,7 +148,7 @@ def test_central_differences_give_no_estimator_term():
 def test_rows_in_a_trial_too_short_for_the_chosen_estimator_are_an_error(bad):
     traj = _trajectory(short_trial=True)
     cfg = DatasetConfig(derivative="savgol", derivative_options={"window": 21, "polyorder": 3}, n_points=100, val_fraction=0.25)
-    tr, st = _fitted(traj, cfg)
+    _tr, st = _fitted(traj, cfg)
     wide = SavitzkyGolay(window=81, polyorder=3)   # longer than the 60-sample trial
     rows = torch.as_tensor(np.flatnonzero(traj.trial == 3)[:10])
     with pytest.raises(ValueError, match="trial 3 holds training rows"):

@@ -398,7 +398,7 @@ def test_c_band_with_estimator_term_matches_torchscript(estimator_case, full):
 
 def test_estimator_term_header_and_constants(estimator_case):
     """N_ESTIMATORS, one shared E array; without input noise no gradient code (BANDED 0), the E term still there."""
-    state, meta, lib, ts, noise, tmp = estimator_case
+    state, _meta, lib, _ts, noise, tmp = estimator_case
     text, header = (tmp / "bem_predictor.c").read_text(), (tmp / "bem_predictor.h").read_text()
     assert f"#define BEM_N_ESTIMATORS {N_ESTIMATORS}" in header
     assert f"static const double bem_E[{N_ESTIMATORS * state.n_support}]" in text and "bem_bem_E" not in text

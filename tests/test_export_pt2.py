@@ -9,10 +9,9 @@ import textwrap
 import pytest
 import torch
 
-from tests.isolation import BLOCK_BEMLEARN
-
 from bemlearn.bench.predict_bench import synthetic_posterior
 from bemlearn.export import BEMPredictor, load_pt2_predictor, save_pt2, script_predictor
+from tests.isolation import BLOCK_BEMLEARN
 
 F64 = torch.float64
 

@@ -17,10 +17,9 @@ from bemlearn.files import atomic_path, atomic_write_text, check_outputs, check_
 def test_atomic_write_replaces_only_on_success(tmp_path):
     target = tmp_path / "metrics.json"
     atomic_write_text(target, "old")
-    with pytest.raises(RuntimeError, match="boom"):
-        with atomic_path(target) as tmp:
-            tmp.write_text("half")
-            raise RuntimeError("boom")
+    with pytest.raises(RuntimeError, match="boom"), atomic_path(target) as tmp:
+        tmp.write_text("half")
+        raise RuntimeError("boom")
     assert target.read_text() == "old"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["metrics.json"]  # no temporary left
     with atomic_path(target) as tmp:
@@ -72,16 +71,14 @@ def test_new_run_dir_is_never_an_existing_folder(tmp_path):
 
 
 def test_created_dir_removes_what_a_failed_command_created(tmp_path):
-    with pytest.raises(ValueError):
-        with created_dir(tmp_path / "runs" / "x") as out:
-            (out / "config.yaml").write_text("robot: furuta\n")
-            raise ValueError("bad")
+    with pytest.raises(ValueError), created_dir(tmp_path / "runs" / "x") as out:
+        (out / "config.yaml").write_text("robot: furuta\n")
+        raise ValueError("bad")
     assert not (tmp_path / "runs").exists()
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "keep.txt").write_text("x")
-    with pytest.raises(ValueError):
-        with created_dir(tmp_path / "mine"):
-            raise ValueError("bad")
+    with pytest.raises(ValueError), created_dir(tmp_path / "mine"):
+        raise ValueError("bad")
     assert (tmp_path / "mine" / "keep.txt").is_file()
     with pytest.raises(KeyboardInterrupt):  # Ctrl-C keeps the best state written on purpose
         with created_dir(tmp_path / "run2") as out:
@@ -113,4 +110,4 @@ def test_one_exception_family_still_value_errors():
     from bemlearn.data.trajectory import TrajectoryFormatError as T1
     from bemlearn.robots.mujoco_robot import RobotModelError as R1
 
-    assert (C1, T1, R1) == (ConfigError, TrajectoryFormatError, RobotModelError)
+    assert (ConfigError, TrajectoryFormatError, RobotModelError) == (C1, T1, R1)

@@ -53,14 +53,14 @@ def test_derivatives_match_finite_differences():
         hp, hm = gait.evaluate(s + eps)[0], gait.evaluate(s - eps)[0]
         np.testing.assert_allclose(h1, (hp - hm) / (2 * eps), rtol=0, atol=1e-7)
         np.testing.assert_allclose(h2, (hp - 2 * h + hm) / eps**2, rtol=0, atol=2e-4)
-    qa, qad, qadd = gait.reference(0.4, 2.0, 3.0)
+    _qa, qad, qadd = gait.reference(0.4, 2.0, 3.0)
     h, h1, h2 = gait.evaluate(0.4)
     np.testing.assert_allclose(qad, 2.0 * h1, atol=1e-14)
     np.testing.assert_allclose(qadd, 4.0 * h2 + 3.0 * h1, atol=1e-13)
 
 
 def test_endpoints_are_pinned_and_evaluation_is_clamped():
-    s, q = _poly_samples()
+    _s, q = _poly_samples()
     gait = BezierGait.fit(q, degree=4, phase_weights=C)
     a = np.asarray(gait.coefficients)
     np.testing.assert_allclose(a[:, 0], q[0, 1:], atol=1e-15)

@@ -7,7 +7,7 @@ import torch
 
 from bemlearn.config import ConfigError, from_dict
 from bemlearn.fitting import GPConfig, build_gp, fit_svgp, select_inducing_points
-from bemlearn.models import ExactBEMGP, SGPRBEMGP, SVGPBEMGP, gaussian_likelihood, gp_class, predict
+from bemlearn.models import SGPRBEMGP, SVGPBEMGP, ExactBEMGP, gaussian_likelihood, gp_class, predict
 
 F64 = torch.float64
 

@@ -69,7 +69,7 @@ def test_exact_gp_duplicated_inputs_tiny_noise(caplog: pytest.LogCaptureFixture)
 
 
 def test_exact_fit_on_near_singular_data_stays_finite(caplog: pytest.LogCaptureFixture) -> None:
-    x, y, model, lik = _near_singular_exact_gp()
+    _x, _y, model, lik = _near_singular_exact_gp()
     with caplog.at_level(logging.WARNING):
         result = fit_exact(model, lik, max_iter=5)
     assert result.steps >= 1

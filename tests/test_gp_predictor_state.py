@@ -6,8 +6,8 @@ import pytest
 import torch
 
 from bemlearn.fitting import GPConfig, build_gp, fit_svgp, optimal_variational, set_hyperparameters
-from bemlearn.models import PredictorState, SGPRBEMGP, SVGPBEMGP, gaussian_likelihood, predict, predictor_state
 from bemlearn.fitting.init import select_inducing_points
+from bemlearn.models import SGPRBEMGP, SVGPBEMGP, PredictorState, gaussian_likelihood, predict, predictor_state
 
 F64 = torch.float64
 X_MEAN = torch.tensor([0.5, -1.0, 2.0, 0.0, 3.0], dtype=F64)

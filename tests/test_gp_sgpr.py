@@ -8,7 +8,7 @@ import gpytorch
 import torch
 
 from bemlearn.fitting import optimal_variational, select_inducing_points, set_hyperparameters
-from bemlearn.models import ExactBEMGP, SGPRBEMGP, SVGPBEMGP, cholesky_policy, gaussian_likelihood, predict
+from bemlearn.models import SGPRBEMGP, SVGPBEMGP, ExactBEMGP, cholesky_policy, gaussian_likelihood, predict
 from bemlearn.models.kernels import se_kernel
 
 F64 = torch.float64

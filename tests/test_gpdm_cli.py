@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from bemlearn.cli.main import main
-from bemlearn.data import read_ground_truth, read_trajectory, write_trajectory
 from bemlearn.apps.biped.human_gait import HUMAN_GAIT_CSV
 from bemlearn.apps.biped.walker import WalkConfig, simulate_walk, walk_trajectories
+from bemlearn.cli.main import main
+from bemlearn.data import read_ground_truth, read_trajectory, write_trajectory
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "biped.yaml"

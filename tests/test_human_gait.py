@@ -103,7 +103,7 @@ def test_loaded_recording_cycle_and_half_cycle_step():
     assert g.t.shape == (301,) and int(g.interpolated.sum()) == 11
     hs = g.heel_strikes()
     assert len(hs) == 3 and g.cycle_period() == pytest.approx(1.1957, abs=1e-3)
-    s, qa, trunk = g.step_profile(21)
+    _s, qa, _trunk = g.step_profile(21)
     # half-cycle assumption: the swing leg starts where the stance leg ends and vice versa
     np.testing.assert_allclose(qa[0, 2:], qa[-1, :2], atol=1e-12)
     np.testing.assert_allclose(qa[-1, 2:], qa[0, :2], atol=1e-12)

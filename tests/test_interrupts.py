@@ -6,8 +6,8 @@ The 3,000-point measurement is ``bemlearn bench sigint``; here an 800-point fit 
 import math
 import signal
 
-import pytest
 import numpy as np
+import pytest
 import torch
 
 from bemlearn import interrupts
@@ -102,7 +102,7 @@ def test_lbfgs_restarts_from_the_best_point_after_a_numerical_failure():
             return x.sum() * float("nan")
         return ((x - 1) ** 2).sum() + 0.1 * (x**4).sum()
 
-    final, evals, stop, _ = minimize(loss, [x], optimizer="lbfgs", max_iter=100, lr=1.0, tol=1e-12, metrics_fn=dict)
-    root = [r.real for r in np.roots([0.4, 0.0, 2.0, -2.0]) if abs(r.imag) < 1e-12][0]
+    _final, _evals, stop, _ = minimize(loss, [x], optimizer="lbfgs", max_iter=100, lr=1.0, tol=1e-12, metrics_fn=dict)
+    root = next(r.real for r in np.roots([0.4, 0.0, 2.0, -2.0]) if abs(r.imag) < 1e-12)
     assert stop == "converged" and calls["n"] > 3
     assert abs(float(x) - root) < 1e-6

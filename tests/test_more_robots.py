@@ -94,9 +94,8 @@ def _loop_config(name: str, source: str):
 
 
 def _short_loop(name: str, source: str) -> dict:
-    from bemlearn.sim.closed_loop import simulate
-
     from bemlearn.robots import load
+    from bemlearn.sim.closed_loop import simulate
 
     return simulate(load(str(ROBOTS / f"{name}.xml")), _loop_config(name, source), progress=False).metrics
 

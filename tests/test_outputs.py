@@ -155,7 +155,7 @@ def test_different_files_of_one_folder_are_written_side_by_side(tmp_path):
 # ---------------------------------------------------------------- failed --force / --resume
 
 def test_a_failed_train_force_leaves_the_run_as_it_was(trained, tmp_path, monkeypatch, capsys):
-    cfg, run = trained
+    _cfg, run = trained
     copy = _copy(run, tmp_path / "run")
     before = _tree(copy)
 
@@ -211,7 +211,7 @@ def test_an_interrupted_train_force_keeps_its_resumable_checkpoint(trained, tmp_
 
 
 def test_an_interrupted_train_force_before_its_checkpoint_restores_the_run(trained, tmp_path, monkeypatch):
-    cfg, run = trained
+    _cfg, run = trained
     copy = _copy(run, tmp_path / "run")
     before = _tree(copy)
 
@@ -282,16 +282,14 @@ def test_a_killed_new_run_is_reported_as_incomplete(tmp_path):
 
 
 def test_a_failed_command_removes_the_folder_it_created_and_keeps_a_users_folder(tmp_path):
-    with pytest.raises(ValueError):
-        with claim_outputs(tmp_path / "a" / "b", what="run") as out:
-            atomic_write_text(out / "x", "x")
-            raise ValueError("boom")
+    with pytest.raises(ValueError), claim_outputs(tmp_path / "a" / "b", what="run") as out:
+        atomic_write_text(out / "x", "x")
+        raise ValueError("boom")
     assert not (tmp_path / "a").exists()
     mine = tmp_path / "mine"
     mine.mkdir()
     (mine / "notes.txt").write_text("keep")
-    with pytest.raises(ValueError):
-        with claim_outputs(mine, entries=["data.npz"]) as out:
-            atomic_write_text(out / "data.npz", "x")
-            raise ValueError("boom")
+    with pytest.raises(ValueError), claim_outputs(mine, entries=["data.npz"]) as out:
+        atomic_write_text(out / "data.npz", "x")
+        raise ValueError("boom")
     assert _tree(mine) == {"notes.txt": b"keep"}

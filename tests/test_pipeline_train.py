@@ -18,11 +18,11 @@ import yaml
 from conftest import furuta_section
 
 from bemlearn.cli.main import main
-from bemlearn.sim.collect import collect
 from bemlearn.data.trajectory_io import write_trajectory
 from bemlearn.export import load_learned_bem
 from bemlearn.models.learned_bem import LearnedBEM, srinivas_kappa
 from bemlearn.pipeline.train import train_run
+from bemlearn.sim.collect import collect
 
 #: run folder → the normalized training set (X̃, ỹ) its fit saw, recorded by the fixture.
 TRAIN_SET: dict = {}

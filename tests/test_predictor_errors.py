@@ -16,11 +16,10 @@ import textwrap
 import pytest
 import torch
 
-from tests.isolation import BLOCK_BEMLEARN
-
 from bemlearn.bench.predict_bench import synthetic_posterior
 from bemlearn.errors import BemlearnError, PredictorInputError
 from bemlearn.export import BEMPredictor, load_pt2_predictor, save_pt2, save_torchscript
+from tests.isolation import BLOCK_BEMLEARN
 
 F64 = torch.float64
 

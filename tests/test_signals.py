@@ -49,11 +49,10 @@ def test_sigterm_is_handled_like_sigint_and_a_second_signal_exits():
 def test_sigterm_inside_an_optimizer_loop_only_sets_the_flag():
     previous = signal.signal(signal.SIGTERM, _raise_unhandled)
     try:
-        with interrupts.sigint_handling():
-            with interrupts.interruptible():
-                signal.raise_signal(signal.SIGTERM)  # recorded, not raised: the loop stops at its next check
-                with pytest.raises(KeyboardInterrupt):
-                    interrupts.check_interrupt()
+        with interrupts.sigint_handling(), interrupts.interruptible():
+            signal.raise_signal(signal.SIGTERM)  # recorded, not raised: the loop stops at its next check
+            with pytest.raises(KeyboardInterrupt):
+                interrupts.check_interrupt()
     finally:
         signal.signal(signal.SIGTERM, previous)
 

@@ -124,7 +124,7 @@ def test_explicit_S_loses_the_variance_when_K_ZZ_is_ill_conditioned():
 
 def test_sgpr_factor_is_I_minus_B_inverse(frozen):
     """C of an SGPR is I − B⁻¹ (eigenvalues in [0, 1)); L Lᵀ is K_ZZ up to the jitter on the diagonal."""
-    model, _, _, state = frozen
+    _model, _, _, state = frozen
     lam = torch.linalg.eigvalsh(state.S_inner)
     if state.kind == "sgpr":
         assert float(lam.min()) >= -1e-12 and float(lam.max()) < 1.0
@@ -136,7 +136,7 @@ def test_sgpr_factor_is_I_minus_B_inverse(frozen):
 
 @pytest.fixture(scope="module", params=["sgpr", "svgp"])
 def exported(request, tmp_path_factory):
-    model, lik, x, state = (_sgpr if request.param == "sgpr" else _svgp)(30.0)
+    _model, _lik, x, state = (_sgpr if request.param == "sgpr" else _svgp)(30.0)
     meta = _metadata(state, 1)
     eager = BEMPredictor(state, meta)
     tmp = tmp_path_factory.mktemp(f"factored-{request.param}")
@@ -158,7 +158,7 @@ def test_exported_factored_matches_eager_and_reference(exported):
     assert eager.full.factored and eager.full.triangular and eager.bem.factored
     q = _queries(state, x)
     ref_mean, ref_std = state.predict_reference(q)
-    vref_mean, vref_std, bound = reference_posterior(state, q)
+    _vref_mean, vref_std, bound = reference_posterior(state, q)
     assert bound == pytest.approx(64 * M * EPS * float(torch.linalg.matrix_norm(state.S_inner, ord=2)) * OUTPUTSCALE
                                   * float(state.y_std) ** 2, rel=1e-12)
     var_tol = STD_RTOL * ref_std.square() + _bound(state) * float(state.y_std) ** 2
@@ -192,7 +192,7 @@ def test_c_factored_matches_torchscript(exported):
     lib = CPredictorLibrary(compile_shared([files[1]], tmp / "libbem.so", flags=(*STRICT_FLAGS, "-O2")))
     q = np.ascontiguousarray(_queries(state, x).numpy())
     for latent, ref in ((True, scripted.predict_full_latent), (False, scripted.predict_full)):
-        mean, std, codes = lib.forward(q, full=True, latent=latent)
+        mean, std, _codes = lib.forward(q, full=True, latent=latent)
         ref_mean, ref_std = (t.numpy() for t in ref(torch.from_numpy(q)))
         var_tol = STD_RTOL * ref_std**2 + _bound(state) * float(state.y_std) ** 2
         assert np.abs(mean - ref_mean).max() <= MEAN_ATOL

@@ -49,7 +49,7 @@ def test_a_failed_cell_is_retried_once_then_recorded_and_the_sweep_goes_on(seria
     assert fail.status == "failed" and fail.attempt == 2
     assert fail.error.startswith("TrajectoryFormatError: choose_sigma: ") and "fewer than 10 samples inside" in fail.error
     assert "Traceback" in fail.traceback and "build_datasets" in fail.traceback
-    assert ok.status == "ok" and ok.attempt == 1 and ok.pid == os.getpid() and 0 < ok.cpu_s
+    assert ok.status == "ok" and ok.attempt == 1 and ok.pid == os.getpid() and ok.cpu_s > 0
     started = [e["cell"] for e in _events(out) if e["event"] == "started"]
     assert started.count(bad.cell_id) == 2 and started.count(good.cell_id) == 1
     # the ok cell is the folder `bemlearn collect` + `bemlearn train` write, plus cell.json and cell.log
@@ -64,7 +64,7 @@ def test_a_failed_cell_is_retried_once_then_recorded_and_the_sweep_goes_on(seria
 
 
 def test_results_have_one_row_per_cell_with_grid_values_status_and_metrics(serial):
-    out, result = serial
+    out, _result = serial
     header = (out / "results.csv").read_text().splitlines()[0].split(",")
     assert header[:5] == ["cell", "index", "dataset.qu_window", "status", "verdict"]
     rows = _results(out)

@@ -65,7 +65,7 @@ def test_limits_of_the_documented_table(metrics, status, check):
 def test_worst_first_and_exit_status():
     v = judge_run({**_design(gain=0.9), "fit": {"stop_reason": "max_iter", "steps": 100},
                    "closed_loop": {"predictor": {"fell": True, "duration_s": 1.0}}})
-    assert v.status == "unusable" and [f.severity for f in v.findings][0] == "unusable"
+    assert v.status == "unusable" and next(f.severity for f in v.findings) == "unusable"
     assert v.exit_status() == EXIT_UNUSABLE == 3
     d = judge_run(_design(gain=0.9))
     assert d.exit_status() == 0 and d.exit_status(strict=True) == EXIT_DEGRADED_STRICT != 0

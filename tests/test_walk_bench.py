@@ -5,8 +5,8 @@ from pathlib import Path
 import pytest
 
 from bemlearn.apps.biped.walk_bench import WalkBenchRow, format_walk_bench, run_walk_bench
-from bemlearn.cli import main
 from bemlearn.apps.biped.walker import WalkConfig, simulate_walk
+from bemlearn.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 

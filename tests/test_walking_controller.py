@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bemlearn.control.bem_sources import ModelBEM, ZeroBEM
-from bemlearn.apps.biped.gait import GaitConfig, build_gait, stance_frame
 from bemlearn.apps.biped.controller import WalkingController, WalkingGains
+from bemlearn.apps.biped.gait import GaitConfig, build_gait, stance_frame
+from bemlearn.control.bem_sources import ModelBEM, ZeroBEM
 from bemlearn.robots import load
 
 

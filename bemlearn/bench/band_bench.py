@@ -54,6 +54,7 @@ def run_band_bench(runs: list[str | Path], *, progress=print) -> list[dict]:
         if not (run / "config.yaml").is_file():
             raise ArgumentError(f"{run}: not a run folder (no config.yaml; expected the output of `bemlearn run` or `bemlearn train`)")
         state = load_checkpoint(run).predictor_state
+        assert state.std_scale is not None  # filled by PredictorState.__post_init__
         cfg = load_pipeline_config(run / "config.yaml")
         robot, _ = run_truth_robot(run)
         x, qu = reference_queries(robot, cfg.evaluate)

@@ -24,6 +24,7 @@ import subprocess
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal, cast
 
 import torch
 
@@ -31,10 +32,11 @@ from bemlearn.bench.predict_bench import synthetic_posterior
 from bemlearn.errors import EnvironmentProblem
 from bemlearn.export.c_build import find_cc
 from bemlearn.export.c_source import c_sources
+from bemlearn.models.predictor_state import GPKind
 
 __all__ = ["Footprint", "measure_footprints", "format_footprints", "SIZES"]
 
-SIZES = {"exact": (100, 250, 500, 1000), "sgpr": (64, 128, 256, 512), "svgp": (64, 128, 256, 512)}
+SIZES: dict[str, tuple[int, ...]] = {"exact": (100, 250, 500, 1000), "sgpr": (64, 128, 256, 512), "svgp": (64, 128, 256, 512)}
 
 
 @dataclass(frozen=True)
@@ -60,7 +62,7 @@ class Footprint:
         return self.code + self.rodata_mean + self.rodata_std
 
 
-def _sparse_state(kind: str, M: int, seed: int = 0):
+def _sparse_state(kind: GPKind, M: int, seed: int = 0):
     """A synthetic sgpr/svgp posterior: M support points, S = K⁻¹ − K⁻¹ S_u K⁻¹ with S_u = ½ K, held
     factored as trained sparse posteriors are: S = L⁻ᵀ C L⁻¹, L Lᵀ = K, C = ½ I."""
     state, meta = synthetic_posterior(n_train=M, seed=seed, noise=1e-3)
@@ -88,7 +90,7 @@ def _stack_frames(su: Path) -> dict[str, int]:
     return out
 
 
-def measure_footprints(sizes: dict[str, tuple[int, ...]] = SIZES, dtypes: tuple[str, ...] = ("float64", "float32")) -> list[Footprint]:
+def measure_footprints(sizes: dict[str, tuple[int, ...]] = SIZES, dtypes: tuple[Literal["float64", "float32"], ...] = ("float64", "float32")) -> list[Footprint]:
     """Compile and measure every (kind, M, dtype); needs ``cc`` and binutils ``size``."""
     cc = find_cc()
     if cc is None or shutil.which("size") is None:
@@ -97,7 +99,7 @@ def measure_footprints(sizes: dict[str, tuple[int, ...]] = SIZES, dtypes: tuple[
     with tempfile.TemporaryDirectory() as tmp:
         for kind, Ms in sizes.items():
             for M in Ms:
-                state, meta = synthetic_posterior(n_train=M, seed=0) if kind == "exact" else _sparse_state(kind, M)
+                state, meta = synthetic_posterior(n_train=M, seed=0) if kind == "exact" else _sparse_state(cast(GPKind, kind), M)
                 for dtype in dtypes:
                     files = c_sources(state, meta, dtype=dtype, f32_mean_tol=float("inf"), f32_std_rtol=float("inf"))
                     for name, text in files.items():

@@ -178,7 +178,9 @@ def time_c_predictor(sources: dict[str, str], x: np.ndarray, *, kind: str, prefi
     if cc is None:
         raise EnvironmentProblem("time_c_predictor: no C compiler found (set $CC or install cc)")
     header = next(t for k, t in sources.items() if k.endswith(".h"))
-    n, M = x.shape[1], int(re.search(r"_N_SUPPORT (\d+)", header).group(1))
+    found = re.search(r"_N_SUPPORT (\d+)", header)
+    assert found is not None  # c_sources always writes the define
+    n, M = x.shape[1], int(found.group(1))
     n_fma_mean = M * (n + 1)
     n_fma_band = n * M if re.search(rf"#define {prefix.upper()}_BANDED 1\b", header) else 0
     n_est = re.search(rf"#define {prefix.upper()}_N_ESTIMATORS (\d+)", header)

@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -134,9 +135,10 @@ def run_derivatives_bench(config, data_path: str | Path, *, with_gp: bool = True
     base_rows = None
     for name, setting in grid:
         options = resolve_setting(data, name, setting, qu_window=qu_window)
-        row = {"estimator": name, "options": options, "setting": setting}
+        row: dict[str, Any] = {"estimator": name, "options": options, "setting": setting}
         row.update(derivative_errors(data, truth, name, options, qu_window=qu_window))
         if with_gp:
+            assert robot is not None and grid_points is not None  # loaded above
             from bemlearn.data.features import gp_inputs
             from bemlearn.data.normalization import Normalization
             from bemlearn.fitting import train_gp

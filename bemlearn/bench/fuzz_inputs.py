@@ -198,7 +198,7 @@ def _set(path: tuple[str, ...], value: Any) -> Callable[[Path, int, dict], Path]
         import yaml
 
         doc = {"robot": "base.xml", "collect": {"n_trials": 4}, "train": {"kind": "exact"}}
-        d = doc
+        d: dict[str, Any] = doc
         for k in path[:-1]:
             d = d.setdefault(k, {})
         d[path[-1]] = value
@@ -207,10 +207,15 @@ def _set(path: tuple[str, ...], value: Any) -> Callable[[Path, int, dict], Path]
     return _yaml(text)
 
 
+def _mkdir(path: Path) -> Path:
+    path.mkdir(exist_ok=True)
+    return path
+
+
 BAD_INPUTS: list[BadInput] = [
     # -- trajectory files (NPZ / CSV)
     BadInput("trajectory", "missing file", lambda f, s, b: f / f"missing{s}.npz"),
-    BadInput("trajectory", "folder named .npz", lambda f, s, b: (f / f"dir{s}.npz").mkdir(exist_ok=True) or f / f"dir{s}.npz"),
+    BadInput("trajectory", "folder named .npz", lambda f, s, b: _mkdir(f / f"dir{s}.npz")),
     BadInput("trajectory", "unsupported suffix", lambda f, s, b: _write(f, f"bad{s}.txt", "t,trial\n")),
     BadInput("trajectory", "empty .npz", lambda f, s, b: _write(f, f"bad{s}.npz", b"")),
     BadInput("trajectory", "empty .csv", lambda f, s, b: _write(f, f"bad{s}.csv", b"")),
@@ -264,7 +269,7 @@ BAD_INPUTS: list[BadInput] = [
     BadInput("config", "unknown robot", _set(("robot",), "no-such-robot")),
     BadInput("config", "robot MJCF missing", _set(("robot",), "no/such/robot.xml")),
     BadInput("config", "robot not a string", _set(("robot",), [1, 2])),
-    BadInput("config", "folder as config", lambda f, s, b: (f / f"dir{s}.yaml").mkdir(exist_ok=True) or f / f"dir{s}.yaml"),
+    BadInput("config", "folder as config", lambda f, s, b: _mkdir(f / f"dir{s}.yaml")),
     # -- MJCF paths
     BadInput("mjcf", "missing .xml", lambda f, s, b: f / f"missing{s}.xml"),
     BadInput("mjcf", "empty .xml", _mjcf(lambda r: "")),
@@ -275,7 +280,7 @@ BAD_INPUTS: list[BadInput] = [
     BadInput("mjcf", "free joint", _mjcf(lambda r: _FREE)),
     BadInput("mjcf", "every joint actuated", _mjcf(lambda r: _ALL_ACT)),
     BadInput("mjcf", "bytes flipped in the MJCF", _from_base("mjcf", ".xml", _flip)),
-    BadInput("mjcf", "folder named .xml", lambda f, s, b: (f / f"dir{s}.xml").mkdir(exist_ok=True) or f / f"dir{s}.xml"),
+    BadInput("mjcf", "folder named .xml", lambda f, s, b: _mkdir(f / f"dir{s}.xml")),
     # -- checkpoints
     BadInput("checkpoint", "missing file", lambda f, s, b: f / f"missing{s}.pt"),
     BadInput("checkpoint", "empty file", lambda f, s, b: _write(f, f"bad{s}.pt", b"")),

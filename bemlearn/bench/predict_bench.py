@@ -98,7 +98,7 @@ def synthetic_posterior(*, n_train: int = 500, m: int = 1, seed: int = 0, noise:
     α = K⁻¹ỹ, S = K⁻¹ follow from a dense Cholesky of K = K_ZZ + σ_0² I.
     """
     g = torch.Generator().manual_seed(seed)
-    f64 = dict(dtype=torch.float64)
+    f64: dict[str, Any] = dict(dtype=torch.float64)
     d = 3 * m + 2
     scales = torch.tensor([20.0] * m + [3.0] * m + [1.0] * m + [30.0, 2.0], **f64)
     X = torch.randn(n_train, d, generator=g, **f64) * scales
@@ -345,6 +345,7 @@ def run_predict_bench(
                 for name, fn in (("pt2 forward", p2.forward), ("pt2 bem_mean", p2.bem_mean)):
                     lat[name] = _latency(name, fn, x1, repeats=n2, warmup=min(warmup, n2))
             elif step == "gpytorch":
+                assert gp is not None  # the step is listed for exact GPs only
                 lat.update(_gpytorch_latency(gp, x1, repeats=gpytorch_repeats))
                 m_ref, s_ref = (torch.cat(t) for t in zip(*(gp(c) for c in xp.split(2000))))
                 # GPyTorch gives the latent std; forward's std is the calibrated band (docs/uncertainty.md)
@@ -376,7 +377,7 @@ def _extended_precision_mean(state: PredictorState, x: torch.Tensor) -> np.ndarr
     """
     ld = np.longdouble
     n = x.shape[1]
-    xt = np.zeros((x.shape[0], state.dim), dtype=ld)
+    xt: np.ndarray = np.zeros((x.shape[0], state.dim), dtype=ld)
     xt[:, :n] = x.numpy()
     xt = (xt - state.x_mean.numpy().astype(ld)) / state.x_std.numpy().astype(ld) / state.lengthscale.numpy().astype(ld)
     zs = state.Z.numpy().astype(ld) / state.lengthscale.numpy().astype(ld)

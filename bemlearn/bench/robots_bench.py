@@ -61,7 +61,6 @@ def heldout_bem_errors(state: PredictorState, robot: BalanceRobot, references: l
 def robot_chain(robot_path: str, out_dir: str | Path, *, n_trials: int = 24, duration_s: float = 20.0, sim_duration_s: float = 30.0,
                 workers: int = 1, seed: int = 0, progress: Callable[[str], None] = lambda s: None) -> dict:
     """Run the chain of the module docstring on one MJCF file; returns a row of figures."""
-    from bemlearn.sim.collect import collect
     from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
     from bemlearn.export.checkpoint import load_checkpoint
     from bemlearn.export.export_run import export_run
@@ -69,6 +68,7 @@ def robot_chain(robot_path: str, out_dir: str | Path, *, n_trials: int = 24, dur
     from bemlearn.pipeline.train import train_run
     from bemlearn.robots import load
     from bemlearn.sim.closed_loop import simulate
+    from bemlearn.sim.collect import collect
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -47,7 +48,8 @@ def bench_references(n: int, *, frequency_hz=(0.1, 0.5), amplitude=(0.3, 0.5), b
         A = rng.uniform(0.05, 1.0, k)
         A = A / A.sum() * rng.uniform(*amplitude)
         f = np.sort(rng.choice(grid, size=k, replace=False))
-        refs.append(ReferenceConfig(*(tuple(float(v) for v in np.round(a, 4)) for a in (A, f, rng.uniform(0, 2 * math.pi, k)))))
+        amps, freqs, phases = (tuple(float(v) for v in np.round(a, 4)) for a in (A, f, rng.uniform(0, 2 * math.pi, k)))
+        refs.append(ReferenceConfig(amps, freqs, phases))
     return refs
 
 
@@ -70,16 +72,17 @@ def run_sim_bench(run_dir: str | Path, *, n_refs: int = 5, n_seeds: int = 5, dur
     truth, ref_rec = run_truth_robot(run_dir)
     cfg = from_dict(PipelineConfig, load_yaml(run_dir / "config.yaml"), where=str(run_dir / "config.yaml"))
     ev = cfg.evaluate
+    assert ev.frequency_hz is not None  # a run folder's config.yaml is complete
     base = dataclasses.replace(cfg.simulate, duration_s=duration_s, predictor=str(predictor))
     refs = bench_references(n_refs, frequency_hz=(ev.frequency_hz[0], min(0.5, ev.frequency_hz[1])),
                             amplitude=(ev.amplitude_min, ev.amplitude_max))
     runs = []
     for i, ref in enumerate(refs):
         for seed in range(n_seeds):
-            row = {"ref": i, "seed": seed}
+            row: dict[str, Any] = {"ref": i, "seed": seed}
             for src in ("predictor", "model", "zero"):
-                cfg = dataclasses.replace(_seeded(base, seed), reference=ref, bem_source=src)
-                m = simulate(truth, cfg, progress=False).metrics
+                sim_cfg = dataclasses.replace(_seeded(base, seed), reference=ref, bem_source=src)
+                m = simulate(truth, sim_cfg, progress=False).metrics
                 row[src] = {k: m[k] for k in ("fell", "duration_s", "tracking_rmse", "u_max", "qu_max", "real_time_factor", "tick_us")}
             runs.append(row)
             p, mo, z = row["predictor"], row["model"], row["zero"]
@@ -126,7 +129,7 @@ def _mismatch(pred: PredictorBEM, truth, base: SimulateConfig, ref: ReferenceCon
     for ms, ls in ((1.0, 1.0), (0.8, 1.0), (1.2, 1.0), (1.0, 0.8), (1.0, 1.2), (0.8, 0.8), (1.2, 1.2)):
         nom = NominalConfig(mass_scale=ms, length_scale=ls, bodies=bodies)
         wrong = ModelBEM(nominal_robot(truth, nom))
-        row = {"mass_scale": ms, "length_scale": ls,
+        row: dict[str, Any] = {"mass_scale": ms, "length_scale": ls,
                "bem_rmse_model": _bem_rmse(wrong, truth, refs), "bem_rmse_learned": _bem_rmse(pred, truth, refs)}
         for src in ("model", "predictor"):
             m = simulate(truth, dataclasses.replace(_seeded(base, 0), reference=ref, bem_source=src, nominal=nom), progress=False).metrics

@@ -46,8 +46,9 @@ def run_sweep_bench(sweep: str | Path, out_dir: str | Path, *, max_parallel: int
         bad = differing_columns(a, b)
         if bad:
             differ.append({"cell": a["cell"], "columns": bad})
-    seen_pids: set[int] = set()
-    first, rest = [], []
+    seen_pids: set[int | None] = set()
+    first: list[float] = []
+    rest: list[float] = []
     for t in sorted(ray.timings, key=lambda t: t.started):
         pid = ray.outcomes[t.cell_id].pid if t.cell_id in ray.outcomes else None
         (first if pid not in seen_pids else rest).append(t.overhead_s)

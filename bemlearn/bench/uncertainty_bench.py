@@ -139,6 +139,7 @@ def _oracle_rmse(state, traj, case: BenchCase, tr, x, q) -> float | None:
     if not path.is_file():
         return None
     truth = read_ground_truth(path)
+    assert truth.qd is not None and truth.qdd is not None  # read_ground_truth checks
     rows = tr.row.numpy()
     xt = torch.as_tensor(gp_inputs(truth.q[rows], truth.qd[rows], truth.qdd[rows], unactuated_index=traj.meta.unactuated_index))
     mean = condition_state(state, xt, tr.y).predict_reference(x)[0].numpy()
@@ -154,6 +155,7 @@ def run_case(case: BenchCase, *, progress=print) -> dict:
     from bemlearn.robots import load
 
     cfg = case.config
+    assert cfg.robot is not None  # a bench case names its robot (config_case checks)
     traj = read_trajectory(case.data_path, robot=cfg.robot)
     ds = build_datasets(traj, cfg.dataset)
     dcfg = ds.config                  # the dataset config with the options chosen from the data written out
@@ -231,6 +233,7 @@ def run_case(case: BenchCase, *, progress=print) -> dict:
     rows.append(_score(f"(d) conformal, static-q_u proxy (c = {c_d:.2f})", e, c_d * lat, d_s, costs["scale_us"], val_cov(c_d * lv)))
     # (e) trial-split replicas, (f) estimator neighbours, and the chosen band (e) with max((a'), (f)) exactly as
     # `bemlearn train` computes it
+    assert banded.std_scale is not None  # filled by PredictorState.__post_init__
     c = float(banded.std_scale)
     rows.append(_score(f"(e) trial-split replicas (c = {c:.2f})", e, c * lat, e_s - f_s, costs["scale_us"], val_cov(c * lv)))
     only_f = dataclasses.replace(state, estimator_delta=banded.estimator_delta)
@@ -265,6 +268,7 @@ def run_seed_sweep(case: BenchCase, seeds, *, progress=print) -> list[dict]:
     )
 
     cfg = case.config
+    assert cfg.robot is not None  # a bench case names its robot (config_case checks)
     traj = read_trajectory(case.data_path, robot=cfg.robot)
     from bemlearn.robots import load
 

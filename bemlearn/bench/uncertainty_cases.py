@@ -12,8 +12,15 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from bemlearn.errors import ConfigError
+
+if TYPE_CHECKING:
+    from bemlearn.pipeline.config import PipelineConfig
+    from bemlearn.pipeline.evaluation import EvaluationConfig
 
 __all__ = ["CARTPOLE_XML", "BenchCase", "cartpole_case", "config_case"]
 
@@ -40,9 +47,9 @@ class BenchCase:
     """One robot of the bench: pipeline config, data file, held-out references."""
 
     name: str
-    config: object
+    config: PipelineConfig
     data_path: Path
-    evaluation: object
+    evaluation: EvaluationConfig
 
 
 def config_case(config_path: str | Path, data_path: str | Path) -> BenchCase:
@@ -50,6 +57,8 @@ def config_case(config_path: str | Path, data_path: str | Path) -> BenchCase:
     from bemlearn.pipeline.resolve import load_pipeline_config
 
     cfg = load_pipeline_config(config_path)
+    if cfg.robot is None:
+        raise ConfigError(f"{config_path}: the uncertainty bench needs 'robot:' (it compares with the robot's own BEM)")
     return BenchCase(Path(cfg.robot).stem, cfg, Path(data_path), cfg.evaluate)
 
 
@@ -78,11 +87,11 @@ def cartpole_case(workdir: str | Path, *, n_trials: int = 24, progress: bool = F
     """A cart-pole (actuated slide x, m; unactuated hinge φ, rad) written to ``workdir``, LQR
     gains, 24 × 20 s of excitation collected at 400 Hz (4096-count encoders, 1.53 mm / mrad);
     held-out references of 5–10 cm, 0.1–1 Hz (|φ^e| ≲ 0.4 rad)."""
-    from bemlearn.sim.collect import collect
     from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
     from bemlearn.pipeline.config import PipelineConfig
     from bemlearn.pipeline.evaluation import EvaluationConfig
     from bemlearn.pipeline.resolve import complete_section
+    from bemlearn.sim.collect import collect
 
     workdir = Path(workdir)
     workdir.mkdir(parents=True, exist_ok=True)

@@ -85,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
             traceback.print_exc()
         print(f"bemlearn {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except Exception as exc:  # anything else is a bug in bemlearn: keep its traceback
+    except Exception as exc:  # noqa: BLE001 - anything else is a bug in bemlearn: keep its traceback
         traceback.print_exc()
         print(f"bemlearn {args.command}: internal error ({type(exc).__name__}), a bug in bemlearn: "
               "please report it with the traceback above", file=sys.stderr)

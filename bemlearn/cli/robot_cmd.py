@@ -133,10 +133,13 @@ def _lqr(args) -> int:
     import numpy as np
 
     from bemlearn.control.lqr import discrete_lqr
+    from bemlearn.errors import RobotModelError
     from bemlearn.pipeline.derive import control_rate, design_region, input_units
-    from bemlearn.robots import load
+    from bemlearn.robots import MujocoRobot, load
 
     robot = load(args.robot)
+    if not isinstance(robot, MujocoRobot):
+        raise RobotModelError(f"robot lqr: {args.robot!r} has no MuJoCo model to linearize; give an MJCF robot")
     rate = control_rate(robot)
     if args.rate is None:
         hz, h = rate.value.rate_hz, rate.value.timestep

@@ -65,10 +65,12 @@ def _run(args) -> int:
     with claim_outputs(args.out, default_name=stem, force=args.force, keep_on_interrupt=["data.npz", "checkpoint.pt"],
                        what="run") as claimed:
         if app is not None:
+            assert app.run is not None  # checked above
             out = app.run(args.config, claimed, device=args.device, progress=not args.no_progress)
         else:
             from bemlearn.pipeline.run import run_pipeline
 
+            assert resolved is not None  # resolved above when no application runs
             out = run_pipeline(resolved, claimed, device=args.device, progress=not args.no_progress)
     print((out / "report.md").read_text())
     print(f"\nrun folder: {out}")
@@ -103,7 +105,7 @@ def _simulate(args) -> int:
     cfg = resolve_pipeline_config(args.config).config
     if cfg.robot is None:
         raise ConfigError(f"{args.config}: simulate needs a robot (a model to simulate); the config names only data")
-    pred = args.predictor or (Path(cfg.simulate.predictor) if getattr(cfg.simulate, "predictor", None) else None)
+    pred = args.predictor or (Path(cfg.simulate.predictor) if cfg.simulate.predictor else None)
     if pred is not None and pred.is_file() and (pred.parent / "checkpoint.pt").is_file():
         check_predictor_matches(pred, pred.parent / "checkpoint.pt")
     if args.gif:
@@ -121,6 +123,6 @@ def _simulate_into(args, cfg, simulate_stage) -> int:
     res = simulate_stage(cfg, args.out, predictor=args.predictor, sources=sources, progress=not args.no_progress, gif=args.gif)
     print(f"{'source':<10}{'fell':>6}{'duration s':>12}{'RMSE q_a':>10}{'max|u|':>8}{'×real time':>12}")
     for src, m in res.items():
-        print(f"{src:<10}{str(m['fell']):>6}{m['duration_s']:>12.1f}{m['tracking_rmse']:>10.4f}{m['u_max']:>8.2f}{m['real_time_factor']:>12.1f}")
+        print(f"{src:<10}{m['fell']!s:>6}{m['duration_s']:>12.1f}{m['tracking_rmse']:>10.4f}{m['u_max']:>8.2f}{m['real_time_factor']:>12.1f}")
     print(f"wrote {args.out / 'simulate'}")
     return 1 if any(m["fell"] for m in res.values() if m["bem_source"] != "zero") else 0

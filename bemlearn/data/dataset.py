@@ -206,6 +206,7 @@ def build_datasets(traj: Trajectory, config: DatasetConfig, *, progress: bool = 
         logger.info("dropped %d edge samples (%d at each trial end)", report["samples_dropped_edges"], k)
     inside = np.ones_like(keep) if config.qu_window is None else (raw_inside if getattr(est, "smooths", False)
                                                                   else np.abs(y_all) <= config.qu_window)
+    assert inside is not None  # raw_inside is set whenever qu_window is
     report["samples_outside_window"] = int((keep & ~inside).sum())
     if config.qu_window is not None:
         logger.info(

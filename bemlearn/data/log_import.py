@@ -20,6 +20,7 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -51,7 +52,7 @@ def _trial_blocks(table: LogTable, imap: ImportMap) -> list[tuple[int, int, int 
     starts = np.concatenate([[0], np.flatnonzero(np.diff(ep)) + 1])
     stops = np.concatenate([starts[1:], [len(ep)]])
     seen: dict[int, int] = {}
-    blocks = []
+    blocks: list[tuple[int, int, int | None]] = []
     for a, b in zip(starts, stops):
         value = int(ep[a])
         if value in seen:
@@ -96,6 +97,7 @@ def _sample_rate(tables: list[LogTable], imap: ImportMap) -> float:
     """The map's ``time.rate_hz``, or 1 / the median step over all files (rounded to a whole Hz within 0.1 %)."""
     if imap.time.rate_hz is not None:
         return float(imap.time.rate_hz)
+    assert imap.time.column is not None  # the import map gives rate_hz or a time column
     scale = TIME_UNITS[imap.time.unit]
     steps = []
     for table in tables:
@@ -149,7 +151,8 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
     scales = [j.sign * j.kind_and_scale()[1] for j in imap.joints]
     offsets = [j.offset for j in imap.joints] + [0.0] * (len(imap.inputs) + len(imap.keep))
     mult = np.asarray(scales + [1.0] * (len(imap.inputs) + len(imap.keep)))
-    pieces, reports = _Pieces(), []
+    pieces = _Pieces()
+    reports: list[ResampleReport] = []
     for table in tables:
         raw = np.stack([table.columns[c] for c in value_cols], axis=1)
         values = raw * mult + np.asarray(offsets)
@@ -270,6 +273,7 @@ def _import_meta(imap: ImportMap, rate: float, failed: dict[int, bool], provenan
 def _resample_summary(reports: list[ResampleReport], rate: float, samples: int, tables: list[LogTable],
                       imap: ImportMap, steps: list[float | None]) -> dict:
     """``meta.extra["import"]["resample"]`` and the log lines of a ``time.resample: linear`` import."""
+    assert imap.time.column is not None  # resampling needs the time column
     scale = TIME_UNITS[imap.time.unit]
     stamps = sum(r.stamps for r in reports)
     moved = sum(r.moved for r in reports)
@@ -283,7 +287,7 @@ def _resample_summary(reports: list[ResampleReport], rate: float, samples: int, 
                 duration += float(t[b - 1] - t[a]) * scale
                 intervals += b - a - 1
     stamp_rate = intervals / duration if duration > 0 else rate
-    info = {
+    info: dict[str, Any] = {
         "method": "linear", "rate_hz": rate, "stamps": stamps, "samples": samples, "moved": moved,
         "tolerance_steps": imap.time.max_jitter, "largest_step_s": largest,
         "largest_overrun_s": max(0.0, largest - 1.0 / rate), "stamp_rate_hz": stamp_rate,

@@ -32,6 +32,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -391,7 +392,7 @@ def read_log_table(path: str | Path, imap: ImportMap) -> LogTable:
     names_used = list(index)
     usecols = [index[c] for c in names_used]
     bom_data = not imap.header and raw.startswith(b"\xef\xbb\xbf")
-    source: object = path
+    source: Any = path  # a path or the cleaned text
     if cut is not None or bom_data:
         source = io.StringIO(raw[:stop].decode("utf-8", errors="replace").lstrip("\ufeff"))
     try:

@@ -65,7 +65,7 @@ class Encoder:
     """
 
     def __init__(self, config: SensorConfig, rng: np.random.Generator, *, kinds: tuple[str, ...] | None = None) -> None:
-        self.step = config.step
+        self.step: float | np.ndarray = config.step
         if kinds is not None and config.m_per_count > 0 and "slide" in kinds:
             self.step = np.array([config.m_per_count if k == "slide" else config.step for k in kinds])
         self.noise_std = config.noise_std

@@ -315,6 +315,7 @@ class Trajectory:
         """(T,) float64 samples of the extra channel ``name`` (``meta.channel_names``)."""
         if name not in self.meta.channel_names:
             raise ArgumentError(f"no channel {name!r}; the trajectory has {list(self.meta.channel_names)}")
+        assert self.channels is not None  # __post_init__ fills it
         return self.channels[:, self.meta.channel_names.index(name)]
 
     def trial_slices(self) -> list[TrialSlice]:
@@ -340,7 +341,7 @@ class Trajectory:
     def select_rows(self, rows: np.ndarray) -> Trajectory:
         """A new trajectory with rows ``rows`` (bool mask or index array); ``trial_failed`` keeps present trials."""
         keys = ("t", "trial", "q", "u", "qd", "qdd", "channels")
-        pick = {k: (None if getattr(self, k) is None else getattr(self, k)[rows]) for k in keys}
+        pick: dict[str, Any] = {k: (None if getattr(self, k) is None else getattr(self, k)[rows]) for k in keys}
         present = set(np.unique(pick["trial"]).tolist())
         failed = {k: v for k, v in self.meta.trial_failed.items() if k in present}
         meta = dataclasses.replace(self.meta, trial_failed=failed)

@@ -151,11 +151,13 @@ def _write_npz(traj: Trajectory, path: Path) -> None:
         "t": traj.t, "trial": traj.trial, "q": traj.q, "u": traj.u,
     }
     if traj.has_ground_truth:
+        assert traj.qd is not None and traj.qdd is not None
         arrays["qd"], arrays["qdd"] = traj.qd, traj.qdd
     if traj.meta.channel_names:
+        assert traj.channels is not None  # Trajectory.__post_init__ fills it
         arrays["channels"] = traj.channels
     with open(path, "wb") as fh:
-        np.savez_compressed(fh, **arrays)
+        np.savez_compressed(fh, **arrays)  # type: ignore[arg-type]  # mypy also matches the ** dict against the bool allow_pickle
 
 
 def _read_npz(path: Path) -> Trajectory:
@@ -234,7 +236,9 @@ def _write_csv(traj: Trajectory, path: Path) -> None:
     cols = column_names(traj.meta, ground_truth=traj.has_ground_truth)
     blocks = [traj.t[:, None], traj.trial[:, None].astype(np.float64), traj.q, traj.u]
     if traj.has_ground_truth:
+        assert traj.qd is not None and traj.qdd is not None
         blocks += [traj.qd, traj.qdd]
+    assert traj.channels is not None  # Trajectory.__post_init__ fills it
     blocks.append(traj.channels)
     table = np.concatenate(blocks, axis=1) if traj.n_samples else np.zeros((0, len(cols)))
     if traj.n_samples and np.abs(traj.trial).max() >= 2**53:

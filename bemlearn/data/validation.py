@@ -35,10 +35,15 @@ __all__ = [
 class RobotLike(Protocol):
     """What :func:`check_robot` reads from a robot (``bemlearn.robots.load(name)`` objects)."""
 
-    name: str
-    joint_names: tuple[str, ...]
-    unactuated_name: str
-    actuated_names: tuple[str, ...]
+    # read-only: a robot may give them as attributes or properties
+    @property
+    def name(self) -> str: ...
+    @property
+    def joint_names(self) -> tuple[str, ...]: ...
+    @property
+    def unactuated_name(self) -> str: ...
+    @property
+    def actuated_names(self) -> tuple[str, ...]: ...
 
 
 def column_names(meta: TrajectoryMeta, *, ground_truth: bool = False) -> list[str]:
@@ -149,7 +154,9 @@ def _check_finite(traj: Trajectory, source: str, first_line: int | None) -> None
         ("q", traj.q, [f"q:{j}" for j in meta.joint_names]),
         ("u", traj.u, [f"u:{a}" for a in meta.actuator_names]),
     ]
+    assert traj.channels is not None  # Trajectory.__post_init__ fills it
     if traj.has_ground_truth:
+        assert traj.qd is not None and traj.qdd is not None
         blocks += [
             ("qd", traj.qd, [f"qd:{j}" for j in meta.joint_names]),
             ("qdd", traj.qdd, [f"qdd:{j}" for j in meta.joint_names]),

@@ -210,7 +210,7 @@ def c_sources(
     n_bem, n_full, M = bem.n_inputs, full.n_inputs, bem.n_support
     if not (np.array_equal(bem.w, full.w) and bem.y0 == full.y0 and np.array_equal(bem.factor, full.factor)
             and bem.scale2 == full.scale2 and np.array_equal(bem.E, full.E)
-            and (bem.inner is None) == (full.inner is None) and (bem.inner is None or np.array_equal(bem.inner, full.inner))):
+            and (bem.inner is None) == (full.inner is None) and (bem.inner is None or np.array_equal(bem.inner, full.inner))):  # type: ignore[arg-type]  # both None or both arrays
         raise AssertionError("c_sources: the BEM and full posteriors must share w, y0, the variance factor, c and E")
     K = bem.n_estimators
     lo, hi = support_box(state.Z, state.x_mean, state.x_std, state.lengthscale)

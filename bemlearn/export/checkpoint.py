@@ -115,6 +115,7 @@ def _parse_state(data: Any, kind: str, where: str) -> PredictorState:
             raise CheckpointError(f"{where}.{name}: expected positive values, got {getattr(state, name).tolist()}")
     if float(state.noise) < 0:
         raise CheckpointError(f"{where}.noise: expected >= 0, got {float(state.noise)}")
+    assert state.std_scale is not None and state.input_std is not None  # filled by PredictorState.__post_init__
     if not float(state.std_scale) > 0 or not bool((state.input_std >= 0).all()):
         raise CheckpointError(f"{where}: std_scale must be > 0 and input_std >= 0, got {float(state.std_scale)} and "
                          f"{state.input_std.tolist()}")

@@ -87,7 +87,7 @@ def export_run(
     check_outputs(paths, force, what="export")
     for folder in {p.parent for p in paths}:
         check_writable(folder, what="export")
-    files = {}
+    files: dict[str | os.PathLike[str], bytes] = {}
     for path, serialize, load in targets:   # serialized and checked in memory: nothing is written unless all pass
         data = serialize(predictor)
         if verify:

@@ -48,6 +48,8 @@ kernel cannot be evaluated in float64 always shows up as a non-finite μ, and on
 replaces a pass over x (the C export applies the same rule: docs/c-export.md).
 """
 
+from typing import Any
+
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -95,6 +97,19 @@ class FoldedPosterior(nn.Module):
     banded: bool
     var0: float
     scale2: float
+    # buffers (registered in __init__; declared for the type checker)
+    a: torch.Tensor
+    nb: torch.Tensor
+    W: torch.Tensor
+    c: torch.Tensor
+    offset: torch.Tensor
+    powers: torch.Tensor
+    w: torch.Tensor
+    FT: torch.Tensor
+    RT: torch.Tensor
+    signs: torch.Tensor
+    G: torch.Tensor
+    gamma: torch.Tensor
 
     def __init__(
         self,
@@ -114,7 +129,9 @@ class FoldedPosterior(nn.Module):
             raise ArgumentError(f"chunk: expected a positive row count, got {chunk}")
         if form not in ("auto", "raw", "centered"):
             raise ArgumentError(f"form: expected 'auto', 'raw' or 'centered', got {form!r}")
-        f64 = dict(dtype=torch.float64)
+        f64: dict[str, Any] = dict(dtype=torch.float64)
+        # filled in by PredictorState.__post_init__
+        assert state.input_std is not None and state.estimator_delta is not None and state.std_scale is not None
         free, fixed = slice(0, n_inputs), slice(n_inputs, d)
         a = 1.0 / (state.x_std * state.lengthscale)
         b = state.x_mean * a
@@ -157,6 +174,7 @@ class FoldedPosterior(nn.Module):
                     RT = torch.zeros(M + 1, M, **f64)
                     RT[:M] = factor.F.T
             else:                       # v = k̂ (gain F)ᵀ
+                assert factor.F is not None  # VarianceFactor holds F, L or both
                 FT = torch.zeros(M + 1, M, **f64)
                 FT[:M] = (gain * factor.F).T
             signs = factor.signs if factor.signs is not None else torch.zeros(0, **f64)

@@ -208,6 +208,7 @@ def artifact_metadata(meta: PredictorMetadata, state: PredictorState) -> dict[st
         raise CheckpointError(f"metadata.n_train = {meta.n_train} but PredictorState.n_train = {state.n_train}")
     n = 3 * meta.m
     noise_std = float(state.y_std) * math.sqrt(max(float(state.noise), 0.0))
+    assert state.std_scale is not None and state.input_std is not None  # filled by PredictorState.__post_init__
     # the output q_u is in its joint's unit: the unit of the q̇_u column without "/s" (rad or m)
     rate_unit = meta.units.get(f"qd_{meta.unactuated_name}", "rad/s")
     out_unit = rate_unit[: -len("/s")] if rate_unit.endswith("/s") else "rad"

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import torch
 
-from bemlearn.export.bem_predictor import EXPORTED_METHODS, LATENT_METHODS, BEMPredictor
 from bemlearn.errors import CheckpointError
+from bemlearn.export.bem_predictor import EXPORTED_METHODS, LATENT_METHODS, BEMPredictor
 from bemlearn.files import atomic_write_files
 
 __all__ = ["script_predictor", "save_torchscript", "torchscript_bytes", "load_torchscript", "METADATA_FILE"]

@@ -152,6 +152,7 @@ def _factored(state: PredictorState, psd_rtol: float) -> VarianceFactor:
     diagonal (the jitter): off-diagonal |L Lᵀ − K_ZZ| ≤ GRAM_RTOL σ_f², else ValueError.
     """
     L, C = state.S_chol, state.S_inner
+    assert L is not None and C is not None, "called for factored states only"
     K = se_gram(state.Z, state.lengthscale, state.outputscale)
     D = L @ L.T - K
     off = float((D - torch.diag(torch.diagonal(D))).abs().max()) if D.numel() else 0.0

@@ -21,6 +21,8 @@ exponent the exported predictor uses, and
 
 from __future__ import annotations
 
+from typing import Any
+
 import torch
 
 from bemlearn.errors import CheckpointError
@@ -93,6 +95,7 @@ def _estimator_rounding(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
     error is up to M ε y_std |k|ᵀ|δ_k|, and its square's up to 2 |shift| times that."""
     if not state.n_estimators:
         return torch.zeros(x.shape[0], dtype=torch.float64)
+    assert state.estimator_delta is not None  # n_estimators > 0
     k = state.kernel_row(x)
     shift = state.y_std * (k @ state.estimator_delta)
     err = state.n_support * _EPS * state.y_std * (k @ state.estimator_delta.abs())
@@ -100,7 +103,7 @@ def _estimator_rounding(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
 
 
 def verify_predictor(
-    predictor: object,
+    predictor: Any,
     state: PredictorState,
     *,
     n: int = 256,
@@ -144,6 +147,7 @@ def verify_predictor(
         mean, std = getattr(predictor, name)(x)
         ref_mean, ref_std, bound = reference_posterior(state, ref_x)
         if band:  # eq. (B1): c² σ² + Σ_{i < n_in} (s_i ∂μ/∂x_i)² + the estimator term
+            assert state.std_scale is not None  # filled by PredictorState.__post_init__
             ref_std = (state.std_scale**2 * ref_std.square() + band_extra_variance(state, ref_x, n_inputs=n_in)).sqrt()
             bound = bound * float(state.std_scale) ** 2 + _estimator_rounding(state, ref_x)
         dm = float((mean - ref_mean).abs().max())

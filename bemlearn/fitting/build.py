@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from typing import cast
 
 import gpytorch
 import torch
@@ -92,5 +93,5 @@ def build_gp(
         return model, lik
     model = SVGPBEMGP(Z, learn_inducing_locations=config.learn_inducing, jitter=config.jitter).to(device)
     set_hyperparameters(model, lik, **theta)
-    optimal_variational(model, lik, train_x.to(device), train_y.to(device))
+    optimal_variational(cast(SVGPBEMGP, model), lik, train_x.to(device), train_y.to(device))
     return model, lik

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from bemlearn.data.derivatives import DerivativeEstimator
 from bemlearn.data.trajectory import Trajectory
 from bemlearn.errors import ArgumentError
 from bemlearn.models.kernels import se_kernel
@@ -101,7 +102,7 @@ class EstimatorSensitivity:
                 "trials_kept_base": list(self.trials_kept_base), "n_neighbours": len(self.estimators)}
 
 
-def _describe(est) -> str:
+def _describe(est: DerivativeEstimator) -> str:
     if not dataclasses.is_dataclass(est):   # an estimator class of the user's own: its repr
         return repr(est)
     opts = ", ".join(f"{f.name}={getattr(est, f.name)}" for f in dataclasses.fields(est) if getattr(est, f.name) is not None)
@@ -167,7 +168,7 @@ def estimator_sensitivity(state: PredictorState, traj: Trajectory, estimator, ro
         rms = tuple(float(v) for v in shift.square().mean(0).sqrt())
         med = tuple(float(v) for v in shift.abs().median(0).values)
     out = EstimatorSensitivity(delta, tuple(_describe(e) for e in neighbours), rms, tuple(shorts), med)
-    if rms is not None:
+    if rms is not None and med is not None:
         log.info("estimator term, BEM shift at the queries (RMS / median): %s",
                  ", ".join(f"{n}: {r:.3g} / {m:.3g}" for n, r, m in zip(out.estimators, rms, med)))
     return out

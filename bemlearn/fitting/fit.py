@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any, cast
+
 import gpytorch
 import torch
 
@@ -13,6 +15,11 @@ from bemlearn.fitting.result import Callback, FitResult
 from bemlearn.fitting.sgpr import fit_sgpr
 from bemlearn.fitting.svgp import fit_svgp
 from bemlearn.models.gp_kinds import gp_kind_of
+
+if TYPE_CHECKING:
+    from bemlearn.models.exact_gp import ExactBEMGP
+    from bemlearn.models.sgpr import SGPRBEMGP
+    from bemlearn.models.svgp import SVGPBEMGP
 
 __all__ = ["fit_gp", "train_gp"]
 
@@ -41,16 +48,16 @@ def fit_gp(
     kind = gp_kind_of(model)
     if kind != config.kind:
         raise ConfigError(f"config.kind: {config.kind!r} does not match the model kind {kind!r}")
-    common = dict(jitter=config.jitter, callback=callback, progress=progress)
+    common: dict[str, Any] = dict(jitter=config.jitter, callback=callback, progress=progress)
     if kind == "exact":
-        return fit_exact(model, likelihood, optimizer=config.optimizer, max_iter=config.resolved_max_iter, lr=config.resolved_lr, tol=config.tol, **common)
+        return fit_exact(cast("ExactBEMGP", model), likelihood, optimizer=config.optimizer, max_iter=config.resolved_max_iter, lr=config.resolved_lr, tol=config.tol, **common)
     if kind == "sgpr":
         return fit_sgpr(
-            model, likelihood, optimizer=config.optimizer, max_iter=config.resolved_max_iter, lr=config.resolved_lr, tol=config.tol,
+            cast("SGPRBEMGP", model), likelihood, optimizer=config.optimizer, max_iter=config.resolved_max_iter, lr=config.resolved_lr, tol=config.tol,
             subset=config.fit_subset, seed=config.seed, **common,
         )
     return fit_svgp(
-        model, likelihood, train_x, train_y, batch_size=config.batch_size, epochs=config.epochs,
+        cast("SVGPBEMGP", model), likelihood, train_x, train_y, batch_size=config.batch_size, epochs=config.epochs,
         lr=config.resolved_lr, ngd_lr=config.ngd_lr, refresh_q=config.refresh_q, seed=config.seed, **common,
     )
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from typing import Any
 
 import torch
 
@@ -53,11 +54,12 @@ def set_hyperparameters(
     Values are set through the GPyTorch constraints in the model's dtype; a noise at or below the
     likelihood's floor is raised to 1.5 × the floor (with a debug log).
     """
-    kernel = model.covar_module
+    kernel: Any = model.covar_module  # a gpytorch ScaleKernel: nn.Module attributes are untyped
     ref = kernel.raw_outputscale
     kernel.base_kernel.lengthscale = torch.as_tensor(lengthscale).to(ref).reshape(1, -1)
     kernel.outputscale = torch.as_tensor(outputscale).to(ref).reshape(())
-    floor = float(likelihood.noise_covar.raw_noise_constraint.lower_bound)
+    noise_covar: Any = likelihood.noise_covar  # gpytorch module: nn.Module attributes are untyped
+    floor = float(noise_covar.raw_noise_constraint.lower_bound)
     noise_t = torch.as_tensor(noise).to(ref).reshape(1)
     if float(noise_t) <= floor:
         logger.debug("initial noise %.3g at or below the floor %.3g; using 1.5 × floor", float(noise_t), floor)
@@ -97,7 +99,7 @@ def select_inducing_points(
     if method == "random":
         return train_x[torch.randperm(N, generator=gen)[:num].to(train_x.device)].clone()
     cand = train_x
-    if N > max_candidates:
+    if max_candidates < N:
         cand = train_x[torch.randperm(N, generator=gen)[:max_candidates].to(train_x.device)]
     n = cand.shape[0]
     chosen = [int(torch.randint(n, (1,), generator=gen))]

@@ -16,6 +16,7 @@ import logging
 import math
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
+from typing import cast
 
 import torch
 from linear_operator.utils.errors import NanError, NotPSDError
@@ -198,7 +199,7 @@ def minimize(
             # restart from the best point with a fresh curvature history, up to 3 times
             for restart in range(4):
                 try:
-                    opt.step(closure)
+                    opt.step(closure)  # type: ignore[arg-type]  # torch's stub wants a float closure; LBFGS uses the Tensor
                 except NumericalFailure as exc:
                     if restart == 3 or kept.count >= max_eval or not math.isfinite(kept.best):
                         raise
@@ -208,13 +209,13 @@ def minimize(
                     left = max_eval - kept.count
                     opt = lbfgs(max(1, int(left / 1.5)), left)
                     continue
-                n_iter = opt.state[opt._params[0]].get("n_iter", 0)
+                n_iter = opt.state[cast(torch.optim.LBFGS, opt)._params[0]].get("n_iter", 0)
                 if n_iter < opt.defaults["max_iter"] and kept.count < max_eval:
                     stop = "converged"
                 break
         else:
             for _ in range(max_iter):
-                opt.step(closure)
+                opt.step(closure)  # type: ignore[arg-type]  # torch's stub wants a float closure; a Tensor works
                 if tol > 0 and state["since_best"] >= 50:
                     stop = "converged"
                     break

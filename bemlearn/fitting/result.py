@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 
@@ -37,8 +38,9 @@ class FitResult:
 
 def hyperparameter_metrics(model: torch.nn.Module, likelihood: torch.nn.Module) -> dict[str, float]:
     """Current σ_0², σ_f² and every ℓ_j as floats (normalized units)."""
-    kernel = model.covar_module
-    out = {"noise": float(likelihood.noise.detach().reshape(())), "outputscale": float(kernel.outputscale.detach().reshape(()))}
+    kernel: Any = model.covar_module  # a gpytorch ScaleKernel: nn.Module attributes are untyped
+    noise: Any = likelihood.noise  # a gpytorch likelihood: nn.Module attributes are untyped
+    out = {"noise": float(noise.detach().reshape(())), "outputscale": float(kernel.outputscale.detach().reshape(()))}
     for j, ls in enumerate(kernel.base_kernel.lengthscale.detach().reshape(-1).tolist()):
         out[f"lengthscale_{j}"] = float(ls)
     return out

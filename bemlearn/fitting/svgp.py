@@ -78,9 +78,9 @@ def fit_svgp(
     dtype = next(model.parameters()).dtype
     check_inputs(train_x, name="train_x", dim=model.dim, dtype=dtype)
     check_targets(train_y, name="train_y", n=train_x.shape[0], dtype=dtype)
-    for name, value in (("batch_size", batch_size), ("epochs", epochs)):
-        if value < 1:
-            raise ArgumentError(f"{name}: expected a positive integer, got {value}")
+    for name, count in (("batch_size", batch_size), ("epochs", epochs)):
+        if count < 1:
+            raise ArgumentError(f"{name}: expected a positive integer, got {count}")
     device = next(model.parameters()).device
     N = train_x.shape[0]
     model.train()

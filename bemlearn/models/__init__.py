@@ -6,8 +6,8 @@ from bemlearn.models.freeze import posterior_weights, predictor_state, variance_
 from bemlearn.models.gp_kinds import GP_KINDS, gp_class, gp_kind_of
 from bemlearn.models.gpdm import GPDM, GPDMObjective, LatentComparison, compare_latents, reconstruct_latent
 from bemlearn.models.input_noise import mean_gradient
-from bemlearn.models.learned_bem import BEMPrediction, LearnedBEM, srinivas_kappa
 from bemlearn.models.kernels import ard_se_kernel, gaussian_likelihood, kernel_matrix, se_cross_covariance
+from bemlearn.models.learned_bem import BEMPrediction, LearnedBEM, srinivas_kappa
 from bemlearn.models.predict import predict
 from bemlearn.models.predictor_state import GPKind, PredictorState
 from bemlearn.models.sgpr import SGPRBEMGP

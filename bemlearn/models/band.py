@@ -40,6 +40,7 @@ def band_reference(state: PredictorState, x: torch.Tensor, *, n_inputs: int | No
     """
     mean, latent = state.predict_reference(x)
     extra = band_extra_variance(state, x, n_inputs=n_inputs)
+    assert state.std_scale is not None  # filled by PredictorState.__post_init__
     return mean, torch.sqrt(state.std_scale**2 * latent**2 + extra), latent
 
 
@@ -49,6 +50,7 @@ def band_extra_variance(state: PredictorState, x: torch.Tensor, *, n_inputs: int
     n = state.dim if n_inputs is None else n_inputs
     if not 1 <= n <= state.dim:
         raise ArgumentError(f"band_reference: n_inputs: expected 1..{state.dim}, got {n}")
+    assert state.input_std is not None and state.estimator_delta is not None  # filled by PredictorState.__post_init__
     s = state.input_std.clone()
     s[n:] = 0.0
     var_in = torch.zeros(x.shape[0], dtype=torch.float64, device=x.device)

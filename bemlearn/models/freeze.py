@@ -4,6 +4,7 @@ sparse kinds also with S factored as L⁻ᵀ C L⁻¹)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any, cast
 
 import gpytorch
 import torch
@@ -12,7 +13,7 @@ from bemlearn.errors import ArgumentError
 from bemlearn.models.exact_gp import ExactBEMGP
 from bemlearn.models.gp_kinds import gp_kind_of
 from bemlearn.models.kernels import kernel_matrix, se_gram
-from bemlearn.models.predictor_state import PredictorState
+from bemlearn.models.predictor_state import GPKind, PredictorState
 from bemlearn.models.sgpr import SGPRBEMGP
 from bemlearn.models.solver import DEFAULT_JITTER, DEFAULT_MAX_TRIES, cholesky_policy, robust_cholesky
 from bemlearn.models.svgp import SVGPBEMGP
@@ -40,7 +41,7 @@ def posterior_weights(
     with torch.no_grad(), cholesky_policy(jitter=jitter, max_tries=max_tries):
         if isinstance(model, ExactBEMGP):
             X, Y = model.train_inputs[0], model.train_targets
-            kern = model.covar_module
+            kern: Any = model.covar_module  # a gpytorch ScaleKernel: nn.Module attributes are untyped
             # the Gram matrix exactly as the frozen state rebuilds it (PredictorState.gram): with κ(K) ~ 1e8
             # (near-noise-free labels) GPyTorch's ‖a‖² + ‖b‖² − 2aᵀb distances would differ from it by far more than ε
             K = se_gram(X, kern.base_kernel.lengthscale.reshape(-1), kern.outputscale.reshape(()))
@@ -132,8 +133,8 @@ def predictor_state(
         Li = torch.linalg.solve_triangular(L, torch.eye(L.shape[0], dtype=L.dtype, device=L.device), upper=False)
         S = Li.mT @ C @ Li
         S = 0.5 * (S + S.mT)
-    kernel = model.covar_module
-    f64 = dict(dtype=torch.float64, device="cpu")
+    kernel: Any = model.covar_module  # a gpytorch ScaleKernel: nn.Module attributes are untyped
+    f64: dict[str, Any] = dict(dtype=torch.float64, device="cpu")
 
     def _t(v: torch.Tensor | float) -> torch.Tensor:
         if not isinstance(v, torch.Tensor):  # a Python float must not pass through float32
@@ -141,7 +142,7 @@ def predictor_state(
         return v.detach().to(**f64).clone()
 
     return PredictorState(
-        kind=kind,
+        kind=cast(GPKind, kind),  # the registered kinds are the three PredictorState knows
         Z=_t(Z),
         alpha=_t(alpha),
         S=_t(S),

@@ -112,6 +112,28 @@ class GPDM(nn.Module):
             (which already includes its noise variance) fails to factorize.
     """
 
+    # buffers, raw parameters and their constraints (registered in __init__; declared for the type checker)
+    q_mean: Tensor
+    q_scale: Tensor
+    Y: Tensor
+    dyn_in_idx: Tensor
+    dyn_out_idx: Tensor
+    first_idx: Tensor
+    raw_obs_lengthscale: nn.Parameter
+    raw_obs_lengthscale_constraint: Interval
+    raw_obs_noise: nn.Parameter
+    raw_obs_noise_constraint: Interval
+    raw_obs_w: nn.Parameter
+    raw_obs_w_constraint: Interval
+    raw_dyn_lengthscale: nn.Parameter
+    raw_dyn_lengthscale_constraint: Interval
+    raw_dyn_outputscale: nn.Parameter
+    raw_dyn_outputscale_constraint: Interval
+    raw_dyn_linear: nn.Parameter
+    raw_dyn_linear_constraint: Interval
+    raw_dyn_noise: nn.Parameter
+    raw_dyn_noise_constraint: Interval
+
     def __init__(
         self,
         Q_list: Sequence,

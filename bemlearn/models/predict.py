@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import cast
+
 import gpytorch
 import torch
 
@@ -44,7 +46,7 @@ def predict(
     """
     kind = gp_kind_of(model)
     dtype = next(model.parameters()).dtype
-    check_inputs(x, name="x", dim=model.dim, dtype=dtype)
+    check_inputs(x, name="x", dim=cast(int, model.dim), dtype=dtype)
     if batch_size < 1:
         raise ArgumentError(f"batch_size: expected a positive integer, got {batch_size}")
     model.eval()

@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import torch
 
@@ -116,6 +116,7 @@ class PredictorState:
         if self.estimator_delta is None or (self.estimator_delta.ndim == 2 and self.estimator_delta.shape[1] == 0):
             # the empty default carries no information; it follows Z (e.g. through dataclasses.replace)
             object.__setattr__(self, "estimator_delta", torch.zeros(M, 0, dtype=self.Z.dtype, device=self.Z.device))
+        assert self.std_scale is not None and self.input_std is not None and self.estimator_delta is not None
         checks = {
             "alpha": (self.alpha, (M,)),
             "S": (self.S, (M, M)),
@@ -168,6 +169,7 @@ class PredictorState:
     @property
     def n_estimators(self) -> int:
         """K, the neighbouring derivative estimators of the band's estimator term (0: none)."""
+        assert self.estimator_delta is not None  # filled by __post_init__
         return int(self.estimator_delta.shape[1])
 
     def tensors(self) -> dict[str, torch.Tensor]:
@@ -189,7 +191,7 @@ class PredictorState:
         return cls(**kw)
 
     def to(self, device: torch.device | str | None = None, dtype: torch.dtype | None = None) -> PredictorState:
-        moved = {k: v.to(device=device, dtype=dtype) for k, v in self.tensors().items()}
+        moved: dict[str, Any] = {k: v.to(device=device, dtype=dtype) for k, v in self.tensors().items()}
         return dataclasses.replace(self, **moved)
 
     @property

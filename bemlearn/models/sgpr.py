@@ -88,7 +88,7 @@ class SGPRBEMGP(gpytorch.Module):
         """Number of inducing points M."""
         return int(self.inducing_points.shape[0])
 
-    def train(self, mode: bool = True) -> "SGPRBEMGP":
+    def train(self, mode: bool = True) -> SGPRBEMGP:
         self._cache = None
         return super().train(mode)
 

@@ -22,7 +22,7 @@ def check_inputs(x: object, *, name: str, dim: int | None = None, dtype: torch.d
         TypeError: ``x`` is not a tensor or has the wrong dtype.
         ValueError: wrong shape, no rows, or non-finite entries (the first bad row is named).
     """
-    _check_float_tensor(x, name, "(N, d)", dtype)
+    x = _check_float_tensor(x, name, "(N, d)", dtype)
     if x.ndim != 2:
         raise ArgumentError(f"{name}: expected shape (N, d), got {tuple(x.shape)}")
     if x.shape[0] == 0:
@@ -46,14 +46,14 @@ def check_targets(y: object, *, name: str, n: int, dtype: torch.dtype | None = N
         TypeError: ``y`` is not a tensor or has the wrong dtype.
         ValueError: wrong shape or non-finite entries (the first bad row is named).
     """
-    _check_float_tensor(y, name, f"({n},)", dtype)
+    y = _check_float_tensor(y, name, f"({n},)", dtype)
     if tuple(y.shape) != (n,):
         raise ArgumentError(f"{name}: expected shape ({n},), got {tuple(y.shape)}")
     _check_finite(y, name)
     return y
 
 
-def _check_float_tensor(t: object, name: str, shape: str, dtype: torch.dtype | None) -> None:
+def _check_float_tensor(t: object, name: str, shape: str, dtype: torch.dtype | None) -> torch.Tensor:
     """TypeError naming ``name`` unless ``t`` is a floating tensor (of ``dtype`` if given)."""
     if not isinstance(t, torch.Tensor):
         raise ArgumentError(f"{name}: expected a torch.Tensor of shape {shape}, got {type(t).__name__}")
@@ -61,6 +61,7 @@ def _check_float_tensor(t: object, name: str, shape: str, dtype: torch.dtype | N
         raise ArgumentError(f"{name}: expected a floating-point tensor, got dtype {t.dtype}")
     if dtype is not None and t.dtype != dtype:
         raise ArgumentError(f"{name}: expected dtype {dtype}, got {t.dtype}")
+    return t
 
 
 def _check_finite(t: torch.Tensor, name: str) -> None:

@@ -25,12 +25,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from bemlearn.config import Limit, config_limits
-from bemlearn.sim.collect import CollectConfig
 from bemlearn.data.dataset import DatasetConfig
 from bemlearn.errors import ConfigError
 from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.pipeline.evaluation import EvaluationConfig
 from bemlearn.sim.closed_loop import SimulateConfig
+from bemlearn.sim.collect import CollectConfig
 
 __all__ = ["PipelineConfig", "MAX_SAMPLES"]
 

@@ -82,8 +82,8 @@ def _type_name(tp) -> str:
 def _default(f: dataclasses.Field) -> str:
     if f.default is not dataclasses.MISSING:
         v = f.default
-    elif f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
-        v = f.default_factory()  # type: ignore[misc]
+    elif f.default_factory is not dataclasses.MISSING:
+        v = f.default_factory()
         if dataclasses.is_dataclass(v):
             return "(section)"
     else:
@@ -99,7 +99,7 @@ def _rows(cls, prefix: str, rows: list[str], sections: list[tuple[str, type]]) -
     for f in dataclasses.fields(cls):
         key = f"{prefix}{f.name}"
         tp = hints[f.name]
-        if dataclasses.is_dataclass(tp):
+        if isinstance(tp, type) and dataclasses.is_dataclass(tp):
             sections.append((key, tp))
             continue
         derived = "derived" if key in DERIVED_KEYS else ""

@@ -192,7 +192,9 @@ def bem_slices(model: PredictorState | LearnedBEM, train: BEMDataset, spec: Slic
                 "units": {"qdd": joint_unit(kind, 2), "qd": joint_unit(kind, 1), "q": joint_unit(kind, 0),
                           "qu": joint_unit(meta.kind_of(meta.unactuated), 0)},
             })
-    cat = lambda parts: float(np.concatenate(parts).mean()) if parts else float("nan")
+    def cat(parts: list) -> float:
+        return float(np.concatenate(parts).mean()) if parts else float("nan")
+
     return {
         "slices": slices,
         "summary": {"std_pred_mean_covered": cat(inside_std), "std_pred_mean_extrapolated": cat(outside_std),
@@ -268,7 +270,7 @@ def bem_resolution(model: PredictorState | LearnedBEM, train: BEMDataset, *, max
     spread, bstd = float(mean.std(correction=0)), float(band.median())
     meta = train.meta
     unit = joint_unit(meta.kind_of(meta.unactuated))
-    inputs = []
+    inputs: list[dict[str, Any]] = []
     for i, name in enumerate(state.input_names[:-2]):
         prefix, joint = name.split("_", 1)
         share = abs(float(grad[i])) * float(amp[i])

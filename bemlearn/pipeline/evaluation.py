@@ -62,6 +62,8 @@ def held_out_references(config: EvaluationConfig, m: int) -> list[CompositeSinus
     if unset:
         raise ConfigError(f"evaluate: {unset} not set; derive them from the model with "
                          "bemlearn.pipeline.complete_section(robot, 'evaluate', config) or give them")
+    assert config.n_sines is not None and config.frequency_hz is not None  # checked just above
+    assert config.amplitude_min is not None and config.amplitude_max is not None
     rng = np.random.default_rng(config.seed)
     refs = []
     for _ in range(config.n_references):

@@ -37,7 +37,7 @@ def check_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
         ConfigError: the file is missing, not YAML, not a mapping, or names neither
             ``robot:`` nor ``data:`` (an empty config would silently run on hidden defaults).
     """
-    data = load_yaml(path)
+    data = load_yaml(Path(path))
     if not any(k in data for k in REQUIRED_ANY):
         what = "is empty (or only comments)" if not data else f"names neither {' nor '.join(f'{k}:' for k in REQUIRED_ANY)} (keys: {sorted(data)})"
         raise ConfigError(
@@ -68,7 +68,7 @@ def check_config(path: str | os.PathLike[str], data: dict[str, Any]) -> None:
         return
     from bemlearn.pipeline.resolve import resolve_pipeline_config
 
-    resolve_pipeline_config(path)
+    resolve_pipeline_config(Path(path))
 
 
 def check_robot(name: Any, *, where: str = "robot") -> None:

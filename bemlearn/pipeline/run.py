@@ -24,6 +24,7 @@ import json
 import logging
 import time
 from pathlib import Path
+from typing import Any
 
 from bemlearn.config import save_yaml
 from bemlearn.files import atomic_write_text, new_run_dir
@@ -39,12 +40,12 @@ log = logging.getLogger(__name__)
 def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | None = None, *,
                  device: str | None = None, progress: bool = True) -> Path:
     """Run every stage of ``config`` into ``out_dir`` (default: a new ``runs/<robot or data stem>-<timestamp>``, :func:`~bemlearn.files.new_run_dir`); returns the folder."""
-    from bemlearn.sim.collect import collect
     from bemlearn.data.trajectory_io import ground_truth_path, read_trajectory, write_trajectory
     from bemlearn.export.export_run import export_run
     from bemlearn.pipeline.report import write_report
     from bemlearn.pipeline.simulate import simulate_stage
     from bemlearn.pipeline.train import train_run
+    from bemlearn.sim.collect import collect
 
     resolved = config if isinstance(config, ResolvedConfig) else resolve_pipeline_config(_as_dict(config))
     cfg = resolved.config
@@ -67,6 +68,7 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
                 return _stop_after_preflight(out, cfg, resolved, feasibility, t0)
     if cfg.data is None:
         log.info("[1/%d] collecting excitation data", stages)
+        assert cfg.robot is not None  # PipelineConfig needs robot or data
         data, truth = collect(cfg.robot, cfg.collect, progress=progress)
         data_path = write_trajectory(data, out / "data.npz")
         write_trajectory(truth, ground_truth_path(data_path))
@@ -103,7 +105,7 @@ def _stop_after_preflight(out: Path, cfg: PipelineConfig, resolved: ResolvedConf
     """Write the verdict of a robot its model says cannot be balanced (metrics.json, report.md); no data."""
     from bemlearn.pipeline.report import write_report
 
-    metrics = {"robot": {"name": Path(str(cfg.robot)).stem, "source": str(cfg.robot)}, "feasibility": feasibility,
+    metrics: dict[str, Any] = {"robot": {"name": Path(str(cfg.robot)).stem, "source": str(cfg.robot)}, "feasibility": feasibility,
                "stopped_after": "preflight"}
     metrics["verdict"] = judge_run(metrics).to_dict()
     atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))

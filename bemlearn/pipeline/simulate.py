@@ -10,7 +10,7 @@ import dataclasses
 import json
 import logging
 from pathlib import Path
-from typing import cast
+from typing import Literal, cast
 
 import numpy as np
 import torch
@@ -28,7 +28,7 @@ log = logging.getLogger(__name__)
 
 
 def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: str | Path | None = None,
-                   sources: tuple[str, ...] = ("predictor", "model", "zero"), progress: bool = True, gif: bool = False) -> dict:
+                   sources: tuple[Literal["predictor", "model", "zero"], ...] = ("predictor", "model", "zero"), progress: bool = True, gif: bool = False) -> dict:
     """Run the closed loop for each BEM source in ``sources``; returns ``{source: metrics}``.
 
     ``gif=True`` also writes ``simulate/<source>.gif`` (first 10 s, offscreen rendering;
@@ -38,6 +38,7 @@ def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: st
     out.mkdir(parents=True, exist_ok=True)
     scfg = config.simulate
     predictor = predictor or scfg.predictor
+    assert config.robot is not None and scfg.rate_hz is not None  # a robot run, completed by complete_section
     results = {}
     from torch.utils.tensorboard import SummaryWriter
 
@@ -61,6 +62,7 @@ def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: st
         if src == "predictor":
             from bemlearn.control.bem_sources import PredictorBEM
 
+            assert predictor is not None, "simulate_stage: the 'predictor' source needs a predictor file"
             pred = PredictorBEM(predictor, robot=nominal)
             mean, std = pred.mean_std(res.bem_x) if len(x) else (np.zeros(0), np.zeros(0))
             band = (mean, std)

@@ -10,7 +10,7 @@ of 1/T the trajectory is T-periodic (:attr:`CompositeSinusoid.period`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from fractions import Fraction
 
 import numpy as np
@@ -36,6 +36,11 @@ class CompositeSinusoid:
     frequencies: tuple[tuple[float, ...], ...]
     phases: tuple[tuple[float, ...], ...]
     offsets: tuple[float, ...]
+    # numpy copies set in __post_init__ for the per-tick fast path (:meth:`evaluate`)
+    _A: np.ndarray = field(init=False, repr=False, compare=False)
+    _w: np.ndarray = field(init=False, repr=False, compare=False)
+    _ph: np.ndarray = field(init=False, repr=False, compare=False)
+    _c: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         m = len(self.offsets)
@@ -131,4 +136,5 @@ class ConstantAcceleration:
         return torch.from_numpy((q, qd, qdd)[order])
 
     def __call__(self, t) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        return tuple(torch.from_numpy(x) for x in self.evaluate(np.asarray(t, dtype=np.float64)))
+        q, qd, qdd = self.evaluate(np.asarray(t, dtype=np.float64))
+        return torch.from_numpy(q), torch.from_numpy(qd), torch.from_numpy(qdd)

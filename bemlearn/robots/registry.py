@@ -62,7 +62,7 @@ class RobotRef:
         return {"name": self.name, "mjcf": self.mjcf, "sha256": self.sha256, "registry": self.registry}
 
     @classmethod
-    def from_dict(cls, data: dict, *, where: str = "robot") -> "RobotRef":
+    def from_dict(cls, data: dict, *, where: str = "robot") -> RobotRef:
         if not isinstance(data, dict) or "mjcf" not in data:
             raise CheckpointError(f"{where}: expected a mapping with keys name, mjcf, sha256, registry; got {data!r}")
         return cls(str(data.get("name") or "robot"), data.get("mjcf"), data.get("sha256"), data.get("registry"))
@@ -76,8 +76,7 @@ class RobotRef:
         path = Path(self.mjcf)
         if not path.is_file():
             raise MissingFileError(f"robot {self.name!r}: the run's MJCF {path} no longer exists")
-        actual = file_sha256(path) if check and self.sha256 else None
-        if actual is not None and actual != self.sha256:
+        if check and self.sha256 and (actual := file_sha256(path)) != self.sha256:
             raise CheckpointError(
                 f"robot {self.name!r}: {path} changed since the run (sha256 {actual[:12]}… ≠ recorded "
                 f"{self.sha256[:12]}…); the run's results belong to the old file"
@@ -96,7 +95,7 @@ def resolve_robot(name_or_path: str | Path) -> tuple[Robot, RobotRef]:
     if path.suffix.lower() == ".xml" or path.exists() or "/" in key:
         if not path.is_file():
             raise MissingFileError(f"robot: MJCF file {path} not found")
-        robot = MujocoRobot.from_xml(path)
+        robot: Robot = MujocoRobot.from_xml(path)
         return robot, RobotRef(robot.name, str(path.resolve()), file_sha256(path), None)
     known = registered_robots()
     if key not in known:

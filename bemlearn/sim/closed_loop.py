@@ -52,7 +52,7 @@ class ReferenceConfig:
     offset: float | None = None
 
     def build(self, m: int) -> CompositeSinusoid:
-        if None in (self.amplitudes, self.frequencies_hz, self.phases, self.offset):
+        if self.amplitudes is None or self.frequencies_hz is None or self.phases is None or self.offset is None:
             raise ConfigError("simulate.reference: amplitudes, frequencies_hz, phases and offset must be set "
                              "(derive them from the model with bemlearn.pipeline.complete_section)")
         if not (len(self.amplitudes) == len(self.frequencies_hz) == len(self.phases)):
@@ -221,6 +221,7 @@ def _simulate(plant: BalanceRobot, config: SimulateConfig, *, progress: bool, re
     actuator = MujocoActuatorInverse(plant)
     ctrl = EICController(nominal, bem, ref, actuator, config.gains, rate_hz=config.rate_hz)
     model = plant.model
+    assert config.rate_hz is not None  # complete_section derives it
     sensed = SensedPlant(plant, rate_hz=config.rate_hz, sensor=config.sensor, rng=np.random.default_rng(config.seed), where="simulate",
                          timestep=config.physics_timestep)
     dt = sensed.dt

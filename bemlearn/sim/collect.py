@@ -133,6 +133,10 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
     from bemlearn.sim.plant import SensedPlant  # here: the plant loads torch
 
     rng = np.random.default_rng(seed_seq)
+    # every field is set (collect() checks it; complete_section derives them)
+    assert config.rate_hz is not None and config.fall_window is not None and config.gains is not None
+    assert config.gain_scale is not None and config.n_sines is not None and config.amplitude is not None
+    assert config.frequency_hz is not None and config.initial_qa is not None and config.initial_qu is not None
     model, n, m = robot.model, robot.n, robot.m
     plant = SensedPlant(robot, rate_hz=config.rate_hz, sensor=config.sensor, rng=rng, where="collect", timestep=config.physics_timestep)
     dt = plant.dt
@@ -177,8 +181,8 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
             break
         qd, qdd = plant.apply(u)
         rec["q_meas"][tick], rec["u"][tick], rec["q"][tick], rec["qd"][tick], rec["qdd"][tick] = y, u, q_true, qd, qdd
-    t = np.arange(k) * dt
-    return TrialResult(trial_id, failed, t, *(rec[name][:k] for name in ("q_meas", "u", "q", "qd", "qdd")))
+    times = np.arange(k) * dt
+    return TrialResult(trial_id, failed, times, *(rec[name][:k] for name in ("q_meas", "u", "q", "qd", "qdd")))
 
 
 _WORKER_ROBOT = None
@@ -194,6 +198,7 @@ def _worker_init(robot_name: str, parent_pid: int) -> None:
 
 def _worker_run(args) -> TrialResult:
     config, trial_id, seq = args
+    assert _WORKER_ROBOT is not None, "the pool's initializer loads the robot"
     return simulate_trial(_WORKER_ROBOT, config, trial_id, seq)
 
 
@@ -210,6 +215,7 @@ def collect(robot_name: str, config: CollectConfig, *, progress: bool = True) ->
     if unset:
         raise ConfigError(f"collect: {unset} not set; derive them from the model with "
                          "bemlearn.pipeline.complete_section(robot, 'collect', config) (as every pipeline command does) or give them")
+    assert config.rate_hz is not None and config.input_units is not None  # checked just above
     seqs = np.random.SeedSequence(config.seed).spawn(config.n_trials)
     jobs = [(config, i, s) for i, s in enumerate(seqs)]
     workers = config.workers or (os.cpu_count() or 1)

@@ -257,7 +257,7 @@ def run_cell(job: CellJob) -> CellOutcome:
     cell = job.cell
     folder = cell_folder(job.sweep_dir, cell.cell_id)
     events = Path(job.sweep_dir) / "log.jsonl"
-    who = {"cell": cell.cell_id, "host": socket.gethostname(), "pid": os.getpid(), "attempt": job.attempt}
+    who: dict[str, Any] = {"cell": cell.cell_id, "host": socket.gethostname(), "pid": os.getpid(), "attempt": job.attempt}
     with cell_lock(job.sweep_dir, cell.cell_id):
         done = read_outcome(folder)
         if done is not None and done.status == "ok" and not job.rerun:

@@ -189,8 +189,8 @@ def _execute_train(resolved, out: Path, cpus: int) -> None:
     cfg = resolved.config
     _write_configs(resolved, out)
     if cfg.data is None:
-        from bemlearn.sim.collect import collect
         from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
+        from bemlearn.sim.collect import collect
 
         data, truth = collect(cfg.robot, cfg.collect, progress=False)
         data_path = write_trajectory(data, out / "data.npz")
@@ -212,7 +212,7 @@ def core_stages() -> dict[str, SweepStage]:
     """The stages of pipeline configs (module docstring), by name."""
     from bemlearn.pipeline.config import PipelineConfig
 
-    common = dict(schema=PipelineConfig, config_of=lambda r: r.config,
+    common: dict[str, Any] = dict(schema=PipelineConfig, config_of=lambda r: r.config,
                   path_keys=("robot", "data", "model", "simulate.predictor"), execution_keys=("collect.workers",))
     return {
         "run": SweepStage("run", "the whole `bemlearn run`: collect → train → export → evaluate → closed loop → report",
@@ -242,6 +242,7 @@ def get_stage(name: str, application: str | None = None, *, where: str = "stage"
     Raises:
         ConfigError: no such stage (the message lists the valid ones) or no such application.
     """
+    stages: dict[str, Any]  # the core's stages, or an application's stages and stage factories
     if application is None:
         stages = core_stages()
         owner = "pipeline configs"

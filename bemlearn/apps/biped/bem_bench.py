@@ -98,7 +98,7 @@ def run_biped_bem_bench(config, *, data: str | Path | None = None, subsets: int 
             raise ArgumentError(f"--collect-seeds: expected distinct non-negative integers, got {collect_seeds}")
     with tempfile.TemporaryDirectory() as tmp:
         if data is None:
-            draws = collect_seeds if collect_seeds is not None else [config.collect.seed]
+            draws: list[int | None] = list(collect_seeds) if collect_seeds is not None else [config.collect.seed]
             sources = []
         else:
             data_path = Path(data)

@@ -125,7 +125,8 @@ class WalkExcitation:
             A = amplitude * rng.dirichlet(np.ones(self.n_sines), size=rows)
             f = rng.uniform(*band, size=(rows, self.n_sines))
             ph = rng.uniform(0.0, 2 * np.pi, size=(rows, self.n_sines))
-            return CompositeSinusoid(*(tuple(map(tuple, a.tolist())) for a in (A, f, ph)), (0.0,) * rows)
+            amps, freqs, phases = (tuple(map(tuple, a.tolist())) for a in (A, f, ph))
+            return CompositeSinusoid(amps, freqs, phases, (0.0,) * rows)
 
         return draw(self.torso_amplitude, self.torso_frequency_hz, 1), draw(self.joint_amplitude, self.joint_frequency_hz, 4)
 

@@ -112,6 +112,7 @@ def walking_gp_data(data: Trajectory, truth: Trajectory | None, config: WalkData
         if truth is None or not truth.has_ground_truth:
             raise ArgumentError("dataset.derivatives = truth needs the ground-truth trajectory")
         truth = truth.select_trials(keep)
+        assert truth.qd is not None and truth.qdd is not None  # has_ground_truth
         q, qd, qdd = truth.q, truth.qd, truth.qdd
     else:   # an estimator that smooths gives the smoothed q too (inputs and label alike, eq. G2)
         q, qd, qdd, valid = estimate_states(data, est)

@@ -94,6 +94,11 @@ class BezierGait:
     theta_end: float
     torso: float = 0.0
     name: str = "gait"
+    # numpy caches set in __post_init__: coefficients, their first and second differences, c
+    _a: np.ndarray = field(init=False, repr=False, compare=False)
+    _d1: np.ndarray = field(init=False, repr=False, compare=False)
+    _d2: np.ndarray = field(init=False, repr=False, compare=False)
+    _c: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         a = np.asarray(self.coefficients, dtype=np.float64)
@@ -144,7 +149,7 @@ class BezierGait:
         return np.r_[(theta - c[1:] @ h) / c[0], h]
 
     @classmethod
-    def fit(cls, q: np.ndarray, *, degree: int, phase_weights, name: str = "gait") -> "BezierGait":
+    def fit(cls, q: np.ndarray, *, degree: int, phase_weights, name: str = "gait") -> BezierGait:
         """Least-squares Bézier fit of stance-relative samples of one step.
 
         The end coefficients are pinned to the first and last sample (so a gait whose last

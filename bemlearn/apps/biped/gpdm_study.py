@@ -15,10 +15,12 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -64,15 +66,18 @@ def fit_gpdm_logged(Q_list: list[np.ndarray], out_dir: str | Path, *, config: GP
     try:
         if threads is not None:
             torch.set_num_threads(threads)
-        model = fit_gpdm(Q_list, config=config, progress=progress,
-                         callback=lambda step, m: [writer.add_scalar(f"gpdm/{k}", v, step) for k, v in m.items()])
+        def log_metrics(step: int, m: dict[str, float]) -> None:
+            for k, v in m.items():
+                writer.add_scalar(f"gpdm/{k}", v, step)
+
+        model = fit_gpdm(Q_list, config=config, progress=progress, callback=log_metrics)
     finally:
         torch.set_num_threads(old)
         writer.close()
     seconds = time.perf_counter() - t0
     Q = np.concatenate(Q_list)
     chi, proj = torch.cat(model.latents), model.project(torch.from_numpy(Q))
-    metrics = {"c": model.c.tolist(), "c_normalized": model.c_normalized.detach().tolist(),
+    metrics: dict[str, Any] = {"c": model.c.tolist(), "c_normalized": model.c_normalized.detach().tolist(),
                "q_mean": model.q_mean.tolist(), "fit_seconds": seconds, "sequences": [len(q) for q in Q_list],
                "corr_latent_projection": compare_latents(chi, proj).corr, **gpdm_metrics(model)}
     from bemlearn.files import atomic_path, atomic_write_text
@@ -129,7 +134,7 @@ def _stance_q(result) -> np.ndarray:
 def _steady_steps(result, first_step: int) -> list[slice]:
     """Tick slices of the complete steps after the first ``first_step`` ones."""
     ends = np.r_[0, result.steps + 1]
-    return [slice(int(a), int(b)) for a, b in zip(ends[:-1], ends[1:])][first_step:]
+    return [slice(int(a), int(b)) for a, b in itertools.pairwise(ends)][first_step:]
 
 
 def _binned(phase: np.ndarray, values: np.ndarray, bins: int) -> np.ndarray:
@@ -173,9 +178,12 @@ def latent_study(loop: dict, robot_gpdm, human_gpdm, human_Q: list[np.ndarray], 
     """
     from bemlearn.control.bem_sources import ModelBEM
     from bemlearn.robots import load
+    from bemlearn.robots.protocol import ControlRobot
 
     out = Path(out)
-    model = ModelBEM(load("biped"))
+    nominal = load("biped")
+    assert isinstance(nominal, ControlRobot)
+    model = ModelBEM(nominal)
     res: dict = {"c_robot": robot_gpdm.c.tolist(), "c_human": human_gpdm.c.tolist(), "loop_bem": {}}
     curves = {}
     for gait, r in loop.items():

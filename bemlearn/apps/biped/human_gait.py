@@ -29,6 +29,7 @@ type (hips share one map, knees another, so both legs stay alike).
 
 from __future__ import annotations
 
+import itertools
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -179,7 +180,7 @@ class HumanGait:
         phase = np.arange(n) / n
         ang = np.stack([self.trunk, self.hip, self.knee], 1)
         cycles = [np.stack([np.interp(a + phase * (b - a), self.t, ang[:, j]) for j in range(3)], 1)
-                  for a, b in zip(hs[:-1], hs[1:])]
+                  for a, b in itertools.pairwise(hs)]
         return phase, np.mean(cycles, axis=0)
 
     def cycle_period(self, *, threshold: float = 20.0) -> float:
@@ -195,7 +196,9 @@ class HumanGait:
             swing: the half-cycle assumption), and ``trunk (n,)`` rad.
         """
         phase, ang = self.mean_cycle(400, threshold=threshold)
-        wrap = lambda p, j: np.interp(p, np.r_[phase, 1.0], np.r_[ang[:, j], ang[0, j]])  # noqa: E731
+        def wrap(p: np.ndarray, j: int) -> np.ndarray:
+            return np.interp(p, np.r_[phase, 1.0], np.r_[ang[:, j], ang[0, j]])
+
         s = np.linspace(0.0, 1.0, n)
         qa = np.stack([wrap(s / 2, 1), wrap(s / 2, 2), wrap(0.5 + s / 2, 1), wrap(0.5 + s / 2, 2)], 1)
         return s, qa, wrap(s / 2, 0)
@@ -228,7 +231,7 @@ def load_human_gait(path: str | Path | None = None) -> HumanGait:
     if len(bad):
         r, c = bad[0]
         raise TrajectoryFormatError(f"{path}: line {header_at + 2 + r}, column {CSV_COLUMNS[c]!r}: non-finite value")
-    return HumanGait(*(table[:, i] for i in range(5)), interpolated=table[:, 5] != 0, source=str(path))
+    return HumanGait(table[:, 0], table[:, 1], table[:, 2], table[:, 3], table[:, 4], interpolated=table[:, 5] != 0, source=str(path))
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,7 @@ import json
 import logging
 import time
 from pathlib import Path
+from typing import Literal, cast
 
 from bemlearn.apps.biped.bem import bem_errors, heldout_bem, heldout_walks, train_walking_gp
 from bemlearn.apps.biped.config import (
@@ -95,7 +96,7 @@ def run_biped_pipeline(config: BipedConfig, out_dir: str | Path | None = None, *
     for gait in config.evaluate.gaits:
         cfg = dataclasses.replace(config.walk, duration_s=config.evaluate.loop_duration_s, max_steps=0,
                                   bem_source="predictor", predictor=str(predictor),
-                                  gait=dataclasses.replace(config.walk.gait, kind=gait), excitation=WalkExcitation())
+                                  gait=dataclasses.replace(config.walk.gait, kind=cast(Literal["default", "human"], gait)), excitation=WalkExcitation())
         loop[gait] = simulate_walk(cfg, progress=progress)
         write_trajectory(walk_trajectories(loop[gait])[0], out / f"walk_{gait}.npz")
     log.info("[4/6] GPDM on the robot's steps and on the human gait (eq. 16–17)")

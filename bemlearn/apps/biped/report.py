@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-
 from bemlearn.apps.biped.gpdm_study import PAPER_C_HUMAN, PAPER_C_ROBOT
 
 __all__ = ["write_biped_report"]

@@ -36,9 +36,8 @@ def _resolve(raw: dict[str, Any], where: str) -> BipedConfig:
     return from_dict(BipedConfig, raw, where=f"{where}: config")
 
 
-def _execute_bem(config: BipedConfig, out: Path, cpus: int) -> None:  # noqa: ARG001 - threads set by the cell
-    from bemlearn.apps.biped.pipeline import (collect_walks, heldout_bem, train_walking_gp, walking_gp_data,
-                                              walks_trajectories)
+def _execute_bem(config: BipedConfig, out: Path, cpus: int) -> None:  # cpus unused: threads set by the cell
+    from bemlearn.apps.biped.pipeline import collect_walks, heldout_bem, train_walking_gp, walking_gp_data, walks_trajectories
     from bemlearn.data import ground_truth_path, write_trajectory
     from bemlearn.files import atomic_write_text
 
@@ -72,7 +71,7 @@ def _bem_headline(metrics: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _execute_run(config: BipedConfig, out: Path, cpus: int) -> None:  # noqa: ARG001 - threads set by the cell
+def _execute_run(config: BipedConfig, out: Path, cpus: int) -> None:  # cpus unused: threads set by the cell
     from bemlearn.apps.biped.pipeline import run_biped_pipeline
 
     run_biped_pipeline(config, out, progress=False)

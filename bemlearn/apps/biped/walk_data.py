@@ -94,6 +94,7 @@ def walking_data(truth: Trajectory, *, skip_after_impact: int = 3) -> tuple[np.n
         raise DataError("walking_data: the trajectory has no qd/qdd (pass the ground-truth file, *.truth.*)")
     if truth.meta.joint_names != ("q1", "q2", "q3", "q4", "q5") or truth.meta.unactuated != "q1":
         raise DataError(f"walking_data: expected biped joints q1..q5 with q1 unactuated, got {truth.meta.joint_names}")
+    assert truth.qd is not None and truth.qdd is not None  # checked above
     rows = np.concatenate([np.arange(s.rows.start + skip_after_impact, s.rows.stop) for s in truth.trial_slices()])
     X = gp_inputs(truth.q[rows], truth.qd[rows], truth.qdd[rows], unactuated_index=0)
     return X, truth.q[rows, 0].copy()

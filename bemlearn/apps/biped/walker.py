@@ -82,9 +82,11 @@ def simulate_walk(config: WalkConfig | None = None, *, bem=None, progress: bool 
         progress: show a tqdm bar.
     """
     from bemlearn.robots import load
+    from bemlearn.robots.protocol import ControlRobot
 
     config = WalkConfig() if config is None else config
     nominal = load("biped")
+    assert isinstance(nominal, ControlRobot)
     gait = build_gait(config.gait)
     if bem is None:
         bem = make_bem_source(config.bem_source, robot=nominal, predictor=config.predictor)

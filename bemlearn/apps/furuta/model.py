@@ -66,7 +66,7 @@ class FurutaParameters:
     g: float = 9.81  # gravity, m/s² (MuJoCo's default)
 
     @property
-    def l(self) -> float:
+    def l(self) -> float:  # noqa: E743 - the paper's symbol l = L_p / 2
         """Hinge-to-centre-of-mass distance L_p / 2, m."""
         return self.L_p / 2
 
