@@ -2,7 +2,7 @@
 
 Starts ``python -m bemlearn train`` in a child process on the shipped data with
 ``dataset.n_points`` training points, waits until the fit has run for ``delay_s`` seconds
-(after the training run's ``dataset:`` log line, which follows the data stage), sends SIGINT (or ``signum``, e.g. SIGTERM) and times until
+(after the fit's ``fit:`` log line of ``bemlearn.pipeline.gp_stage``: the model is built and the fit's Ctrl-C handling in place), sends SIGINT (or ``signum``, e.g. SIGTERM) and times until
 the process exits.  Checks that it exited with status 128 + signum (130 for SIGINT, 143 for
 SIGTERM) and left a loadable checkpoint marked ``interrupted``.
 With ``twice=True`` a second SIGINT follows the first after ``second_after_s`` and the time
@@ -35,7 +35,7 @@ def _reader(stream, lines: list[str], started: threading.Event, stamps: dict[str
                             ("reported", "bemlearn train: interrupted"), ("reported", "bemlearn train: terminated")):
             if marker in line and key not in stamps:
                 stamps[key] = time.perf_counter()
-        if "train: dataset:" in line:  # the training run's own line (not any `bemlearn.data.dataset:` logger line)
+        if "gp_stage: fit:" in line:  # the fit has started: its model is built and its Ctrl-C handling in place
             started.set()
     stream.close()
 

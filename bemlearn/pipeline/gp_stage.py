@@ -133,7 +133,11 @@ def fit_bem_gp(
     latent_check = None if interrupted else _frozen_latent_check(state, model, lik, xn, dtype, config.device)
     calibration = None
     if calibrate is not None and not interrupted:  # Ctrl-C: write the best checkpoint at once, uncalibrated
-        state, calibration = calibrate(state)
+        try:
+            state, calibration = calibrate(state)
+        except KeyboardInterrupt:  # Ctrl-C / SIGTERM during the calibration: the fit is done; keep it, uncalibrated
+            log.warning("interrupted during the band calibration: writing the fitted checkpoint uncalibrated")
+            interrupted = True
     hyp = hyperparameter_metrics(model, lik)
     phys_ls = {n: float(state.lengthscale[j] * state.x_std[j]) for j, n in enumerate(names)}
     extra = {"interrupted": interrupted, "robot_ref": dict(provenance.robot), **dict(provenance.extra),
@@ -169,6 +173,7 @@ def _fit(model, lik, xn: torch.Tensor, yn: torch.Tensor, *, config: GPConfig, wr
             tag = f"lengthscale/{names[int(k.split('_')[1])]}" if k.startswith("lengthscale_") else f"train/{k}"
             writer.add_scalar(tag, v, step)
 
+    log.info("fit: %s GP on %d points, %s", config.kind, int(yn.shape[0]), config.optimizer)
     t0 = time.perf_counter()
     try:
         result = fit_gp(model, lik, xn, yn, config=config, callback=callback, progress=progress)
