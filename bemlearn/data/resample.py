@@ -52,6 +52,22 @@ _BACK_HINT = ("; if the file holds several runs one after another, cut them with
               "or give each run its own file (trials: per_file)")
 
 
+
+def _increasing_steps(t: np.ndarray, where) -> np.ndarray:
+    """The time steps ``diff(t)`` (s, ``(N - 1,)``), after checking that ``t`` increases.
+
+    Raises:
+        TrajectoryFormatError: a stamp does not increase; the message names the place ``where(i)``.
+    """
+    steps = np.diff(t)
+    back = np.flatnonzero(steps <= 0)
+    if len(back):
+        i = int(back[0]) + 1
+        raise TrajectoryFormatError(
+            f"{where(i)}: time {float(t[i])!r} s does not increase (previous {float(t[i - 1])!r} s){_BACK_HINT}"
+        )
+    return steps
+
 def _rate_hint(steps: np.ndarray, h: float, max_jitter: float) -> str:
     """What to set when the stamps do not advance at 1/h: resampling (overruns, drift) or the rate."""
     median = float(np.median(steps))
@@ -119,13 +135,7 @@ def place_on_grid(
     if len(t) == 0:
         return []
     h = 1.0 / rate_hz
-    steps = np.diff(t)
-    back = np.flatnonzero(steps <= 0)
-    if len(back):
-        i = int(back[0]) + 1
-        raise TrajectoryFormatError(
-            f"{where(i)}: time {float(t[i])!r} s does not increase (previous {float(t[i - 1])!r} s){_BACK_HINT}"
-        )
+    steps = _increasing_steps(t, where)
     counts = np.round(steps * rate_hz).astype(np.int64)
     dup = np.flatnonzero(counts == 0)
     if len(dup):
@@ -243,13 +253,7 @@ def resample_linear(
     if len(t) == 0:
         return [], ResampleReport(0, 0, 0.0, tolerance)
     h = 1.0 / rate_hz
-    steps = np.diff(t)
-    back = np.flatnonzero(steps <= 0)
-    if len(back):
-        i = int(back[0]) + 1
-        raise TrajectoryFormatError(
-            f"{where(i)}: time {float(t[i])!r} s does not increase (previous {float(t[i - 1])!r} s){_BACK_HINT}"
-        )
+    steps = _increasing_steps(t, where)
     n_steps = np.round(steps * rate_hz).astype(np.int64)
     long_gaps = np.flatnonzero(n_steps - 1 > max_fill)
     if len(long_gaps) and on_gap == "error":
