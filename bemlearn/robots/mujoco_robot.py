@@ -301,7 +301,8 @@ class MujocoRobot(Robot):
         """D(q) and h = C(q, q̇)q̇ + G(q) − τ_p for one state, as numpy, without torch overhead.
 
         Args:
-            q, qd: ``(n,)`` coordinates (rad / m) and rates (rad/s / m/s), by joint kind.
+            q: ``(n,)`` coordinates, each in its joint's unit (rad for a hinge, m for a slide).
+            qd: ``(n,)`` rates, each in its joint's unit (rad/s for a hinge, m/s for a slide).
 
         Returns:
             ``D (n, n)`` and ``h (n,)`` in coordinates (eq. 1: D q̈ + h = B u).

@@ -138,8 +138,9 @@ class Robot(abc.ABC):
 
         Args:
             qu: ``(B,)`` candidate unactuated coordinate, in its joint's unit (rad for a hinge, m for a slide).
-            qa, qad, qadd: ``(B, m)`` actuated positions, velocities, accelerations, each in its
-                joint's unit (rad, rad/s, rad/s² for hinges; m, m/s, m/s² for slides).
+            qa: ``(B, m)`` actuated positions q_a, each in its joint's unit (rad or m).
+            qad: ``(B, m)`` actuated velocities q̇_a (rad/s or m/s).
+            qadd: ``(B, m)`` actuated accelerations q̈_a (rad/s² or m/s²).
         """
         zeros = torch.zeros_like(qu)
         return self.gamma(self.join(qa, qu), self.join(qad, zeros), self.join(qadd, zeros))
@@ -166,8 +167,9 @@ class Robot(abc.ABC):
         |Γ_0| ≤ 1e-10 (N·m, or N for a slide q_u).  See :func:`bemlearn.robots.bem.solve_bem`.
 
         Args:
-            qa, qad, qadd: ``(B, m)`` actuated q_a, q̇_a, q̈_a, each in its joint's unit
-                (rad, rad/s, rad/s² for hinges; m, m/s, m/s² for slides).
+            qa: ``(B, m)`` actuated positions q_a, each in its joint's unit (rad or m).
+            qad: ``(B, m)`` actuated velocities q̇_a (rad/s or m/s).
+            qadd: ``(B, m)`` actuated accelerations q̈_a (rad/s² or m/s²).
             qu_range: admissible ``(lo, hi)``; default :attr:`qu_range`.
             n_grid: grid points used to bracket roots (roots closer together than
                 the grid spacing may be missed).
