@@ -11,6 +11,16 @@ package first) costs nothing, while ``from bemlearn.data import build_datasets``
 ``bemlearn.data.dataset`` at that moment.  ``bemlearn --help`` and ``bemlearn config show``
 stay fast this way (``tests/test_startup.py``).  The ``from … import …`` lines are read from
 the package's own source, so the names are written once.
+
+A module that uses torch only inside its functions writes, instead of ``import torch``::
+
+    if TYPE_CHECKING:
+        import torch
+    else:
+        torch = lazy_module("torch")
+
+so importing it (to read a config dataclass, or to load a robot's MuJoCo model) does not load
+torch; the first attribute looked up (``torch.zeros``) does.
 """
 
 from __future__ import annotations
@@ -18,11 +28,12 @@ from __future__ import annotations
 import ast
 import importlib
 import sys
+import types
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["lazy_exports", "lazy_namespace"]
+__all__ = ["lazy_exports", "lazy_namespace", "lazy_module", "LazyModule"]
 
 
 def lazy_exports(init_file: str | Path) -> dict[str, tuple[str, str]]:
@@ -76,3 +87,37 @@ def lazy_namespace(package: str, init_file: str | Path) -> tuple[Callable[[str],
         return sorted(set(namespace) | set(exports))
 
     return __getattr__, __dir__
+
+
+class LazyModule:
+    """A stand-in for the module ``name`` that imports it on the first attribute look-up.
+
+    After the import the module's namespace is copied onto the stand-in, so later look-ups cost
+    what a module attribute costs; names the module defines later (submodules imported on
+    demand) are still found through :meth:`__getattr__`.  ``sys.modules`` is not touched: a
+    plain ``import name`` elsewhere behaves as usual.
+    """
+
+    def __init__(self, name: str) -> None:
+        object.__setattr__(self, "_lazy_name", name)
+
+    def _lazy_load(self) -> types.ModuleType:
+        module = importlib.import_module(self._lazy_name)
+        self.__dict__.update(module.__dict__)
+        object.__setattr__(self, "_lazy_module", module)
+        return module
+
+    def __getattr__(self, attr: str) -> Any:
+        if attr.startswith("_lazy_"):
+            raise AttributeError(attr)
+        module = self.__dict__.get("_lazy_module") or self._lazy_load()
+        return getattr(module, attr)
+
+    def __repr__(self) -> str:
+        state = "loaded" if "_lazy_module" in self.__dict__ else "not loaded yet"
+        return f"<lazy module {self._lazy_name!r} ({state})>"
+
+
+def lazy_module(name: str) -> Any:
+    """``name`` itself when it is imported already, else a :class:`LazyModule` that imports it on first use."""
+    return sys.modules.get(name) or LazyModule(name)

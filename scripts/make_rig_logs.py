@@ -47,8 +47,8 @@ def main() -> int:
     p.add_argument("--clock-drift", type=float, default=0.0, help="relative drift of the stamping clock, e.g. 0.02")
     args = p.parse_args()
     if args.collect is not None:
-        from bemlearn.sim.collect import collect
         from bemlearn.pipeline.resolve import load_pipeline_config
+        from bemlearn.sim.collect import collect
 
         cfg = dataclasses.replace(load_pipeline_config(args.config).collect, n_trials=args.collect, seed=args.seed)
         traj, _ = collect("furuta", cfg)

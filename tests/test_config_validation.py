@@ -16,6 +16,7 @@ import yaml
 from bemlearn.cli.main import main
 from bemlearn.config import MAX_NODES, to_dict
 from bemlearn.errors import ConfigError
+from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.pipeline.resolve import flatten, resolve_pipeline_config
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -164,3 +165,26 @@ def test_a_robot_file_whose_physics_makes_no_sense_is_refused(tmp_path, capsys, 
     assert message in err and "r.xml" in err and "Traceback" not in err, err
     assert main(["run", str(cfg), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("device", ["cpu", "cuda", "cuda:0", "cuda:12", "mps", "xpu:1", "meta", "cpu:0", "CUDA", "cuda:",
+                                    "cuda:-1", "cuda:00", "cuda:+1", " cuda", "cuda:1 ", "cuda:0:1", "gpu", "tpu", ""])
+def test_device_check_accepts_what_torch_device_accepts(device):
+    """``train.device`` is checked without importing torch; the check agrees with ``torch.device``."""
+    import warnings
+
+    import torch
+
+    from bemlearn.fitting.gp_config import DEVICE_PATTERN
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            torch.device(device)
+        torch_ok = True
+    except RuntimeError:
+        torch_ok = False
+    assert bool(DEVICE_PATTERN.fullmatch(device)) == torch_ok
+    if not torch_ok:
+        with pytest.raises(ConfigError, match="not a torch device string"):
+            GPConfig(device=device)

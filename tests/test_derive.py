@@ -310,3 +310,55 @@ def test_lqr_in_mapped_coordinates():
     mujoco.mj_forward(mapped.model, d)
     tau = np.linalg.inv(T).T @ d.qfrc_actuator  # generalized force in coordinates
     np.testing.assert_allclose(tau, [0.0, 0.5], atol=1e-12)
+
+
+_SENSOR_KEYS = ("counts_per_rev", "noise_std", "velocity_cutoff", "m_per_count")
+#: (derivation skipped, {config prefix: the keys of that group the config gives})
+_GIVEN_GROUPS = {
+    "excitation_gains": {"collect": ("gains", "gain_scale")},
+    "eic_gains": {"simulate.gains": ("kp_a", "kd_a", "kp_u", "kd_u")},
+    "sensor": {"collect.sensor": _SENSOR_KEYS, "simulate.sensor": _SENSOR_KEYS},
+    "closed_loop_reference": {"simulate.reference": ("amplitudes", "frequencies_hz", "phases", "offset")},
+    "evaluation": {"evaluate": ("n_sines", "amplitude_max", "amplitude_min", "frequency_hz")},
+}
+
+
+def test_derived_groups_list_every_key_their_derivation_writes():
+    """Each group's declared keys are exactly the leaves its derivation writes (a group is skipped when the
+    config gives all of its declared keys, so a leaf missing from the list would never be derived)."""
+    from bemlearn.pipeline import derived_defaults as dd
+    from bemlearn.pipeline.config import PipelineConfig
+
+    robot = _robot("cartpole")
+    keys = set(dd.derive_pipeline_values(robot, PipelineConfig(robot="cartpole")))
+    declared = {"collect.sensor": dd._SENSOR, "simulate.sensor": dd._SENSOR, "simulate.gains": dd._EIC_GAINS,
+                "simulate.reference": dd._REFERENCE}
+    for prefix, leaves in declared.items():
+        assert {k for k in keys if k.startswith(prefix + ".")} == {f"{prefix}.{k}" for k in leaves}, prefix
+    assert {k.split(".", 1)[1] for k in keys if k.startswith("evaluate.")} == set(dd._EVALUATE)
+    assert set(dd._SIGNALS) <= {k.split(".", 1)[1] for k in keys if k.startswith("collect.")}
+
+
+@pytest.mark.parametrize("skipped", sorted(_GIVEN_GROUPS))
+def test_a_group_the_config_gives_in_full_is_not_derived(skipped, monkeypatch):
+    """Giving every key of a group skips its derivation (``config show`` stays fast: no LQR when the gains
+    are given); the other derived keys keep the values of a derivation from the model alone."""
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
+
+    xml = str(ROBOTS / "cartpole.xml")
+    values = resolve_pipeline_config({"robot": xml}).to_json_dict()
+    part: dict = {}
+    for prefix, keys in _GIVEN_GROUPS[skipped].items():
+        node = part
+        for name in prefix.split("."):
+            node = node.setdefault(name, {})
+        node.update({k: values[f"{prefix}.{k}"]["value"] for k in keys})
+
+    def refuse(*args, **kwargs):
+        raise AssertionError(f"derive.{skipped} ran although the config gives its keys")
+
+    monkeypatch.setattr(derive, skipped, refuse)
+    partial = resolve_pipeline_config({"robot": xml, **part}).to_json_dict()
+    assert {k: v["value"] for k, v in partial.items()} == {k: v["value"] for k, v in values.items()}
+    given = {f"{prefix}.{k}" for prefix, keys in _GIVEN_GROUPS[skipped].items() for k in keys}
+    assert {k for k, v in partial.items() if v["origin"] == "given"} == given | {"robot"}

@@ -381,4 +381,4 @@ def test_minimize_keeps_the_best_parameters_on_a_numerical_failure(optimizer):
     p, loss = _quadratic("nan")
     final, evals, stop, _ = minimize(loss, [p], optimizer=optimizer, max_iter=200, lr=1.0, tol=0.0, metrics_fn=dict)
     assert stop == "numerical failure" and evals >= 1
-    assert float(p) >= 1.5 and final == pytest.approx((float(p) - 1.0) ** 2)
+    assert float(p.detach()) >= 1.5 and final == pytest.approx((float(p.detach()) - 1.0) ** 2)

@@ -117,3 +117,53 @@ def _typed_robot_assignments(mj: MujocoRobot, an: AnalyticFuruta) -> list[Contro
 
 def _typed_source_assignments(robot: ControlRobot, path: Path, learned: LearnedBEM) -> list[BEMSource]:
     return [ModelBEM(robot), ZeroBEM(robot.qu_nominal), PredictorBEM(path, robot=robot), learned]
+
+
+@pytest.mark.parametrize("robot", _robots(), ids=lambda r: f"{type(r).__name__}:{r.name}")
+def test_generic_single_state_path_matches_each_robots_fast_path(robot):
+    """:class:`~bemlearn.robots.Robot`'s own ``terms``/``gamma0_scalar`` (through the batched torch dynamics)
+    agree with the NumPy fast path every concrete robot overrides them with."""
+    from bemlearn.robots import Robot
+
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        q, qd = rng.normal(scale=0.3, size=robot.n), rng.normal(scale=0.5, size=robot.n)
+        q[robot.unactuated_index] += robot.qu_nominal
+        D_fast, h_fast = robot.terms(q, qd)
+        D_gen, h_gen = Robot.terms(robot, q, qd)
+        np.testing.assert_allclose(D_gen, D_fast, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(h_gen, h_fast, rtol=1e-10, atol=1e-10)
+        qa, qad, qadd = (rng.normal(scale=s, size=robot.m) for s in (0.2, 0.5, 1.0))
+        args = (robot.qu_nominal + 0.05, qa, qad, qadd, 0.3, -0.7)
+        assert Robot.gamma0_scalar(robot, *args) == pytest.approx(robot.gamma0_scalar(*args), rel=1e-10, abs=1e-10)
+
+
+def test_numpy_root_finder_is_the_torch_solvers_core():
+    """:func:`~bemlearn.robots.bem.solve_bem` (torch residuals) returns what :func:`find_roots` returns for
+    the same residuals in NumPy, and the roots solve a closed form: tan(x) = c on (−π/2, π/2)."""
+    from bemlearn.robots.bem import find_roots, solve_bem
+
+    c = np.array([-3.0, -0.2, 0.0, 0.7, 4.0])
+    roots, valid, residual, _ = find_roots(lambda x, rows: np.tan(x) - c[rows, None], len(c), lo=-1.5, hi=1.5)
+    assert valid.all()
+    np.testing.assert_allclose(roots, np.arctan(c), atol=1e-13)
+    assert np.all(residual <= 1e-10)
+    ct = torch.from_numpy(c)
+    res = solve_bem(lambda x, rows: torch.tan(x) - ct[rows, None], len(c), lo=-1.5, hi=1.5)
+    np.testing.assert_array_equal(res.qu.numpy(), roots)
+    res_all = solve_bem(lambda x: torch.tan(x) - ct[:, None], len(c), lo=-1.5, hi=1.5)  # residuals without `rows`
+    np.testing.assert_array_equal(res_all.qu.numpy(), roots)
+    # no root in range: NaN and invalid, as before
+    none = find_roots(lambda x, rows: x**2 + 1.0, 2, lo=-1.0, hi=1.0)
+    assert not none[1].any() and np.isnan(none[0]).all()
+
+
+def test_loading_a_robot_does_not_load_torch():
+    """A MuJoCo robot's model, ranges and numpy dynamics need no torch; its torch members load it on first use."""
+    import subprocess
+    import sys
+
+    probe = ("import sys; from bemlearn.robots import load; r = load('furuta'); r.terms(r.T_np[0] * 0, r.T_np[0] * 0); "
+             "before = 'torch' in sys.modules; r.T; print(before, 'torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, check=True).stdout.split()
+    assert out == ["False", "True"]

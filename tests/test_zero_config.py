@@ -104,3 +104,15 @@ def test_run_on_a_config_naming_only_the_file(tmp_path):
     assert dr["rmse"] <= 0.01 and dr["max_abs"] <= 0.04
     assert not m["closed_loop"]["predictor"]["fell"] and not m["closed_loop"]["model"]["fell"]
     assert set(m["closed_loop"]) == {"predictor", "model", "zero"}
+
+
+def test_a_folder_named_like_a_registered_robot_does_not_hide_it(tmp_path, monkeypatch):
+    """``bemlearn run configs/furuta.yaml --out furuta`` claims the folder ``furuta`` before loading the robot:
+    ``robot: furuta`` still means the registered Furuta, not that folder."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "furuta").mkdir()
+    robot, ref = resolve_robot("furuta")
+    assert ref.registry == "furuta" and robot.joint_names == ("theta", "alpha")
+    (tmp_path / "mine").mkdir()  # a folder that is no registered name is still reported as a missing MJCF
+    with pytest.raises(FileNotFoundError, match="MJCF file mine not found"):
+        resolve_robot("mine")

@@ -118,10 +118,9 @@ def _lemma1(args) -> int:
 
 def _units(robot) -> tuple[str, str, str]:
     """Units of q_a, of the unactuated row's generalized force, and of q_u (by joint kind)."""
-    import numpy as np
 
     kinds = getattr(robot, "joint_kinds", None)
-    if kinds is None or not np.allclose(robot.T.numpy(), np.eye(robot.n)):
+    if kinds is None or not robot.identity_coordinates:
         return "rad", "N·m", "rad"
     ka = {kinds[i] for i in robot.actuated_index}
     qa = "rad" if ka == {"hinge"} else "m" if ka == {"slide"} else "rad or m"
@@ -130,7 +129,6 @@ def _units(robot) -> tuple[str, str, str]:
 
 
 def _lqr(args) -> int:
-    import numpy as np
 
     from bemlearn.control.lqr import discrete_lqr
     from bemlearn.errors import RobotModelError
@@ -151,7 +149,7 @@ def _lqr(args) -> int:
     unit = input_units(robot).value
     kinds = getattr(robot, "joint_kinds", ("hinge",) * robot.n)
     pos = ["rad" if k == "hinge" else "m" for k in kinds]
-    if not np.allclose(robot.T.numpy(), np.eye(robot.n)):
+    if not robot.identity_coordinates:
         pos = ["rad"] * robot.n
     cols = [f"{nm} [{unit}/{u}]" for nm, u in zip(robot.joint_names, pos)] + [f"d{nm} [{unit}/({u}/s)]" for nm, u in zip(robot.joint_names, pos)]
     print(f"robot      {robot.name}: u = K e, e = [q − q_t, q̇ − q̇_t]; {hz:g} Hz, {res.substeps} × {res.timestep:g} s physics steps")

@@ -52,8 +52,8 @@ class MujocoActuatorInverse:
                 raise RobotModelError(f"{robot.source}: actuator {name!r} has activation dynamics; the EIC needs dyntype='none'")
             if int(model.actuator_gaintype[i]) not in _GAIN_OK or int(model.actuator_biastype[i]) not in _BIAS_OK:
                 raise RobotModelError(f"{robot.source}: actuator {name!r} needs gaintype fixed/affine and biastype none/affine")
-        self.Tinv = robot.Tinv.numpy()
-        self.B_pinv = np.linalg.pinv(robot.input_matrix[list(robot.actuated_index)].numpy())  # (nu, m)
+        self.Tinv = robot.Tinv_np
+        self.B_pinv = np.linalg.pinv(robot.input_matrix_np[list(robot.actuated_index)])  # (nu, m)
         self.gear = model.actuator_gear[:, 0].copy()
         self.joint_dof = np.array([int(model.jnt_dofadr[model.actuator_trnid[i, 0]]) for i in range(model.nu)], dtype=np.int64)
         self.dof_col = {int(a): k for k, a in enumerate(robot._dadr)}

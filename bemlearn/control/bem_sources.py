@@ -19,13 +19,18 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
-import torch
 
+from bemlearn._lazy import lazy_module
 from bemlearn.errors import ArgumentError, ConfigError, MissingFileError
 from bemlearn.robots.protocol import BalanceRobot, ControlRobot
+
+if TYPE_CHECKING:
+    import torch
+else:
+    torch = lazy_module("torch")
 
 __all__ = ["BEM_SOURCES", "BEMSource", "PredictorBEM", "ModelBEM", "ZeroBEM", "make_bem_source"]
 

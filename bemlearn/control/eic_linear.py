@@ -18,35 +18,34 @@ unstable for every gain (see :func:`eic_linear_abscissa`).
 from __future__ import annotations
 
 import numpy as np
-import torch
 
 from bemlearn.errors import RobotModelError
-from bemlearn.robots.protocol import BalanceRobot
+from bemlearn.robots.protocol import ControlRobot
 
 __all__ = ["eic_linear_matrix", "eic_linear_abscissa"]
 
 
-def _model_terms(robot: BalanceRobot, eps: float = 1e-6) -> tuple[float, float, np.ndarray, np.ndarray]:
+def _model_terms(robot: ControlRobot, eps: float = 1e-6) -> tuple[float, float, np.ndarray, np.ndarray]:
     from bemlearn.robots.scales import bem_slopes
 
     n, iu, ia = robot.n, robot.unactuated_index, robot.actuated_index[0]
-    q0 = torch.zeros(1, n, dtype=torch.float64)
-    q0[0, iu] = robot.qu_nominal
-    D = robot.mass_matrix(q0)[0].numpy()
-    z = torch.zeros(1, n, dtype=torch.float64)
+    q0 = np.zeros(n)
+    q0[iu] = robot.qu_nominal
+    z = np.zeros(n)
+    D = robot.terms(q0, z)[0]
     Hq = np.zeros(4)
     for k, (col, vel) in enumerate(((iu, False), (ia, False), (iu, True), (ia, True))):
-        e = torch.zeros(1, n, dtype=torch.float64)
-        e[0, col] = eps
+        e = np.zeros(n)
+        e[col] = eps
         if vel:
-            hp, hm = robot.bias(q0, e) - robot.passive(q0, e), robot.bias(q0, -e) - robot.passive(q0, -e)
+            hp, hm = robot.terms(q0, e)[1], robot.terms(q0, -e)[1]
         else:
-            hp, hm = robot.bias(q0 + e, z) - robot.passive(q0 + e, z), robot.bias(q0 - e, z) - robot.passive(q0 - e, z)
-        Hq[k] = float((hp - hm)[0, iu]) / (2 * eps)
+            hp, hm = robot.terms(q0 + e, z)[1], robot.terms(q0 - e, z)[1]
+        Hq[k] = float(hp[iu] - hm[iu]) / (2 * eps)
     return D[iu, iu], D[iu, ia], Hq, bem_slopes(robot)[:, 0]
 
 
-def eic_linear_matrix(robot: BalanceRobot, gains, *, terms: tuple[float, float, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+def eic_linear_matrix(robot: ControlRobot, gains, *, terms: tuple[float, float, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """The ``(4, 4)`` matrix A of ẋ = A x (module docstring) for a robot with m = 1 (1/s, 1/s²)."""
     if robot.m != 1:
         raise RobotModelError(f"eic_linear_matrix: needs one actuated joint, robot {robot.name!r} has {robot.m}")
@@ -62,6 +61,6 @@ def eic_linear_matrix(robot: BalanceRobot, gains, *, terms: tuple[float, float, 
     return A
 
 
-def eic_linear_abscissa(robot: BalanceRobot, gains) -> float:
+def eic_linear_abscissa(robot: ControlRobot, gains) -> float:
     """max Re λ of :func:`eic_linear_matrix` (1/s): < 0 is needed for the EIC to balance."""
     return float(np.max(np.linalg.eigvals(eic_linear_matrix(robot, gains)).real))

@@ -96,7 +96,7 @@ def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = No
     n = robot.n
     q0 = np.zeros(n)
     q0[robot.unactuated_index] = robot.qu_nominal
-    data.qpos[robot._qadr] = robot.Tinv.numpy() @ q0
+    data.qpos[robot._qadr] = robot.Tinv_np @ q0
     mujoco.mj_forward(model, data)
     nx = 2 * model.nv + model.na
     A1 = np.zeros((nx, nx))
@@ -107,7 +107,7 @@ def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = No
     for _ in range(N):
         BN = A1 @ BN + B1
         AN = A1 @ AN
-    T = robot.T.numpy()
+    T = robot.T_np
     S = np.block([[T, np.zeros((n, n))], [np.zeros((n, n)), T]])
     Sinv = np.linalg.inv(S)
     return S @ AN @ Sinv, S @ BN, N, h
@@ -148,7 +148,7 @@ def bryson_scales(robot: MujocoRobot, *, design_qu: float = 0.2) -> tuple[np.nda
 
 
 def _limited_actuated(robot: MujocoRobot) -> np.ndarray:
-    if not np.allclose(robot.T.numpy(), np.eye(robot.n)):
+    if not robot.identity_coordinates:
         return np.ones(robot.m, dtype=bool)
     return np.array([bool(robot.model.jnt_limited[j]) for j in robot.actuated_index])
 

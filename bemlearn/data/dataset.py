@@ -27,13 +27,12 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
-import torch
 
+from bemlearn._lazy import lazy_module
 from bemlearn.config import Limit, config_limits
-from bemlearn.data.dataset_types import BEMDataset, GPDatasets
 from bemlearn.data.derivative_choice import estimate_states, resolve_estimator
 from bemlearn.data.derivatives import DerivativeEstimator, make_estimator
 from bemlearn.data.features import gp_input_names, gp_inputs, gp_output_name
@@ -41,6 +40,13 @@ from bemlearn.data.normalization import Normalization
 from bemlearn.data.trajectory import Trajectory
 from bemlearn.data.validation import validate
 from bemlearn.errors import ConfigError, DataError
+
+if TYPE_CHECKING:
+    import torch
+
+    from bemlearn.data.dataset_types import BEMDataset, GPDatasets
+else:
+    torch = lazy_module("torch")
 
 __all__ = ["DatasetConfig", "build_datasets", "split_trials"]
 
@@ -159,6 +165,8 @@ def build_datasets(traj: Trajectory, config: DatasetConfig, *, progress: bool = 
         ValueError: short trials with ``short_trials="error"``, nothing left to train on,
             or too few trials to split.
     """
+    from bemlearn.data.dataset_types import BEMDataset, GPDatasets  # torch: not needed to read a DatasetConfig
+
     validate(traj, source="build_datasets", min_trial_samples=1)  # cheap; in-memory trajectories too
     meta = traj.meta
     rate = meta.sample_rate_hz

@@ -12,16 +12,21 @@ the same x with q̈_u = q̇_u = 0.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
-import torch
 
+from bemlearn._lazy import lazy_module
 from bemlearn.errors import ArgumentError
+
+if TYPE_CHECKING:
+    import torch
+else:
+    torch = lazy_module("torch")
 
 __all__ = ["gp_input_names", "gp_output_name", "gp_inputs"]
 
-ArrayT = TypeVar("ArrayT", np.ndarray, torch.Tensor)
+ArrayT = TypeVar("ArrayT", np.ndarray, "torch.Tensor")
 
 
 def gp_input_names(joint_names: Sequence[str], unactuated: str) -> tuple[str, ...]:

@@ -2,17 +2,25 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
-import torch
-
+from bemlearn._lazy import lazy_module
 from bemlearn.config import Limit, config_limits
 from bemlearn.errors import ConfigError
 
+if TYPE_CHECKING:
+    import torch
+else:
+    torch = lazy_module("torch")
+
 __all__ = ["GPConfig"]
 
-_DTYPES = {"float64": torch.float64, "float32": torch.float32}
+#: What ``torch.device`` accepts: a device type, optionally ``:index`` (checked without importing
+#: torch, so that reading a config stays fast; ``tests/test_config_validation.py`` compares with torch).
+DEVICE_PATTERN = re.compile(r"(cpu|cuda|ipu|xpu|mkldnn|opengl|opencl|ideep|hip|ve|fpga|maia|xla|lazy|vulkan|mps|meta|hpu|mtia"
+                            r"|privateuseone)(:(0|[1-9][0-9]*))?")
 
 
 @dataclass(frozen=True)
@@ -81,10 +89,8 @@ class GPConfig:
                 raise ConfigError(f"{name}: expected a positive number, got {getattr(self, name)}")
         if self.tol < 0.0:
             raise ConfigError(f"tol: expected a non-negative number, got {self.tol}")
-        try:
-            torch.device(self.device)
-        except RuntimeError as exc:
-            raise ConfigError(f"device: not a torch device string: {self.device!r}") from exc
+        if not DEVICE_PATTERN.fullmatch(self.device):
+            raise ConfigError(f"device: not a torch device string (cpu, cuda, cuda:1, mps, ...): {self.device!r}")
 
     @property
     def resolved_max_iter(self) -> int:
@@ -105,7 +111,7 @@ class GPConfig:
     @property
     def torch_dtype(self) -> torch.dtype:
         """The torch dtype named by :attr:`dtype`."""
-        return _DTYPES[self.dtype]
+        return {"float64": torch.float64, "float32": torch.float32}[self.dtype]
 
 
 # (the lower bounds of the counts and step sizes are checked by __post_init__)

@@ -174,7 +174,7 @@ def excitation_signals(robot, rate: RateChoice, *, n_sines: tuple[int, int] = (2
 
 
 def _limited_actuated(robot) -> np.ndarray:
-    if not np.allclose(robot.T.numpy(), np.eye(robot.n)):
+    if not robot.identity_coordinates:
         return np.ones(robot.m, dtype=bool)
     return np.array([bool(robot.model.jnt_limited[j]) for j in robot.actuated_index])
 
@@ -279,14 +279,12 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None) -> Deri
 
 def _eic_peak(robot, w_u: float, e0: float) -> float:
     """|ctrl| / ctrl_max of the EIC's first tick for a q_u error e0 at rest at upright (linearised)."""
-    import torch
-
     from bemlearn.control.actuator_inverse import MujocoActuatorInverse
 
     n, iu, ia = robot.n, robot.unactuated_index, list(robot.actuated_index)
     q = np.zeros(n)
     q[iu] = robot.qu_nominal
-    D = robot.mass_matrix(torch.from_numpy(q[None]))[0].numpy()
+    D = robot.terms(q, np.zeros(n))[0]
     v_u = -(w_u**2) * e0
     D_ua = D[iu, ia]
     v_a = -D_ua / (D_ua @ D_ua) * (D[iu, iu] * v_u)

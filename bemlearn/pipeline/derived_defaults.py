@@ -7,7 +7,9 @@ config does not give.  It is the one assembly of the derived defaults: ``bemlear
 ``config show``, ``bench robots`` and the tests all go through it.  Values that depend on each
 other are derived consistently with what the config *does* give: a given control rate is used for
 the excitation LQR, the velocity filter and the EIC gains, and the closed loop runs at the
-collection's rate unless told otherwise.
+collection's rate unless told otherwise.  A group of keys that come from one derivation (the LQR
+gains, the sensor, the excitation's sines, the held-out references, the EIC gains, the closed-loop
+reference) is derived only when the config leaves at least one of them out.
 """
 
 from __future__ import annotations
@@ -27,6 +29,11 @@ __all__ = ["DERIVED_KEYS", "derive_pipeline_values"]
 _COLLECT = ("rate_hz", "physics_timestep", "gains", "gain_scale", "fall_window", "input_units", "sensor", "n_sines",
             "amplitude", "frequency_hz", "initial_qa", "initial_qu")
 _SIMULATE = ("rate_hz", "physics_timestep", "gains", "reference", "fall_window", "sensor")
+_SENSOR = ("counts_per_rev", "noise_std", "velocity_cutoff", "m_per_count")  # the leaves of derive.sensor
+_SIGNALS = ("n_sines", "amplitude", "frequency_hz")
+_EVALUATE = ("n_sines", "amplitude_max", "amplitude_min", "frequency_hz")
+_EIC_GAINS = ("kp_a", "kd_a", "kp_u", "kd_u")
+_REFERENCE = ("amplitudes", "frequencies_hz", "phases", "offset")
 
 #: Every config key that the robot's model derives when the config does not give it (docs/config.md).
 DERIVED_KEYS: set[str] = set()
@@ -77,7 +84,8 @@ def _rate(robot, rate_hz: float | None, timestep: float | None, *, section: str 
 
 
 def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | frozenset[str] = frozenset()) -> dict[str, tuple[Any, str]]:
-    """``{dotted key: (value, how it was derived)}`` for every derivable key of ``config`` (docs/config.md).
+    """``{dotted key: (value, how it was derived)}`` for the derivable keys of ``config`` (docs/config.md): every
+    key of each group the config does not give in full (module docstring).
 
     Args:
         robot: the config's robot (a :class:`~bemlearn.robots.MujocoRobot`; other robots derive nothing).
@@ -101,35 +109,53 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
     else:
         srate = _rate(robot, given_sim_rate, None, section="simulate")
     rc, rs = crate.value, srate.value
-    sig = derive.excitation_signals(robot, rc)
-    gains = derive.excitation_gains(robot, rc)
-    init = derive.initial_ranges(robot)
+
+    def wanted(*keys: str) -> bool:  # derive a group only when the config leaves one of its keys out
+        return any(not _given(given, k) for k in keys)
+
+    signals: list[dict] = []
+
+    def excitation() -> dict:  # collect's sines, also the base of evaluate's references and of the closed loop's
+        if not signals:
+            sig = derive.excitation_signals(robot, rc)
+            _leaves("collect", {k: sig.value[k] for k in _SIGNALS}, sig.note, out)
+            signals.append(sig.value)
+        return signals[0]
+
     fw = derive.fall_window(robot)
-    sen = derive.sensor(robot, rc)
-    sen_sim = derive.sensor(robot, rs)
     _leaves("collect.rate_hz", rc.rate_hz, crate.note, out)
     _leaves("collect.physics_timestep", rc.timestep if rc.timestep_changed else None, crate.note, out)
-    _leaves("collect.gains", gains.value["gains"], gains.note, out)
-    _leaves("collect.gain_scale", gains.value["gain_scale"], gains.note, out)
+    if wanted("collect.gains", "collect.gain_scale"):
+        gains = derive.excitation_gains(robot, rc)
+        _leaves("collect.gains", gains.value["gains"], gains.note, out)
+        _leaves("collect.gain_scale", gains.value["gain_scale"], gains.note, out)
     _leaves("collect.fall_window", fw.value, fw.note, out)
     units = derive.input_units(robot)
     _leaves("collect.input_units", units.value, units.note, out)
-    _leaves("collect.sensor", sen.value, sen.note, out)
-    for k in ("n_sines", "amplitude", "frequency_hz"):
-        _leaves(f"collect.{k}", sig.value[k], sig.note, out)
+    if wanted(*(f"collect.sensor.{k}" for k in _SENSOR)):
+        sen = derive.sensor(robot, rc)
+        _leaves("collect.sensor", sen.value, sen.note, out)
+    if wanted(*(f"collect.{k}" for k in _SIGNALS)):
+        excitation()
+    init = derive.initial_ranges(robot)
     for k in ("initial_qa", "initial_qu"):
         _leaves(f"collect.{k}", init.value[k], init.note, out)
-    ev = derive.evaluation(robot, sig.value)
-    _leaves("evaluate", {k: v for k, v in to_dict(ev.value).items() if k != "n_references"}, ev.note, out)
+    if wanted(*(f"evaluate.{k}" for k in _EVALUATE)):
+        ev = derive.evaluation(robot, excitation())
+        _leaves("evaluate", {k: v for k, v in to_dict(ev.value).items() if k in _EVALUATE}, ev.note, out)
     _leaves("simulate.rate_hz", rs.rate_hz, srate.note + ("" if _given(given, "simulate.rate_hz") else " (the collection's rate)"), out)
     _leaves("simulate.physics_timestep", rs.timestep if rs.timestep_changed else None, srate.note, out)
-    eic = derive.eic_gains(robot, rs)
-    _leaves("simulate.gains", {k: v for k, v in to_dict(eic.value).items() if k in ("kp_a", "kd_a", "kp_u", "kd_u")}, eic.note, out)
-    ref = derive.closed_loop_reference(robot, sig.value)
-    _leaves("simulate.reference", ref.value, ref.note, out)
+    if wanted(*(f"simulate.gains.{k}" for k in _EIC_GAINS)):
+        eic = derive.eic_gains(robot, rs)
+        _leaves("simulate.gains", {k: v for k, v in to_dict(eic.value).items() if k in _EIC_GAINS}, eic.note, out)
+    if wanted(*(f"simulate.reference.{k}" for k in _REFERENCE)):
+        ref = derive.closed_loop_reference(robot, excitation())
+        _leaves("simulate.reference", ref.value, ref.note, out)
     _leaves("simulate.fall_window", fw.value, fw.note, out)
-    _leaves("simulate.sensor", {**sen_sim.value, "velocity_cutoff": 2 * sen_sim.value["velocity_cutoff"]},
-            sen_sim.note + "; × 2 in the closed loop", out)
+    if wanted(*(f"simulate.sensor.{k}" for k in _SENSOR)):
+        sen_sim = derive.sensor(robot, rs)
+        _leaves("simulate.sensor", {**sen_sim.value, "velocity_cutoff": 2 * sen_sim.value["velocity_cutoff"]},
+                sen_sim.note + "; × 2 in the closed loop", out)
     return out
 
 

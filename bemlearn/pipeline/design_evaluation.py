@@ -37,7 +37,7 @@ from bemlearn.models.predictor_state import PredictorState
 
 if TYPE_CHECKING:
     from bemlearn.pipeline.evaluation import EvaluationConfig
-    from bemlearn.robots.protocol import BalanceRobot
+    from bemlearn.robots.protocol import ControlRobot
 
 __all__ = ["DesignGrid", "design_grid", "evaluate_design_region", "least_squares_gain", "design_region_figure"]
 
@@ -61,7 +61,7 @@ class DesignGrid:
     n_drawn: int
 
 
-def design_grid(robot: BalanceRobot, evaluate_config: EvaluationConfig, *, n_points: int = 4096, seed: int = 0, bound: float | None = None) -> DesignGrid:
+def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_points: int = 4096, seed: int = 0, bound: float | None = None) -> DesignGrid:
     """The queries of (D1) for ``robot`` (module docstring).
 
     Args:

@@ -13,15 +13,18 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import torch
 
+from bemlearn._lazy import lazy_module
 from bemlearn.errors import CheckpointError, ConfigError
-from bemlearn.pipeline.reliability import reliability_table
 from bemlearn.robots.protocol import BalanceRobot
 from bemlearn.robots.reference import CompositeSinusoid
 
 if TYPE_CHECKING:  # bemlearn.models loads GPyTorch: not needed to read an EvaluationConfig
+    import torch
+
     from bemlearn.models.predictor_state import PredictorState
+else:
+    torch = lazy_module("torch")
 
 __all__ = ["EvaluationConfig", "held_out_references", "reference_queries", "evaluate_bem", "run_truth_robot", "BEMEvaluation",
            "BEMCurves", "ReferenceErrors", "DesignRegionErrors", "BoundViolation"]
@@ -295,6 +298,8 @@ def evaluate_bem(state: PredictorState, robot: BalanceRobot, references: list[Co
     Returns:
         a :class:`BEMEvaluation`; :meth:`BEMEvaluation.as_dict` is what ``metrics.json`` records.
     """
+    from bemlearn.pipeline.reliability import reliability_table  # SciPy: not needed to read an EvaluationConfig
+
     if design_bound is None:
         from bemlearn.pipeline.derive import design_region
 

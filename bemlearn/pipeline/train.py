@@ -34,7 +34,7 @@ from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.evaluation import BEMCurves, EvaluationConfig, evaluate_bem, held_out_references
 from bemlearn.pipeline.reliability import reliability_figure
 from bemlearn.pipeline.uncertainty import calibrate_band
-from bemlearn.robots.protocol import BalanceRobot
+from bemlearn.robots.protocol import BalanceRobot, ControlRobot
 from bemlearn.units import gp_input_units
 
 if TYPE_CHECKING:
@@ -186,7 +186,7 @@ def _data_only_metrics(state: PredictorState, train: BEMDataset, val: BEMDataset
     return metrics
 
 
-def _model_metrics(state: PredictorState, truth_robot: BalanceRobot, ecfg: EvaluationConfig, unactuated: str, unit: str,
+def _model_metrics(state: PredictorState, truth_robot: ControlRobot, ecfg: EvaluationConfig, unactuated: str, unit: str,
                    out: Path, writer) -> dict:
     """Learned vs model-based BEM along held-out references and over the design region (writes
     ``reliability.png``, ``bem_validation.png``, ``design_region.png``)."""

@@ -5,7 +5,7 @@ from typing import TYPE_CHECKING
 from bemlearn._lazy import lazy_namespace
 
 if TYPE_CHECKING:  # imported on first use: bemlearn._lazy
-    from bemlearn.robots.bem import BEMResult, solve_bem
+    from bemlearn.robots.bem import BEMResult, find_roots, solve_bem
     from bemlearn.robots.mujoco_robot import MujocoRobot, RobotModelError
     from bemlearn.robots.protocol import BalanceRobot, ControlRobot
     from bemlearn.robots.registry import ROBOTS, RobotRef, load, register_robot, registered_robots, resolve_robot
@@ -25,6 +25,7 @@ __all__ = [
     "registered_robots",
     "resolve_robot",
     "solve_bem",
+    "find_roots",
 ]
 
 __getattr__, __dir__ = lazy_namespace(__name__, __file__)

@@ -8,20 +8,31 @@ zero counts as a root), and the root is refined by Chandrupatla's method (bracke
 inverse quadratic interpolation with a bisection safeguard; T. R. Chandrupatla, Adv.
 Eng. Softw. 28, 1997), which never leaves its bracket and converges superlinearly.
 Elements without a sign change in the range get NaN and ``valid = False``.
+
+:func:`find_roots` is the NumPy implementation (the derivation of defaults calls it without torch);
+:func:`solve_bem` is its interface for residuals written in torch.
 """
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import torch
+import numpy as np
 
+from bemlearn._lazy import lazy_module
 from bemlearn.errors import ArgumentError
 
-__all__ = ["BEMResult", "solve_bem"]
+if TYPE_CHECKING:
+    import torch
+else:
+    torch = lazy_module("torch")
 
-_EPS = torch.finfo(torch.float64).eps
+__all__ = ["BEMResult", "solve_bem", "find_roots"]
+
+_EPS = sys.float_info.epsilon  # float64 machine epsilon, as torch.finfo(torch.float64).eps
 
 
 @dataclass(frozen=True)
@@ -53,13 +64,49 @@ def solve_bem(
     ftol: float = 1e-10,
     max_iter: int = 100,
 ) -> BEMResult:
-    """Find, per batch element, the root of ``fun`` in ``[lo, hi]`` nearest ``nominal``.
+    """Find, per batch element, the root of ``fun`` in ``[lo, hi]`` nearest ``nominal`` (torch interface of :func:`find_roots`).
 
     Args:
-        fun: maps candidate roots ``(R, K)`` to residuals ``(R, K)``; with a keyword argument
-            ``rows`` (``(R,)`` int64) row r uses the ``rows[r]``-th problem's parameters, so only
+        fun: maps candidate roots ``(R, K)`` to residuals ``(R, K)`` (float64 tensors); with a keyword
+            argument ``rows`` (``(R,)`` int64) row r uses the ``rows[r]``-th problem's parameters, so only
             unresolved problems are evaluated; without it ``R = B`` and row b is problem b.
         batch: B.
+        lo, hi, nominal, n_grid, xtol, ftol, max_iter: as for :func:`find_roots`.
+    """
+    import inspect
+
+    if "rows" in inspect.signature(fun).parameters:
+        def call(x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+            return fun(torch.from_numpy(x), rows=torch.from_numpy(rows)).detach().cpu().numpy()
+    else:
+        def call(x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+            full = np.zeros((batch, x.shape[1]))
+            full[rows] = x
+            return fun(torch.from_numpy(full)).detach().cpu().numpy()[rows]
+
+    qu, valid, residual, it = find_roots(call, batch, lo=lo, hi=hi, nominal=nominal, n_grid=n_grid, xtol=xtol, ftol=ftol,
+                                         max_iter=max_iter)
+    return BEMResult(qu=torch.from_numpy(qu), valid=torch.from_numpy(valid), residual=torch.from_numpy(residual), iterations=it)
+
+
+def find_roots(
+    fun: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    batch: int,
+    *,
+    lo: float,
+    hi: float,
+    nominal: float = 0.0,
+    n_grid: int = 73,
+    xtol: float = 1e-14,
+    ftol: float = 1e-10,
+    max_iter: int = 100,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Find, per problem, the root of ``fun`` in ``[lo, hi]`` nearest ``nominal`` (module docstring), in NumPy.
+
+    Args:
+        fun: ``fun(x, rows)`` maps candidate roots ``x (R, K)`` of the problems ``rows (R,)`` (int64
+            indices into the batch) to residuals ``(R, K)``; only unresolved problems are evaluated.
+        batch: B, the number of problems.
         lo: lower end of the admissible range.
         hi: upper end, ``lo < hi``.
         nominal: preferred value; among bracketed roots the one nearest it is returned.
@@ -67,48 +114,29 @@ def solve_bem(
         xtol: absolute tolerance on the root.
         ftol: a returned root must satisfy |fun| ≤ ftol, else it is marked invalid.
         max_iter: refinement iteration cap.
+
+    Returns:
+        ``(root (B,), valid (B,) bool, |fun(root)| (B,), iterations)``: NaN root and residual where invalid.
     """
     if not lo < hi:
         raise ArgumentError(f"solve_bem: need lo < hi, got lo={lo}, hi={hi}")
     if n_grid < 3:
         raise ArgumentError(f"solve_bem: n_grid must be ≥ 3, got {n_grid}")
-    call = _on_rows(fun, batch)
-    nodes = torch.linspace(lo, hi, n_grid, dtype=torch.float64)
-    br = _bracket(call, nodes, nominal, batch)
-    exact = br.valid & (br.fa == 0)
-    root = torch.where(exact, br.a, torch.full_like(br.a, float("nan")))
-    froot = torch.where(exact, br.fa, torch.full_like(br.a, float("nan")))
-    root, froot, it = _chandrupatla(call, br, root, froot, active=br.valid & ~exact, xtol=xtol, max_iter=max_iter)
+    nodes = np.linspace(lo, hi, n_grid)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        br = _bracket(fun, nodes, nominal, batch)
+        exact = br.valid & (br.fa == 0)
+        root = np.where(exact, br.a, np.nan)
+        froot = np.where(exact, br.fa, np.nan)
+        root, froot, it = _chandrupatla(fun, br, root, froot, active=br.valid & ~exact, xtol=xtol, max_iter=max_iter)
     # a last-node exact zero is a root only if nothing else was found
     use_last = br.last_zero & ~br.valid
-    root = torch.where(use_last, nodes[-1].expand(batch), root)
-    froot = torch.where(use_last, torch.zeros_like(froot), froot)
+    root = np.where(use_last, nodes[-1], root)
+    froot = np.where(use_last, 0.0, froot)
     valid = br.valid | use_last
-    residual = froot.abs()
+    residual = np.abs(froot)
     good = valid & (residual <= ftol)
-    nan = torch.full_like(root, float("nan"))
-    return BEMResult(
-        qu=torch.where(good, root, nan),
-        valid=good,
-        residual=torch.where(good, residual, nan),
-        iterations=it,
-    )
-
-
-def _on_rows(fun: Callable[..., torch.Tensor], batch: int) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
-    """``call(x (R, K), rows (R,))``: ``fun`` on the problems ``rows`` only (all problems, then
-    selected, when ``fun`` takes no ``rows``)."""
-    import inspect
-
-    if "rows" in inspect.signature(fun).parameters:
-        return lambda x, rows: fun(x, rows=rows)
-
-    def call(x: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
-        full = torch.zeros(batch, x.shape[1], dtype=torch.float64)
-        full[rows] = x
-        return fun(full)[rows]
-
-    return call
+    return np.where(good, root, np.nan), good, np.where(good, residual, np.nan), it
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,15 +145,15 @@ class _Bracket:
     ``fa``, ``fb`` (NaN where none), ``valid`` where one was found, and ``last_zero`` where the residual
     is exactly zero on the last grid node (not covered by the cells)."""
 
-    a: torch.Tensor
-    b: torch.Tensor
-    fa: torch.Tensor
-    fb: torch.Tensor
-    valid: torch.Tensor
-    last_zero: torch.Tensor
+    a: np.ndarray
+    b: np.ndarray
+    fa: np.ndarray
+    fb: np.ndarray
+    valid: np.ndarray
+    last_zero: np.ndarray
 
 
-def _bracket(call: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], nodes: torch.Tensor, nominal: float, batch: int) -> _Bracket:
+def _bracket(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.ndarray, nominal: float, batch: int) -> _Bracket:
     """Scan the grid ``nodes`` for the sign-change cell nearest ``nominal`` (a node where the residual is
     exactly zero counts as a root).
 
@@ -133,30 +161,30 @@ def _bracket(call: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], nodes: 
     problems whose nearest root may lie outside the window.  A sign-change cell in a window is the
     nearest one of the whole grid when it is no farther than the window's edges.
     """
-    n_grid = nodes.numel()
-    a = torch.full((batch,), float("nan"), dtype=torch.float64)
-    b, fa, fb = a.clone(), a.clone(), a.clone()
-    valid = torch.zeros(batch, dtype=torch.bool)
-    last_zero = torch.zeros(batch, dtype=torch.bool)
-    k0 = int(torch.clamp(torch.searchsorted(nodes, torch.tensor(nominal, dtype=torch.float64)), 0, n_grid - 1))
-    pending = torch.arange(batch)
+    n_grid = nodes.size
+    a = np.full(batch, np.nan)
+    b, fa, fb = a.copy(), a.copy(), a.copy()
+    valid = np.zeros(batch, dtype=bool)
+    last_zero = np.zeros(batch, dtype=bool)
+    k0 = int(np.clip(np.searchsorted(nodes, nominal), 0, n_grid - 1))
+    pending = np.arange(batch)
     for half in (4, n_grid):
         i0, i1 = max(0, k0 - half), min(n_grid - 1, k0 + half)
-        if i1 - i0 < 1 or pending.numel() == 0:
+        if i1 - i0 < 1 or pending.size == 0:
             continue
-        grid = nodes[i0 : i1 + 1].expand(pending.numel(), i1 - i0 + 1).contiguous()
-        f = call(grid, pending)
+        grid = np.broadcast_to(nodes[i0 : i1 + 1], (pending.size, i1 - i0 + 1)).copy()
+        f = np.asarray(call(grid, pending), dtype=np.float64)
         fl, fr = f[:, :-1], f[:, 1:]
-        change = (torch.sign(fl) * torch.sign(fr) < 0) | (fl == 0)
+        change = (np.sign(fl) * np.sign(fr) < 0) | (fl == 0)
         xl, xr = grid[:, :-1], grid[:, 1:]
-        dist = torch.where(nominal < xl, xl - nominal, torch.where(nominal > xr, nominal - xr, torch.zeros_like(xl)))
-        dist = torch.where(change, dist, torch.full_like(dist, float("inf")))
-        k = dist.argmin(dim=1)
-        r = torch.arange(pending.numel())
+        dist = np.where(nominal < xl, xl - nominal, np.where(nominal > xr, nominal - xr, 0.0))
+        dist = np.where(change, dist, np.inf)
+        k = dist.argmin(axis=1)
+        r = np.arange(pending.size)
         d = dist[r, k]
         whole = i0 == 0 and i1 == n_grid - 1
         edge = min(nominal - float(nodes[i0]) if i0 > 0 else float("inf"), float(nodes[i1]) - nominal if i1 < n_grid - 1 else float("inf"))
-        found = torch.isfinite(d) & ((d <= edge) | whole)
+        found = np.isfinite(d) & ((d <= edge) | whole)
         rows = pending[found]
         a[rows], b[rows], fa[rows], fb[rows] = xl[r, k][found], xr[r, k][found], fl[r, k][found], fr[r, k][found]
         valid[rows] = True
@@ -166,48 +194,48 @@ def _bracket(call: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], nodes: 
     return _Bracket(a, b, fa, fb, valid, last_zero)
 
 
-def _chandrupatla(call: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], br: _Bracket, root: torch.Tensor, froot: torch.Tensor,
-                  *, active: torch.Tensor, xtol: float, max_iter: int) -> tuple[torch.Tensor, torch.Tensor, int]:
+def _chandrupatla(call: Callable[[np.ndarray, np.ndarray], np.ndarray], br: _Bracket, root: np.ndarray, froot: np.ndarray,
+                  *, active: np.ndarray, xtol: float, max_iter: int) -> tuple[np.ndarray, np.ndarray, int]:
     """Chandrupatla's iteration on the brackets ``br`` of the ``active`` problems (evaluated on those only).
 
     Returns ``(root, froot, iterations)``: ``root``/``froot`` updated where a problem converged, and
     at the iteration cap the better end of each bracket still active.
     """
-    a, b, fa, fb = br.a.clone(), br.b.clone(), br.fa.clone(), br.fb.clone()
-    c, fc = a.clone(), fa.clone()
-    t = torch.full_like(a, 0.5)
-    active = active.clone()
+    a, b, fa, fb = br.a.copy(), br.b.copy(), br.fa.copy(), br.fb.copy()
+    c, fc = a.copy(), fa.copy()
+    t = np.full_like(a, 0.5)
+    active = active.copy()
     it = 0
     while bool(active.any()) and it < max_iter:
         it += 1
-        idx = active.nonzero()[:, 0]
+        idx = np.flatnonzero(active)
         A, B_, C, FA, FB, FC, T = a[idx], b[idx], c[idx], fa[idx], fb[idx], fc[idx], t[idx]
         xt = A + T * (B_ - A)
-        ft = call(xt[:, None], idx)[:, 0]
-        same = torch.sign(ft) == torch.sign(FA)
-        C, FC = torch.where(same, A, B_), torch.where(same, FA, FB)
-        B_, FB = torch.where(same, B_, A), torch.where(same, FB, FA)
+        ft = np.asarray(call(xt[:, None], idx), dtype=np.float64)[:, 0]
+        same = np.sign(ft) == np.sign(FA)
+        C, FC = np.where(same, A, B_), np.where(same, FA, FB)
+        B_, FB = np.where(same, B_, A), np.where(same, FB, FA)
         A, FA = xt, ft
-        use_a = FA.abs() < FB.abs()
-        xm = torch.where(use_a, A, B_)
-        fm = torch.where(use_a, FA, FB)
-        tol = 2 * _EPS * xm.abs() + xtol
-        width = (B_ - C).abs()
-        tl = tol / torch.where(width > 0, width, torch.ones_like(width))
+        use_a = np.abs(FA) < np.abs(FB)
+        xm = np.where(use_a, A, B_)
+        fm = np.where(use_a, FA, FB)
+        tol = 2 * _EPS * np.abs(xm) + xtol
+        width = np.abs(B_ - C)
+        tl = tol / np.where(width > 0, width, 1.0)
         done = (tl > 0.5) | (fm == 0) | (width == 0)
         # next t: inverse quadratic interpolation when safe, else bisection
         xi = (A - B_) / (C - B_)
         phi = (FA - FB) / (FC - FB)
         iqi = (phi**2 < xi) & ((1 - phi) ** 2 < 1 - xi)
         t_iqi = FA / (FB - FA) * FC / (FB - FC) + (C - A) / (B_ - A) * FA / (FC - FA) * FB / (FC - FB)
-        T = torch.where(iqi, t_iqi, torch.full_like(T, 0.5))
-        T = torch.minimum(torch.maximum(T, tl), 1 - tl)
-        T = torch.where(torch.isfinite(T), T, torch.full_like(T, 0.5))
+        T = np.where(iqi, t_iqi, 0.5)
+        T = np.minimum(np.maximum(T, tl), 1 - tl)
+        T = np.where(np.isfinite(T), T, 0.5)
         a[idx], b[idx], c[idx], fa[idx], fb[idx], fc[idx], t[idx] = A, B_, C, FA, FB, FC, T
         root[idx[done]], froot[idx[done]] = xm[done], fm[done]
         active[idx[done]] = False
     if bool(active.any()):  # iteration cap: take the best point so far
-        use_a = fa.abs() < fb.abs()
-        root = torch.where(active, torch.where(use_a, a, b), root)
-        froot = torch.where(active, torch.where(use_a, fa, fb), froot)
+        use_a = np.abs(fa) < np.abs(fb)
+        root = np.where(active, np.where(use_a, a, b), root)
+        froot = np.where(active, np.where(use_a, fa, fb), froot)
     return root, froot, it

@@ -26,17 +26,24 @@ With q_j = T⁻¹ q, the dynamics transform as D = T⁻ᵀ D_j T⁻¹, C q̇ + G
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
-import torch
 
+from bemlearn._lazy import lazy_module
 from bemlearn.errors import MissingFileError, RobotModelError
 from bemlearn.robots._mujoco_compat import full_mass_matrix, make_mass_matrix
 from bemlearn.robots.robot import Robot, as_batch
+
+if TYPE_CHECKING:
+    import torch
+else:
+    torch = lazy_module("torch")
 
 __all__ = ["MujocoRobot", "RobotModelError"]
 
@@ -110,6 +117,13 @@ class MujocoRobot(Robot):
         model: a compiled ``mujoco.MjModel``.
         name: a name for the robot (default: the model name).
         source: where the model came from (path or registry name), for messages.
+
+    Attributes:
+        identity_coordinates: True when the coordinates are the MJCF joints themselves (T = I; see
+            the module docstring), so joint ranges and kinds apply to the coordinates directly.
+        T_np, Tinv_np: ``(n, n)`` the coordinate map T and T⁻¹ as NumPy arrays (:attr:`T`, :attr:`Tinv`
+            are the same numbers as torch tensors).
+        input_matrix_np: ``(n, nu)`` B = T⁻ᵀ B_j as a NumPy array (:attr:`input_matrix` in torch).
     """
 
     def __init__(self, model: mujoco.MjModel, *, name: str | None = None, source: str | None = None) -> None:
@@ -159,12 +173,12 @@ class MujocoRobot(Robot):
         self.joint_names = tuple(coord_names.split()) if coord_names else tuple(names)
         if len(self.joint_names) != n:
             raise RobotModelError(f"{where}: 'bemlearn_coordinate_names' lists {len(self.joint_names)} names, expected {n}")
-        self.T = torch.as_tensor(T, dtype=torch.float64)
-        self.Tinv = torch.linalg.inv(self.T)
-        self._Tinv_np = self.Tinv.numpy().copy()
-        B = self.Tinv.T @ torch.as_tensor(Bj)
-        self.input_matrix = B  # (n, nu): generalized force = B @ actuator force
-        zero_rows = [i for i in range(n) if bool((B[i].abs() < 1e-12).all())]
+        # numpy here, torch tensors on first use (T, Tinv, input_matrix): loading a robot does not load torch
+        self.T_np = np.array(T, dtype=np.float64)
+        self.Tinv_np = np.linalg.inv(self.T_np)
+        self.input_matrix_np = self.Tinv_np.T @ Bj  # (n, nu): generalized force = B @ actuator force
+        self.identity_coordinates = bool(np.allclose(self.T_np, np.eye(n)))
+        zero_rows = [i for i in range(n) if bool((np.abs(self.input_matrix_np[i]) < 1e-12).all())]
         if len(zero_rows) != 1:
             desc = "no" if not zero_rows else f"{len(zero_rows)} ({[self.joint_names[i] for i in zero_rows]})"
             raise RobotModelError(
@@ -178,13 +192,13 @@ class MujocoRobot(Robot):
         self.qu_nominal = float(nom[0]) if nom is not None else 0.0
         if rng is not None:
             self.qu_range = (float(rng[0]), float(rng[1]))
-        elif np.allclose(T, np.eye(n)) and model.jnt_limited[self.unactuated_index]:
+        elif self.identity_coordinates and model.jnt_limited[self.unactuated_index]:
             lo, hi = model.jnt_range[self.unactuated_index]
             self.qu_range = (float(lo), float(hi))
         else:
-            half = math.pi / 2 if self.joint_kinds[self.unactuated_index] == "hinge" or not np.allclose(T, np.eye(n)) else 1.0
+            half = math.pi / 2 if self.joint_kinds[self.unactuated_index] == "hinge" or not self.identity_coordinates else 1.0
             self.qu_range = (self.qu_nominal - half, self.qu_nominal + half)
-        if np.allclose(T, np.eye(n)):
+        if self.identity_coordinates:
             self._coordinate_kinds = self.joint_kinds
         elif len(set(self.joint_kinds)) == 1:  # a linear map of like joints keeps their kind
             self._coordinate_kinds = (self.joint_kinds[0],) * n
@@ -195,6 +209,21 @@ class MujocoRobot(Robot):
         self._M = np.zeros((model.nv, model.nv))
         self._vec = np.zeros(model.nv)
         self._chain = None
+
+    @functools.cached_property
+    def T(self) -> torch.Tensor:
+        """``(n, n)`` the coordinate map q = T q_j (the identity unless the model declares one), float64."""
+        return torch.from_numpy(self.T_np)
+
+    @functools.cached_property
+    def Tinv(self) -> torch.Tensor:
+        """``(n, n)`` T⁻¹, float64."""
+        return torch.from_numpy(self.Tinv_np)
+
+    @functools.cached_property
+    def input_matrix(self) -> torch.Tensor:
+        """``(n, nu)`` B = T⁻ᵀ B_j: the generalized force is B @ actuator force (eq. 1), float64."""
+        return torch.from_numpy(self.input_matrix_np)
 
     @property
     def coordinate_kinds(self) -> tuple[str, ...]:
@@ -307,7 +336,7 @@ class MujocoRobot(Robot):
         Returns:
             ``D (n, n)`` and ``h (n,)`` in coordinates (eq. 1: D q̈ + h = B u).
         """
-        Tinv = self._Tinv_np
+        Tinv = self.Tinv_np
         self._load_state(Tinv @ q, Tinv @ qd)
         m, d = self.model, self.data
         make_mass_matrix(m, d)
@@ -328,7 +357,7 @@ class MujocoRobot(Robot):
         q[ia], q[u] = qa, qu
         qd[ia], qd[u] = qad, qud
         qdd[ia], qdd[u] = qadd, qudd
-        Tinv = self._Tinv_np
+        Tinv = self.Tinv_np
         m, d = self.model, self.data
         self._load_state(Tinv @ q, Tinv @ qd)
         mujoco.mj_comVel(m, d)

@@ -17,12 +17,17 @@ members exist (not their signatures).
 
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
-import torch
 
+from bemlearn._lazy import lazy_module
 from bemlearn.robots.bem import BEMResult
+
+if TYPE_CHECKING:
+    import torch
+else:
+    torch = lazy_module("torch")
 
 __all__ = ["BalanceRobot", "ControlRobot"]
 

@@ -12,11 +12,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from fractions import Fraction
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
+from bemlearn._lazy import lazy_module
 from bemlearn.errors import ArgumentError
+
+if TYPE_CHECKING:
+    import torch
+else:
+    torch = lazy_module("torch")
 
 __all__ = ["CompositeSinusoid", "ConstantAcceleration"]
 

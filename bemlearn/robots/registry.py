@@ -88,11 +88,12 @@ def resolve_robot(name_or_path: str | Path) -> tuple[Robot, RobotRef]:
     """Load a robot by registry name or MJCF path and return it with its :class:`RobotRef`.
 
     A path always means that file, even when its stem equals a registry name (a user's own
-    ``furuta.xml`` is never mistaken for the shipped Furuta).
+    ``furuta.xml`` is never mistaken for the shipped Furuta).  A bare name is a path when it ends in
+    ``.xml`` or names an existing file; a folder of that name (e.g. a run's ``--out furuta``) is not.
     """
     key = str(name_or_path)
     path = Path(key)
-    if path.suffix.lower() == ".xml" or path.exists() or "/" in key:
+    if path.suffix.lower() == ".xml" or path.is_file() or "/" in key or (path.exists() and key not in registered_robots()):
         if not path.is_file():
             raise MissingFileError(f"robot: MJCF file {path} not found")
         robot: Robot = MujocoRobot.from_xml(path)

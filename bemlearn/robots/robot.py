@@ -21,11 +21,18 @@ from __future__ import annotations
 
 import abc
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
-import torch
+import numpy as np
 
+from bemlearn._lazy import lazy_module
 from bemlearn.errors import ArgumentError
 from bemlearn.robots.bem import BEMResult, solve_bem
+
+if TYPE_CHECKING:
+    import torch
+else:
+    torch = lazy_module("torch")
 
 __all__ = ["Robot", "as_batch"]
 
@@ -144,6 +151,26 @@ class Robot(abc.ABC):
         """
         zeros = torch.zeros_like(qu)
         return self.gamma(self.join(qa, qu), self.join(qad, zeros), self.join(qadd, zeros))
+
+    # ---- single-state NumPy path (control loops, the derivation of defaults) ----------------
+    def terms(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """D(q) ``(n, n)`` and h = C(q, q̇) q̇ + G(q) − τ_p ``(n,)`` for one state ``q, qd (n,)`` (eq. 1: D q̈ + h = B u).
+
+        This version evaluates the batched torch terms; implementations override it with a faster path.
+        """
+        qt = torch.as_tensor(np.asarray(q, dtype=np.float64))[None]
+        qdt = torch.as_tensor(np.asarray(qd, dtype=np.float64))[None]
+        return self.mass_matrix(qt)[0].numpy(), (self.bias(qt, qdt) - self.passive(qt, qdt))[0].numpy()
+
+    def gamma0_scalar(self, qu: float, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray, qud: float = 0.0, qudd: float = 0.0) -> float:
+        """Γ (eq. 5) for one state; Γ_0 (eq. 7) with the default q̇_u = q̈_u = 0 (N·m, N for a slide q_u).
+
+        This version evaluates :meth:`gamma` on a batch of one; implementations override it with a faster path.
+        """
+        def joined(a: np.ndarray, u: float) -> torch.Tensor:
+            return self.join(torch.as_tensor(np.asarray(a, dtype=np.float64).reshape(1, self.m)), torch.tensor([float(u)], dtype=torch.float64))
+
+        return float(self.gamma(joined(qa, qu), joined(qad, qud), joined(qadd, qudd))[0])
 
     def momentum_u(self, q: torch.Tensor, qd_u: torch.Tensor) -> torch.Tensor:
         """H_u = D_uu(q) q̇_u (Lemma 1, eq. 19–20). ``q: (B, n)``, ``qd_u: (B,)`` → ``(B,)``."""

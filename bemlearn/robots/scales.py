@@ -16,11 +16,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import torch
 
 from bemlearn.errors import RobotModelError
+from bemlearn.robots.bem import find_roots
 from bemlearn.robots.mujoco_robot import MujocoRobot
-from bemlearn.robots.protocol import BalanceRobot
+from bemlearn.robots.protocol import BalanceRobot, ControlRobot
 
 __all__ = ["instability_rate", "bem_slopes", "qu_half_range", "qa_half_ranges", "bem_gain", "UNLIMITED_HALF_RANGE"]
 
@@ -28,30 +28,37 @@ UNLIMITED_HALF_RANGE = 0.5
 """Half range assumed for an unlimited actuated coordinate, rad or m."""
 
 
-def instability_rate(robot: BalanceRobot, *, step: float = 1e-5) -> float:
+def instability_rate(robot: ControlRobot, *, step: float = 1e-5) -> float:
     """λ = √(|Γ_q| / D_uu) at upright (1/s); see the module docstring."""
     n, iu = robot.n, robot.unactuated_index
-    m = robot.m
-    z = torch.zeros(2, m, dtype=torch.float64)
-    qu = torch.tensor([robot.qu_nominal + step, robot.qu_nominal - step], dtype=torch.float64)
-    g = robot.gamma0(qu, z, z, z)
-    gq = -float(g[0] - g[1]) / (2 * step)
-    q0 = torch.zeros(1, n, dtype=torch.float64)
-    q0[0, iu] = robot.qu_nominal
-    duu = float(robot.mass_matrix(q0)[0, iu, iu])
+    z = np.zeros(robot.m)
+    g_plus = robot.gamma0_scalar(robot.qu_nominal + step, z, z, z)
+    g_minus = robot.gamma0_scalar(robot.qu_nominal - step, z, z, z)
+    gq = -(g_plus - g_minus) / (2 * step)
+    q0 = np.zeros(n)
+    q0[iu] = robot.qu_nominal
+    duu = float(robot.terms(q0, np.zeros(n))[0][iu, iu])
     return math.sqrt(abs(gq) / duu)
 
 
-def bem_slopes(robot: BalanceRobot, *, step: float = 1e-4) -> np.ndarray:
-    """``(3, m)`` rows (s_p, s_v, s_a): ∂q_u^e/∂q_a, ∂/∂q̇_a, ∂/∂q̈_a at upright (module docstring)."""
+def bem_slopes(robot: ControlRobot, *, step: float = 1e-4) -> np.ndarray:
+    """``(3, m)`` rows (s_p, s_v, s_a): ∂q_u^e/∂q_a, ∂/∂q̇_a, ∂/∂q̈_a at upright (module docstring).
+
+    Central differences of the model BEM (eq. 9: the root of Γ_0 nearest q_u,nominal in
+    :attr:`qu_range`, :func:`~bemlearn.robots.bem.find_roots`) at ±``step`` on each input.
+    """
     m = robot.m
     rows = np.zeros((6 * m, 3, m))
     for k in range(3):
         for j in range(m):
             rows[(2 * k) * m + j, k, j] = step
             rows[(2 * k + 1) * m + j, k, j] = -step
-    qa, qad, qadd = (torch.from_numpy(rows[:, k].copy()) for k in range(3))
-    qu = robot.bem(qa, qad, qadd).qu.numpy()
+
+    def gamma0(x: np.ndarray, problems: np.ndarray) -> np.ndarray:  # (R, K) candidate q_u -> Γ_0 (R, K)
+        return np.array([[robot.gamma0_scalar(float(qu), *rows[p]) for qu in row] for row, p in zip(x, problems)])
+
+    lo, hi = robot.qu_range
+    qu = find_roots(gamma0, len(rows), lo=lo, hi=hi, nominal=robot.qu_nominal)[0]
     if not np.all(np.isfinite(qu)):
         raise RobotModelError(f"bem_slopes: robot {robot.name!r} has no BEM near upright")
     out = np.empty((3, m))
@@ -79,7 +86,7 @@ def qa_half_ranges(robot: BalanceRobot) -> np.ndarray:
     :class:`~bemlearn.robots.MujocoRobot`, else :data:`UNLIMITED_HALF_RANGE` (also when the model
     declares a coordinate map, and for a robot without a MuJoCo model)."""
     out = np.full(robot.m, UNLIMITED_HALF_RANGE)
-    if not isinstance(robot, MujocoRobot) or not np.allclose(robot.T.numpy(), np.eye(robot.n)):
+    if not isinstance(robot, MujocoRobot) or not robot.identity_coordinates:
         return out
     model = robot.model
     for k, j in enumerate(robot.actuated_index):

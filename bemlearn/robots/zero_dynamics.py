@@ -36,7 +36,7 @@ import numpy as np
 import torch
 
 from bemlearn.errors import ArgumentError, NumericalError
-from bemlearn.robots.protocol import BalanceRobot
+from bemlearn.robots.protocol import BalanceRobot, ControlRobot
 from bemlearn.robots.reference import CompositeSinusoid
 
 __all__ = [
@@ -251,7 +251,7 @@ def lemma1(robot: BalanceRobot, reference: CompositeSinusoid, *, n_nodes: int = 
     )
 
 
-def scaled_references(robot: BalanceRobot, *, design_qu: float = 0.2) -> dict[str, CompositeSinusoid]:
+def scaled_references(robot: ControlRobot, *, design_qu: float = 0.2) -> dict[str, CompositeSinusoid]:
     """Periodic composite sinusoids scaled to ``robot`` for Lemma 1 (labels → references).
 
     Base frequency f_0 = 0.1 λ/2π (λ = √(Γ_q/D_uu), :func:`bemlearn.robots.scales.instability_rate`)

@@ -15,12 +15,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Literal, overload
+from typing import TYPE_CHECKING, Literal, overload
 
 import numpy as np
-import torch
 from tqdm.auto import tqdm
 
+from bemlearn._lazy import lazy_module
 from bemlearn.config import Limit, config_limits
 from bemlearn.control.actuator_inverse import MujocoActuatorInverse
 from bemlearn.control.bem_sources import BEMSource, make_bem_source
@@ -31,6 +31,11 @@ from bemlearn.robots.mujoco_robot import MujocoRobot
 from bemlearn.robots.protocol import BalanceRobot
 from bemlearn.robots.reference import CompositeSinusoid
 from bemlearn.sim.plant import SensedPlant
+
+if TYPE_CHECKING:
+    import torch
+else:
+    torch = lazy_module("torch")
 
 __all__ = ["ReferenceConfig", "NominalConfig", "SimulateConfig", "SimResult", "simulate", "nominal_robot"]
 

@@ -54,7 +54,7 @@ class SensedPlant:
         if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
             raise ConfigError(f"{where}: 1/rate_hz = {self.dt} s is not a whole number of physics steps ({self.model.opt.timestep} s)")
         self.substeps = int(round(steps))
-        self.T, self.Tinv = robot.T.numpy(), robot.Tinv.numpy()
+        self.T, self.Tinv = robot.T_np, robot.Tinv_np
         self.encoder = Encoder(sensor, rng, kinds=_coordinate_kinds(robot))
         self.velocity = FilteredDifferentiator(robot.n, cutoff=sensor.velocity_cutoff, dt=self.dt)
 
@@ -89,6 +89,6 @@ class SensedPlant:
 def _coordinate_kinds(robot: MujocoRobot) -> tuple[str, ...] | None:
     """Joint kinds per coordinate when coordinates are the joints (T = I), else None."""
     kinds = getattr(robot, "joint_kinds", None)
-    if kinds is None or not np.allclose(robot.T.numpy(), np.eye(robot.n)):
+    if kinds is None or not robot.identity_coordinates:
         return None
     return tuple(kinds)

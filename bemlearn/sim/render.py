@@ -119,7 +119,7 @@ def render_gif(robot: MujocoRobot, q: np.ndarray, path: str | Path, *, rate_hz: 
     cam = mujoco.MjvCamera()
     cam.type = mujoco.mjtCamera.mjCAMERA_FREE
     cam.distance, cam.elevation, cam.azimuth = distance, elevation, azimuth
-    Tinv = robot.Tinv.numpy()
+    Tinv = robot.Tinv_np
     head = (model.vis.headlight.ambient.copy(), model.vis.headlight.diffuse.copy())
     model.vis.headlight.ambient[:] = 0.45  # brighter than MuJoCo's default for small GIFs;
     model.vis.headlight.diffuse[:] = 0.7  # restored below
