@@ -71,7 +71,16 @@ def solve_bem(
             argument ``rows`` (``(R,)`` int64) row r uses the ``rows[r]``-th problem's parameters, so only
             unresolved problems are evaluated; without it ``R = B`` and row b is problem b.
         batch: B.
-        lo, hi, nominal, n_grid, xtol, ftol, max_iter: as for :func:`find_roots`.
+        lo: lower end of the admissible range.
+        hi: upper end, ``lo < hi``.
+        nominal: preferred value; among bracketed roots the one nearest it is returned.
+        n_grid: grid nodes for bracketing (≥ 3).
+        xtol: absolute tolerance on the root.
+        ftol: a returned root must satisfy |fun| ≤ ftol, else it is marked invalid.
+        max_iter: refinement iteration cap.
+
+    Returns:
+        :class:`BEMResult` (float64 tensors), computed by :func:`find_roots`.
     """
     import inspect
 
