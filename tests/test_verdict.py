@@ -118,12 +118,12 @@ def test_design_region_of_a_faithful_and_a_scaled_bem(cartpole_state):
     # the acceleration range reaches past the design bound: 1.3 d / |s_a|, s_a ≈ 1/g for a cart-pole
     assert grid.box["slider"]["qdd"] > 1.3 * 0.2 * 9.81 * 0.9
     good = evaluate_design_region(st, grid)
-    assert abs(good["gain"] - 1.0) < 0.02 and good["rmse"] < 0.005, good
+    assert abs(good.gain - 1.0) < 0.02 and good.rmse < 0.005, good.as_dict()
     # a BEM whose deviation from y_mean is scaled by 0.8: gain 0.8 × the faithful one's (μ is linear in α)
     scaled = evaluate_design_region(dataclasses.replace(st, alpha=0.8 * st.alpha), grid)
-    expected, _ = least_squares_gain(grid.qu, float(st.y_mean) + 0.8 * (good["curve"]["learned"] - float(st.y_mean)))
-    assert abs(scaled["gain"] - expected) < 1e-9 and abs(scaled["gain"] - 0.8 * good["gain"]) < 0.01
-    assert judge_run({"bem_design_region": scaled}).status == "degraded"
+    expected, _ = least_squares_gain(grid.qu, float(st.y_mean) + 0.8 * (good.curve.learned - float(st.y_mean)))
+    assert abs(scaled.gain - expected) < 1e-9 and abs(scaled.gain - 0.8 * good.gain) < 0.01
+    assert judge_run({"bem_design_region": scaled.as_dict()}).status == "degraded"
 
 
 def test_model_checks_flag_the_acrobot_and_pass_the_cartpole():

@@ -168,7 +168,7 @@ def run_derivatives_bench(config, data_path: str | Path, *, with_gp: bool = True
             dr = evaluate_design_region(st, grid_points)
             row.update({
                 "bem_rmse": ev.rmse, "bem_max": ev.max_abs, "bem_coverage_latent": ev.coverage_2sigma_latent,
-                "design_rmse": dr["rmse"], "design_max": dr["max_abs"], "design_gain": dr["gain"],
+                "design_rmse": dr.rmse, "design_max": dr.max_abs, "design_gain": dr.gain,
                 "fit_seconds": time.perf_counter() - t0,
             })
         rows.append(row)

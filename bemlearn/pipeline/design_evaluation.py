@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -39,7 +39,8 @@ if TYPE_CHECKING:
     from bemlearn.pipeline.evaluation import EvaluationConfig
     from bemlearn.robots.protocol import ControlRobot
 
-__all__ = ["DesignGrid", "design_grid", "evaluate_design_region", "least_squares_gain", "design_region_figure"]
+__all__ = ["DesignGrid", "DesignRegionResult", "DesignRegionCurve", "design_grid", "evaluate_design_region", "least_squares_gain",
+           "design_region_figure"]
 
 
 @dataclass(frozen=True)
@@ -113,31 +114,72 @@ def least_squares_gain(model: np.ndarray, learned: np.ndarray) -> tuple[float, f
     return slope, float(learned.mean() - slope * model.mean())
 
 
-def evaluate_design_region(state: PredictorState, grid: DesignGrid) -> dict:
-    """(D2) of ``state``'s learned BEM on ``grid``.
+@dataclass(frozen=True)
+class DesignRegionCurve:
+    """The points of (D2), for the figure: model BEM, learned μ(x_0^e) and the exported band's σ, ``(N,)`` each, q_u's unit."""
 
-    Returns:
-        ``rmse``, ``max_abs`` (q_u's unit), ``gain`` and ``intercept`` of (D2), ``n_points``,
-        ``n_drawn``, ``bound``, ``box``, ``coverage_2sigma_band`` (share of the model BEM inside the
-        exported band's ±2σ), ``worst`` (the query and both BEMs where |e| is largest), and
-        ``curve`` (model, learned: ``(N,)`` arrays, for the figure; not JSON).
+    model: np.ndarray
+    learned: np.ndarray
+    band: np.ndarray
+
+
+@dataclass(frozen=True)
+class DesignRegionResult:
+    """What :func:`evaluate_design_region` measured: (D2) of a learned BEM over a :class:`DesignGrid`.
+
+    Errors are learned minus model BEM, in q_u's unit (NaN when the grid is empty).
+
+    Attributes:
+        rmse: RMSE of the error.
+        max_abs: largest |error|.
+        gain: slope of the least-squares line of learned on model BEM (1 for a faithful BEM).
+        intercept: its intercept, q_u's unit.
+        n_points: points of the grid whose model BEM is in the design region.
+        n_drawn: points drawn for the grid.
+        bound: the design bound d, q_u's unit.
+        box: per actuated coordinate, the half widths ``{"q", "qd", "qdd"}`` of (D1).
+        coverage_2sigma_band: share of the model BEM inside the exported band's ±2σ.
+        worst: the query ``x0e`` and both BEMs where |error| is largest (``None`` for an empty grid).
+        curve: the points, for :func:`design_region_figure` (not serialized).
     """
+
+    rmse: float
+    max_abs: float
+    gain: float
+    intercept: float
+    n_points: int
+    n_drawn: int
+    bound: float
+    box: dict
+    coverage_2sigma_band: float
+    worst: dict[str, Any] | None
+    curve: DesignRegionCurve
+
+    def as_dict(self) -> dict[str, Any]:
+        """The JSON-ready summary (``metrics.json`` → ``bem_design_region``), without ``curve``."""
+        return {"rmse": self.rmse, "max_abs": self.max_abs, "gain": self.gain, "intercept": self.intercept,
+                "n_points": self.n_points, "n_drawn": self.n_drawn, "bound": self.bound, "box": self.box,
+                "coverage_2sigma_band": self.coverage_2sigma_band, "worst": self.worst}
+
+
+def evaluate_design_region(state: PredictorState, grid: DesignGrid) -> DesignRegionResult:
+    """(D2) of ``state``'s learned BEM on ``grid`` (module docstring)."""
     if len(grid.qu) == 0:
-        return {"rmse": math.nan, "max_abs": math.nan, "gain": math.nan, "intercept": math.nan, "n_points": 0,
-                "n_drawn": grid.n_drawn, "bound": grid.bound, "box": grid.box, "coverage_2sigma_band": math.nan,
-                "worst": None, "curve": {"model": np.zeros(0), "learned": np.zeros(0)}}
+        empty = np.zeros(0)
+        return DesignRegionResult(math.nan, math.nan, math.nan, math.nan, 0, grid.n_drawn, grid.bound, grid.box, math.nan, None,
+                                  DesignRegionCurve(empty, empty, empty))
     mean, band, _ = (v.numpy() for v in band_reference(state, grid.x, n_inputs=state.dim - 2))
     e = mean - grid.qu
     gain, icpt = least_squares_gain(grid.qu, mean)
     i = int(np.argmax(np.abs(e)))
-    return {"rmse": float(np.sqrt(np.mean(e**2))), "max_abs": float(np.abs(e).max()), "gain": gain, "intercept": icpt,
-            "n_points": int(e.size), "n_drawn": grid.n_drawn, "bound": grid.bound, "box": grid.box,
-            "coverage_2sigma_band": float(np.mean(np.abs(e) <= 2 * band)),
-            "worst": {"x0e": [float(v) for v in grid.x[i, :-2]], "model": float(grid.qu[i]), "learned": float(mean[i])},
-            "curve": {"model": grid.qu, "learned": mean, "band": band}}
+    return DesignRegionResult(
+        rmse=float(np.sqrt(np.mean(e**2))), max_abs=float(np.abs(e).max()), gain=gain, intercept=icpt, n_points=int(e.size),
+        n_drawn=grid.n_drawn, bound=grid.bound, box=grid.box, coverage_2sigma_band=float(np.mean(np.abs(e) <= 2 * band)),
+        worst={"x0e": [float(v) for v in grid.x[i, :-2]], "model": float(grid.qu[i]), "learned": float(mean[i])},
+        curve=DesignRegionCurve(grid.qu, mean, band))
 
 
-def design_region_figure(curve: dict, result: dict, qu_name: str, unit: str = "rad"):
+def design_region_figure(result: DesignRegionResult, qu_name: str, unit: str = "rad"):
     """Learned vs model BEM over the design region: μ(x_0^e) against q_u^e with ±2σ of the band
     and the identity line (left), and the error against q_u^e (right)."""
     import matplotlib
@@ -145,23 +187,23 @@ def design_region_figure(curve: dict, result: dict, qu_name: str, unit: str = "r
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    model, learned, band = curve["model"], curve["learned"], curve.get("band")
+    model, learned, band = result.curve.model, result.curve.learned, result.curve.band
     order = np.argsort(model)
     fig, ax = plt.subplots(1, 2, figsize=(10, 4.2))
-    d = result["bound"]
+    d = result.bound
     ax[0].plot([-d, d], [-d, d], "k", lw=1, label="identity (learned = model)")
-    ax[0].scatter(model, learned, s=3, c="C1", alpha=0.5, label=f"learned μ(x₀ᵉ), {result['n_points']} motions")
-    if band is not None and len(model):
+    ax[0].scatter(model, learned, s=3, c="C1", alpha=0.5, label=f"learned μ(x₀ᵉ), {result.n_points} motions")
+    if len(model):
         ax[0].fill_between(model[order], (learned - 2 * band)[order], (learned + 2 * band)[order], color="C1", alpha=0.15,
                            label="±2σ (calibrated band)")
     ax[0].set_xlabel(f"model-based BEM q_u^e (eq. 9), {unit}")
     ax[0].set_ylabel(f"learned BEM (eq. 14), {unit}")
-    ax[0].set_title(f"{qu_name}: gain {result['gain']:.3f}, RMSE {result['rmse']:.4f} {unit}", fontsize=10)
+    ax[0].set_title(f"{qu_name}: gain {result.gain:.3f}, RMSE {result.rmse:.4f} {unit}", fontsize=10)
     ax[0].legend(fontsize=8)
     ax[1].scatter(model, learned - model, s=3, c="C3", alpha=0.5)
     ax[1].axhline(0.0, color="k", lw=0.8)
     ax[1].set_xlabel(f"model-based BEM q_u^e, {unit}")
     ax[1].set_ylabel(f"learned − model, {unit}")
-    ax[1].set_title(f"max |error| {result['max_abs']:.4f} {unit} over |q_u^e| ≤ {d:g}", fontsize=10)
+    ax[1].set_title(f"max |error| {result.max_abs:.4f} {unit} over |q_u^e| ≤ {d:g}", fontsize=10)
     fig.tight_layout()
     return fig

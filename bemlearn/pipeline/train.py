@@ -205,11 +205,10 @@ def _model_metrics(state: PredictorState, truth_robot: ControlRobot, ecfg: Evalu
         from bemlearn.pipeline.design_evaluation import design_grid, design_region_figure, evaluate_design_region
 
         dr = evaluate_design_region(state, design_grid(truth_robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed))
-        curve = dr.pop("curve")
-        metrics["bem_design_region"] = dr
+        metrics["bem_design_region"] = dr.as_dict()
         for k in ("rmse", "max_abs", "gain"):
-            writer.add_scalar(f"bem/design_region_{k}", dr[k], 0)
-        fig = design_region_figure(curve, dr, unactuated, unit)
+            writer.add_scalar(f"bem/design_region_{k}", getattr(dr, k), 0)
+        fig = design_region_figure(dr, unactuated, unit)
         writer.add_figure("bem/design_region", fig, 0)
         with atomic_path(out / "design_region.png") as tmp:
             fig.savefig(tmp, dpi=110)
