@@ -40,6 +40,7 @@ from bemlearn.data.normalization import Normalization
 from bemlearn.data.trajectory import Trajectory
 from bemlearn.data.validation import validate
 from bemlearn.errors import ConfigError, DataError
+from bemlearn.units import q_unit_label
 
 if TYPE_CHECKING:
     import torch
@@ -162,82 +163,23 @@ def build_datasets(traj: Trajectory, config: DatasetConfig, *, progress: bool = 
         :class:`GPDatasets` (train, val, report); both sets share the training normalization.
 
     Raises:
-        ValueError: short trials with ``short_trials="error"``, nothing left to train on,
+        DataError: short trials with ``short_trials="error"``, nothing left to train on,
             or too few trials to split.
     """
     from bemlearn.data.dataset_types import BEMDataset, GPDatasets  # torch: not needed to read a DatasetConfig
 
     validate(traj, source="build_datasets", min_trial_samples=1)  # cheap; in-memory trajectories too
     meta = traj.meta
-    rate = meta.sample_rate_hz
     report: dict[str, Any] = {"trials_total": len(traj.trial_ids), "samples_total": traj.n_samples}
     est, choice = resolve_estimator(config.estimator(), traj, qu_window=config.qu_window)
     config = config.with_estimator(est) if choice is not None else config
     if choice is not None:
         report["derivative_choice"] = choice.to_dict()
+    traj, source_rows = _kept_trials(traj, est, config, report)                 # step 1
+    x_all, y_all, keep = _usable_samples(traj, est, config, report)             # steps 2-4
+    train_rows, val_rows, train_ids, val_ids = _split_and_draw(traj, keep, config, report)   # steps 5-6
 
-    need = est.min_samples(rate)
-    short = [s.trial_id for s in traj.trial_slices() if s.n_samples < need]
-    if short and config.short_trials == "error":
-        raise DataError(
-            f"trial(s) {short} are shorter than the {need} samples the {est.name!r} estimator needs "
-            "(set short_trials: drop to drop them)"
-        )
-    failed = [] if config.include_failed else [i for i in traj.trial_ids if meta.trial_failed[i] and i not in short]
-    kept = _drop_trials(traj, short, f"short (< {need} samples)", report, "short")
-    kept &= _drop_trials(traj, failed, "failed", report, "failed")
-    source_rows = np.flatnonzero(kept)  # row in the caller's trajectory of each kept row
-    if len(source_rows) == 0:
-        raise DataError("no trials left to build a dataset from (all were dropped; see the log)")
-    traj = traj.select_rows(kept) if len(source_rows) < traj.n_samples else traj
-
-    raw_inside = None if config.qu_window is None else np.abs(traj.q[:, meta.unactuated_index]) <= config.qu_window
-    q_all, qd, qdd, valid = estimate_states(traj, est, within=raw_inside)
-    x_all = gp_inputs(q_all, qd, qdd, unactuated_index=meta.unactuated_index)
-    y_all = q_all[:, meta.unactuated_index]
-
-    keep = valid.copy()
-    if getattr(est, "smooths", False):
-        # the trials were cut to their runs inside the window before smoothing (no motion outside it
-        # is smoothed in); count the rows outside as outside, the runs' ends as edges
-        outside = np.zeros_like(valid) if raw_inside is None else ~raw_inside
-        report["samples_dropped_edges"] = int((~valid & ~outside).sum())
-        logger.info("dropped %d samples within %d of the end of a trial or of a run inside the |%s| window (no full %r "
-                    "kernel there)", report["samples_dropped_edges"], est.edge_samples(rate), meta.unactuated, est.name)
-        keep = valid | outside          # the window below removes the outside rows and counts them
-    elif config.drop_edges:
-        k = est.edge_samples(rate)
-        for s in traj.trial_slices():
-            keep[s.rows.start:s.rows.start + k] = False
-            keep[max(s.rows.stop - k, s.rows.start):s.rows.stop] = False
-        report["samples_dropped_edges"] = int((~keep).sum())
-        logger.info("dropped %d edge samples (%d at each trial end)", report["samples_dropped_edges"], k)
-    inside = np.ones_like(keep) if config.qu_window is None else (raw_inside if getattr(est, "smooths", False)
-                                                                  else np.abs(y_all) <= config.qu_window)
-    assert inside is not None  # raw_inside is set whenever qu_window is
-    report["samples_outside_window"] = int((keep & ~inside).sum())
-    if config.qu_window is not None:
-        logger.info(
-            "dropped %d of %d samples with |%s| > %g rad", report["samples_outside_window"], int(keep.sum()),
-            meta.unactuated, config.qu_window,
-        )
-    keep &= inside
-
-    split_rng, train_rng, val_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(config.seed).spawn(3))
-    train_ids, val_ids = split_trials(traj.trial_ids, config.val_fraction, split_rng)
-    report["train_trials"], report["val_trials"] = train_ids, val_ids
-    train_pool = np.flatnonzero(keep & np.isin(traj.trial, train_ids))
-    val_pool = np.flatnonzero(keep & np.isin(traj.trial, val_ids))
-    train_rows = _draw(train_pool, config.n_points, train_rng, "train", report)
-    val_rows = _draw(val_pool, config.n_val_points, val_rng, "val", report)
-    if len(train_rows) == 0:
-        raise DataError(
-            f"no training samples left after the |{meta.unactuated}| <= {config.qu_window} rad window "
-            f"(training trials {train_ids})"
-        )
-    report["n_train"], report["n_val"] = int(len(train_rows)), int(len(val_rows))
-
-    names = gp_input_names(meta.joint_names, meta.unactuated)
+    names = gp_input_names(meta.joint_names, meta.unactuated)                   # step 7
     x = torch.as_tensor(x_all, dtype=torch.float64)
     y = torch.as_tensor(y_all, dtype=torch.float64)
     norm = Normalization.fit(x[train_rows], y[train_rows], names=names)
@@ -256,3 +198,94 @@ def build_datasets(traj: Trajectory, config: DatasetConfig, *, progress: bool = 
     )
     report["estimator"] = repr(est)
     return GPDatasets(train=make(train_rows), val=make(val_rows), report=report, config=config)
+
+
+def _qu_unit(traj: Trajectory) -> str:
+    """q_u's unit (rad for a hinge, m for a slide)."""
+    return q_unit_label([traj.meta.joint_kinds[traj.meta.unactuated_index]])
+
+
+def _kept_trials(traj: Trajectory, est: DerivativeEstimator, config: DatasetConfig,
+                 report: dict[str, Any]) -> tuple[Trajectory, np.ndarray]:
+    """Step 1: ``traj`` without the trials shorter than ``est`` needs (or an error) and, unless
+    ``include_failed``, the failed ones; with the row in the caller's trajectory of each kept row."""
+    meta = traj.meta
+    need = est.min_samples(meta.sample_rate_hz)
+    short = [s.trial_id for s in traj.trial_slices() if s.n_samples < need]
+    if short and config.short_trials == "error":
+        raise DataError(
+            f"trial(s) {short} are shorter than the {need} samples the {est.name!r} estimator needs "
+            "(set short_trials: drop to drop them)"
+        )
+    failed = [] if config.include_failed else [i for i in traj.trial_ids if meta.trial_failed[i] and i not in short]
+    kept = _drop_trials(traj, short, f"short (< {need} samples)", report, "short")
+    kept &= _drop_trials(traj, failed, "failed", report, "failed")
+    source_rows = np.flatnonzero(kept)
+    if len(source_rows) == 0:
+        raise DataError("no trials left to build a dataset from (all were dropped; see the log)")
+    return (traj.select_rows(kept) if len(source_rows) < traj.n_samples else traj), source_rows
+
+
+def _usable_samples(traj: Trajectory, est: DerivativeEstimator, config: DatasetConfig,
+                    report: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Steps 2–4: the inputs ``x (N, 3n − 1)`` and label ``y (N,)`` of eq. (11) of every row, and the rows
+    to keep: a valid derivative estimate (edges dropped where asked or where a smoother has no full
+    kernel) and |q_u| within ``qu_window``."""
+    meta = traj.meta
+    rate = meta.sample_rate_hz
+    raw_inside = None if config.qu_window is None else np.abs(traj.q[:, meta.unactuated_index]) <= config.qu_window
+    q_all, qd, qdd, valid = estimate_states(traj, est, within=raw_inside)
+    x_all = gp_inputs(q_all, qd, qdd, unactuated_index=meta.unactuated_index)
+    y_all = q_all[:, meta.unactuated_index]
+
+    keep = valid.copy()
+    smooths = getattr(est, "smooths", False)
+    if smooths:
+        # the trials were cut to their runs inside the window before smoothing (no motion outside it
+        # is smoothed in); count the rows outside as outside, the runs' ends as edges
+        outside = np.zeros_like(valid) if raw_inside is None else ~raw_inside
+        report["samples_dropped_edges"] = int((~valid & ~outside).sum())
+        logger.info("dropped %d samples within %d of the end of a trial or of a run inside the |%s| window (no full %r "
+                    "kernel there)", report["samples_dropped_edges"], est.edge_samples(rate), meta.unactuated, est.name)
+        keep = valid | outside          # the window below removes the outside rows and counts them
+    elif config.drop_edges:
+        k = est.edge_samples(rate)
+        for s in traj.trial_slices():
+            keep[s.rows.start:s.rows.start + k] = False
+            keep[max(s.rows.stop - k, s.rows.start):s.rows.stop] = False
+        report["samples_dropped_edges"] = int((~keep).sum())
+        logger.info("dropped %d edge samples (%d at each trial end)", report["samples_dropped_edges"], k)
+    if config.qu_window is None:
+        inside = np.ones_like(keep)
+    else:
+        inside = raw_inside if smooths and raw_inside is not None else np.abs(y_all) <= config.qu_window
+    report["samples_outside_window"] = int((keep & ~inside).sum())
+    if config.qu_window is not None:
+        logger.info(
+            "dropped %d of %d samples with |%s| > %g %s", report["samples_outside_window"], int(keep.sum()),
+            meta.unactuated, config.qu_window, _qu_unit(traj),
+        )
+    return x_all, y_all, keep & inside
+
+
+def _split_and_draw(traj: Trajectory, keep: np.ndarray, config: DatasetConfig,
+                    report: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, list[int], list[int]]:
+    """Steps 5–6: split the trials (seeded) and draw the training and validation rows among ``keep``.
+
+    Returns:
+        ``(train rows, validation rows, training trial ids, validation trial ids)``.
+    """
+    split_rng, train_rng, val_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(config.seed).spawn(3))
+    train_ids, val_ids = split_trials(traj.trial_ids, config.val_fraction, split_rng)
+    report["train_trials"], report["val_trials"] = train_ids, val_ids
+    train_pool = np.flatnonzero(keep & np.isin(traj.trial, train_ids))
+    val_pool = np.flatnonzero(keep & np.isin(traj.trial, val_ids))
+    train_rows = _draw(train_pool, config.n_points, train_rng, "train", report)
+    val_rows = _draw(val_pool, config.n_val_points, val_rng, "val", report)
+    if len(train_rows) == 0:
+        raise DataError(
+            f"no training samples left after the |{traj.meta.unactuated}| <= {config.qu_window} {_qu_unit(traj)} window "
+            f"(training trials {train_ids})"
+        )
+    report["n_train"], report["n_val"] = int(len(train_rows)), int(len(val_rows))
+    return train_rows, val_rows, train_ids, val_ids
