@@ -67,7 +67,7 @@ def test_exact_gp_loss_and_gradient_match_gpytorch():
                 out = lik(model(X))
                 loss = gaussian_nll(out.covariance_matrix, Y - out.mean)
             loss.backward()
-        grads.append((float(loss), [p.grad.clone() for p in model.parameters()]))
+        grads.append((float(loss.detach()), [p.grad.clone() for p in model.parameters()]))
     assert math.isclose(grads[0][0], grads[1][0], rel_tol=1e-12)
     for a, b in zip(grads[0][1], grads[1][1]):
         torch.testing.assert_close(a, b, rtol=1e-9, atol=1e-12)

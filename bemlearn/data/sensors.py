@@ -54,7 +54,7 @@ class SensorConfig:
         return 2 * math.pi / self.counts_per_rev if self.counts_per_rev else 0.0
 
 
-config_limits(SensorConfig, counts_per_rev=Limit(ge=0, le=2**31), noise_std=Limit(ge=0, unit="rad"),
+config_limits(SensorConfig, counts_per_rev=Limit(ge=0, le=2**31), noise_std=Limit(ge=0, unit="rad or m"),
               velocity_cutoff=Limit(gt=0, unit="rad/s"), m_per_count=Limit(ge=0, unit="m"))
 
 
