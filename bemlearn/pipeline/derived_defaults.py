@@ -14,6 +14,7 @@ reference) is derived only when the config leaves at least one of them out.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import TYPE_CHECKING, Any
 
@@ -39,13 +40,13 @@ _REFERENCE = ("amplitudes", "frequencies_hz", "phases", "offset")
 DERIVED_KEYS: set[str] = set()
 
 DERIVED_KEYS.update(f"collect.{k}" for k in _COLLECT if k != "sensor")
-DERIVED_KEYS.update(f"collect.sensor.{k}" for k in ("counts_per_rev", "m_per_count", "velocity_cutoff"))
+_MODEL_SENSOR = tuple(k for k in _SENSOR if k != "noise_std")  # noise_std is a plain default (0), not from the model
+DERIVED_KEYS.update(f"collect.sensor.{k}" for k in _MODEL_SENSOR)
 DERIVED_KEYS.update(f"simulate.{k}" for k in _SIMULATE if k not in ("gains", "reference", "sensor"))
-DERIVED_KEYS.update(f"simulate.gains.{k}" for k in ("kp_a", "kd_a", "kp_u", "kd_u"))
-DERIVED_KEYS.update(f"simulate.reference.{k}" for k in ("amplitudes", "frequencies_hz", "phases", "offset"))
-DERIVED_KEYS.update(f"simulate.sensor.{k}" for k in ("counts_per_rev", "m_per_count", "velocity_cutoff"))
-DERIVED_KEYS.update(f"evaluate.{k}" for k in ("n_sines", "amplitude_max", "amplitude_min", "frequency_hz"))
-
+DERIVED_KEYS.update(f"simulate.gains.{k}" for k in _EIC_GAINS)
+DERIVED_KEYS.update(f"simulate.reference.{k}" for k in _REFERENCE)
+DERIVED_KEYS.update(f"simulate.sensor.{k}" for k in _MODEL_SENSOR)
+DERIVED_KEYS.update(f"evaluate.{k}" for k in _EVALUATE)
 
 def _leaves(prefix: str, value: Any, note: str, out: dict) -> None:
     value = to_dict(value)
@@ -110,49 +111,46 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
         srate = _rate(robot, given_sim_rate, None, section="simulate")
     rc, rs = crate.value, srate.value
 
-    def wanted(*keys: str) -> bool:  # derive a group only when the config leaves one of its keys out
-        return any(not _given(given, k) for k in keys)
+    def wanted(prefix: str, keys: tuple[str, ...]) -> bool:  # derive a group only when the config leaves one of its keys out
+        return any(not _given(given, f"{prefix}.{k}") for k in keys)
 
-    signals: list[dict] = []
-
+    @functools.cache
     def excitation() -> dict:  # collect's sines, also the base of evaluate's references and of the closed loop's
-        if not signals:
-            sig = derive.excitation_signals(robot, rc)
-            _leaves("collect", {k: sig.value[k] for k in _SIGNALS}, sig.note, out)
-            signals.append(sig.value)
-        return signals[0]
+        sig = derive.excitation_signals(robot, rc)
+        _leaves("collect", {k: sig.value[k] for k in _SIGNALS}, sig.note, out)
+        return sig.value
 
     fw = derive.fall_window(robot)
     _leaves("collect.rate_hz", rc.rate_hz, crate.note, out)
     _leaves("collect.physics_timestep", rc.timestep if rc.timestep_changed else None, crate.note, out)
-    if wanted("collect.gains", "collect.gain_scale"):
+    if wanted("collect", ("gains", "gain_scale")):
         gains = derive.excitation_gains(robot, rc)
         _leaves("collect.gains", gains.value["gains"], gains.note, out)
         _leaves("collect.gain_scale", gains.value["gain_scale"], gains.note, out)
     _leaves("collect.fall_window", fw.value, fw.note, out)
     units = derive.input_units(robot)
     _leaves("collect.input_units", units.value, units.note, out)
-    if wanted(*(f"collect.sensor.{k}" for k in _SENSOR)):
+    if wanted("collect.sensor", _SENSOR):
         sen = derive.sensor(robot, rc)
         _leaves("collect.sensor", sen.value, sen.note, out)
-    if wanted(*(f"collect.{k}" for k in _SIGNALS)):
+    if wanted("collect", _SIGNALS):
         excitation()
     init = derive.initial_ranges(robot)
     for k in ("initial_qa", "initial_qu"):
         _leaves(f"collect.{k}", init.value[k], init.note, out)
-    if wanted(*(f"evaluate.{k}" for k in _EVALUATE)):
+    if wanted("evaluate", _EVALUATE):
         ev = derive.evaluation(robot, excitation())
         _leaves("evaluate", {k: v for k, v in to_dict(ev.value).items() if k in _EVALUATE}, ev.note, out)
     _leaves("simulate.rate_hz", rs.rate_hz, srate.note + ("" if _given(given, "simulate.rate_hz") else " (the collection's rate)"), out)
     _leaves("simulate.physics_timestep", rs.timestep if rs.timestep_changed else None, srate.note, out)
-    if wanted(*(f"simulate.gains.{k}" for k in _EIC_GAINS)):
+    if wanted("simulate.gains", _EIC_GAINS):
         eic = derive.eic_gains(robot, rs)
         _leaves("simulate.gains", {k: v for k, v in to_dict(eic.value).items() if k in _EIC_GAINS}, eic.note, out)
-    if wanted(*(f"simulate.reference.{k}" for k in _REFERENCE)):
+    if wanted("simulate.reference", _REFERENCE):
         ref = derive.closed_loop_reference(robot, excitation())
         _leaves("simulate.reference", ref.value, ref.note, out)
     _leaves("simulate.fall_window", fw.value, fw.note, out)
-    if wanted(*(f"simulate.sensor.{k}" for k in _SENSOR)):
+    if wanted("simulate.sensor", _SENSOR):
         sen_sim = derive.sensor(robot, rs)
         _leaves("simulate.sensor", {**sen_sim.value, "velocity_cutoff": 2 * sen_sim.value["velocity_cutoff"]},
                 sen_sim.note + "; × 2 in the closed loop", out)
