@@ -35,16 +35,14 @@ def run(args) -> int:
     from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
     from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.preflight import preflight
-    from bemlearn.pipeline.resolve import load_pipeline_config
     from bemlearn.sim.collect import collect
 
     target = args.out or Path("data.npz")   # without --out: data.npz in a new runs/collect-<timestamp>
     if target.suffix.lower() not in (".npz", ".csv"):
         raise ArgumentError(f"--out: expected a .npz or .csv file name, got {args.out}")
     names = (target.name, ground_truth_path(target).name)
-    preflight(config=args.config, outputs=[args.out, ground_truth_path(args.out)] if args.out else [],
-              out_dir=args.out.parent if args.out else Path("runs"), force=args.force)
-    cfg = load_pipeline_config(args.config)
+    cfg = preflight(config=args.config, outputs=[args.out, ground_truth_path(args.out)] if args.out else [],
+                    out_dir=args.out.parent if args.out else Path("runs"), force=args.force).pipeline_config()
     if cfg.robot is None:
         raise ConfigError(f"{args.config}: collect needs a robot (a model to simulate); the config names only data")
     overrides = {k: v for k, v in (("n_trials", args.trials), ("seed", args.seed), ("workers", args.workers)) if v is not None}

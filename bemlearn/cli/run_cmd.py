@@ -48,17 +48,13 @@ def _run(args) -> int:
     from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.preflight import preflight
 
-    raw = preflight(config=args.config, device=args.device)
+    checked = preflight(config=args.config, device=args.device)  # strict parse and model-derived values, before any folder exists
+    raw, resolved = checked.raw, checked.resolved
     app = None
     if raw.get("application") is not None:  # a config of an application (e.g. the biped's): it runs its own stages
         app = get_application(str(raw["application"]))
         if app.run is None:
             raise ConfigError(f"{args.config}: application {raw['application']!r} has no pipeline of its own; remove the 'application' key")
-        resolved = None
-    else:
-        from bemlearn.pipeline.resolve import resolve_pipeline_config
-
-        resolved = resolve_pipeline_config(args.config)  # strict parse and model-derived values, before any folder exists
     stem = Path(str(raw["robot"])).stem if "robot" in raw else Path(str(raw.get("data", "run"))).stem
     preflight(out_dir=args.out or Path("runs"), outputs=[args.out] if args.out else [], force=args.force)
     # claimed: created exclusively and locked; a failed --force puts the folder back as it was
@@ -98,11 +94,10 @@ def _simulate(args) -> int:
     from bemlearn.export.staleness import check_predictor_matches
     from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.preflight import preflight
-    from bemlearn.pipeline.resolve import resolve_pipeline_config
     from bemlearn.pipeline.simulate import simulate_stage
 
-    preflight(config=args.config, out_dir=args.out or Path("runs"), outputs=[args.out / "simulate"] if args.out else [], force=args.force)
-    cfg = resolve_pipeline_config(args.config).config
+    cfg = preflight(config=args.config, out_dir=args.out or Path("runs"), outputs=[args.out / "simulate"] if args.out else [],
+                    force=args.force).pipeline_config()
     if cfg.robot is None:
         raise ConfigError(f"{args.config}: simulate needs a robot (a model to simulate); the config names only data")
     pred = args.predictor or (Path(cfg.simulate.predictor) if cfg.simulate.predictor else None)

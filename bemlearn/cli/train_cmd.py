@@ -36,11 +36,9 @@ def run(args) -> int:
 
     from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.preflight import preflight
-    from bemlearn.pipeline.resolve import load_pipeline_config
     from bemlearn.pipeline.train import train_run
 
-    preflight(config=args.config, device=args.device)
-    cfg = load_pipeline_config(args.config)
+    cfg = preflight(config=args.config, device=args.device).pipeline_config()
     data = args.data or (Path(cfg.data) if cfg.data else None)
     if data is None:
         raise ArgumentError(f"--data: no trajectory file given and {args.config} has no 'data:' key "

@@ -15,19 +15,50 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bemlearn.config import load_yaml
 from bemlearn.errors import BemlearnError, ConfigError, EnvironmentProblem, MissingFileError
 from bemlearn.files import check_outputs, check_writable
 
-__all__ = ["preflight", "check_config_file", "check_config", "check_robot", "check_device", "check_data_file"]
+if TYPE_CHECKING:
+    from bemlearn.pipeline.config import PipelineConfig
+    from bemlearn.pipeline.resolve import ResolvedConfig
+
+__all__ = ["preflight", "Preflight", "check_config_file", "check_config", "check_robot", "check_device", "check_data_file"]
 
 log = logging.getLogger(__name__)
 
 #: Top-level keys of which a config must name at least one (otherwise it is empty for our purpose).
 REQUIRED_ANY = ("robot", "data")
+
+
+@dataclass(frozen=True)
+class Preflight:
+    """What :func:`preflight` read, so that the command does not read and resolve the config again.
+
+    Attributes:
+        path: the config file (``None`` when the command has none).
+        raw: its mapping as written (``{}`` without a config).
+        resolved: the config as :func:`~bemlearn.pipeline.resolve.resolve_pipeline_config` resolved it
+            (``None`` without a config and for an application's config).
+    """
+
+    path: str | os.PathLike[str] | None
+    raw: dict[str, Any]
+    resolved: ResolvedConfig | None
+
+    def pipeline_config(self) -> PipelineConfig:
+        """The resolved pipeline config (an application's config is parsed as one, and refused as before)."""
+        if self.resolved is not None:
+            return self.resolved.config
+        from bemlearn.pipeline.resolve import load_pipeline_config
+
+        if self.path is None:
+            raise ConfigError("no config was checked")
+        return load_pipeline_config(Path(self.path))
 
 
 def check_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
@@ -47,11 +78,14 @@ def check_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
     return data
 
 
-def check_config(path: str | os.PathLike[str], data: dict[str, Any]) -> None:
+def check_config(path: str | os.PathLike[str], data: dict[str, Any]) -> ResolvedConfig | None:
     """Parse every section of the config at ``path`` strictly, as the command will: an application's
     config by its application's parser, a pipeline config by
     :func:`~bemlearn.pipeline.resolve.resolve_pipeline_config` (types, finite numbers, limits, the
     rules between sections and those that need the robot, with the values derived from its model).
+
+    Returns:
+        the resolved pipeline config, for the command to use as it is (``None`` for an application's config).
 
     Raises:
         ConfigError: naming the file and the key.
@@ -65,10 +99,10 @@ def check_config(path: str | os.PathLike[str], data: dict[str, Any]) -> None:
             raise ConfigError(f"{path}: application: {exc}") from None
         if app.parse_config is not None:
             app.parse_config(path)
-        return
+        return None
     from bemlearn.pipeline.resolve import resolve_pipeline_config
 
-    resolve_pipeline_config(Path(path))
+    return resolve_pipeline_config(Path(path))
 
 
 def check_robot(name: Any, *, where: str = "robot") -> None:
@@ -131,8 +165,8 @@ def preflight(
     outputs: Iterable[str | os.PathLike[str]] = (),
     out_dir: str | os.PathLike[str] | None = None,
     force: bool = False,
-) -> dict[str, Any]:
-    """Run every check that applies; returns the config mapping (``{}`` without ``config``).
+) -> Preflight:
+    """Run every check that applies; returns the config as read and as resolved (:class:`Preflight`).
 
     Args:
         config: the YAML file (see :func:`check_config_file`); its ``robot`` is loaded when
@@ -144,11 +178,12 @@ def preflight(
         force: allow replacing ``outputs``.
     """
     cfg: dict[str, Any] = {}
+    resolved = None
     if config is not None:
         cfg = check_config_file(config)
         if robot and "robot" in cfg:
             check_robot(cfg["robot"], where=f"{config}: robot")
-        check_config(config, cfg)
+        resolved = check_config(config, cfg)
         train = cfg.get("train")
         if device is None and isinstance(train, dict):
             check_device(train.get("device"), where=f"{config}: train.device")
@@ -159,4 +194,4 @@ def preflight(
         check_writable(out_dir)
     check_outputs(outputs, force)
     log.debug("preflight passed")
-    return cfg
+    return Preflight(config, cfg, resolved)
