@@ -90,7 +90,7 @@ def derivative_errors(data, truth, name: str, options: dict, *, qu_window: float
     rate = data.meta.sample_rate_hz
     long_enough = [s.trial_id for s in data.trial_slices() if s.n_samples >= est.min_samples(rate)]
     data, truth = data.select_trials(long_enough), truth.select_trials(long_enough)  # as the dataset's short_trials="drop"
-    within = None if qu_window is None else np.abs(data.q[:, data.meta.unactuated_index]) <= qu_window
+    within = data.qu_window_mask(qu_window)
     _, qd, qdd, valid = estimate_states(data, est, within=within)
     ref_qd, ref_qdd = truth.qd, truth.qdd
     if getattr(est, "smooths", False):      # against the truth through the same kernel: S[q̇], S[q̈] (eq. G1)
@@ -109,7 +109,7 @@ def derivative_errors(data, truth, name: str, options: dict, *, qu_window: float
         qdd_mid[lo + 1 : hi] = 0.5 * (ref_qdd[lo : hi - 1] + ref_qdd[lo + 1 : hi])
     keep &= valid
     if qu_window is not None:
-        keep &= np.abs(truth.q[:, data.meta.unactuated_index]) <= qu_window
+        keep &= np.abs(truth.q[:, data.meta.unactuated_index] - data.meta.qu_upright) <= qu_window
     rms = lambda e: np.sqrt(np.mean(e[keep] ** 2, axis=0))  # noqa: E731
     return {
         "qd_rms": rms(qd - ref_qd).tolist(),

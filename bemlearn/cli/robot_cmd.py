@@ -60,6 +60,12 @@ def _info(args) -> int:
     print(f"joints     {show(r.joint_names)}")
     print(f"actuated   {show(r.actuated_names)}  (q_a, m = {r.m})")
     print(f"unactuated {show([r.unactuated_name])}  (q_u), BEM searched in [{r.qu_range[0]:.4f}, {r.qu_range[1]:.4f}] {unit}, nominal {r.qu_nominal:g} {unit}")
+    note = getattr(r, "qu_nominal_note", None)
+    if note:
+        print(f"upright    {note}")
+    stiffness = getattr(r, "upright_stiffness", None)
+    if stiffness is not None and not stiffness > 0:
+        print(f"warning    the nominal pose is stable without control (Γ_q = {stiffness:.4g} ≤ 0): it is not a pose to balance")
     return 0
 
 
@@ -153,11 +159,14 @@ def _lqr(args) -> int:
         pos = ["rad"] * robot.n
     cols = [f"{nm} [{unit}/{u}]" for nm, u in zip(robot.joint_names, pos)] + [f"d{nm} [{unit}/({u}/s)]" for nm, u in zip(robot.joint_names, pos)]
     print(f"robot      {robot.name}: u = K e, e = [q − q_t, q̇ − q̇_t]; {hz:g} Hz, {res.substeps} × {res.timestep:g} s physics steps")
-    print(f"weights    Bryson (|q_u| ≤ {d:g}, joint ranges, ctrlrange){'' if res.r_scale == 1 else f', R × {res.r_scale:g} to stay in ctrlrange'}")
+    print(f"weights    Bryson (|q_u| ≤ {d:g}, joint ranges, ctrlrange, forcerange){'' if res.r_scale == 1 else f', R × {res.r_scale:g} to stay within them'}")
+    for note in res.notes:
+        print(f"note       {note}")
     width = max(len(c) for c in cols) + 2
     names = [robot.model.actuator(i).name or f"u{i}" for i in range(robot.model.nu)]
     print(f"{'':<12}" + "".join(f"{c:>{width}}" for c in cols))
     for name, row in zip(names, res.K):
         print(f"{name:<12}" + "".join(f"{v:>{width}.6g}" for v in row))
-    print(f"closed-loop spectral radius {res.spectral_radius:.6f}; peak |u|/u_max for a {0.25 * d:g} q_u error: {res.u_peak:.2f}")
+    print(f"closed-loop spectral radius {res.spectral_radius:.6f}; peak effort (|ctrl|/ctrlrange, |force|/forcerange) "
+          f"for a {0.25 * d:g} q_u error: {res.u_peak:.2f}")
     return 0

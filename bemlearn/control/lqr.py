@@ -8,16 +8,25 @@ input is, linearised at x* = [q_a = 0, q_u = q_u,nominal, q̇ = 0], u = 0,
 where (A, B) is one physics step's Jacobian from ``mujoco.mjd_transitionFD`` (joint state
 [q_j, q̇_j], inputs in actuator ``ctrl`` units; an RK4 model is linearised with its
 integrator set to Euler, which ``mjd_transitionFD`` supports).  In the robot's coordinates q = T q_j the
-state is S x_j, S = diag(T, T).  The gain minimises Σ δxᵀQδx + uᵀRu (``scipy.linalg.
-solve_discrete_are``) with Bryson's rule
+state is S x_j, S = diag(T, T).  The gain minimises Σ δxᵀQδx + uᵀR_u u + fᵀR_f f (``scipy.linalg.
+solve_discrete_are`` with its cross term) with Bryson's rule
 
-    Q = diag(1/x_max²),   R = diag(1/u_max²)
+    Q = diag(1/x_max²),   R_u = diag(1/u_ctrl²),   R_f = diag(1/f_max²),   f = G u + F δx
 
 x_max from the design region (|q_u − nominal| ≤ 0.2 rad or less if the joint range is
 smaller; actuated positions from their joint ranges, 0.5 rad / 0.5 m when unlimited;
-rates from those times the instability rate), u_max = half the ``ctrlrange`` width.  If
-the linear closed loop started at a typical error (q_u off by ``qu0``) needs more than the
-``ctrlrange``, R is raised by 4× until it does not (at most 12 times).
+rates from those times the instability rate); u_ctrl = half the ``ctrlrange`` width and
+f_max = the ``forcerange`` bound of each actuator, whose force MuJoCo computes as
+f = gain·ctrl + b0 + b1·l + b2·l̇ (l = gear·q_j) and clips to the ``forcerange``: linearised,
+f = G u + F δx, so a servo's force limit (its ``ctrl`` is a setpoint) is weighed with the state
+it depends on (cross term S = Fᵀ R_f G).  An actuator with neither limit gets R_u = 1.  If the
+linear closed loop started at a typical error (q_u off by ``qu0``) needs more than the ``ctrlrange``
+or more force than the ``forcerange``, both effort weights are raised by 4× until it does not (at
+most 12 times).
+
+Dry friction (joint ``frictionloss``) makes the dynamics non-smooth at rest: finite differences
+there see the joint stick (B collapses).  The linearisation is taken with ``frictionloss`` set to
+0 (the sliding dynamics the controller acts through); :attr:`LQRResult.notes` says so.
 
 Sign convention of collect: u = K e, e = [q − q_t, q̇ − q̇_t], so K = −K_lqr.
 """
@@ -32,12 +41,12 @@ from typing import TYPE_CHECKING
 import mujoco
 import numpy as np
 
-from bemlearn.errors import ArgumentError
+from bemlearn.errors import ArgumentError, NumericalError
 
 if TYPE_CHECKING:
     from bemlearn.robots.mujoco_robot import MujocoRobot
 
-__all__ = ["LQRResult", "linearize", "discrete_lqr"]
+__all__ = ["LQRResult", "ActuatorLimits", "actuator_limits", "linearize", "discrete_lqr"]
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +63,8 @@ class LQRResult:
         rate_hz: control rate.  substeps: physics steps per tick.  timestep: physics step, s.
         spectral_radius: of A + B K (< 1 when stabilising).
         u_peak: max |u| / u_max of the linear closed loop from the check's initial error.
-        r_scale: factor applied to Bryson's R to respect ctrlrange.
+        r_scale: factor applied to Bryson's R to respect ctrlrange and forcerange.
+        notes: how the linearisation departed from the plain model (dry friction left out), for messages.
     """
 
     K: np.ndarray
@@ -68,6 +78,7 @@ class LQRResult:
     spectral_radius: float
     u_peak: float
     r_scale: float
+    notes: tuple[str, ...] = ()
 
 
 def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = None, eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray, int, float]:
@@ -81,6 +92,12 @@ def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = No
         ``(A (2n, 2n), B (2n, nu), substeps, timestep)``.
     """
     model = _model_copy(robot.model, timestep)
+    if np.any(model.dof_frictionloss > 0):
+        # at rest a joint with dry friction sticks: finite differences would see B ≈ 0 (module docstring)
+        import copy
+
+        model = copy.deepcopy(model)
+        model.dof_frictionloss[:] = 0.0
     if int(model.opt.integrator) == int(mujoco.mjtIntegrator.mjINT_RK4):
         # mjd_transitionFD does not support RK4: linearise the same dynamics with Euler steps
         import copy
@@ -141,10 +158,65 @@ def bryson_scales(robot: MujocoRobot, *, design_qu: float = 0.2) -> tuple[np.nda
     limited = _limited_actuated(robot)
     xmax[ia] = np.where(limited, qa_max, np.maximum(qa_max, need))
     xmax[n:] = xmax[:n] * max(lam, 1.0)
-    lo, hi = robot.model.actuator_ctrlrange[:, 0], robot.model.actuator_ctrlrange[:, 1]
-    ulim = robot.model.actuator_ctrllimited.astype(bool)
-    umax = np.where(ulim, 0.5 * (hi - lo), 1.0)
-    return xmax, umax, lam
+    return xmax, actuator_limits(robot).u_max, lam
+
+
+@dataclass(frozen=True)
+class ActuatorLimits:
+    """What each actuator may be asked for, linearised at rest (module docstring).
+
+    Attributes:
+        u_max: ``(nu,)`` ctrl units: half the ``ctrlrange`` width, and at most |f_max / gain| where the force is
+            limited (1 where neither is).
+        u_ctrl: ``(nu,)`` half the ``ctrlrange`` width (``inf`` where unlimited).
+        f_max: ``(nu,)`` force limit (``forcerange``), ``inf`` where unlimited.
+        gain: ``(nu,)`` ∂f/∂ctrl at rest.
+        f_state: ``(nu, 2n)`` ∂f/∂x at rest for x = [q, q̇] in the robot's coordinates (bias terms b1·l + b2·l̇,
+            l = gear·q_j).
+        binding: per actuator, ``"ctrlrange"``, ``"forcerange"`` or ``"none"``: which limit sets u_max.
+    """
+
+    u_max: np.ndarray
+    u_ctrl: np.ndarray
+    f_max: np.ndarray
+    gain: np.ndarray
+    f_state: np.ndarray
+    binding: tuple[str, ...]
+
+    def peak(self, u: np.ndarray, x: np.ndarray) -> float:
+        """max over actuators of |ctrl| / ctrl limit and |f(x, u)| / f_max for ``u (nu,)``, ``x (2n,)``."""
+        f = self.gain * u + self.f_state @ x
+        return float(max(np.max(np.abs(u) / self.u_ctrl, initial=0.0), np.max(np.abs(f) / self.f_max, initial=0.0)))
+
+
+def actuator_limits(robot: MujocoRobot) -> ActuatorLimits:
+    """The :class:`ActuatorLimits` of ``robot``'s actuators (joint transmissions; gain and bias read from the model)."""
+    model = robot.model
+    nu, n = model.nu, robot.n
+    lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
+    ulim = model.actuator_ctrllimited.astype(bool)
+    u_ctrl = np.where(ulim, 0.5 * (hi - lo), np.inf)
+    flim = model.actuator_forcelimited.astype(bool)
+    f_max = np.where(flim, np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1])), np.inf)
+    gain = model.actuator_gainprm[:, 0].astype(np.float64).copy()
+    affine_bias = model.actuator_biastype == int(mujoco.mjtBias.mjBIAS_AFFINE)
+    b1 = np.where(affine_bias, model.actuator_biasprm[:, 1], 0.0)
+    b2 = np.where(affine_bias, model.actuator_biasprm[:, 2], 0.0)
+    f_state = np.zeros((nu, 2 * n))
+    Tinv = robot.Tinv_np
+    dof_col = {int(a): k for k, a in enumerate(robot._dadr)}
+    for i in range(nu):
+        gear = float(model.actuator_gear[i, 0])
+        col = dof_col.get(int(model.jnt_dofadr[model.actuator_trnid[i, 0]]))
+        if col is None:
+            continue
+        f_state[i, :n] = b1[i] * gear * Tinv[col]
+        f_state[i, n:] = b2[i] * gear * Tinv[col]
+    by_force = np.where(np.abs(gain) > 0, f_max / np.maximum(np.abs(gain), 1e-300), np.inf)
+    u_max = np.minimum(u_ctrl, by_force)
+    binding = tuple("none" if not np.isfinite(um) else ("forcerange" if bf < uc else "ctrlrange")
+                    for um, bf, uc in zip(u_max, by_force, u_ctrl))
+    return ActuatorLimits(np.where(np.isfinite(u_max), u_max, 1.0), u_ctrl, f_max, gain, f_state, binding)
 
 
 def _limited_actuated(robot: MujocoRobot) -> np.ndarray:
@@ -175,26 +247,45 @@ def discrete_lqr(
 
     A, B, N, h = linearize(robot, rate_hz=rate_hz, timestep=timestep)
     xmax, umax, _ = bryson_scales(robot, design_qu=design_qu)
-    Q = np.diag(1.0 / xmax**2)
-    R0 = np.diag(1.0 / umax**2)
+    limits = actuator_limits(robot)
+    notes = []
+    if np.any(robot.model.dof_frictionloss > 0):
+        notes.append("linearised without dry friction (frictionloss: a joint at rest sticks and finite differences see no input)")
+    forced = [robot.model.actuator(i).name or f"#{i}" for i, b in enumerate(limits.binding) if b == "forcerange"]
+    if forced:
+        notes.append(f"forcerange binds before ctrlrange on {', '.join(forced)}")
+    Q0 = np.diag(1.0 / xmax**2)
+    # effort weights: ctrl against its range, actuator force f = G u + F x against its range (a servo's force
+    # depends on the state too: the cross term S = Fᵀ R_f G), Bryson's 1 where an actuator has neither limit
+    G, F = np.diag(limits.gain), limits.f_state
+    Ru = np.diag(np.where(np.isfinite(limits.u_ctrl), 1.0 / limits.u_ctrl**2, 0.0))
+    Rf = np.diag(np.where(np.isfinite(limits.f_max), 1.0 / limits.f_max**2, 0.0))
+    Ru += np.diag(np.where(np.isfinite(limits.u_ctrl) | np.isfinite(limits.f_max), 0.0, 1.0 / umax**2))
     x0 = np.zeros(A.shape[0])
     x0[robot.unactuated_index] = qu0
     steps = int(math.ceil(check_s * rate_hz))
     scale = 1.0
     for _ in range(13):
-        R = R0 * scale
-        P = solve_discrete_are(A, B, Q, R)
-        K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
+        R = scale * (Ru + G @ Rf @ G)
+        Q = Q0 + scale * (F.T @ Rf @ F)
+        S = scale * (F.T @ Rf @ G)
+        try:
+            P = solve_discrete_are(A, B, Q, R, s=S)
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            raise NumericalError(
+                f"discrete_lqr: {robot.name}: no stabilising LQR for MuJoCo's linearisation at {rate_hz:g} Hz ({exc}); "
+                "the upright may be uncontrollable from the actuators at this rate") from None
+        K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A + S.T)
         Acl = A - B @ K
         x, peak = x0.copy(), 0.0
         for _ in range(steps):
             u = -K @ x
-            peak = max(peak, float(np.max(np.abs(u) / umax)))
+            peak = max(peak, limits.peak(u, x))
             x = Acl @ x
         if peak <= 1.0:
             break
         scale *= 4.0
     else:
-        log.warning("discrete_lqr: %s needs %.2f× its ctrlrange for a %.3g initial q_u error even with R × %g", robot.name, peak, qu0, scale)
+        log.warning("discrete_lqr: %s needs %.2f× its actuator limits for a %.3g initial q_u error even with R × %g", robot.name, peak, qu0, scale)
     rho = float(np.max(np.abs(np.linalg.eigvals(A - B @ K))))
-    return LQRResult(-K, A, B, Q, R, float(rate_hz), N, h, rho, peak, scale)
+    return LQRResult(-K, A, B, Q, R, float(rate_hz), N, h, rho, peak, scale, tuple(notes))

@@ -233,7 +233,7 @@ def _usable_samples(traj: Trajectory, est: DerivativeEstimator, config: DatasetC
     kernel) and |q_u| within ``qu_window``."""
     meta = traj.meta
     rate = meta.sample_rate_hz
-    raw_inside = None if config.qu_window is None else np.abs(traj.q[:, meta.unactuated_index]) <= config.qu_window
+    raw_inside = traj.qu_window_mask(config.qu_window)
     q_all, qd, qdd, valid = estimate_states(traj, est, within=raw_inside)
     x_all = gp_inputs(q_all, qd, qdd, unactuated_index=meta.unactuated_index)
     y_all = q_all[:, meta.unactuated_index]
@@ -258,12 +258,12 @@ def _usable_samples(traj: Trajectory, est: DerivativeEstimator, config: DatasetC
     if config.qu_window is None:
         inside = np.ones_like(keep)
     else:
-        inside = raw_inside if smooths and raw_inside is not None else np.abs(y_all) <= config.qu_window
+        inside = raw_inside if smooths and raw_inside is not None else np.abs(y_all - meta.qu_upright) <= config.qu_window
     report["samples_outside_window"] = int((keep & ~inside).sum())
     if config.qu_window is not None:
         logger.info(
-            "dropped %d of %d samples with |%s| > %g %s", report["samples_outside_window"], int(keep.sum()),
-            meta.unactuated, config.qu_window, _qu_unit(traj),
+            "dropped %d of %d samples with |%s − %g| > %g %s", report["samples_outside_window"], int(keep.sum()),
+            meta.unactuated, meta.qu_upright, config.qu_window, _qu_unit(traj),
         )
     return x_all, y_all, keep & inside
 
@@ -284,7 +284,8 @@ def _split_and_draw(traj: Trajectory, keep: np.ndarray, config: DatasetConfig,
     val_rows = _draw(val_pool, config.n_val_points, val_rng, "val", report)
     if len(train_rows) == 0:
         raise DataError(
-            f"no training samples left after the |{traj.meta.unactuated}| <= {config.qu_window} {_qu_unit(traj)} window "
+            f"no training samples left after the |{traj.meta.unactuated} − {traj.meta.qu_upright:g}| <= {config.qu_window} "
+            f"{_qu_unit(traj)} window "
             f"(training trials {train_ids})"
         )
     report["n_train"], report["n_val"] = int(len(train_rows)), int(len(val_rows))

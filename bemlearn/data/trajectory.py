@@ -52,6 +52,9 @@ class TrajectoryMeta:
         joint_kinds: ``"hinge"`` or ``"slide"`` per joint (default: all hinges); q of a
             hinge is in rad, of a slide in m.
         channel_names: names of the extra logged channels (columns of ``Trajectory.channels``).
+        qu_upright: the reading of q_u at the upright (the pose balanced), in its unit (default 0:
+            the convention of imported logs; a simulated robot whose upright reads π by its geometry or
+            its joint ``ref`` records π). Windows on q_u are taken relative to it.
     """
 
     robot: str
@@ -64,6 +67,7 @@ class TrajectoryMeta:
     extra: dict[str, Any] = field(default_factory=dict)
     joint_kinds: tuple[str, ...] = ()
     channel_names: tuple[str, ...] = ()
+    qu_upright: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "joint_names", tuple(self.joint_names))
@@ -108,6 +112,10 @@ class TrajectoryMeta:
         if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not math.isfinite(rate) or rate <= 0:
             raise TrajectoryFormatError(f"meta.sample_rate_hz: expected a positive number, got {rate!r}")
         object.__setattr__(self, "sample_rate_hz", float(rate))
+        up = self.qu_upright
+        if isinstance(up, bool) or not isinstance(up, (int, float)) or not math.isfinite(up):
+            raise TrajectoryFormatError(f"meta.qu_upright: expected a finite number (q_u's reading at upright), got {up!r}")
+        object.__setattr__(self, "qu_upright", float(up))
 
     @property
     def n_joints(self) -> int:
@@ -148,6 +156,8 @@ class TrajectoryMeta:
             optional["joint_kinds"] = list(self.joint_kinds)
         if self.channel_names:
             optional["channel_names"] = list(self.channel_names)
+        if self.qu_upright != 0.0:
+            optional["qu_upright"] = self.qu_upright
         return {
             "robot": self.robot,
             "joint_names": list(self.joint_names),
@@ -174,7 +184,7 @@ class TrajectoryMeta:
         if not isinstance(data, Mapping):
             raise TrajectoryFormatError(f"{source}: metadata must be a JSON object, got {type(data).__name__}")
         required = ("robot", "joint_names", "unactuated", "actuator_names", "sample_rate_hz", "trial_failed")
-        optional = ("units", "extra", "joint_kinds", "channel_names")
+        optional = ("units", "extra", "joint_kinds", "channel_names", "qu_upright")
         missing = [k for k in required if k not in data]
         unknown = sorted(set(data) - set(required) - set(optional))
         if missing:
@@ -221,6 +231,7 @@ class TrajectoryMeta:
                 extra=dict(data.get("extra", {})),
                 joint_kinds=tuple(data.get("joint_kinds", ())),
                 channel_names=tuple(data.get("channel_names", ())),
+                qu_upright=data.get("qu_upright", 0.0),
             )
         except TrajectoryFormatError as exc:
             raise TrajectoryFormatError(f"{source}: {exc}") from None
@@ -317,6 +328,12 @@ class Trajectory:
             raise ArgumentError(f"no channel {name!r}; the trajectory has {list(self.meta.channel_names)}")
         assert self.channels is not None  # __post_init__ fills it
         return self.channels[:, self.meta.channel_names.index(name)]
+
+    def qu_window_mask(self, window: float | None) -> np.ndarray | None:
+        """``(T,)`` rows with |q_u − meta.qu_upright| ≤ ``window`` (q_u's unit), or ``None`` for no window."""
+        if window is None:
+            return None
+        return np.abs(self.q[:, self.meta.unactuated_index] - self.meta.qu_upright) <= window
 
     def trial_slices(self) -> list[TrialSlice]:
         """Contiguous row blocks, one per trial, in file order (a trial split in two blocks gives two entries)."""

@@ -137,7 +137,7 @@ def estimator_sensitivity(state: PredictorState, traj: Trajectory, estimator, ro
     if not neighbours:
         return EstimatorSensitivity(torch.zeros(M, 0, dtype=torch.float64), (), None, ())
     iu = meta.unactuated_index
-    within = None if qu_window is None else np.abs(traj.q[:, iu]) <= qu_window
+    within = traj.qu_window_mask(qu_window)
     q0, qd0, qdd0, valid0 = estimate_states(traj, estimator, within=within)
     if not valid0[rows_np].all():
         bad = int(rows_np[~valid0[rows_np]][0])

@@ -118,8 +118,9 @@ def excitation_gains(robot, rate: RateChoice) -> Derived:
     res = discrete_lqr(robot, rate_hz=rate.rate_hz, timestep=rate.timestep, design_qu=d, qu0=0.25 * d)
     gains = tuple(float(f"{k:.6g}") for k in res.K.ravel())
     scale, frac = _robust_gain_scale(res.A, res.B, res.K)
-    note = (f"discrete LQR of mjd_transitionFD at {rate.rate_hz:g} Hz, Bryson weights (|q_u| ≤ {d:g}, joint ranges, ctrlrange"
-            f"{'' if res.r_scale == 1 else f', R × {res.r_scale:g} to stay in ctrlrange'}); closed-loop spectral radius "
+    note = (f"discrete LQR of mjd_transitionFD at {rate.rate_hz:g} Hz, Bryson weights (|q_u| ≤ {d:g}, joint ranges, ctrlrange, "
+            f"forcerange{'' if res.r_scale == 1 else f'; R × {res.r_scale:g} to stay within them'})"
+            f"{''.join('; ' + n for n in res.notes)}; closed-loop spectral radius "
             f"{res.spectral_radius:.4f}; per-trial gain scale U{scale}: the widest of ±40/20/10 % with ≥ 95 % of 400 "
             f"random per-gain scalings stable ({100 * frac:.0f} %), else none")
     return Derived({"gains": gains, "gain_scale": scale}, note)
@@ -266,7 +267,7 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None) -> Deri
     w_a = w_u / 7
     g = EICGains(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u)
     note = (f"ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/7, critically damped; "
-            f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × ctrlrange")
+            f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange)")
     if robot.m == 1:
         from bemlearn.control.eic_linear import eic_linear_abscissa
 
@@ -290,9 +291,13 @@ def _eic_peak(robot, w_u: float, e0: float) -> float:
     v_a = -D_ua / (D_ua @ D_ua) * (D[iu, iu] * v_u)
     tau = D[np.ix_(ia, ia)] @ v_a + D[ia, iu] * v_u
     inv = MujocoActuatorInverse(robot)
-    raw = inv.B_pinv @ tau / inv.gainprm[:, 0]
+    force = inv.B_pinv @ tau
+    raw = force / inv.gainprm[:, 0]
     umax = np.where(inv.limited, inv.limit, np.inf)
-    return float(np.max(np.abs(raw) / umax))
+    model = robot.model
+    fmax = np.where(model.actuator_forcelimited.astype(bool),
+                    np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1])), np.inf)
+    return float(max(np.max(np.abs(raw) / umax), np.max(np.abs(force) / fmax)))
 
 
 def closed_loop_reference(robot, signals: dict) -> Derived:

@@ -13,8 +13,8 @@ Three checks, each a number with a limit, from the robot's model and the resolve
 * **eic** (one actuated coordinate) — the spectral abscissa of the EIC loop linearised at upright
   with the config's gains (:func:`~bemlearn.control.eic_linear.eic_linear_abscissa`); ≥ 0 means the
   closed loop of eq. (3), (8) cannot balance the robot near upright.
-* **excitation** — the peak ``ctrl`` of the excitation LQR (``collect.gains``, when derived) for a
-  d/4 error of q_u, as a multiple of the ctrlrange (:func:`~bemlearn.control.lqr.discrete_lqr`):
+* **excitation** — the peak ``ctrl`` and actuator force of the excitation LQR (``collect.gains``, when derived)
+  for a d/4 error of q_u, as a multiple of the ctrlrange and forcerange (:func:`~bemlearn.control.lqr.discrete_lqr`):
   above 1 the excitation saturates and trials fall.
 
 ``hold`` or ``eic`` failing makes the run *unusable*: ``bemlearn run`` stops after its preflight
@@ -159,7 +159,7 @@ def model_feasibility(robot: MujocoRobot, config: PipelineConfig) -> list[Feasib
         if np.allclose(K, res.K, rtol=1e-4, atol=1e-9):      # the derived gains: their peak is the LQR's
             out.append(FeasibilityCheck(
                 "excitation", res.u_peak, 1.0, "degraded",
-                f"the excitation LQR needs {res.u_peak:.2f}× the ctrlrange for a {d / 4:g} {qu_unit} error of "
+                f"the excitation LQR needs {res.u_peak:.2f}× the actuator limits (ctrlrange, forcerange) for a {d / 4:g} {qu_unit} error of "
                 f"{robot.unactuated_name}" + (" (its trials will saturate and fall)" if res.u_peak > 1 else "")))
     return out
 

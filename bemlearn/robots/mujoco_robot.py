@@ -39,6 +39,7 @@ from bemlearn._lazy import lazy_module
 from bemlearn.errors import MissingFileError, RobotModelError
 from bemlearn.robots._mujoco_compat import full_mass_matrix, make_mass_matrix
 from bemlearn.robots.robot import Robot, as_batch
+from bemlearn.robots.upright import UprightSearch, find_upright
 
 if TYPE_CHECKING:
     import torch
@@ -189,7 +190,20 @@ class MujocoRobot(Robot):
         # admissible range and nominal value of q_u
         rng = _custom_numeric(model, "bemlearn_qu_range")
         nom = _custom_numeric(model, "bemlearn_qu_nominal")
-        self.qu_nominal = float(nom[0]) if nom is not None else 0.0
+        self._M = np.zeros((model.nv, model.nv))
+        self._vec = np.zeros(model.nv)
+        self._chain = None
+        self.upright_search = self._search_upright(rng)
+        if nom is not None:
+            self.qu_nominal = float(nom[0])
+            self.qu_nominal_note = f"{self.qu_nominal:g}: declared by the model (custom numeric bemlearn_qu_nominal)"
+        elif self.upright_search.upright is not None:
+            self.qu_nominal = float(self.upright_search.upright.qu)
+            self.qu_nominal_note = self.upright_search.describe(self._qu_unit())
+        else:
+            self.qu_nominal = 0.0
+            self.qu_nominal_note = "0: " + self.upright_search.describe(self._qu_unit())
+            log.warning("%s: %s; q_u = 0 is taken as nominal", where, self.upright_search.describe(self._qu_unit()))
         if rng is not None:
             self.qu_range = (float(rng[0]), float(rng[1]))
         elif self.identity_coordinates and model.jnt_limited[self.unactuated_index]:
@@ -206,9 +220,29 @@ class MujocoRobot(Robot):
             raise RobotModelError(f"{where}: 'bemlearn_coordinates' mixes hinge and slide joints; their units would not be defined")
         if model.neq:
             log.warning("%s: equality constraints are ignored by the robot dynamics", where)
-        self._M = np.zeros((model.nv, model.nv))
-        self._vec = np.zeros(model.nv)
-        self._chain = None
+
+    def _qu_unit(self) -> str:
+        return "rad" if self.joint_kinds[self.unactuated_index] == "hinge" or not self.identity_coordinates else "m"
+
+    def _search_upright(self, declared_range: np.ndarray | None) -> UprightSearch:
+        """Equilibria of q_u with the actuated coordinates at 0 (:func:`~bemlearn.robots.upright.find_upright`)."""
+        iu = self.unactuated_index
+        kind = self.joint_kinds[iu] if self.identity_coordinates else "hinge"
+        limits = None
+        if declared_range is not None:
+            limits = (float(declared_range[0]), float(declared_range[1]))
+        elif self.identity_coordinates and self.model.jnt_limited[iu]:
+            limits = (float(self.model.jnt_range[iu, 0]), float(self.model.jnt_range[iu, 1]))
+        z = np.zeros(self.n - 1)
+        return find_upright(lambda qu: self.gamma0_scalar(qu, z, z, z), kind=kind, limits=limits)
+
+    @property
+    def upright_stiffness(self) -> float:
+        """Γ_q = −∂Γ_0/∂q_u at :attr:`qu_nominal` with the actuated coordinates at 0 (N·m/rad or N/m):
+        positive where the nominal pose is unstable (a pose to balance), ≤ 0 where it is stable without control."""
+        z = np.zeros(self.n - 1)
+        h = 1e-6
+        return -(self.gamma0_scalar(self.qu_nominal + h, z, z, z) - self.gamma0_scalar(self.qu_nominal - h, z, z, z)) / (2 * h)
 
     @functools.cached_property
     def T(self) -> torch.Tensor:

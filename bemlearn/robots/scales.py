@@ -29,7 +29,12 @@ UNLIMITED_HALF_RANGE = 0.5
 
 
 def instability_rate(robot: ControlRobot, *, step: float = 1e-5) -> float:
-    """λ = √(|Γ_q| / D_uu) at upright (1/s); see the module docstring."""
+    """λ = √(Γ_q / D_uu) at upright (1/s); see the module docstring.
+
+    Raises:
+        RobotModelError: Γ_q ≤ 0: the nominal pose is stable without control (a hanging pendulum),
+            so there is nothing to balance there and no instability rate.
+    """
     n, iu = robot.n, robot.unactuated_index
     z = np.zeros(robot.m)
     g_plus = robot.gamma0_scalar(robot.qu_nominal + step, z, z, z)
@@ -38,7 +43,11 @@ def instability_rate(robot: ControlRobot, *, step: float = 1e-5) -> float:
     q0 = np.zeros(n)
     q0[iu] = robot.qu_nominal
     duu = float(robot.terms(q0, np.zeros(n))[0][iu, iu])
-    return math.sqrt(abs(gq) / duu)
+    if not gq > 0:
+        raise RobotModelError(
+            f"robot {robot.name!r}: q_u = {robot.qu_nominal:g} is a stable pose without control (Γ_q = −∂Γ_0/∂q_u = "
+            f"{gq:.4g} ≤ 0: gravity pulls it back), not an upright to balance; {getattr(robot, 'qu_nominal_note', '')}".rstrip("; "))
+    return math.sqrt(gq / duu)
 
 
 def bem_slopes(robot: ControlRobot, *, step: float = 1e-4) -> np.ndarray:

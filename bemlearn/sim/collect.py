@@ -263,6 +263,7 @@ def collect(robot_name: str, config: CollectConfig, *, progress: bool = True) ->
         trial_failed={r.trial_id: r.failed for r in kept},
         units={"t": "s", "q": q_unit_label(robot.coordinate_kinds), "u": config.input_units},
         joint_kinds=robot.coordinate_kinds,
+        qu_upright=robot.qu_nominal,
         extra={
             "generator": f"bemlearn {__version__} collect",
             "collect_config": to_dict(config),
