@@ -262,8 +262,8 @@ def _usable_samples(traj: Trajectory, est: DerivativeEstimator, config: DatasetC
     report["samples_outside_window"] = int((keep & ~inside).sum())
     if config.qu_window is not None:
         logger.info(
-            "dropped %d of %d samples with |%s − %g| > %g %s", report["samples_outside_window"], int(keep.sum()),
-            meta.unactuated, meta.qu_upright, config.qu_window, _qu_unit(traj),
+            "dropped %d of %d samples with |%s| > %g %s", report["samples_outside_window"], int(keep.sum()),
+            meta.qu_from_upright, config.qu_window, _qu_unit(traj),
         )
     return x_all, y_all, keep & inside
 
@@ -284,8 +284,7 @@ def _split_and_draw(traj: Trajectory, keep: np.ndarray, config: DatasetConfig,
     val_rows = _draw(val_pool, config.n_val_points, val_rng, "val", report)
     if len(train_rows) == 0:
         raise DataError(
-            f"no training samples left after the |{traj.meta.unactuated} − {traj.meta.qu_upright:g}| <= {config.qu_window} "
-            f"{_qu_unit(traj)} window "
+            f"no training samples left after the |{traj.meta.qu_from_upright}| <= {config.qu_window} {_qu_unit(traj)} window "
             f"(training trials {train_ids})"
         )
     report["n_train"], report["n_val"] = int(len(train_rows)), int(len(val_rows))

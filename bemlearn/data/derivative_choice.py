@@ -184,8 +184,8 @@ def choose_sigma(traj: Trajectory, *, qu_window: float | None = 0.5, truncate: f
     ladder = _ladder(traj, truncate, within)
     where = f"{meta.robot!r} ({traj.n_samples} samples in {len(traj.trial_ids)} trials at {rate:g} Hz)"
     if within is not None and int(within.sum()) < 10:
-        raise TrajectoryFormatError(f"choose_sigma: {where}: fewer than 10 samples inside |{meta.unactuated} − "
-                                    f"{meta.qu_upright:g}| ≤ {qu_window:g} ({int(within.sum())}); widen dataset.qu_window or "
+        raise TrajectoryFormatError(f"choose_sigma: {where}: fewer than 10 samples inside |{meta.qu_from_upright}| ≤ "
+                                    f"{qu_window:g} ({int(within.sum())}); widen dataset.qu_window or "
                                     f"check the sign and offset of {meta.unactuated} (the upright must read "
                                     f"{meta.qu_upright:g}, the data's meta.qu_upright)")
     if not ladder:
@@ -200,7 +200,7 @@ def choose_sigma(traj: Trajectory, *, qu_window: float | None = 0.5, truncate: f
             common[r.start + edge:r.stop - edge] = True
     rows = np.flatnonzero(common)
     if rows.size < 10:
-        raise TrajectoryFormatError(f"choose_sigma: {where}: fewer than 10 samples inside |{meta.unactuated} − {meta.qu_upright:g}| ≤ "
+        raise TrajectoryFormatError(f"choose_sigma: {where}: fewer than 10 samples inside |{meta.qu_from_upright}| ≤ "
                                     f"{qu_window} away from the trial ends; nothing to choose σ from")
     trial = traj.trial[rows]
     label = traj.q[:, iu:iu + 1]

@@ -137,6 +137,11 @@ class TrajectoryMeta:
         return tuple(i for i, j in enumerate(self.joint_names) if j != self.unactuated)
 
     @property
+    def qu_from_upright(self) -> str:
+        """``"alpha"`` or ``"alpha − 3.14159"``: how q_u's distance from the upright reads in messages."""
+        return self.unactuated if self.qu_upright == 0.0 else f"{self.unactuated} − {self.qu_upright:g}"
+
+    @property
     def dt(self) -> float:
         """Nominal sample period, s."""
         return 1.0 / self.sample_rate_hz
