@@ -222,3 +222,22 @@ def test_config_parsing():
         from_dict(DatasetConfig, {"qu_window": -0.1})
     with pytest.raises(ConfigError, match=r"short_trials: expected one of \['drop', 'error'\]"):
         from_dict(DatasetConfig, {"short_trials": "skip"})
+
+
+@pytest.mark.parametrize("derivative", ["savgol", "gaussian"])
+def test_the_window_is_relative_to_the_datas_upright(traj, derivative, tmp_path):
+    """A robot whose upright reads π: the same motion shifted by π, with meta.qu_upright = π, gives the same
+    dataset (labels shifted by π, inputs equal) — and survives writing and reading the file."""
+    from bemlearn.data import read_trajectory, write_trajectory
+
+    q = traj.q.copy()
+    q[:, 1] += np.pi
+    shifted = dataclasses.replace(traj, q=q, meta=dataclasses.replace(traj.meta, qu_upright=np.pi))
+    path = write_trajectory(shifted, tmp_path / "pi.npz")
+    shifted = read_trajectory(path)
+    assert shifted.meta.qu_upright == pytest.approx(np.pi)
+    cfg = DatasetConfig(derivative=derivative, n_points=None, qu_window=0.1, val_fraction=0.3, seed=0)
+    a, b = build_datasets(traj, cfg), build_datasets(shifted, cfg)
+    assert a.report["samples_outside_window"] == b.report["samples_outside_window"] > 0
+    np.testing.assert_allclose(b.train.y.numpy() - np.pi, a.train.y.numpy(), atol=1e-9)
+    np.testing.assert_allclose(b.train.x.numpy(), a.train.x.numpy(), atol=1e-7)
