@@ -138,7 +138,7 @@ def _lqr(args) -> int:
 
     from bemlearn.control.lqr import discrete_lqr
     from bemlearn.errors import RobotModelError
-    from bemlearn.pipeline.derive import control_rate, design_region, input_units
+    from bemlearn.pipeline.derive import control_rate, design_region, initial_ranges, input_units
     from bemlearn.robots import MujocoRobot, load
 
     robot = load(args.robot)
@@ -151,7 +151,7 @@ def _lqr(args) -> int:
     else:
         hz, h = args.rate, (rate.value.timestep if rate.value.timestep_changed else None)
     d = design_region(robot).value
-    res = discrete_lqr(robot, rate_hz=hz, timestep=h, design_qu=d, qu0=0.25 * d)
+    res = discrete_lqr(robot, rate_hz=hz, timestep=h, design_qu=d, qu0=0.25 * d, qa0=initial_ranges(robot).value["initial_qa"][1])
     unit = input_units(robot).value
     kinds = getattr(robot, "joint_kinds", ("hinge",) * robot.n)
     pos = ["rad" if k == "hinge" else "m" for k in kinds]

@@ -232,6 +232,7 @@ def discrete_lqr(
     timestep: float | None = None,
     design_qu: float = 0.2,
     qu0: float = 0.05,
+    qa0: float | None = None,
     check_s: float = 3.0,
 ) -> LQRResult:
     """Discrete LQR gains in collect's convention (module docstring).
@@ -241,6 +242,8 @@ def discrete_lqr(
         rate_hz: control rate, Hz.  timestep: physics step override, s.
         design_qu: |q_u − nominal| design bound of Bryson's rule, rad (or m).
         qu0: initial q_u error of the ctrlrange check, rad (or m).
+        qa0: if given, the check also starts from an error of ``qa0`` on each actuated coordinate alone (rad or m:
+            the excitation trials' initial range), and its peak is the worst of all starts.
         check_s: duration of the check, s.
     """
     from scipy.linalg import solve_discrete_are
@@ -261,8 +264,11 @@ def discrete_lqr(
     Ru = np.diag(np.where(np.isfinite(limits.u_ctrl), 1.0 / limits.u_ctrl**2, 0.0))
     Rf = np.diag(np.where(np.isfinite(limits.f_max), 1.0 / limits.f_max**2, 0.0))
     Ru += np.diag(np.where(np.isfinite(limits.u_ctrl) | np.isfinite(limits.f_max), 0.0, 1.0 / umax**2))
-    x0 = np.zeros(A.shape[0])
-    x0[robot.unactuated_index] = qu0
+    starts = [np.zeros(A.shape[0])]
+    starts[0][robot.unactuated_index] = qu0
+    for j in (robot.actuated_index if qa0 else ()):
+        starts.append(np.zeros(A.shape[0]))
+        starts[-1][j] = qa0
     steps = int(math.ceil(check_s * rate_hz))
     scale = 1.0
     for _ in range(13):
@@ -277,15 +283,18 @@ def discrete_lqr(
                 "the upright may be uncontrollable from the actuators at this rate") from None
         K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A + S.T)
         Acl = A - B @ K
-        x, peak = x0.copy(), 0.0
-        for _ in range(steps):
-            u = -K @ x
-            peak = max(peak, limits.peak(u, x))
-            x = Acl @ x
+        peak = 0.0
+        for x0 in starts:
+            x = x0.copy()
+            for _ in range(steps):
+                u = -K @ x
+                peak = max(peak, limits.peak(u, x))
+                x = Acl @ x
         if peak <= 1.0:
             break
         scale *= 4.0
     else:
-        log.warning("discrete_lqr: %s needs %.2f× its actuator limits for a %.3g initial q_u error even with R × %g", robot.name, peak, qu0, scale)
+        log.warning("discrete_lqr: %s needs %.2f× its actuator limits for a %.3g initial q_u error%s even with R × %g", robot.name,
+                    peak, qu0, f" (or {qa0:.3g} of an actuated coordinate)" if qa0 else "", scale)
     rho = float(np.max(np.abs(np.linalg.eigvals(A - B @ K))))
     return LQRResult(-K, A, B, Q, R, float(rate_hz), N, h, rho, peak, scale, tuple(notes))

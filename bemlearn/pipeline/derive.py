@@ -115,7 +115,8 @@ def excitation_gains(robot, rate: RateChoice) -> Derived:
     from bemlearn.control.lqr import discrete_lqr
 
     d = design_region(robot).value
-    res = discrete_lqr(robot, rate_hz=rate.rate_hz, timestep=rate.timestep, design_qu=d, qu0=0.25 * d)
+    qa0 = initial_ranges(robot).value["initial_qa"][1]
+    res = discrete_lqr(robot, rate_hz=rate.rate_hz, timestep=rate.timestep, design_qu=d, qu0=0.25 * d, qa0=qa0)
     gains = tuple(float(f"{k:.6g}") for k in res.K.ravel())
     scale, frac = _robust_gain_scale(res.A, res.B, res.K)
     note = (f"discrete LQR of mjd_transitionFD at {rate.rate_hz:g} Hz, Bryson weights (|q_u| ≤ {d:g}, joint ranges, ctrlrange, "
@@ -149,9 +150,13 @@ def excitation_signals(robot, rate: RateChoice, *, n_sines: tuple[int, int] = (2
     """Sine amplitudes and frequencies of the excitation reference (collect's ranges).
 
     f ∈ [f_hi/15, f_hi], f_hi = 1.4 λ/2π (clipped to [0.5 Hz, rate/40]); the top amplitude
-    A_hi makes one component at f_hi move the BEM by 1.5 × the design bound,
-    A_hi = 1.5 d / max_j |s_p,j − s_a,j ω_hi²|, capped so that n_max components stay within
-    0.8 × the tightest limited joint's half range; the bottom amplitude is A_hi / 10.
+    A_hi makes one component at f_hi move the BEM by 1.5 × the design bound, shared among the m
+    actuated coordinates (each moves the BEM, and their components add up),
+    A_hi = 1.5 d / (m · max_j |s_p,j − s_a,j ω_hi²|), capped so that n_max components stay within
+    0.8 × the tightest limited joint's half range, and so that n_max components in phase at f_hi on
+    any one actuated coordinate (q_a,j = ±n_max A, q̈_a,j = ∓n_max A ω_hi²) take at most half the
+    actuator limits (ctrlrange, forcerange, servo law; :func:`reference_effort`),
+    the other half left to the balance; the bottom amplitude is A_hi / 10.
 
     Returns:
         ``Derived({"n_sines", "amplitude", "frequency_hz"}, note)`` (amplitudes in rad or m).
@@ -160,18 +165,72 @@ def excitation_signals(robot, rate: RateChoice, *, n_sines: tuple[int, int] = (2
     f_lo, f_hi, lam = _frequency_band(robot, rate)
     slopes = bem_slopes(robot)
     g_hi = float(np.max(bem_gain(slopes, 2 * math.pi * f_hi)))
-    a_bem = 1.5 * d / max(g_hi, 1e-12)
+    a_bem = 1.5 * d / (robot.m * max(g_hi, 1e-12))
     limited = _limited_actuated(robot)
     half = qa_half_ranges(robot)
     cap = float(np.min(0.8 * half[limited] / n_sines[1])) if limited.any() else math.inf
     a_hi = min(a_bem, cap)
+    why = "1.5 × design bound / (m × BEM gain at f_hi)" if a_hi == a_bem else "joint range / n_max"
+    a_eff = _effort_cap(robot, a_hi, 1, 2 * math.pi * f_hi)
+    if a_eff < a_hi:
+        a_hi, why = a_eff, "half the actuator limits at f_hi"
     reach = a_hi * g_hi * n_sines[1]
-    note = (f"f ∈ [{f_lo:.3g}, {f_hi:.3g}] Hz (f_hi = 1.4 λ/2π, λ = {lam:.3g} 1/s); A ≤ {a_hi:.3g} "
-            f"({'1.5 × design bound / BEM gain at f_hi' if a_hi == a_bem else 'joint range / n_max'}); "
+    note = (f"f ∈ [{f_lo:.3g}, {f_hi:.3g}] Hz (f_hi = 1.4 λ/2π, λ = {lam:.3g} 1/s); A ≤ {a_hi:.3g} ({why}); "
             f"n_max components at f_hi reach |q_u^e| ≈ {reach:.3g}")
     if reach < d:
-        log.warning("%s: the excitation reaches |q_u^e| ≈ %.3g < %.3g within the joint ranges", robot.name, reach, d)
+        log.warning("%s: the excitation reaches |q_u^e| ≈ %.3g < %.3g within the joint ranges and actuator limits", robot.name, reach, d)
     return Derived({"n_sines": tuple(n_sines), "amplitude": (a_hi / 10, a_hi), "frequency_hz": (f_lo, f_hi)}, note)
+
+
+def _effort_cap(robot, a_hi: float, n_max: int, omega: float, *, budget: float = 0.5) -> float:
+    """The largest A ≤ ``a_hi`` whose reference (n_max components in phase at ω on one actuated coordinate)
+    takes at most ``budget`` × the actuator limits; ``a_hi`` when the actuator model is not covered or the
+    robot already needs more than the budget at rest."""
+    from bemlearn.errors import NumericalError, RobotModelError
+
+    try:
+        if reference_effort(robot, 0.0, omega) > budget or reference_effort(robot, n_max * a_hi, omega) <= budget:
+            return a_hi
+    except (RobotModelError, NumericalError):
+        return a_hi
+    lo, hi = 0.0, a_hi
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        if reference_effort(robot, n_max * mid, omega) <= budget:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def reference_effort(robot, amplitude: float, omega: float) -> float:
+    """The effort (multiple of the actuator limits) of a sinusoidal reference of ``amplitude`` (rad or m) at
+    ``omega`` (rad/s) on any one actuated coordinate, at its extremes: q_a,j = ±A, q̈_a,j = ∓A ω², q̇ = 0, q_u at
+    its nominal value and q̈_u = 0; τ = D q̈ + h (eq. 1), the actuator forces and ``ctrl`` from MuJoCo's actuator
+    model (:class:`~bemlearn.control.actuator_inverse.MujocoActuatorInverse`); the worst of max |ctrl|/ctrl limit
+    and |force|/force limit over j and the sign (NumPy only)."""
+    from bemlearn.control.actuator_inverse import MujocoActuatorInverse
+
+    inv = MujocoActuatorInverse(robot)
+    model = robot.model
+    fmax = np.where(model.actuator_forcelimited.astype(bool),
+                    np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1])), np.inf)
+    ia = list(robot.actuated_index)
+    worst = 0.0
+    for j in ia:
+        for sign in (1.0, -1.0):
+            q = np.zeros(robot.n)
+            q[robot.unactuated_index] = robot.qu_nominal
+            q[j] = sign * amplitude
+            qdd = np.zeros(robot.n)
+            qdd[j] = -sign * amplitude * omega**2
+            D, h = robot.terms(q, np.zeros(robot.n))
+            tau_a = (D @ qdd + h)[ia]
+            ctrl = inv.command(tau_a, q, np.zeros(robot.n), clip=False)
+            force = inv.B_pinv @ tau_a
+            e = max(float(np.max(np.abs(ctrl) / inv.limit, initial=0.0)), float(np.max(np.abs(force) / fmax, initial=0.0)))
+            worst = max(worst, e)
+    return worst
 
 
 def _limited_actuated(robot) -> np.ndarray:

@@ -154,7 +154,8 @@ def model_feasibility(robot: MujocoRobot, config: PipelineConfig) -> list[Feasib
     if config.collect.gains is not None and config.collect.rate_hz is not None:
         from bemlearn.control.lqr import discrete_lqr
 
-        res = discrete_lqr(robot, rate_hz=config.collect.rate_hz, timestep=config.collect.physics_timestep, design_qu=d, qu0=d / 4)
+        qa0 = config.collect.initial_qa[1] if config.collect.initial_qa is not None else None
+        res = discrete_lqr(robot, rate_hz=config.collect.rate_hz, timestep=config.collect.physics_timestep, design_qu=d, qu0=d / 4, qa0=qa0)
         K = np.asarray(config.collect.gains, dtype=np.float64).reshape(res.K.shape)
         if np.allclose(K, res.K, rtol=1e-4, atol=1e-9):      # the derived gains: their peak is the LQR's
             out.append(FeasibilityCheck(
