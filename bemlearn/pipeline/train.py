@@ -130,13 +130,20 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         writer.close()
         atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
         raise KeyboardInterrupt
-    if len(val):
-        metrics.update(_validation_metrics(stage, train, val, gp_cfg, writer))
-    metrics["uncertainty"] = stage.calibration
-    metrics.update(_data_only_metrics(state, train, val, meta.unactuated, out, writer))
-    if truth_robot is not None:  # held-out learned BEM vs model-based BEM (eq. 14 vs 9)
-        metrics.update(_model_metrics(state, truth_robot, config.evaluate, meta.unactuated,
-                                      units[f"qd_{meta.unactuated}"].removesuffix("/s"), out, writer))
+    try:   # the checkpoint exists: a failure from here on keeps it, and metrics.json says where the run stopped
+        if len(val):
+            metrics.update(_validation_metrics(stage, train, val, gp_cfg, writer))
+        metrics["uncertainty"] = stage.calibration
+        metrics.update(_data_only_metrics(state, train, val, meta.unactuated, out, writer))
+        if truth_robot is not None:  # held-out learned BEM vs model-based BEM (eq. 14 vs 9)
+            metrics.update(_model_metrics(state, truth_robot, config.evaluate, meta.unactuated,
+                                          units[f"qd_{meta.unactuated}"].removesuffix("/s"), out, writer))
+    except Exception as exc:
+        from bemlearn.pipeline.failure import record_failure
+
+        writer.close()
+        record_failure(out, "train: evaluation", exc, metrics)
+        raise
     writer.close()
     from bemlearn.pipeline.verdict import judge_run
 

@@ -20,6 +20,8 @@ data resolve the BEM      its spread over the data < 4 × the larger    < 2 × t
                           q_u error
 held-out trials           < 80 % inside the predictive ±2σ            —
 closed loop               learned BEM's loop diverged                 learned BEM's loop fell
+failed stage              —                                           a stage after training
+                                                                      raised (``failed``)
 Lemma 1                   learned ΔΓ vs the model's ΔΓ = Ḣ_u + b_u q̇_u^e  —
                           correlation < 0.9
 ========================  ==========================================  ======================
@@ -236,6 +238,15 @@ def _check_closed_loop(metrics: dict[str, Any], notes: _Notes) -> None:
                       f"ΔΓ = Ḣ_u + b_u q̇_u^e at r = {r:.2f}")
 
 
+def _check_failed(metrics: dict[str, Any], notes: _Notes) -> None:
+    failed = metrics.get("failed")
+    if isinstance(failed, dict):
+        notes.checked.append("failed")
+        what = f"{failed.get('error_type', 'error')}: {failed.get('error', '')}".rstrip(": ")
+        notes.add("unusable", "failed", f"the run failed at stage '{failed.get('stage')}' ({what}): the stages after it did not "
+                  f"run and its numbers are incomplete; the run folder keeps {', '.join(failed.get('kept') or [])}")
+
+
 #: The checks of the module docstring's table, in the order their findings are listed (before sorting by severity).
-_CHECKS = (_check_model, _check_excitation, _check_derivatives, _check_fit, _check_design_region, _check_resolution,
+_CHECKS = (_check_failed, _check_model, _check_excitation, _check_derivatives, _check_fit, _check_design_region, _check_resolution,
            _check_heldout, _check_closed_loop)
