@@ -138,6 +138,9 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         if truth_robot is not None:  # held-out learned BEM vs model-based BEM (eq. 14 vs 9)
             metrics.update(_model_metrics(state, truth_robot, config.evaluate, meta.unactuated,
                                           units[f"qd_{meta.unactuated}"].removesuffix("/s"), out, writer))
+        tq = _torque_metrics(traj, truth_robot)
+        if tq is not None:
+            metrics["unactuated_torque"] = tq
     except Exception as exc:
         from bemlearn.pipeline.failure import record_failure
 
@@ -152,6 +155,16 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     if interrupted:
         raise KeyboardInterrupt
     return metrics
+
+
+def _torque_metrics(traj, truth_robot) -> dict | None:
+    """A torque logged on q_u, weighed against the model's gravity stiffness when there is a model
+    (:mod:`bemlearn.pipeline.logged_torque`)."""
+    from bemlearn.pipeline.derive import design_region
+    from bemlearn.pipeline.logged_torque import unactuated_torque_metrics
+
+    bound = design_region(truth_robot).value if truth_robot is not None else None
+    return unactuated_torque_metrics(traj, truth_robot, bound=bound)
 
 
 def _validation_metrics(stage: GPStageResult, train: BEMDataset, val: BEMDataset, gp_cfg: GPConfig, writer) -> dict[str, float]:
