@@ -15,6 +15,10 @@ from bemlearn.cli.main import main
 from bemlearn.errors import CheckpointError
 
 ROBOT = Path(__file__).resolve().parent / "robots" / "cartpole.xml"
+#: The cart-pole's gravity stiffness at upright, k_g = m g l_c: pole 0.2 kg, centre of mass 0.3 m up (N·m/rad).
+K_G = 0.2 * 9.81 * 0.3
+#: The logged torque on the hinge: its equilibrium shift τ_rms / k_g = 0.02 rad, twice the target 0.05 d (d = 0.2 rad).
+TAU_RMS = 0.02 * K_G
 
 
 @pytest.fixture(scope="module")
@@ -23,8 +27,19 @@ def data(tmp_path_factory) -> Path:
     from bemlearn.pipeline.resolve import complete_section
     from bemlearn.sim.collect import CollectConfig, collect
 
+    import dataclasses
+
+    import numpy as np
+
+    from bemlearn.data import Trajectory
+
     cfg = complete_section(str(ROBOT), "collect", CollectConfig(n_trials=4, duration_s=4.0, workers=1, seed=3))
     traj, _ = collect(str(ROBOT), cfg, progress=False)
+    # a torque "logged" on the pole's hinge (a label only: the simulation did not apply it), of rms TAU_RMS
+    tau = np.random.default_rng(5).normal(0.0, 1.0, (traj.n_samples, 1))
+    tau *= TAU_RMS / np.sqrt(np.mean(tau**2))
+    traj = Trajectory(t=traj.t, trial=traj.trial, q=traj.q, u=traj.u, meta=dataclasses.replace(traj.meta, torque_joints=("hinge",)),
+                      tau=tau)
     return write_trajectory(traj, tmp_path_factory.mktemp("cartpole") / "cartpole.npz")
 
 
@@ -62,6 +77,14 @@ def test_a_data_only_run_with_a_model_completes(data, tmp_path, capsys):
     assert metrics["bem_design_region"]["n_points"] > 0 and metrics["bem_heldout"]["rmse"] >= 0
     for name in ("checkpoint.pt", "bem_predictor.pt", "report.md", "bem_validation.png"):
         assert (out / name).is_file(), name
+    tq = metrics["unactuated_torque"]   # the logged torque on q_u, weighed against the model's gravity
+    assert tq["stiffness"] == pytest.approx(K_G, rel=1e-6) and tq["rms"] == pytest.approx(TAU_RMS, rel=1e-12)
+    assert tq["shift_rms"] == pytest.approx(0.02, rel=1e-6) and tq["target"] == pytest.approx(0.01, rel=1e-12)
+    finding = next(f for f in metrics["verdict"]["findings"] if f["check"] == "unactuated_torque")
+    assert finding["severity"] == "degraded" and metrics["verdict"]["status"] != "ok"
+    assert finding["reason"].startswith("the unactuated joint hinge carries a logged torque of 0.0118 N·m rms")
+    assert "moves the equilibrium by 0.02 rad rms, more than the accuracy target 0.01 rad" in finding["reason"]
+    assert finding["reason"] in (out / "report.md").read_text()
 
 
 def test_a_failure_after_training_keeps_the_trained_artifacts(data, tmp_path, monkeypatch, capsys, caplog):
@@ -112,3 +135,28 @@ def test_a_failure_before_anything_worth_keeping_leaves_no_folder(data, tmp_path
     out = tmp_path / "new" / "run"
     assert main(["run", str(_config(tmp_path, data)), "--out", str(out), "--no-progress"]) == 2
     assert "injected failure" in capsys.readouterr().err and not (tmp_path / "new").exists()
+
+
+def test_the_gravity_stiffness_is_m_g_l_for_the_cartpole():
+    from bemlearn.pipeline.logged_torque import gravity_stiffness
+    from bemlearn.robots import load
+
+    assert gravity_stiffness(load(str(ROBOT))) == pytest.approx(K_G, rel=1e-6)
+
+
+@pytest.mark.parametrize("extra, severity, status, text", [
+    ({"stiffness": 0.5, "stiffness_unit": "N·m/rad", "bound": 0.2, "target": 0.01, "gravity_scale": 0.1, "shift_rms": 0.012},
+     "degraded", "degraded", "moves the equilibrium by 0.012 rad rms, more than the accuracy target 0.01 rad (0.05 d; 6 % of"),
+    ({"stiffness": 0.5, "stiffness_unit": "N·m/rad", "bound": 0.2, "target": 0.01, "gravity_scale": 0.1, "shift_rms": 0.008},
+     "note", "ok", "less than the accuracy target"),
+    ({}, "note", "ok", "with no model it cannot be weighed against gravity"),
+])
+def test_the_verdict_weighs_a_torque_on_the_unactuated_joint(extra, severity, status, text):
+    from bemlearn.pipeline.verdict import judge_run
+
+    rms = extra.get("shift_rms", 0.01) * extra.get("stiffness", 0.5)
+    v = judge_run({"unactuated_torque": {"joint": "alpha", "unit": "N·m", "rms": rms, "mean": 0.0, "max_abs": 3 * rms, **extra}})
+    assert v.status == status and "unactuated_torque" in v.checked
+    (f,) = v.findings
+    assert f.severity == severity and text in f.reason and f.reason.startswith("the unactuated joint alpha carries a logged torque of")
+    assert judge_run({"unactuated_torque": {"joint": "alpha", "unit": "N·m", "rms": 0.0, "mean": 0.0, "max_abs": 0.0}}).findings == ()
