@@ -79,7 +79,7 @@ def test_a_global_window_keeps_the_logged_rows_inside_it(logs):
 
 
 def test_per_file_windows_override_the_global_one(logs):
-    root, raw = logs
+    root, _ = logs
     imap = load_import_map(map_of(root / "map.yaml", time={"window": [0, 2000]}, windows={"swing_*.csv": [1000, None]}))
     files = [root / "swing_001.csv", root / "calm_001.csv", root / "swing_002.csv"]
     traj = import_logs(files, imap)

@@ -23,15 +23,14 @@ TAU_RMS = 0.02 * K_G
 
 @pytest.fixture(scope="module")
 def data(tmp_path_factory) -> Path:
-    from bemlearn.data.trajectory_io import write_trajectory
-    from bemlearn.pipeline.resolve import complete_section
-    from bemlearn.sim.collect import CollectConfig, collect
-
     import dataclasses
 
     import numpy as np
 
     from bemlearn.data import Trajectory
+    from bemlearn.data.trajectory_io import write_trajectory
+    from bemlearn.pipeline.resolve import complete_section
+    from bemlearn.sim.collect import CollectConfig, collect
 
     cfg = complete_section(str(ROBOT), "collect", CollectConfig(n_trials=4, duration_s=4.0, workers=1, seed=3))
     traj, _ = collect(str(ROBOT), cfg, progress=False)
