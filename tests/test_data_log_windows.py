@@ -177,6 +177,8 @@ def test_a_torque_on_the_unactuated_joint_is_reported_by_the_import(logs, capsys
     assert "warning: the unactuated joint alpha carries a logged torque of 0.000" in out
     assert "the BEM assumes it unactuated (Γ_u = 0)" in out and "logged torque on theta:" in out
     assert "time.window = [1000, end] ms: 1500 of 2000 rows imported" in out
+    assert main(["data", "check", str(root / "rig.npz")]) == 0
+    assert "torques:      theta, alpha (on the unactuated joint: the BEM assumes none there)" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("torque, message", [

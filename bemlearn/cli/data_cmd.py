@@ -83,6 +83,9 @@ def format_summary(path: Path | str, s: dict[str, Any]) -> str:
     kinds = s.get("joint_kinds", {})
     if s.get("channels"):
         lines.append(f"channels:     {', '.join(s['channels'])}")
+    if s.get("torques"):
+        on_qu = " (on the unactuated joint: the BEM assumes none there)" if s["unactuated"] in s["torques"] else ""
+        lines.append(f"torques:      {', '.join(s['torques'])}{on_qu}")
     slides = any(k == "slide" for k in kinds.values())
     lines.append("ranges (rad for hinges, m for slides):" if slides else "angle ranges (rad):")
     for joint, rng in s["angle_ranges_rad"].items():
