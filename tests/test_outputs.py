@@ -196,6 +196,7 @@ def test_a_failed_run_force_keeps_the_new_checkpoint_without_the_old_report(trai
     assert "report.md" not in after and "bem_predictor.pt" not in after  # the old run's report and predictor: gone
     metrics = json.loads(after["metrics.json"])
     assert metrics["failed"]["stage"] == "export" and metrics["verdict"]["status"] == "unusable"
+    assert "checkpoint.pt" in metrics["failed"]["kept"] and "report.md" not in metrics["failed"]["kept"]
     assert not [p for p in copy.iterdir() if p.name.startswith(".bemlearn-")]
 
 

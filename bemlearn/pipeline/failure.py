@@ -30,7 +30,8 @@ def read_metrics(out: Path) -> dict[str, Any]:
     return doc if isinstance(doc, dict) else {}
 
 
-def record_failure(out: Path, stage: str, exc: BaseException, metrics: dict[str, Any]) -> dict[str, Any]:
+def record_failure(out: Path, stage: str, exc: BaseException, metrics: dict[str, Any], *,
+                   since_ns: int | None = None) -> dict[str, Any]:
     """Write ``out/metrics.json`` for a run that failed at ``stage`` with ``exc``; returns what was written.
 
     Args:
@@ -39,6 +40,8 @@ def record_failure(out: Path, stage: str, exc: BaseException, metrics: dict[str,
         exc: the exception.
         metrics: the metrics gathered so far; a ``failed`` entry already there (recorded by an inner
             stage) keeps its more precise stage.
+        since_ns: when the run started (``time.time_ns()``): ``kept`` lists only what it wrote since
+            (a replaced run's files that ``--force`` had not rewritten yet are removed afterwards).
     """
     from bemlearn.pipeline.verdict import judge_run
 
@@ -46,7 +49,8 @@ def record_failure(out: Path, stage: str, exc: BaseException, metrics: dict[str,
     earlier = doc.get("failed")
     if isinstance(earlier, dict) and earlier.get("stage"):
         stage = str(earlier["stage"])
-    kept = sorted(p.name for p in out.iterdir() if not p.name.startswith(INTERNAL_PREFIX) and p.name != "metrics.json")
+    kept = sorted(p.name for p in out.iterdir() if not p.name.startswith(INTERNAL_PREFIX) and p.name != "metrics.json"
+                  and (since_ns is None or p.stat().st_mtime_ns >= since_ns))
     text = str(exc).splitlines()[0] if str(exc) else ""
     doc["failed"] = {"stage": stage, "error_type": type(exc).__name__, "error": text, "kept": [*kept, "metrics.json"]}
     doc["verdict"] = judge_run(doc).to_dict()

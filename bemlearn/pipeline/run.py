@@ -51,6 +51,7 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
     cfg = resolved.config
     out = Path(out_dir) if out_dir else new_run_dir(Path(cfg.robot or cfg.data or "run").stem)
     out.mkdir(parents=True, exist_ok=True)
+    started_ns = time.time_ns()
     save_yaml(cfg, out / "config.yaml")
     atomic_write_text(out / "config_resolved.json", json.dumps(resolved.to_json_dict(), indent=2, ensure_ascii=False))
     t0 = time.perf_counter()
@@ -84,7 +85,7 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
     try:
         train = train_run(cfg, data_path, out, device=device, progress=progress)
     except Exception as exc:
-        _train_failed(out, exc, data_info, collected=cfg.data is None, since_ns=t_train)
+        _train_failed(out, exc, data_info, collected=cfg.data is None, since_ns=t_train, started_ns=started_ns)
         raise
     stage = "export"
     try:   # the checkpoint exists: a failure from here on keeps the folder, and metrics.json says where it stopped
@@ -112,13 +113,13 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
 
         train.setdefault("data", data_info)
         train.setdefault("feasibility", feasibility)
-        record_failure(out, stage, exc, train)
+        record_failure(out, stage, exc, train, since_ns=started_ns)
         raise
     log.info("done in %.0f s: %s", time.perf_counter() - t0, report)
     return out
 
 
-def _train_failed(out: Path, exc: Exception, data_info: dict, *, collected: bool, since_ns: int) -> None:
+def _train_failed(out: Path, exc: Exception, data_info: dict, *, collected: bool, since_ns: int, started_ns: int) -> None:
     """Record a failed training stage in metrics.json when the run keeps something: the checkpoint it wrote
     (train_run recorded where its evaluation stopped; the data's summary is added) or the data it collected."""
     from bemlearn.pipeline.failure import read_metrics, record_failure
@@ -130,9 +131,9 @@ def _train_failed(out: Path, exc: Exception, data_info: dict, *, collected: bool
             doc["data"] = data_info
             atomic_write_text(out / "metrics.json", json.dumps(doc, indent=2, default=float))
             return
-        record_failure(out, "train", exc, {**doc, "data": data_info})
+        record_failure(out, "train", exc, {**doc, "data": data_info}, since_ns=started_ns)
     elif collected:
-        record_failure(out, "train", exc, {"data": data_info})
+        record_failure(out, "train", exc, {"data": data_info}, since_ns=started_ns)
 
 
 def _stop_after_preflight(out: Path, cfg: PipelineConfig, resolved: ResolvedConfig, feasibility: list, t0: float) -> Path:

@@ -19,6 +19,7 @@ import dataclasses
 import json
 import logging
 import math
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -90,6 +91,7 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    started_ns = time.time_ns()
     gp_cfg = config.train
     if device is not None:
         gp_cfg = dataclasses.replace(gp_cfg, device=_resolve_device(device))
@@ -145,7 +147,7 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         from bemlearn.pipeline.failure import record_failure
 
         writer.close()
-        record_failure(out, "train: evaluation", exc, metrics)
+        record_failure(out, "train: evaluation", exc, metrics, since_ns=started_ns)
         raise
     writer.close()
     from bemlearn.pipeline.verdict import judge_run
