@@ -17,12 +17,16 @@ Every bemlearn command that writes files runs its work inside :func:`claim_outpu
    links are impossible) into ``<folder>/.bemlearn-backup-<pid>/``.  Every bemlearn writer
    replaces files by renaming a new file over them (:func:`bemlearn.files.atomic_path`), so
    the linked originals stay untouched;
-5. on success drops the snapshot; when the block raises (an error, a full disk, Ctrl-C or
-   SIGTERM that left no ``keep_on_interrupt`` file) **restores** the entries from the snapshot
-   (new ones removed, old ones moved back) or, for a folder it created, removes the folder:
-   never a mix of two runs (a new ``config.yaml`` beside an old checkpoint, a new checkpoint
-   beside an old report).  A Ctrl-C / SIGTERM that wrote a ``keep_on_interrupt`` file (the
-   interrupted checkpoint) keeps the new state: it is complete and resumable.
+5. on success drops the snapshot; when the block raises **before it produced anything worth
+   keeping** (an error, a full disk, Ctrl-C or SIGTERM before any ``keep`` file was written)
+   it **restores** the entries from the snapshot (new ones removed, old ones moved back) or,
+   for a folder it created, removes the folder: never a mix of two runs (a new
+   ``config.yaml`` beside an old checkpoint, a new checkpoint beside an old report).
+   A failure or interruption **after** the command wrote one of its ``keep`` files (a
+   collected ``data.npz``, a trained ``checkpoint.pt``) keeps what it produced: the new
+   files stay, the old run's files it had not rewritten yet are removed (with ``--force``;
+   with ``--resume`` they are the same run's and stay), and a warning names the folder and
+   what it holds.  The rule is :func:`worth_keeping`, the one place that decides.
 
 A command killed with SIGKILL (or a second Ctrl-C, which exits at once) leaves its lock file
 holding its record; the folder is then *marked incomplete*.  The next command that claims the
@@ -50,7 +54,7 @@ try:  # POSIX
 except ImportError:  # pragma: no cover - Windows: the lock degrades to the record's PID
     fcntl = None  # type: ignore[assignment]  # checked before every use
 
-__all__ = ["claim_outputs", "folder_lock", "LOCK_NAME", "BACKUP_PREFIX"]
+__all__ = ["claim_outputs", "folder_lock", "worth_keeping", "LOCK_NAME", "BACKUP_PREFIX"]
 
 log = logging.getLogger(__name__)
 
@@ -351,6 +355,7 @@ def claim_outputs(
     root: str | os.PathLike[str] = "runs",
     force: bool = False,
     resume: bool = False,
+    keep: Iterable[str] = (),
     keep_on_interrupt: Iterable[str] = (),
     what: str = "",
 ) -> Iterator[Path]:
@@ -363,8 +368,11 @@ def claim_outputs(
         force: replace existing outputs.
         resume: continue in the existing outputs (``train --resume``); they are snapshotted like
             with ``force`` and restored if the command fails.
-        keep_on_interrupt: names whose presence after Ctrl-C / SIGTERM means the command left a
-            complete, resumable state on purpose (e.g. ``checkpoint.pt``): the new state is kept.
+        keep: names of outputs worth keeping (e.g. ``data.npz``, ``checkpoint.pt``): once the command
+            has written one, no later failure or interruption removes what it produced
+            (:func:`worth_keeping`); the command should record the failure in its outputs.
+        keep_on_interrupt: names that count only after Ctrl-C / SIGTERM (a complete, resumable state
+            written on purpose when interrupted); ``keep`` names count there too.
         what: the command, for error messages.
 
     Yields:
@@ -376,7 +384,8 @@ def claim_outputs(
         EnvironmentProblem: the folder cannot be created or written.
     """
     head = f"{what}: " if what else ""
-    keep = tuple(keep_on_interrupt)
+    keep_any = tuple(keep)
+    keep_interrupted = keep_any + tuple(keep_on_interrupt)
     if folder is None:
         if default_name is None:
             raise ArgumentError("claim_outputs: give a folder or a default_name")
@@ -420,18 +429,38 @@ def claim_outputs(
             update(backup=backup.name)
         try:
             yield out
-        except KeyboardInterrupt:
-            if keep and any(_rewritten(out, name, backup) for name in keep):
+        except BaseException as exc:
+            names = keep_interrupted if isinstance(exc, KeyboardInterrupt) else keep_any
+            if worth_keeping(out, names, backup):
+                if not resume:
+                    _drop_stale(out, entries, backup)
                 _discard(backup)
+                if not isinstance(exc, KeyboardInterrupt):
+                    log.warning("%s%s: kept after the failure, with what the command produced (%s)", head, out,
+                                ", ".join(_entries(out, entries)))
             else:
                 _undo(out, created, first_new, entries, backup)
-            raise
-        except BaseException:
-            _undo(out, created, first_new, entries, backup)
             raise
         _discard(backup)
     finally:
         lock.__exit__(None, None, None)
+
+
+def worth_keeping(out: Path, names: Iterable[str], backup: Path | None = None) -> bool:
+    """Whether a command that failed in ``out`` produced something worth keeping: it wrote (new, or
+    replaced by a different file) one of ``names``.  The one rule of what a failure removes: a folder
+    is removed, or put back as it was, only when this is false (module docstring)."""
+    return any(_rewritten(out, name, backup) for name in names)
+
+
+def _drop_stale(out: Path, entries: Sequence[str] | None, backup: Path | None) -> None:
+    """Remove the replaced run's outputs that the failed command had not rewritten, so that the kept new
+    files never sit beside an old run's (a new checkpoint beside an old report)."""
+    if backup is None:
+        return
+    for name in _entries(out, entries):
+        if (backup / name).exists() and not _rewritten(out, name, backup):
+            _remove(out / name)
 
 
 def _discard(backup: Path | None) -> None:

@@ -174,7 +174,9 @@ def test_a_failed_train_force_leaves_the_run_as_it_was(trained, tmp_path, monkey
         assert sorted(p.name for p in copy.iterdir() if p.name.startswith(".bemlearn-")) == []
 
 
-def test_a_failed_run_force_leaves_no_new_checkpoint_beside_the_old_report(trained, tmp_path, monkeypatch, capsys):
+def test_a_failed_run_force_keeps_the_new_checkpoint_without_the_old_report(trained, tmp_path, monkeypatch, capsys, caplog):
+    """A failure after training keeps what the run produced (never a mix: the old run's files it had not
+    rewritten are gone), and metrics.json says at which stage it failed."""
     cfg, run = trained
     copy = _copy(run, tmp_path / "run")
     (copy / "report.md").write_text("# the old run's report\n")
@@ -188,8 +190,14 @@ def test_a_failed_run_force_leaves_no_new_checkpoint_beside_the_old_report(train
     monkeypatch.setattr(importlib.import_module("bemlearn.export.export_run"), "export_run", fail)
     cfg = _small_config(tmp_path, "run.yaml", data=str(DATA))   # train on the shipped data: no collection
     assert main(["run", str(cfg), "--out", str(copy), "--force", "--no-progress"]) == 2
-    assert "injected failure" in capsys.readouterr().err
-    assert _tree(copy) == before
+    assert "injected failure" in capsys.readouterr().err and f"{copy} keeps what it produced" in caplog.text
+    after = _tree(copy)
+    assert after["checkpoint.pt"] != before["checkpoint.pt"]            # the new fit, kept
+    assert "report.md" not in after and "bem_predictor.pt" not in after  # the old run's report and predictor: gone
+    metrics = json.loads(after["metrics.json"])
+    assert metrics["failed"]["stage"] == "export" and metrics["verdict"]["status"] == "unusable"
+    assert "checkpoint.pt" in metrics["failed"]["kept"] and "report.md" not in metrics["failed"]["kept"]
+    assert not [p for p in copy.iterdir() if p.name.startswith(".bemlearn-")]
 
 
 def test_an_interrupted_train_force_keeps_its_resumable_checkpoint(trained, tmp_path, monkeypatch, capsys):

@@ -83,6 +83,9 @@ def format_summary(path: Path | str, s: dict[str, Any]) -> str:
     kinds = s.get("joint_kinds", {})
     if s.get("channels"):
         lines.append(f"channels:     {', '.join(s['channels'])}")
+    if s.get("torques"):
+        on_qu = " (on the unactuated joint: the BEM assumes none there)" if s["unactuated"] in s["torques"] else ""
+        lines.append(f"torques:      {', '.join(s['torques'])}{on_qu}")
     slides = any(k == "slide" for k in kinds.values())
     lines.append("ranges (rad for hinges, m for slides):" if slides else "angle ranges (rad):")
     for joint, rng in s["angle_ranges_rad"].items():
@@ -173,7 +176,7 @@ def run_import(args: argparse.Namespace) -> int:
 
 
 def import_notes(info: dict[str, Any]) -> list[str]:
-    """The import's lines about resampling and cut last lines (``meta.extra["import"]``), for the user."""
+    """The import's lines about resampling, time windows, logged torques and cut last lines (``meta.extra["import"]``), for the user."""
     lines = []
     res = info.get("resample")
     if res:
@@ -190,6 +193,17 @@ def import_notes(info: dict[str, Any]) -> list[str]:
                 "warning: the interpolated angles of " + ", ".join(steps) + " leave their encoder grid; the steps detected "
                 "before resampling are kept in the file (meta.extra['import']['quantization_step']) and shown below"
             )
+    for w in info.get("windows", []):
+        t0, t1 = ("start" if w["window"][0] is None else f"{w['window'][0]:g}"), ("end" if w["window"][1] is None else f"{w['window'][1]:g}")
+        lines.append(f"{w['file']}: {w['key']} = [{t0}, {t1}] {w['unit']}: {w['kept']} of {w['rows']} rows imported")
+    for joint, tq in (info.get("torques") or {}).items():
+        what = "force" if tq["unit"] == "N" else "torque"
+        line = f"logged {what} on {joint}: {tq['rms']:.4g} {tq['unit']} rms, mean {tq['mean']:.4g}, largest {tq['max_abs']:.4g}"
+        if tq["unactuated"] and tq["max_abs"] > 0:
+            line = (f"warning: the unactuated joint {joint} carries a logged {what} of {tq['rms']:.4g} {tq['unit']} rms (mean "
+                    f"{tq['mean']:.4g}, largest {tq['max_abs']:.4g}): the BEM assumes it unactuated (Γ_u = 0), so a map learned "
+                    "from these data mixes it in; a run with the robot's model (model:) weighs it against gravity")
+        lines.append(line)
     for cut in info.get("cut_last_lines", []):
         lines.append(f"warning: {cut['file']}: line {cut['line']}, the last (no line end), looks cut mid-write "
                      f"({cut['reason']}): not imported")

@@ -58,7 +58,7 @@ def _run(args) -> int:
     stem = Path(str(raw["robot"])).stem if "robot" in raw else Path(str(raw.get("data", "run"))).stem
     preflight(out_dir=args.out or Path("runs"), outputs=[args.out] if args.out else [], force=args.force)
     # claimed: created exclusively and locked; a failed --force puts the folder back as it was
-    with claim_outputs(args.out, default_name=stem, force=args.force, keep_on_interrupt=["data.npz", "checkpoint.pt"],
+    with claim_outputs(args.out, default_name=stem, force=args.force, keep=["data.npz", "checkpoint.pt"],
                        what="run") as claimed:
         if app is not None:
             assert app.run is not None  # checked above

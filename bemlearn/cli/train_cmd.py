@@ -52,10 +52,10 @@ def run(args) -> int:
     preflight(data=data, out_dir=args.out or Path("runs"), outputs=[] if args.resume or args.out is None else [args.out], force=args.force)
     # the run folder is claimed (created exclusively, locked); a failed --force / --resume puts it back as it was
     with claim_outputs(args.out, default_name="train", force=args.force, resume=args.resume,
-                       keep_on_interrupt=["checkpoint.pt"], what="train") as out:
+                       keep=["checkpoint.pt"], what="train") as out:
         try:
             m = train_run(cfg, data, out, device=args.device, resume=args.resume, progress=not args.no_progress, threads=args.threads)
-        except KeyboardInterrupt:  # an interrupted checkpoint is kept: the old predictors no longer match it
+        except BaseException:  # an interrupted or failed run keeps its new checkpoint: the old predictors no longer match it
             _remove_stale(out, args)
             raise
         _remove_stale(out, args)

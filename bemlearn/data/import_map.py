@@ -10,6 +10,7 @@ Example (format: ``docs/log-import.md``)::
       - {name: voltage, column: plant_input, unit: V}
     trials: per_file                      # or {column: episode}
     keep: [target_theta, feedforward]
+    windows: {"episode_00[1-3].csv": [2.5, null]}   # per file (name or glob): overrides time.window
     delimiter: whitespace                 # optional: ",", ";", "\t", whitespace; default: detected
     header: false                         # optional: the file has no header line ...
     columns: [t, theta, alpha, plant_input, target_theta, feedforward]   # ... so name its columns
@@ -21,6 +22,7 @@ scale(mm) = 10⁻³ (slides, q in m); ``offset`` is in rad (hinge) or m (slide).
 
 from __future__ import annotations
 
+import fnmatch
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,7 +31,21 @@ from typing import Literal
 from bemlearn.config import ConfigError, from_dict, load_yaml
 
 __all__ = ["DELIMITERS", "TIME_UNITS", "WHITESPACE", "ImportMap", "delimiter_name", "InputMap", "JointMap", "TimeMap", "TrialsByColumn",
-           "load_import_map"]
+           "TORQUE_UNITS", "TorqueMap", "Window", "load_import_map"]
+
+#: A time window [t₀, t₁] in the log's own time unit (``time.unit``; s from the file's first row without a
+#: time column); ``None`` for either bound: the log's start or end.
+Window = tuple[float | None, float | None]
+
+
+def _check_window(window: Window | None, key: str) -> None:
+    if window is None:
+        return
+    t0, t1 = window
+    if t0 is None and t1 is None:
+        raise ConfigError(f"{key}: expected [t0, t1] with at least one bound (null: the log's start or end), got [null, null]")
+    if t0 is not None and t1 is not None and not t0 < t1:
+        raise ConfigError(f"{key}: expected [t0, t1] with t0 < t1 (in the log's time unit), got [{t0:g}, {t1:g}]")
 
 #: Seconds per unit of the time column.
 TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
@@ -62,6 +78,11 @@ class TimeMap:
             :func:`~bemlearn.data.resample.place_on_grid`) or ``"linear"``: every channel is
             linearly interpolated onto t₀ + k/f_s within each trial, for a logger whose loop
             overruns or whose clock drifts (:func:`~bemlearn.data.resample.resample_linear`).
+        window: ``[t0, t1]``: only the samples with t0 ≤ t ≤ t1 are imported (e.g. to leave out a
+            swing-up), t in the time column's own unit as logged (without a time column: s from
+            the file's first row); ``null`` for either bound is the log's start or end.  Applied
+            to every file (``ImportMap.windows`` overrides it per file), before the samples are
+            placed on the grid or resampled.
     """
 
     column: str | None = None
@@ -71,8 +92,10 @@ class TimeMap:
     max_fill: int = 2
     on_gap: Literal["split", "error"] = "split"
     resample: Literal["none", "linear"] = "none"
+    window: Window | None = None
 
     def __post_init__(self) -> None:
+        _check_window(self.window, "window")
         if self.column is None and self.rate_hz is None:
             raise ConfigError("give a time column (time.column) or the sample rate (time.rate_hz)")
         if self.column is None and self.resample != "none":
@@ -138,6 +161,51 @@ class InputMap:
     unit: str = "V"
 
 
+#: Units of a logged torque (hinge, stored in N·m) or force (slide, stored in N) → (joint kind, scale to SI).
+TORQUE_UNITS: dict[str, tuple[str, float]] = {"N*m": ("hinge", 1.0), "Nm": ("hinge", 1.0), "N.m": ("hinge", 1.0),
+                                              "N·m": ("hinge", 1.0), "mN*m": ("hinge", 1e-3), "mNm": ("hinge", 1e-3),
+                                              "mN.m": ("hinge", 1e-3), "mN·m": ("hinge", 1e-3),
+                                              "N": ("slide", 1.0), "mN": ("slide", 1e-3)}
+
+
+@dataclass(frozen=True)
+class TorqueMap:
+    """A logged torque (hinge) or force (slide) on one joint: τ = sign · scale · scale(unit) · raw.
+
+    The generalized force acting on the joint besides gravity and the coupling: for an actuated
+    joint the motor's (measured or commanded) torque, for the unactuated joint whatever acts on
+    it (a friction compensation, an applied perturbation) -- which the BEM assumes is zero.
+
+    Attributes:
+        joint: the joint's name (one of ``joints[].name``).
+        column: the logger's column.
+        unit: ``N*m`` (also ``Nm``, ``N.m``, ``N·m``), ``mN*m`` (…) for a hinge; ``N``, ``mN`` for a
+            slide.  Stored in N·m or N.
+        scale: a factor applied first (e.g. a torque constant, N·m/A, for a logged current); the
+            unit is then the product's.
+        sign: +1 or −1 (the joint's positive direction, as ``joints[].sign``).
+    """
+
+    joint: str
+    column: str
+    unit: str = "N*m"
+    scale: float = 1.0
+    sign: int = 1
+
+    def __post_init__(self) -> None:
+        if self.unit not in TORQUE_UNITS:
+            raise ConfigError(f"unit: expected one of {list(TORQUE_UNITS)}, got {self.unit!r}")
+        if not (math.isfinite(self.scale) and self.scale != 0):
+            raise ConfigError(f"scale: expected a finite non-zero number, got {self.scale!r}")
+        if self.sign not in (1, -1):
+            raise ConfigError(f"sign: expected 1 or -1, got {self.sign!r}")
+
+    @property
+    def factor(self) -> float:
+        """SI value per raw value: sign · scale · scale(unit)."""
+        return self.sign * self.scale * TORQUE_UNITS[self.unit][1]
+
+
 @dataclass(frozen=True)
 class TrialsByColumn:
     """Trials given by an integer column (a new trial wherever its value changes)."""
@@ -166,6 +234,10 @@ class ImportMap:
             ``header: false``; with ``header: true`` they replace the header's names (the
             header line is skipped, its field count must match).  Each file's lines must have
             exactly this many fields.
+        windows: per-file time windows, file name (or glob, matched against the file's name and
+            against the path as given) → ``[t0, t1]`` as ``time.window``, which they override.  A
+            file matched by two keys, and a key that matches no file, are errors.
+        torques: logged joint torques / forces (optional; :class:`TorqueMap`).
     """
 
     time: TimeMap
@@ -178,8 +250,25 @@ class ImportMap:
     comment: str = "#"
     header: bool = True
     columns: tuple[str, ...] | None = None
+    windows: dict[str, Window] | None = None
+    torques: tuple[TorqueMap, ...] = ()
 
     def __post_init__(self) -> None:
+        for pattern, window in (self.windows or {}).items():
+            if not pattern.strip():
+                raise ConfigError("windows: expected file names or globs as keys, got an empty one")
+            _check_window(window, f"windows[{pattern!r}]")
+        joint_names = [j.name for j in self.joints]
+        for i, tq in enumerate(self.torques):
+            if tq.joint not in joint_names:
+                raise ConfigError(f"torques[{i}].joint: {tq.joint!r} is not one of the joints {joint_names}")
+            kind = next(j for j in self.joints if j.name == tq.joint).kind_and_scale()[0]
+            if TORQUE_UNITS[tq.unit][0] != kind:
+                want = [u for u, (k, _) in TORQUE_UNITS.items() if k == kind]
+                raise ConfigError(f"torques[{i}].unit: {tq.joint!r} is a {kind}: expected one of {want}, got {tq.unit!r}")
+        tq_joints = [tq.joint for tq in self.torques]
+        if len(set(tq_joints)) != len(tq_joints):
+            raise ConfigError(f"torques: a joint named twice in {tq_joints}")
         if len(self.joints) < 2:
             raise ConfigError(f"joints: expected at least 2 joints, got {len(self.joints)}")
         names = [j.name for j in self.joints]
@@ -236,7 +325,33 @@ class ImportMap:
             cols.setdefault(self.trial_column, "trials.column")
         for i, c in enumerate(self.keep):
             cols.setdefault(c, f"keep[{i}]")
+        for i, tq in enumerate(self.torques):
+            cols.setdefault(tq.column, f"torques[{i}].column")
         return cols
+
+    def window_for(self, path: str | Path, files: list[str | Path] | None = None) -> tuple[str, Window] | None:
+        """``(map key, window)`` of the file ``path``: the ``windows`` entry whose name or glob matches it
+        (its name, or the path as given), else ``time.window``, else ``None``.
+
+        Raises:
+            ConfigError: two ``windows`` keys match the file.
+        """
+        hits = [k for k in (self.windows or {}) if _matches(k, path)]
+        if len(hits) > 1:
+            raise ConfigError(f"{path}: matched by windows{hits}: give one window per file")
+        if hits:
+            assert self.windows is not None
+            return f"windows[{hits[0]!r}]", self.windows[hits[0]]
+        return ("time.window", self.time.window) if self.time.window is not None else None
+
+    def unmatched_windows(self, paths: list[str | Path]) -> list[str]:
+        """The ``windows`` keys that match none of ``paths`` (a misspelt name)."""
+        return [k for k in (self.windows or {}) if not any(_matches(k, p) for p in paths)]
+
+
+def _matches(pattern: str, path: str | Path) -> bool:
+    """Whether the file name or glob ``pattern`` names ``path`` (its name, or the path as given)."""
+    return fnmatch.fnmatchcase(Path(path).name, pattern) or fnmatch.fnmatchcase(str(path), pattern)
 
 
 def delimiter_name(delimiter: str) -> str:

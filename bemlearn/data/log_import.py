@@ -16,6 +16,7 @@ column and the row (0-based data row and 1-based file line).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -26,13 +27,13 @@ import numpy as np
 
 from bemlearn._version import __version__
 from bemlearn.config import to_dict
-from bemlearn.data.import_map import TIME_UNITS, ImportMap, delimiter_name
+from bemlearn.data.import_map import TIME_UNITS, TORQUE_UNITS, ImportMap, delimiter_name
 from bemlearn.data.log_table import LogTable, check_finite, read_log_table
 from bemlearn.data.quantization import counts_per_revolution, detect_quantization_step, snap_to_grid
 from bemlearn.data.resample import GridSegment, ResampleReport, place_on_grid, resample_linear
 from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, TrajectoryMeta
 from bemlearn.data.validation import MIN_TRIAL_SAMPLES
-from bemlearn.errors import ArgumentError
+from bemlearn.errors import ArgumentError, ConfigError
 from bemlearn.units import q_unit_label
 
 __all__ = ["import_logs"]
@@ -41,7 +42,20 @@ logger = logging.getLogger(__name__)
 
 
 def _trial_blocks(table: LogTable, imap: ImportMap) -> list[tuple[int, int, int | None]]:
-    """(first row, stop row, episode value or None) of each trial in one file."""
+    """(first row, stop row, episode value or None) of each trial in one file, inside the file's time window
+    (``table.window``: from its first to its last row inside the window; a trial outside it is left out)."""
+    blocks = _episode_blocks(table, imap)
+    if table.window is None:
+        return blocks
+    out = []
+    for a, b, episode in blocks:
+        inside = np.flatnonzero(table.window[a:b])
+        if len(inside):
+            out.append((a + int(inside[0]), a + int(inside[-1]) + 1, episode))
+    return out
+
+
+def _episode_blocks(table: LogTable, imap: ImportMap) -> list[tuple[int, int, int | None]]:
     col = imap.trial_column
     if col is None:
         return [(0, table.n_rows, None)]
@@ -142,15 +156,22 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
     if not paths:
         raise ArgumentError("import_logs: no input files")
     tables = [read_log_table(p, imap) for p in paths]
-    value_cols = [j.column for j in imap.joints] + [u.column for u in imap.inputs] + list(imap.keep)
+    value_cols = ([j.column for j in imap.joints] + [u.column for u in imap.inputs] + list(imap.keep)
+                  + [tq.column for tq in imap.torques])
     for table in tables:
         check_finite(table, value_cols + ([imap.time.column] if imap.time.column else []))
+    unmatched = imap.unmatched_windows(list(paths))
+    if unmatched:
+        raise ConfigError(f"windows[{unmatched[0]!r}]: matches none of the files "
+                          f"{[Path(p).name for p in paths][:8]} (a file name or glob, e.g. 'episode_00*.csv')")
+    windows: list[dict] = []
+    tables = [_apply_window(t, imap, min_trial_samples, windows) for t in tables]
     rate = _sample_rate(tables, imap)
     resampling = imap.time.resample == "linear"
     logged_steps = _logged_steps(tables, imap)
     scales = [j.sign * j.kind_and_scale()[1] for j in imap.joints]
-    offsets = [j.offset for j in imap.joints] + [0.0] * (len(imap.inputs) + len(imap.keep))
-    mult = np.asarray(scales + [1.0] * (len(imap.inputs) + len(imap.keep)))
+    offsets = [j.offset for j in imap.joints] + [0.0] * (len(imap.inputs) + len(imap.keep) + len(imap.torques))
+    mult = np.asarray(scales + [1.0] * (len(imap.inputs) + len(imap.keep)) + [tq.factor for tq in imap.torques])
     pieces = _Pieces()
     reports: list[ResampleReport] = []
     for table in tables:
@@ -172,7 +193,7 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
                     "grid samples more than ½ step from any stamp" if resampling else "dropped samples interpolated",
                     splits, dropped)
     v = np.concatenate(pieces.v)
-    n, m = len(imap.joints), len(imap.inputs)
+    n, m, k = len(imap.joints), len(imap.inputs), len(imap.keep)
     snapped = (_snap_filled_joints(v, np.concatenate(pieces.filled), logged_steps)
                if filled_total and not resampling else {})
     resample_info = _resample_summary(reports, rate, len(v), tables, imap, logged_steps) if resampling else None
@@ -186,12 +207,14 @@ def import_logs(paths: Sequence[str | Path], imap: ImportMap, *, min_trial_sampl
         "quantization_step": {j.name: step for j, step in zip(imap.joints, logged_steps)},
         "resample": resample_info,
         "cut_last_lines": [{"file": str(t.path), **t.cut_line} for t in tables if t.cut_line is not None],
+        "windows": windows,
+        "torques": _torque_summary(v[:, n + m + k:], imap),
         "trials": trials_info,
     }
     meta = _import_meta(imap, rate, failed, provenance)
     return Trajectory(
         t=np.concatenate(pieces.t), trial=np.concatenate(pieces.trial), q=v[:, :n], u=v[:, n:n + m],
-        meta=meta, channels=v[:, n + m:],
+        meta=meta, channels=v[:, n + m:n + m + k], tau=v[:, n + m + k:],
     )
 
 
@@ -267,6 +290,7 @@ def _import_meta(imap: ImportMap, rate: float, failed: dict[int, bool], provenan
         units={"t": "s", "q": q_unit_label(kinds), "u": u_units[0] if len(set(u_units)) == 1 else "|".join(u_units)},
         joint_kinds=kinds,
         channel_names=tuple(imap.keep),
+        torque_joints=tuple(tq.joint for tq in imap.torques),
         extra={"import": provenance},
     )
 
@@ -301,3 +325,58 @@ def _resample_summary(reports: list[ResampleReport], rate: float, samples: int, 
         logger.warning("time.resample: linear: the interpolated angles of %s leave their encoder grid; the step detected "
                        "before resampling is kept in meta.extra['import']['quantization_step']", ", ".join(quantized))
     return info
+
+
+def _apply_window(table: LogTable, imap: ImportMap, min_samples: int, record: list[dict]) -> LogTable:
+    """``table`` with its rows inside the file's time window marked (``LogTable.window``); the window and the
+    rows it keeps are appended to ``record``.  Times as logged, in ``time.unit`` (no time column: s from the
+    file's first row, at ``time.rate_hz``).
+
+    Raises:
+        TrajectoryFormatError: a bound outside the log's time, or a window holding fewer than
+            ``min_samples`` rows; naming the file and the map key.
+    """
+    found = imap.window_for(table.path)
+    if found is None:
+        return table
+    key, (t0, t1) = found
+    if imap.time.column is not None:
+        t, unit = table.columns[imap.time.column], imap.time.unit
+    else:
+        assert imap.time.rate_hz is not None  # the map gives a time column or the rate
+        t, unit = np.arange(table.n_rows) / imap.time.rate_hz, "s"
+    shown = f"[{'null' if t0 is None else f'{t0:g}'}, {'null' if t1 is None else f'{t1:g}'}] {unit}"
+    lo, hi = float(np.min(t)), float(np.max(t))
+    for bound, name in ((t0, "t0"), (t1, "t1")):
+        if bound is not None and not lo <= bound <= hi:
+            raise TrajectoryFormatError(f"{table.path}: {key} = {shown}: {name} = {bound:g} lies outside the log, whose time "
+                                        f"runs {lo:g}–{hi:g} {unit} (null stands for the log's start or end)")
+    inside = np.ones(table.n_rows, dtype=bool)
+    if t0 is not None:
+        inside &= t >= t0
+    if t1 is not None:
+        inside &= t <= t1
+    kept = int(inside.sum())
+    if kept < min_samples:
+        raise TrajectoryFormatError(f"{table.path}: {key} = {shown} holds {kept} samples, fewer than the {min_samples} a "
+                                    "trial needs")
+    record.append({"file": str(table.path), "key": key, "window": [t0, t1], "unit": unit, "rows": table.n_rows, "kept": kept})
+    logger.info("%s: %s = %s keeps %d of %d rows", table.path, key, shown, kept, table.n_rows)
+    return dataclasses.replace(table, window=inside)
+
+
+def _torque_summary(tau: np.ndarray, imap: ImportMap) -> dict[str, dict]:
+    """Per logged torque (``tau (T, p)``, N·m or N, the imported samples): its unit, rms, mean and largest
+    magnitude, and whether it acts on the unactuated joint (which the BEM assumes carries none, Γ_u = 0)."""
+    out = {}
+    for c, tq in enumerate(imap.torques):
+        x = tau[:, c]
+        unit = "N" if TORQUE_UNITS[tq.unit][0] == "slide" else "N·m"
+        on_qu = tq.joint == imap.unactuated
+        rms, mean, largest = float(np.sqrt(np.mean(x**2))), float(np.mean(x)), float(np.max(np.abs(x)))
+        out[tq.joint] = {"unit": unit, "rms": rms, "mean": mean, "max_abs": largest, "unactuated": on_qu}
+        if on_qu and largest > 0:
+            logger.warning("the unactuated joint %s carries a logged %s of %.4g %s rms (mean %.4g, largest %.4g): the BEM "
+                           "assumes it unactuated (Γ_u = 0, eq. 2), so the learned map mixes this torque in",
+                           tq.joint, "force" if unit == "N" else "torque", rms, unit, mean, largest)
+    return out

@@ -61,6 +61,8 @@ class LogTable:
             ``"\\t"``, … or ``"whitespace"``.
         cut_line: ``None``, or the last line that was left out because it was cut mid-write:
             ``{"line": 1-based line, "reason": text, "text": its first 80 characters}``.
+        window: ``None`` (every row is imported), or (R,) bool: the rows inside the map's time
+            window (``time.window``, ``windows``), set by the import.
     """
 
     path: Path
@@ -69,6 +71,7 @@ class LogTable:
     comment: str = "#"
     delimiter: str = ","
     cut_line: dict | None = None
+    window: np.ndarray | None = None
 
     @property
     def n_rows(self) -> int:

@@ -6,7 +6,9 @@ m = n − 1 actuated joints q_a (eq. 1, 2):
     t (T,) s,  trial (T,) int64,  q (T, n) rad (robot joint order),  u (T, n − 1) inputs,
 
 optionally with the simulator's true q̇ (T, n) rad/s and q̈ (T, n) rad/s² (a ground-truth
-file) and extra logged channels (T, k) carried along (``meta.channel_names``).  Units
+file), extra logged channels (T, k) carried along (``meta.channel_names``) and logged joint
+torques τ (T, p) N·m (N for slides) on the joints ``meta.torque_joints`` (a torque on q_u is
+one the BEM assumes absent, eq. 2: Γ_u = 0).  Units
 follow the joint (``meta.joint_kinds``): a hinge in rad, a slide in m
 (:mod:`bemlearn.units`).  Samples of one trial are contiguous and time increases within a trial at the
 nominal sample rate.  The on-disk format (NPZ and CSV) is described in
@@ -55,6 +57,8 @@ class TrajectoryMeta:
         qu_upright: the reading of q_u at the upright (the pose balanced), in its unit (default 0:
             the convention of imported logs; a simulated robot whose upright reads π by its geometry or
             its joint ``ref`` records π). Windows on q_u are taken relative to it.
+        torque_joints: the joints with a logged torque (N·m) or force (N) (columns of
+            ``Trajectory.tau``, a subset of ``joint_names``).
     """
 
     robot: str
@@ -68,6 +72,7 @@ class TrajectoryMeta:
     joint_kinds: tuple[str, ...] = ()
     channel_names: tuple[str, ...] = ()
     qu_upright: float = 0.0
+    torque_joints: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "joint_names", tuple(self.joint_names))
@@ -78,6 +83,7 @@ class TrajectoryMeta:
         kinds = tuple(self.joint_kinds) or ("hinge",) * len(self.joint_names)
         object.__setattr__(self, "joint_kinds", kinds)
         object.__setattr__(self, "channel_names", tuple(self.channel_names))
+        object.__setattr__(self, "torque_joints", tuple(self.torque_joints))
         n = len(self.joint_names)
         if n < 2:
             raise TrajectoryFormatError(f"meta.joint_names: expected at least 2 joints, got {list(self.joint_names)}")
@@ -108,6 +114,10 @@ class TrajectoryMeta:
                 )
         if len(set(self.channel_names)) != len(self.channel_names):
             raise TrajectoryFormatError(f"meta.channel_names: duplicate names in {list(self.channel_names)}")
+        stray = [j for j in self.torque_joints if j not in self.joint_names]
+        if stray or len(set(self.torque_joints)) != len(self.torque_joints):
+            raise TrajectoryFormatError(f"meta.torque_joints: expected distinct joints of {list(self.joint_names)}, "
+                                        f"got {list(self.torque_joints)}")
         rate = self.sample_rate_hz
         if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not math.isfinite(rate) or rate <= 0:
             raise TrajectoryFormatError(f"meta.sample_rate_hz: expected a positive number, got {rate!r}")
@@ -154,7 +164,8 @@ class TrajectoryMeta:
         """The JSON form stored in files (trial ids become string keys).
 
         ``joint_kinds`` is written only when some joint is a slide, ``channel_names`` only
-        when there are channels, so files without either keep their v1 form.
+        when there are channels, ``torque_joints`` only when torques were logged, so files
+        without them keep their v1 form.
         """
         optional: dict[str, Any] = {}
         if any(k != "hinge" for k in self.joint_kinds):
@@ -163,6 +174,8 @@ class TrajectoryMeta:
             optional["channel_names"] = list(self.channel_names)
         if self.qu_upright != 0.0:
             optional["qu_upright"] = self.qu_upright
+        if self.torque_joints:
+            optional["torque_joints"] = list(self.torque_joints)
         return {
             "robot": self.robot,
             "joint_names": list(self.joint_names),
@@ -189,7 +202,7 @@ class TrajectoryMeta:
         if not isinstance(data, Mapping):
             raise TrajectoryFormatError(f"{source}: metadata must be a JSON object, got {type(data).__name__}")
         required = ("robot", "joint_names", "unactuated", "actuator_names", "sample_rate_hz", "trial_failed")
-        optional = ("units", "extra", "joint_kinds", "channel_names", "qu_upright")
+        optional = ("units", "extra", "joint_kinds", "channel_names", "qu_upright", "torque_joints")
         missing = [k for k in required if k not in data]
         unknown = sorted(set(data) - set(required) - set(optional))
         if missing:
@@ -201,6 +214,7 @@ class TrajectoryMeta:
         expect = {
             "robot": str, "joint_names": list, "unactuated": str, "actuator_names": list,
             "trial_failed": dict, "units": dict, "extra": dict, "joint_kinds": list, "channel_names": list,
+            "torque_joints": list,
         }
         for key, typ in expect.items():
             if key in data and not isinstance(data[key], typ):
@@ -210,7 +224,7 @@ class TrajectoryMeta:
         bad_units = {k: v for k, v in data.get("units", {}).items() if not isinstance(v, str)}
         if bad_units:
             raise TrajectoryFormatError(f"{source}: metadata key 'units' must map names to unit strings, got {bad_units!r}")
-        for key in ("joint_names", "actuator_names", "joint_kinds", "channel_names"):
+        for key in ("joint_names", "actuator_names", "joint_kinds", "channel_names", "torque_joints"):
             if key in data and not all(isinstance(s, str) for s in data[key]):
                 raise TrajectoryFormatError(f"{source}: metadata key {key!r} must list strings, got {data[key]!r}")
         failed: dict[int, bool] = {}
@@ -237,6 +251,7 @@ class TrajectoryMeta:
                 joint_kinds=tuple(data.get("joint_kinds", ())),
                 channel_names=tuple(data.get("channel_names", ())),
                 qu_upright=data.get("qu_upright", 0.0),
+                torque_joints=tuple(data.get("torque_joints", ())),
             )
         except TrajectoryFormatError as exc:
             raise TrajectoryFormatError(f"{source}: {exc}") from None
@@ -269,6 +284,8 @@ class Trajectory:
         qdd: optional (T, n) float64 true joint accelerations, rad/s² (m/s² for slides) (ground-truth files).
         channels: (T, k) float64 extra logged channels, columns ``meta.channel_names``
             (``None`` → an empty (T, 0) block when there are no channels).
+        tau: (T, p) float64 logged torques, N·m (N for slides), columns ``meta.torque_joints``
+            (``None`` → an empty (T, 0) block when none were logged).
 
     Construction checks only shapes and dtypes; :func:`bemlearn.data.validate` checks values.
     """
@@ -281,6 +298,7 @@ class Trajectory:
     qd: np.ndarray | None = None
     qdd: np.ndarray | None = None
     channels: np.ndarray | None = None
+    tau: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         trial = np.asarray(self.trial)
@@ -293,7 +311,10 @@ class Trajectory:
         no_channels = not self.meta.channel_names and (self.channels is None or np.shape(self.channels)[-1:] == (0,))
         if self.channels is None or no_channels:  # an empty block follows T (dataclasses.replace with new rows)
             object.__setattr__(self, "channels", np.zeros((len(trial), len(self.meta.channel_names))))
-        shapes = {"t": None, "q": n, "u": n - 1, "qd": n, "qdd": n, "channels": len(self.meta.channel_names)}
+        if not self.meta.torque_joints and (self.tau is None or np.shape(self.tau)[-1:] == (0,)):
+            object.__setattr__(self, "tau", np.zeros((len(trial), 0)))
+        shapes = {"t": None, "q": n, "u": n - 1, "qd": n, "qdd": n, "channels": len(self.meta.channel_names),
+                  "tau": len(self.meta.torque_joints)}
         for name, width in shapes.items():
             arr = getattr(self, name)
             if arr is None:
@@ -306,10 +327,10 @@ class Trajectory:
             arr = arr.astype(np.float64, copy=False)
             expected = (len(trial),) if width is None else (len(trial), width)
             if arr.shape != expected:
-                k = len(self.meta.channel_names)
+                k, p = len(self.meta.channel_names), len(self.meta.torque_joints)
                 raise TrajectoryFormatError(
                     f"Trajectory.{name}: expected shape {expected} (T = len(trial), n = {n} joints, "
-                    f"k = {k} channels), got {arr.shape}"
+                    f"k = {k} channels, p = {p} torques), got {arr.shape}"
                 )
             object.__setattr__(self, name, arr)
         if (self.qd is None) != (self.qdd is None):
@@ -339,6 +360,12 @@ class Trajectory:
         if window is None:
             return None
         return np.abs(self.q[:, self.meta.unactuated_index] - self.meta.qu_upright) <= window
+    def torque(self, joint: str) -> np.ndarray:
+        """(T,) float64 logged torque (N·m) or force (N) on ``joint`` (``meta.torque_joints``)."""
+        if joint not in self.meta.torque_joints:
+            raise ArgumentError(f"no logged torque on {joint!r}; the trajectory has torques on {list(self.meta.torque_joints)}")
+        assert self.tau is not None  # __post_init__ fills it
+        return self.tau[:, self.meta.torque_joints.index(joint)]
 
     def trial_slices(self) -> list[TrialSlice]:
         """Contiguous row blocks, one per trial, in file order (a trial split in two blocks gives two entries)."""
@@ -362,7 +389,7 @@ class Trajectory:
 
     def select_rows(self, rows: np.ndarray) -> Trajectory:
         """A new trajectory with rows ``rows`` (bool mask or index array); ``trial_failed`` keeps present trials."""
-        keys = ("t", "trial", "q", "u", "qd", "qdd", "channels")
+        keys = ("t", "trial", "q", "u", "qd", "qdd", "channels", "tau")
         pick: dict[str, Any] = {k: (None if getattr(self, k) is None else getattr(self, k)[rows]) for k in keys}
         present = set(np.unique(pick["trial"]).tolist())
         failed = {k: v for k, v in self.meta.trial_failed.items() if k in present}
@@ -427,4 +454,5 @@ class Trajectory:
             "ground_truth": self.has_ground_truth,
             "joint_kinds": dict(zip(self.meta.joint_names, self.meta.joint_kinds)),
             "channels": list(self.meta.channel_names),
+            "torques": list(self.meta.torque_joints),
         }

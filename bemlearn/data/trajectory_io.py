@@ -2,8 +2,8 @@
 
 The suffix chooses the format: ``.npz`` (arrays ``meta``, ``t``, ``trial``, ``q``, ``u``
 and, in ground-truth files, ``qd``, ``qdd``; ``channels`` when the file carries extra
-logged channels) or ``.csv`` (two ``#`` metadata lines, a header
-``t,trial,q:<joint>...,u:<actuator>...[,qd:<joint>...,qdd:<joint>...][,x:<channel>...]``, one row
+logged channels; ``tau`` when it carries logged torques) or ``.csv`` (two ``#`` metadata lines, a header
+``t,trial,q:<joint>...,u:<actuator>...[,qd:<joint>...,qdd:<joint>...][,tau:<joint>...][,x:<channel>...]``, one row
 per sample, floats written with ``%.17g`` so CSV ↔ NPZ is lossless).  Every read is
 validated (:func:`bemlearn.data.validation.validate`); nothing is dropped or repaired.
 """
@@ -35,7 +35,7 @@ _CSV_META_PREFIX = "# meta: "
 #: Supported file suffixes.
 SUFFIXES = (".npz", ".csv")
 _NPZ_REQUIRED = ("meta", "t", "trial", "q", "u")
-_NPZ_OPTIONAL = ("qd", "qdd", "channels")
+_NPZ_OPTIONAL = ("qd", "qdd", "channels", "tau")
 
 
 def _suffix(path: Path) -> str:
@@ -156,6 +156,9 @@ def _write_npz(traj: Trajectory, path: Path) -> None:
     if traj.meta.channel_names:
         assert traj.channels is not None  # Trajectory.__post_init__ fills it
         arrays["channels"] = traj.channels
+    if traj.meta.torque_joints:
+        assert traj.tau is not None  # Trajectory.__post_init__ fills it
+        arrays["tau"] = traj.tau
     with open(path, "wb") as fh:
         np.savez_compressed(fh, **arrays)  # type: ignore[arg-type]  # mypy also matches the ** dict against the bool allow_pickle
 
@@ -188,14 +191,19 @@ def _read_npz(path: Path) -> Trajectory:
             f"{path}: meta.channel_names lists {list(meta.channel_names)} but the array 'channels' is "
             f"{'present' if 'channels' in arrays else 'missing'}"
         )
+    if ("tau" in arrays) != bool(meta.torque_joints):
+        raise TrajectoryFormatError(
+            f"{path}: meta.torque_joints lists {list(meta.torque_joints)} but the array 'tau' is "
+            f"{'present' if 'tau' in arrays else 'missing'}"
+        )
     names = {
         "q": meta.joint_names, "qd": meta.joint_names, "qdd": meta.joint_names, "u": meta.actuator_names,
-        "channels": meta.channel_names,
+        "channels": meta.channel_names, "tau": meta.torque_joints,
     }
     if arrays["t"].ndim != 1:
         raise TrajectoryFormatError(f"{path}: array 't' must be 1-D (T,), got shape {arrays['t'].shape}")
     T = arrays["t"].shape[0]
-    for key in ("t", "trial", "q", "u", "qd", "qdd", "channels"):
+    for key in ("t", "trial", "q", "u", "qd", "qdd", "channels", "tau"):
         if key not in arrays:
             continue
         arr = arrays[key]
@@ -217,7 +225,7 @@ def _read_npz(path: Path) -> Trajectory:
             )
     return Trajectory(
         t=arrays["t"], trial=arrays["trial"], q=arrays["q"], u=arrays["u"], meta=meta,
-        qd=arrays.get("qd"), qdd=arrays.get("qdd"), channels=arrays.get("channels"),
+        qd=arrays.get("qd"), qdd=arrays.get("qdd"), channels=arrays.get("channels"), tau=arrays.get("tau"),
     )
 
 
@@ -238,8 +246,8 @@ def _write_csv(traj: Trajectory, path: Path) -> None:
     if traj.has_ground_truth:
         assert traj.qd is not None and traj.qdd is not None
         blocks += [traj.qd, traj.qdd]
-    assert traj.channels is not None  # Trajectory.__post_init__ fills it
-    blocks.append(traj.channels)
+    assert traj.channels is not None and traj.tau is not None  # Trajectory.__post_init__ fills them
+    blocks += [traj.tau, traj.channels]
     table = np.concatenate(blocks, axis=1) if traj.n_samples else np.zeros((0, len(cols)))
     if traj.n_samples and np.abs(traj.trial).max() >= 2**53:
         raise TrajectoryFormatError(f"{path}: trial ids must be below 2**53 in magnitude to be written as CSV")
@@ -292,7 +300,8 @@ def _read_csv(path: Path) -> tuple[Trajectory, int]:
             f"got {body[i].split(',')[1]!r}"
         )
     n, m = meta.n_joints, meta.n_joints - 1
-    kw: dict[str, Any] = {"channels": table[:, table.shape[1] - len(meta.channel_names):]}
+    k, p = len(meta.channel_names), len(meta.torque_joints)
+    kw: dict[str, Any] = {"channels": table[:, table.shape[1] - k:], "tau": table[:, table.shape[1] - k - p:table.shape[1] - k]}
     if gt:
         kw.update(qd=table[:, 2 + n + m: 2 + 2 * n + m], qdd=table[:, 2 + 2 * n + m: 2 + 3 * n + m])
     traj = Trajectory(

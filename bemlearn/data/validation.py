@@ -47,11 +47,11 @@ class RobotLike(Protocol):
 
 
 def column_names(meta: TrajectoryMeta, *, ground_truth: bool = False) -> list[str]:
-    """Column labels in file order: ``t, trial, q:<joint>..., u:<actuator>...[, qd:..., qdd:...][, x:<channel>...]``."""
+    """Column labels in file order: ``t, trial, q:<joint>..., u:<actuator>...[, qd:..., qdd:...][, tau:<joint>...][, x:<channel>...]``."""
     cols = ["t", "trial", *(f"q:{j}" for j in meta.joint_names), *(f"u:{a}" for a in meta.actuator_names)]
     if ground_truth:
         cols += [f"qd:{j}" for j in meta.joint_names] + [f"qdd:{j}" for j in meta.joint_names]
-    return cols + [f"x:{c}" for c in meta.channel_names]
+    return cols + [f"tau:{j}" for j in meta.torque_joints] + [f"x:{c}" for c in meta.channel_names]
 
 
 def _row(i: int, first_line: int | None) -> str:
@@ -162,6 +162,8 @@ def _check_finite(traj: Trajectory, source: str, first_line: int | None) -> None
             ("qdd", traj.qdd, [f"qdd:{j}" for j in meta.joint_names]),
         ]
     blocks.append(("channels", traj.channels, [f"x:{c}" for c in meta.channel_names]))
+    assert traj.tau is not None  # Trajectory.__post_init__ fills it
+    blocks.append(("tau", traj.tau, [f"tau:{j}" for j in meta.torque_joints]))
     for _, arr, names in blocks:
         finite = np.isfinite(arr)
         if not finite.all():

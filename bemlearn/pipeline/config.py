@@ -59,7 +59,8 @@ class PipelineConfig:
             class (hinge/slide joints, exactly one no actuator drives). A path always means that file.
         data: a trajectory file to train on instead of collecting. Without ``robot`` the run is model-free.
         model: model-free runs only: a registry name or MJCF path whose model-based BEM the learned one
-            is compared with (nothing is compared without it).
+            is compared with (nothing is compared without it). It derives the ``evaluate`` references
+            (as for ``robot:``) and weighs a torque logged on the unactuated joint against its gravity.
     """
 
     robot: str | None = None

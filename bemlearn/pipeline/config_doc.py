@@ -42,6 +42,9 @@ plain **default**. An explicit key always wins. Each run saves the resolved conf
 
 A model-free config names a trajectory file instead of a robot (`data: FILE`, see
 docs/log-import.md); `model:` then optionally names an MJCF to compare the learned BEM with.
+With `model:` the `evaluate` keys marked *derived* are derived from that model (the held-out
+references along which the learned BEM is compared with the model's; nothing else is derived:
+the data were recorded elsewhere, so there is no collection or closed loop).
 
 Units follow the joint: rad, rad/s, rad/s² for hinges; m, m/s, m/s² for slides.
 

@@ -25,7 +25,7 @@ from bemlearn.pipeline.derive import Derived, RateChoice, control_rate
 if TYPE_CHECKING:
     from bemlearn.pipeline.config import PipelineConfig
 
-__all__ = ["DERIVED_KEYS", "derive_pipeline_values"]
+__all__ = ["DERIVED_KEYS", "MODEL_DERIVED_KEYS", "derive_model_values", "derive_pipeline_values"]
 
 _COLLECT = ("rate_hz", "physics_timestep", "gains", "gain_scale", "fall_window", "input_units", "sensor", "n_sines",
             "amplitude", "frequency_hz", "initial_qa", "initial_qu")
@@ -47,6 +47,8 @@ DERIVED_KEYS.update(f"simulate.gains.{k}" for k in _EIC_GAINS)
 DERIVED_KEYS.update(f"simulate.reference.{k}" for k in _REFERENCE)
 DERIVED_KEYS.update(f"simulate.sensor.{k}" for k in _MODEL_SENSOR)
 DERIVED_KEYS.update(f"evaluate.{k}" for k in _EVALUATE)
+#: The keys a model-free run's ``model:`` derives (the held-out references its learned BEM is compared along).
+MODEL_DERIVED_KEYS: set[str] = {f"evaluate.{k}" for k in _EVALUATE}
 
 def _leaves(prefix: str, value: Any, note: str, out: dict) -> None:
     value = to_dict(value)
@@ -154,6 +156,30 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
         sen_sim = derive.sensor(robot, rs)
         _leaves("simulate.sensor", {**sen_sim.value, "velocity_cutoff": 2 * sen_sim.value["velocity_cutoff"]},
                 sen_sim.note + "; × 2 in the closed loop", out)
+    return out
+
+
+def derive_model_values(model, config: PipelineConfig, given: set[str] | frozenset[str] = frozenset()) -> dict[str, tuple[Any, str]]:
+    """``{dotted key: (value, how it was derived)}`` of :data:`MODEL_DERIVED_KEYS` for a model-free run whose
+    ``model:`` names ``model``: the held-out references along which the learned BEM is compared with the
+    model's (``evaluate.*``), derived as for a run with ``robot:`` at the model's own control rate
+    (no collection, no LQR, no closed loop: the data were recorded elsewhere).
+
+    Args:
+        model: the config's ``model:`` (a :class:`~bemlearn.robots.MujocoRobot`; other robots derive nothing).
+        config: the config as given.
+        given: the dotted keys the config gives; the group is derived only when one of its keys is missing.
+    """
+    from bemlearn.robots import MujocoRobot
+
+    if not isinstance(model, MujocoRobot) or not any(not _given(given, f"evaluate.{k}") for k in _EVALUATE):
+        return {}
+    rate = control_rate(model)
+    sig = derive.excitation_signals(model, rate.value)
+    ev = derive.evaluation(model, sig.value)
+    out: dict[str, tuple[Any, str]] = {}
+    _leaves("evaluate", {k: v for k, v in to_dict(ev.value).items() if k in _EVALUATE},
+            f"from model: {ev.note}", out)
     return out
 
 

@@ -104,6 +104,19 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
                 notes[key] = note
         parsed = from_dict(PipelineConfig, raw, where=source)
         _check_for_robot(parsed, robot, source)
+    elif derive and parsed.model is not None:   # model-free run compared with a model: its references from the model
+        from bemlearn.pipeline.derived_defaults import derive_model_values
+        from bemlearn.robots import load
+
+        try:
+            model = load(parsed.model)
+        except (BemlearnError, OSError) as exc:
+            raise ConfigError(f"{source}: model: {exc}") from exc
+        for key, (value, note) in derive_model_values(model, parsed, given).items():
+            if not _has(raw, key):
+                set_dotted(raw, key, value)
+                notes[key] = note
+        parsed = from_dict(PipelineConfig, raw, where=source)
     if "dataset.derivative_options" not in notes:
         est = parsed.dataset.estimator()
         if not getattr(est, "resolved", True):   # e.g. the Gaussian's σ: chosen from the data at train time

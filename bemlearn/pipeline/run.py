@@ -51,6 +51,7 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
     cfg = resolved.config
     out = Path(out_dir) if out_dir else new_run_dir(Path(cfg.robot or cfg.data or "run").stem)
     out.mkdir(parents=True, exist_ok=True)
+    started_ns = time.time_ns()
     save_yaml(cfg, out / "config.yaml")
     atomic_write_text(out / "config_resolved.json", json.dumps(resolved.to_json_dict(), indent=2, ensure_ascii=False))
     t0 = time.perf_counter()
@@ -80,25 +81,59 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
                  "failed": sum(data.meta.trial_failed.values()), "samples": data.n_samples,
                  "rate_hz": data.meta.sample_rate_hz, "input_units": data.meta.units.get("u", "actuator units")}
     log.info("[2/%d] training the BEM GP", stages)
-    train = train_run(cfg, data_path, out, device=device, progress=progress)
-    log.info("[3/%d] exporting the predictor", stages)
-    files = export_run(out, fmt="both")
-    sim: dict = {}
-    if cfg.robot:
-        log.info("[4/%d] closed-loop simulation", stages)
-        sim = simulate_stage(cfg, out, predictor=out / "bem_predictor.pt", progress=progress)
-        train["closed_loop"] = {src: {k: m[k] for k in ("fell", "diverged", "tracking_rmse", "tracking_max", "qu_max", "u_max",
-                                                         "duration_s", "lemma1") if k in m}
-                                for src, m in sim.items()}
-    train["data"] = data_info
-    train["feasibility"] = feasibility
-    train["verdict"] = judge_run(train).to_dict()
-    atomic_write_text(out / "metrics.json", json.dumps(train, indent=2, default=float))
-    _record_data_choices(out, resolved, train)
-    log.info("[%d/%d] report", stages, stages)
-    report = write_report(out, config=cfg, resolved=resolved, data=data_info, train=train, export=files, sim=sim)
+    t_train = time.time_ns()
+    try:
+        train = train_run(cfg, data_path, out, device=device, progress=progress)
+    except Exception as exc:
+        _train_failed(out, exc, data_info, collected=cfg.data is None, since_ns=t_train, started_ns=started_ns)
+        raise
+    stage = "export"
+    try:   # the checkpoint exists: a failure from here on keeps the folder, and metrics.json says where it stopped
+        log.info("[3/%d] exporting the predictor", stages)
+        files = export_run(out, fmt="both")
+        sim: dict = {}
+        if cfg.robot:
+            stage = "simulate"
+            log.info("[4/%d] closed-loop simulation", stages)
+            sim = simulate_stage(cfg, out, predictor=out / "bem_predictor.pt", progress=progress)
+            train["closed_loop"] = {src: {k: m[k] for k in ("fell", "diverged", "tracking_rmse", "tracking_max", "qu_max", "u_max",
+                                                             "duration_s", "lemma1") if k in m}
+                                    for src, m in sim.items()}
+        stage = "verdict"
+        train["data"] = data_info
+        train["feasibility"] = feasibility
+        train["verdict"] = judge_run(train).to_dict()
+        atomic_write_text(out / "metrics.json", json.dumps(train, indent=2, default=float))
+        _record_data_choices(out, resolved, train)
+        stage = "report"
+        log.info("[%d/%d] report", stages, stages)
+        report = write_report(out, config=cfg, resolved=resolved, data=data_info, train=train, export=files, sim=sim)
+    except Exception as exc:
+        from bemlearn.pipeline.failure import record_failure
+
+        train.setdefault("data", data_info)
+        train.setdefault("feasibility", feasibility)
+        record_failure(out, stage, exc, train, since_ns=started_ns)
+        raise
     log.info("done in %.0f s: %s", time.perf_counter() - t0, report)
     return out
+
+
+def _train_failed(out: Path, exc: Exception, data_info: dict, *, collected: bool, since_ns: int, started_ns: int) -> None:
+    """Record a failed training stage in metrics.json when the run keeps something: the checkpoint it wrote
+    (train_run recorded where its evaluation stopped; the data's summary is added) or the data it collected."""
+    from bemlearn.pipeline.failure import read_metrics, record_failure
+
+    ck = out / "checkpoint.pt"
+    if ck.is_file() and ck.stat().st_mtime_ns >= since_ns:
+        doc = read_metrics(out)
+        if isinstance(doc.get("failed"), dict):
+            doc["data"] = data_info
+            atomic_write_text(out / "metrics.json", json.dumps(doc, indent=2, default=float))
+            return
+        record_failure(out, "train", exc, {**doc, "data": data_info}, since_ns=started_ns)
+    elif collected:
+        record_failure(out, "train", exc, {"data": data_info}, since_ns=started_ns)
 
 
 def _stop_after_preflight(out: Path, cfg: PipelineConfig, resolved: ResolvedConfig, feasibility: list, t0: float) -> Path:

@@ -19,6 +19,7 @@ import dataclasses
 import json
 import logging
 import math
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -90,6 +91,7 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    started_ns = time.time_ns()
     gp_cfg = config.train
     if device is not None:
         gp_cfg = dataclasses.replace(gp_cfg, device=_resolve_device(device))
@@ -130,13 +132,23 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         writer.close()
         atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
         raise KeyboardInterrupt
-    if len(val):
-        metrics.update(_validation_metrics(stage, train, val, gp_cfg, writer))
-    metrics["uncertainty"] = stage.calibration
-    metrics.update(_data_only_metrics(state, train, val, meta.unactuated, out, writer))
-    if truth_robot is not None:  # held-out learned BEM vs model-based BEM (eq. 14 vs 9)
-        metrics.update(_model_metrics(state, truth_robot, config.evaluate, meta.unactuated,
-                                      units[f"qd_{meta.unactuated}"].removesuffix("/s"), out, writer))
+    try:   # the checkpoint exists: a failure from here on keeps it, and metrics.json says where the run stopped
+        if len(val):
+            metrics.update(_validation_metrics(stage, train, val, gp_cfg, writer))
+        metrics["uncertainty"] = stage.calibration
+        metrics.update(_data_only_metrics(state, train, val, meta.unactuated, out, writer))
+        if truth_robot is not None:  # held-out learned BEM vs model-based BEM (eq. 14 vs 9)
+            metrics.update(_model_metrics(state, truth_robot, config.evaluate, meta.unactuated,
+                                          units[f"qd_{meta.unactuated}"].removesuffix("/s"), out, writer))
+        tq = _torque_metrics(traj, truth_robot)
+        if tq is not None:
+            metrics["unactuated_torque"] = tq
+    except Exception as exc:
+        from bemlearn.pipeline.failure import record_failure
+
+        writer.close()
+        record_failure(out, "train: evaluation", exc, metrics, since_ns=started_ns)
+        raise
     writer.close()
     from bemlearn.pipeline.verdict import judge_run
 
@@ -145,6 +157,16 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     if interrupted:
         raise KeyboardInterrupt
     return metrics
+
+
+def _torque_metrics(traj, truth_robot) -> dict | None:
+    """A torque logged on q_u, weighed against the model's gravity stiffness when there is a model
+    (:mod:`bemlearn.pipeline.logged_torque`)."""
+    from bemlearn.pipeline.derive import design_region
+    from bemlearn.pipeline.logged_torque import unactuated_torque_metrics
+
+    bound = design_region(truth_robot).value if truth_robot is not None else None
+    return unactuated_torque_metrics(traj, truth_robot, bound=bound)
 
 
 def _validation_metrics(stage: GPStageResult, train: BEMDataset, val: BEMDataset, gp_cfg: GPConfig, writer) -> dict[str, float]:

@@ -20,11 +20,17 @@ data resolve the BEM      its spread over the data < 4 × the larger    < 2 × t
                           q_u error
 held-out trials           < 80 % inside the predictive ±2σ            —
 closed loop               learned BEM's loop diverged                 learned BEM's loop fell
+failed stage              —                                           a stage after training
+                                                                      raised (``failed``)
+torque logged on q_u      its rms moves the model's equilibrium by    —
+                          more than 0.05 d (τ_rms > 0.05 k_g d);
+                          without a model: reported (a note)
 Lemma 1                   learned ΔΓ vs the model's ΔΓ = Ḣ_u + b_u q̇_u^e  —
                           correlation < 0.9
 ========================  ==========================================  ======================
 
-The status is the worst finding's; ``reasons`` lists one sentence per finding, worst first.
+The status is the worst finding's; ``reasons`` lists one sentence per finding, worst first.  A
+*note* (severity ``note``) is a finding the run reports without changing its status.
 """
 
 from __future__ import annotations
@@ -43,7 +49,7 @@ MAX_OF_BOUND = 0.2             # max ≤ 0.2 d (0.04 rad)
 EXIT_UNUSABLE = 3
 EXIT_DEGRADED_STRICT = 4
 
-_RANK = {"ok": 0, "degraded": 1, "unusable": 2}
+_RANK = {"note": -1, "ok": 0, "degraded": 1, "unusable": 2}
 
 
 @dataclass(frozen=True)
@@ -100,6 +106,7 @@ def judge_run(metrics: dict[str, Any]) -> Verdict:
         check(metrics, notes)
     found = sorted(notes.found, key=lambda f: -_RANK[f.severity])
     status = max((f.severity for f in found), key=_RANK.__getitem__, default="ok")
+    status = "ok" if _RANK[status] < 0 else status   # notes alone leave the run ok
     return Verdict(status, tuple(found), tuple(notes.checked))
 
 
@@ -236,6 +243,42 @@ def _check_closed_loop(metrics: dict[str, Any], notes: _Notes) -> None:
                       f"ΔΓ = Ḣ_u + b_u q̇_u^e at r = {r:.2f}")
 
 
+def _check_failed(metrics: dict[str, Any], notes: _Notes) -> None:
+    failed = metrics.get("failed")
+    if isinstance(failed, dict):
+        notes.checked.append("failed")
+        what = f"{failed.get('error_type', 'error')}: {failed.get('error', '')}".rstrip(": ")
+        notes.add("unusable", "failed", f"the run failed at stage '{failed.get('stage')}' ({what}): the stages after it did not "
+                  f"run and its numbers are incomplete; the run folder keeps {', '.join(failed.get('kept') or [])}")
+
+
+def _check_unactuated_torque(metrics: dict[str, Any], notes: _Notes) -> None:
+    tq = metrics.get("unactuated_torque")
+    if not (isinstance(tq, dict) and _finite(tq.get("rms"))):
+        return
+    notes.checked.append("unactuated_torque")
+    if tq["rms"] == 0:
+        return
+    unit = tq.get("unit", "N·m")
+    text = (f"the unactuated joint {tq.get('joint')} carries a logged {'force' if unit == 'N' else 'torque'} of "
+            f"{tq['rms']:.3g} {unit} rms (mean {tq.get('mean', math.nan):.3g}): the BEM assumes it unactuated (Γ_u = 0, eq. 2), "
+            "so the learned map mixes it in")
+    shift, target = tq.get("shift_rms"), tq.get("target")
+    if _finite(shift) and _finite(target):
+        q_unit = metrics.get("output_unit", "rad")
+        big = float(shift) > float(target)  # type: ignore[arg-type]  # _finite checked both
+        text += (f"; against the model's gravity stiffness {tq['stiffness']:.3g} {tq.get('stiffness_unit', '')} it moves the "
+                 f"equilibrium by {shift:.3g} {q_unit} rms, {'more' if big else 'less'} than the accuracy target "
+                 f"{target:.3g} {q_unit} (0.05 d; {100 * tq['rms'] / tq['gravity_scale']:.2g} % of the gravity torque "
+                 f"{tq['gravity_scale']:.3g} {unit} at d)")
+        if big:
+            text += ": log without it (friction compensation off) or subtract its effect before learning"
+        notes.add("degraded" if big else "note", "unactuated_torque", text)
+    else:
+        notes.add("note", "unactuated_torque", text + "; with no model it cannot be weighed against gravity (name the "
+                  "robot's MJCF under model: to have it judged)")
+
+
 #: The checks of the module docstring's table, in the order their findings are listed (before sorting by severity).
-_CHECKS = (_check_model, _check_excitation, _check_derivatives, _check_fit, _check_design_region, _check_resolution,
-           _check_heldout, _check_closed_loop)
+_CHECKS = (_check_failed, _check_model, _check_excitation, _check_derivatives, _check_fit, _check_design_region, _check_resolution,
+           _check_heldout, _check_closed_loop, _check_unactuated_torque)
