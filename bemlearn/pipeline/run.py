@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from bemlearn.config import save_yaml
+from bemlearn.errors import DataError
 from bemlearn.files import atomic_write_text, new_run_dir
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.resolve import ResolvedConfig, resolve_pipeline_config
@@ -70,7 +71,10 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
     if cfg.data is None:
         log.info("[1/%d] collecting excitation data", stages)
         assert cfg.robot is not None  # PipelineConfig needs robot or data
-        data, truth = collect(cfg.robot, cfg.collect, progress=progress)
+        try:
+            data, truth = collect(cfg.robot, cfg.collect, progress=progress)
+        except DataError as exc:   # e.g. every excitation trial fell at once: a finding about the robot, not a crash
+            return _stop_after_collect(out, cfg, resolved, feasibility, exc, t0)
         data_path = write_trajectory(data, out / "data.npz")
         write_trajectory(truth, ground_truth_path(data_path))
     else:
@@ -146,6 +150,20 @@ def _stop_after_preflight(out: Path, cfg: PipelineConfig, resolved: ResolvedConf
     atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
     write_report(out, config=cfg, resolved=resolved, data=None, train=metrics, export=[], sim={})
     log.warning("stopped after the model checks (%.1f s): %s", time.perf_counter() - t0, "; ".join(metrics["verdict"]["reasons"]))
+    return out
+
+
+def _stop_after_collect(out: Path, cfg: PipelineConfig, resolved: ResolvedConfig, feasibility: list, exc: Exception,
+                        t0: float) -> Path:
+    """Write the verdict of a run whose excitation produced no usable data (metrics.json, report.md)."""
+    from bemlearn.pipeline.failure import record_failure
+    from bemlearn.pipeline.report import write_report
+
+    metrics: dict[str, Any] = {"robot": {"name": Path(str(cfg.robot)).stem, "source": str(cfg.robot)}, "feasibility": feasibility,
+                               "stopped_after": "collect"}
+    metrics = record_failure(out, "collect", exc, metrics)
+    write_report(out, config=cfg, resolved=resolved, data=None, train=metrics, export=[], sim={})
+    log.warning("stopped after collecting (%.1f s): %s", time.perf_counter() - t0, "; ".join(metrics["verdict"]["reasons"]))
     return out
 
 
