@@ -5,8 +5,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import pytest
-
 import bemlearn.sim.collect as collect_module
 from bemlearn.errors import DataError
 from bemlearn.pipeline.resolve import resolve_pipeline_config
