@@ -39,6 +39,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "bemlearn.cli.sweep_cmd",
     "bemlearn.cli.data_cmd",
     "bemlearn.cli.export_cmd",
+    "bemlearn.cli.examples_cmd",
     "bemlearn.cli.bench_cmd",
 )
 

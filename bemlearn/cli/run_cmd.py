@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from bemlearn.errors import ConfigError
+from bemlearn.examples import config_argument
 
 __all__ = ["add_parser"]
 
@@ -19,7 +20,7 @@ def add_parser(sub) -> None:
         "for ok and degraded, 3 for unusable (4 for degraded with --strict). A robot its model says cannot be balanced "
         "over the design region stops after the model checks, with the verdict written.",
     )
-    p.add_argument("config", type=Path, help="pipeline YAML; `robot: path/to/robot.xml` alone is enough")
+    p.add_argument("config", type=config_argument, help="pipeline YAML; `robot: path/to/robot.xml` alone is enough")
     p.add_argument("--out", type=Path, help="run folder (default: a new runs/<robot>-<timestamp>)")
     p.add_argument("--force", action="store_true", help="write into a non-empty --out folder, replacing its files")
     p.add_argument("--device", choices=["cpu", "cuda"], help="GP training device (default: the config's train.device)")
@@ -33,7 +34,7 @@ def add_parser(sub) -> None:
         description="Simulate the EIC controller (eq. 3, 8) in MuJoCo with the configured BEM source; writes "
         "OUT/simulate/{metrics.json,fig2_<source>.png} and TensorBoard logs.",
     )
-    s.add_argument("config", type=Path)
+    s.add_argument("config", type=config_argument)
     s.add_argument("--predictor", type=Path, help="exported bem_predictor.pt (overrides simulate.predictor)")
     s.add_argument("--source", action="append", choices=["predictor", "model", "zero"], help="BEM source(s); default: simulate.bem_source")
     s.add_argument("--out", type=Path, help="output folder (default: a new runs/simulate-<timestamp>)")

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from bemlearn.errors import ArgumentError, MissingFileError
+from bemlearn.examples import config_argument
 
 __all__ = ["add_parser"]
 
@@ -16,7 +17,7 @@ def add_parser(sub) -> None:
         description="Build the GP dataset (eq. 11) from a trajectory file, fit the GP by maximizing the marginal "
         "likelihood, and write RUN_DIR/{config.yaml,checkpoint.pt,metrics.json,tb/}. Ctrl-C leaves a usable checkpoint.",
     )
-    p.add_argument("config", type=Path, help="pipeline YAML ('robot', 'dataset' and 'train' sections)")
+    p.add_argument("config", type=config_argument, help="pipeline YAML ('robot', 'dataset' and 'train' sections)")
     p.add_argument("--data", type=Path, help="trajectory file (.npz/.csv); default: the config's 'data:'")
     p.add_argument("--out", type=Path, help="run folder (default: runs/train-<timestamp>)")
     p.add_argument("--device", choices=["cpu", "cuda"], help="override train.device")

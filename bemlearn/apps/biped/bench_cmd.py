@@ -11,6 +11,7 @@ import argparse
 from pathlib import Path
 
 from bemlearn.errors import ArgumentError, MissingFileError
+from bemlearn.examples import config_argument
 
 __all__ = ["add_bench"]
 
@@ -19,7 +20,8 @@ def add_bench(sub) -> None:
     b = sub.add_parser("biped-bem", help="learned torso BEM vs model BEM on held-out walks, over training subsets",
                        description="Fit the biped's torso-BEM GP (as `bemlearn run configs/biped.yaml` does) on "
                        "several random training subsets of the same walks and score each on the held-out walks.")
-    b.add_argument("config", type=Path, nargs="?", default=Path("configs/biped.yaml"))
+    b.add_argument("config", type=config_argument, nargs="?", default="configs/biped.yaml",
+                   help="biped YAML (default: configs/biped.yaml, or the shipped example of that name)")
     b.add_argument("--data", type=Path, default=None,
                    help="data.npz of a biped run (default: collect the walks of the config, about 30 s)")
     b.add_argument("--subsets", type=int, default=4, help="training subsets (dataset seeds seed … seed + k − 1)")
@@ -32,7 +34,8 @@ def add_bench(sub) -> None:
                        description="Repeat the walk of the config's 'walk' section over seeds (initial-angle and "
                        "encoder noise) on each gait, with the model-based torso BEM and/or an exported predictor "
                        "in the loop, and count the walks that reach --steps steps.")
-    w.add_argument("config", type=Path, nargs="?", default=Path("configs/biped.yaml"))
+    w.add_argument("config", type=config_argument, nargs="?", default="configs/biped.yaml",
+                   help="biped YAML (default: configs/biped.yaml, or the shipped example of that name)")
     w.add_argument("--predictor", type=Path, default=None, help="exported bem_predictor.pt to walk with")
     w.add_argument("--no-model", action="store_true", help="only the predictor (needs --predictor)")
     w.add_argument("--seeds", type=int, default=20, help="walks per gait and source (default 20)")
