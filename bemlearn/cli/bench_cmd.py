@@ -48,7 +48,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--threads", type=int, default=1, help="torch/BLAS threads of the single-query cases (default 1)")
     p.add_argument("--batch-threads", type=int, default=None,
                    help="torch/BLAS threads of the batch case (default: every core)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the synthetic posterior and of the query points (default 0)")
     p.add_argument("--no-pt2", action="store_true", help="skip the torch.export artifact")
     p.add_argument("--no-c", action="store_true", help="skip the C export (compiled with the system cc)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -67,10 +67,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("run_dir", type=Path, help="a run folder (its robot, closed-loop config and bem_predictor.pt are used)")
     s.add_argument("--mismatch-bodies", nargs="+", default=None, metavar="BODY",
                    help="bodies whose mass and lengths the mismatch study scales (default: all)")
-    s.add_argument("--refs", type=int, default=5)
-    s.add_argument("--seeds", type=int, default=5)
+    s.add_argument("--refs", type=int, default=5, help="random composite-sinusoid references (default 5)")
+    s.add_argument("--seeds", type=int, default=5, help="seeds (sensor noise, initial state) per reference (default 5)")
     s.add_argument("--duration", type=float, default=60.0, help="simulated seconds per run")
-    s.add_argument("--no-mismatch", action="store_true")
+    s.add_argument("--no-mismatch", action="store_true", help="skip the model-mismatch study")
     s.set_defaults(func=_sim)
     d = sub.add_parser("derivatives", help="derivative estimators vs ground truth and their effect on the learned BEM "
                        "(design region and held-out references; first row: the exact-derivative oracle)")
@@ -79,7 +79,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument("--no-gp", action="store_true", help="only the derivative errors")
     d.set_defaults(func=_derivatives)
     g = sub.add_parser("gpdm", help="GPDM fit time and recovery of c and χ on synthetic gait data")
-    g.add_argument("--max-iter", type=int, default=500)
+    g.add_argument("--max-iter", type=int, default=500, help="GPDM optimizer iterations (default 500)")
     g.set_defaults(func=_gpdm)
     from bemlearn.applications import applications
 
@@ -115,7 +115,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     sw.add_argument("--out", type=Path, required=True, help="folder of the two sweeps (OUT/serial, OUT/ray)")
     sw.add_argument("--max-parallel", type=int, default=None, help="cells at once on Ray (default: the cores)")
     sw.add_argument("--force", action="store_true", help="run every cell again in existing OUT/serial and OUT/ray")
-    sw.add_argument("--no-progress", action="store_true")
+    sw.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
     sw.set_defaults(func=_sweep)
     u = sub.add_parser("uncertainty", help="candidate BEM bands: coverage of the model BEM, sharpness, bound violations, cost",
                        description="Fit the config's robot (and a generated cart-pole) BEM GP and score each candidate band "
@@ -141,7 +141,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     g.add_argument("config", type=config_argument, help="pipeline YAML (e.g. the shipped configs/*.yaml)")
     g.add_argument("--data", type=Path, required=True, help="trajectory file to train on (e.g. the shipped data/*.npz)")
     g.add_argument("--n-points", type=int, default=3000, help="training points (default 3000: the largest exact fit)")
-    g.add_argument("--kind", choices=["exact", "sgpr"], default="exact")
+    g.add_argument("--kind", choices=["exact", "sgpr"], default="exact", help="GP kind to fit (default exact)")
     g.add_argument("--delays", type=float, nargs="+", default=[3.0, 5.0, 7.0, 9.0, 11.0],
                    help="seconds after the fit starts at which SIGINT is sent, one run each")
     g.add_argument("--twice", action="store_true", help="also a run with a second SIGINT 0.2 s after the first")

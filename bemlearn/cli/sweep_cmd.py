@@ -30,7 +30,7 @@ def add_parser(sub) -> None:
     p.add_argument("--max-parallel", type=int, default=None, metavar="N",
                    help="at most N cells at once (default: as many as the cluster's CPUs hold at resources.cpus each)")
     p.add_argument("--dry-run", action="store_true", help="validate every cell and list them (id, grid values, complete?)")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
     p.set_defaults(func=_sweep)
 
 

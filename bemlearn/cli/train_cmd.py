@@ -24,8 +24,10 @@ def add_parser(sub) -> None:
     p.add_argument("--resume", action="store_true", help="continue from the run folder's checkpoint")
     p.add_argument("--force", action="store_true",
                    help="train into an existing run folder, replacing its checkpoint and metrics (stale predictors are removed)")
-    p.add_argument("--threads", type=int, default=1, help="torch threads during training (default 1; see README)")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--threads", type=int, default=1, help="torch intra-op threads of the GP fit (default 1). More threads can be faster on an idle machine, but "
+                   "on a loaded 2-core machine the 500-point exact fit took 28 s with 2 threads against 4.5 s with 1 "
+                   "(docs/design.md)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
     p.set_defaults(func=run)
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -162,12 +163,24 @@ def format_resolved(resolved: ResolvedConfig) -> str:
     lines = [f"# {resolved.source}: every value with its origin (given / derived from the model / data: chosen from the "
              "training data when training / default)"]
     for key, r in rows.items():
-        value = json.dumps(r["value"], ensure_ascii=False) if not isinstance(r["value"], str) else r["value"]
+        value = json.dumps(_shown(r["value"]), ensure_ascii=False) if not isinstance(r["value"], str) else r["value"]
         if len(value) > 60:
             value = value[:57] + "..."
         note = f"  # {r['note']}" if "note" in r else ""
         lines.append(f"{key:<{width}}  {value:<40}  {r['origin']:<8}{note}")
     return "\n".join(lines)
+
+
+def _shown(value: Any) -> Any:
+    """``value`` for the table: floats to 12 significant digits (``0.6000000000000001`` → ``0.6``; the
+    exact values are in ``--json`` and ``config_resolved.json``)."""
+    if isinstance(value, float) and math.isfinite(value):
+        return float(f"{value:.12g}")
+    if isinstance(value, (list, tuple)):
+        return [_shown(v) for v in value]
+    if isinstance(value, Mapping):
+        return {k: _shown(v) for k, v in value.items()}
+    return value
 
 
 def _strip_none(data: Any) -> Any:

@@ -28,7 +28,7 @@ def add_bench(sub) -> None:
     b.add_argument("--collect-seeds", type=int, nargs="+", default=None, metavar="SEED",
                    help="collect the training walks once per seed (collect.seed) and fit the subsets on each: "
                    "the spread over training walks too (about 40 s of walks per seed)")
-    b.add_argument("--no-progress", action="store_true")
+    b.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
     b.set_defaults(func=_biped_bem)
     w = sub.add_parser("walks", help="seeded biped walks per gait and torso BEM source: steps reached, falls",
                        description="Repeat the walk of the config's 'walk' section over seeds (initial-angle and "
@@ -40,10 +40,11 @@ def add_bench(sub) -> None:
     w.add_argument("--no-model", action="store_true", help="only the predictor (needs --predictor)")
     w.add_argument("--seeds", type=int, default=20, help="walks per gait and source (default 20)")
     w.add_argument("--steps", type=int, default=30, help="steps asked of each walk (default 30)")
-    w.add_argument("--gaits", nargs="+", default=["default", "human"], choices=["default", "human"])
+    w.add_argument("--gaits", nargs="+", default=["default", "human"], choices=["default", "human"],
+                   help="gaits to walk (default: both)")
     w.add_argument("--initial-noise", type=float, default=0.02, help="initial joint-angle noise std, rad (default 0.02)")
     w.add_argument("--sensor-noise", type=float, default=0.001, help="encoder noise std, rad (default 0.001)")
-    w.add_argument("--no-progress", action="store_true")
+    w.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
     w.set_defaults(func=_walks)
 
 

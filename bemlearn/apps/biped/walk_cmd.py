@@ -27,7 +27,7 @@ def add_parser(sub) -> None:
     p.add_argument("--seed", type=int, help="override walk.seed")
     p.add_argument("--out", type=Path, help="output folder (default: a new runs/walk-<timestamp>)")
     p.add_argument("--force", action="store_true", help="replace OUT/walk.* if they exist")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
     p.set_defaults(func=run)
 
 
