@@ -27,10 +27,10 @@ def test_a_config_argument_names_an_example_from_any_folder(tmp_path, monkeypatc
     assert config_argument("furuta") == EXAMPLES_DIR / "configs" / "furuta.yaml"
     assert config_argument("configs/furuta.yaml") == EXAMPLES_DIR / "configs" / "furuta.yaml"
     assert config_argument("sweeps/example") == EXAMPLES_DIR / "configs" / "sweeps" / "example.yaml"
+    assert main(["config", "show", "furuta"]) == 0  # the example, from an empty folder
     (tmp_path / "furuta").write_text("robot: my.xml\n")  # a file of the user's wins over an example of that name
     assert config_argument("furuta") == Path("furuta")
     assert config_argument("nope.yaml") == Path("nope.yaml")
-    assert main(["config", "show", "furuta"]) == 0  # the example, from an empty folder
     assert main(["examples"]) == 0
     out = capsys.readouterr().out
     assert "furuta " in out and "sweeps/example" in out
