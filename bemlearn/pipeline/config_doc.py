@@ -116,12 +116,16 @@ def _rows(cls, prefix: str, rows: list[str], sections: list[tuple[str, type]]) -
             sections.append((key, tp))
             continue
         derived = "derived" if key in DERIVED_KEYS else ""
-        desc = docs.get(f.name, "").replace("|", "\\|")
+        desc = _ROLE.sub(r"`\g<target>`", docs.get(f.name, "")).replace("|", "\\|")
         limit = LIMITS.get(cls, {}).get(f.name)
         bounds = "" if limit is None else ", ".join(b for b in (limit.describe(), "min ≤ max" if limit.ordered else "",
                                                                  f"≥ {limit.min_len} entries" if limit.min_len else "") if b)
         kind = _type_name(tp).replace('|', 'or') + (f" ({bounds})" if bounds else "")
         rows.append(f"| `{key}` | {kind} | {_default(f)} | {derived} | {desc} |")
+
+
+#: A Sphinx role of a docstring (``:mod:`x```): a code span on this Markdown page.
+_ROLE = re.compile(r":(?:py:)?(?:func|meth|attr|class|mod|data|exc|obj|const):`~?(?P<target>[^`]+)`")
 
 
 def config_markdown() -> str:

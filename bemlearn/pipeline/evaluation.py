@@ -159,7 +159,8 @@ class DesignRegionErrors:
     Attributes:
         bound: the design region's half width d, in q_u's unit.
         n_points: the points inside.
-        rmse, max_abs: RMSE and largest |error| over them, in q_u's unit (NaN without points).
+        rmse: RMSE over them, in q_u's unit (NaN without points).
+        max_abs: largest |error| over them, in q_u's unit (NaN without points).
     """
 
     bound: float
@@ -215,7 +216,8 @@ class BEMEvaluation:
     Errors are learned minus model BEM in q_u's unit (rad or m); coverages are fractions in [0, 1].
 
     Attributes:
-        rmse, max_abs: RMSE and largest |error| over all points.
+        rmse: RMSE over all points.
+        max_abs: largest |error| over all points.
         coverage_2sigma_latent: fraction of points with |error| ≤ 2σ, σ the latent std (eq. 12).
         coverage_2sigma_predictive: the same with the predictive std √(σ² + σ_0²) (eq. 11).
         coverage_2sigma_band: the same with the calibrated band σ_band (:mod:`bemlearn.models.band`).
