@@ -49,14 +49,14 @@ Units follow the joint: rad, rad/s, rad/s² for hinges; m, m/s, m/s² for slides
 
 A relative path written **in a file** is relative to **that file's folder**; a path given **on the
 command line** is relative to the **current folder**. This holds for every file bemlearn reads: a
-pipeline config (`robot:`, `data:`, `model:`, `simulate.predictor`), a biped config (`walk.predictor`,
-`walk.gait.human.path`, `gpdm.human.path`), and a sweep file (`base:`, and the paths of its inline
+pipeline config (`robot:`, `data:`, `model:`, `simulate.predictor`), an application's config (its
+input files, such as `walk.predictor`), and a sweep file (`base:`, and the paths of its inline
 base, `overrides:` and `grid:`; a base config *file* keeps its own paths relative to its own folder).
 So `configs/sweeps/example.yaml` names `../../tests/robots/cartpole.xml`, and a config works the same
 from whatever folder the command runs. A value is a path when it holds a `/` or ends in a file
-extension (`my.xml`, `data/rig.npz`); a bare word (`furuta`) is a registry name. The run folder's saved
+extension (`my.xml`, `data/rig.npz`); a bare word is a registry name (`bemlearn robot list`). The run folder's saved
 `config.yaml` holds the resolved, absolute paths. A command's `CONFIG` argument may also be the name
-of an example shipped with bemlearn (`bemlearn run furuta`; `bemlearn examples` lists them).
+of an example shipped with bemlearn (`bemlearn run NAME`; `bemlearn examples` lists them).
 
 This page is generated from the config classes (`python -m bemlearn.pipeline.config_doc`).
 """
