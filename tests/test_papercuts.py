@@ -221,3 +221,22 @@ def test_the_timings_suite_row_counts_todays_tests():
                           capture_output=True, text=True, timeout=600)
     collected = int(re.search(r"(\d+)(?:/\d+)? tests collected", done.stdout).group(1))
     assert documented >= 0.9 * collected, (documented, collected)
+
+
+# --- Fig. 2's panel letters run without a gap ---------------------------------------------------------------------------
+
+def test_fig2_panel_letters_have_no_gap():
+    from types import SimpleNamespace
+
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from bemlearn.sim.figures import run_figure
+
+    t = np.arange(0, 20.0, 0.01)
+    res = SimpleNamespace(t=t, q=np.stack([np.sin(t), 0.01 * np.cos(t)], 1), qa_ref=np.sin(t)[:, None], qu_e=0.01 * np.cos(t),
+                          u=np.zeros((t.size, 1)), metrics={"bem_source": "model"})
+    for lemma, letters in ((None, "abc"), ({"t": np.linspace(0, 2, 50), "delta_gamma": np.zeros(50), "hdot": np.zeros(50)}, "abcd")):
+        fig = run_figure(res, model_bem=0.01 * np.cos(t), lemma=lemma)
+        assert [a.get_title()[:3] for a in fig.axes] == [f"({c})" for c in letters]
+        plt.close(fig)

@@ -2,6 +2,7 @@
 
 .. code-block:: yaml
 
+    # in the repository's root folder: paths are relative to the sweep file's folder
     base: {robot: tests/robots/cartpole.xml, collect: {n_trials: 6, duration_s: 6.0}}   # or a config file path
     overrides: {simulate.duration_s: 10.0}      # optional: dotted keys set on the base (one value each)
     grid:                                       # every combination of the lists is a cell
