@@ -57,6 +57,15 @@ def test_paths_in_a_config_file_are_relative_to_its_folder(tree):
     assert resolve_pipeline_config({"robot": str(CARTPOLE)}, derive=False).config.robot == str(CARTPOLE)
 
 
+def test_the_preflight_of_a_command_reads_the_same_paths(tree):
+    """`bemlearn run sub/rel.yaml` from another folder: the preflight loads the robot the config names."""
+    from bemlearn.pipeline.preflight import preflight
+
+    (tree / "sub" / "rel.yaml").write_text("robot: ../robots/cp.xml\n")
+    checked = preflight(config=Path("../sub/rel.yaml"))
+    assert checked.raw["robot"] == checked.resolved.config.robot == str(tree.resolve() / "robots" / "cp.xml")
+
+
 def test_a_missing_robot_is_named_once_with_the_key_once(tree, capsys):
     """From the parent folder: the config's robot: ../../nowhere/x.xml is looked up from the config's folder."""
     (tree / "sub" / "rel.yaml").write_text("robot: ../nowhere/x.xml\n")
