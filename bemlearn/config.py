@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import re
 import reprlib
 import types
@@ -41,7 +42,8 @@ from bemlearn.errors import ArgumentError, ConfigError
 from bemlearn.files import atomic_write_text
 
 __all__ = ["ConfigError", "from_dict", "to_dict", "load_yaml", "save_yaml", "replace_path", "Limit", "config_limits",
-           "show_value", "MAX_NODES", "MAX_CONFIG_BYTES", "set_dotted", "check_dotted_key"]
+           "show_value", "MAX_NODES", "MAX_CONFIG_BYTES", "set_dotted", "check_dotted_key", "is_relative_path",
+           "rebase_paths", "config_folder"]
 
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
@@ -343,6 +345,51 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level, got {type(data).__name__}")
     return data
+
+
+def is_relative_path(value: Any) -> bool:
+    """Whether a config value names a file by a relative path: a string holding a ``/`` (or ``\\``) or
+    ending in a file extension (``robot.xml``, ``../data/rig.npz``), not absolute.  A bare word
+    (``furuta``: a registry name) is not a path."""
+    if not isinstance(value, str) or not value or Path(value).expanduser().is_absolute():
+        return False
+    return "/" in value or "\\" in value or Path(value).suffix != ""
+
+
+def config_folder(path: str | Path) -> Path:
+    """The folder a config file's relative paths are resolved against: the file's own, symbolic links followed."""
+    return Path(path).resolve().parent
+
+
+def rebase_paths(raw: dict[str, Any], keys: typing.Iterable[str], folder: str | Path) -> dict[str, Any]:
+    """Resolve the relative paths at the dotted ``keys`` of a config mapping against ``folder`` (in place; returned).
+
+    The rule of every bemlearn config file (docs/config.md, "Paths"): a path written in a file is
+    relative to that file's folder (:func:`config_folder`), a path given on the command line to the
+    current folder.  A value is a path by :func:`is_relative_path`; a list of values (a sweep's grid)
+    is rebased item by item; missing keys and other values are left as they are.  ``raw`` is nested
+    (``{"simulate": {"predictor": ...}}``) or flat with dotted keys (``{"simulate.predictor": [...]}``).
+    """
+    base = Path(folder)
+
+    def rebased(value: Any) -> Any:
+        if isinstance(value, list):
+            return [rebased(v) for v in value]
+        if is_relative_path(value):
+            return str(Path(os.path.normpath(base / Path(value).expanduser())))
+        return value
+
+    for key in keys:
+        if key in raw:  # a flat mapping of dotted keys (a sweep's grid and overrides) or a top-level key
+            raw[key] = rebased(raw[key])
+            continue
+        node: Any = raw
+        *heads, last = key.split(".")
+        for h in heads:
+            node = node.get(h) if isinstance(node, dict) else None
+        if isinstance(node, dict) and last in node:
+            node[last] = rebased(node[last])
+    return raw
 
 
 def save_yaml(obj: Any, path: str | Path) -> None:

@@ -97,6 +97,7 @@ def test_a_planted_violation_is_caught(tmp_path):
 #: outputs, applications, ...); ``__main__`` counts as ``cli``.  The applications sit on the core.
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("<base>",),
+    ("examples",),
     ("robots",),
     ("data",),
     ("models",),

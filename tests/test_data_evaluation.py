@@ -122,3 +122,18 @@ def test_slices_without_nearby_data_are_all_extrapolation(fitted):
     tight = dataclasses.replace(state, lengthscale=torch.full((5,), 1e-3, dtype=torch.float64))
     res = bem_slices(tight, train, SliceSpec(n_grid=11))
     assert all(s["covered"] is None and s["n_near"] == 0 for s in res["slices"])
+
+
+def test_resolution_ranges_use_the_slices_covered_rule(fitted):
+    """Each input's range in bem_resolution is the 2.5–97.5 % quantile range of the training data, the rule
+    the slices use for their covered q̈_a range (the report quotes it; it once quoted ±1 std)."""
+    from bemlearn.pipeline.data_evaluation import COVERED_QUANTILES, bem_resolution
+
+    train, state = fitted
+    res = bem_resolution(state, train)
+    x = train.x.numpy()
+    assert COVERED_QUANTILES == (0.025, 0.975)
+    for w in res["inputs"]:
+        i = NAMES.index(w["input"])
+        np.testing.assert_allclose(w["range"], np.quantile(x[:, i], [0.025, 0.975]), rtol=0, atol=1e-12)
+        assert w["range"][1] - w["range"][0] > 3 * w["amplitude"]  # about ±2 std for these normal inputs, not ±1

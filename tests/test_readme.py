@@ -27,8 +27,8 @@ README = (ROOT / "README.md").read_text()
 
 #: Names the README uses for the reader's own files and for outputs; not repository paths.
 PLACEHOLDERS = {"RUN", "DIR", "my.xml", "my.yaml", "map.yaml", "rig.yaml", "logs/*.csv", "data/rig.npz"}
-#: Commands cheap enough to run for real (a robot or config file in, a table out, seconds).
-CHEAP = {("robot", "info"), ("robot", "lqr"), ("robot", "list"), ("config", "show")}
+#: Commands cheap enough to run for real (a robot or config file in, a table out, seconds; the examples copied into an empty folder).
+CHEAP = {("robot", "info"), ("robot", "lqr"), ("robot", "list"), ("config", "show"), ("examples", "copy")}
 
 
 def _commands() -> list[str]:
@@ -40,7 +40,7 @@ def _commands() -> list[str]:
     return sorted({s.strip() for s in spans if re.match(r"\s*bemlearn [a-z]", s)})
 
 
-def test_readme_api_tour_gives_the_right_bems(monkeypatch, capsys):
+def test_readme_api_tour_gives_the_right_bems(tmp_path, monkeypatch, capsys):
     """The tour runs as written; its model-based BEM is the cart-pole's closed form and its
     learned (model-free) BEM meets the verdict's accuracy target against the Furuta model."""
     from bemlearn.pipeline.derive import DESIGN_QU
@@ -49,7 +49,7 @@ def test_readme_api_tour_gives_the_right_bems(monkeypatch, capsys):
 
     blocks = re.findall(r"```python\n(.*?)```", README, flags=re.S)
     assert blocks, "README has no python block"
-    monkeypatch.chdir(ROOT)
+    monkeypatch.chdir(tmp_path)  # from any folder: the tour reads only files shipped in the package
     ns: dict = {}
     for code in blocks:
         exec(compile(code, "README.md", "exec"), ns)
@@ -164,6 +164,39 @@ def test_ci_runs_exactly_the_readme_test_command():
     assert cmds, "README quickstart test command not found"
     ci = (ROOT / ".ci" / "run").read_text().strip().splitlines()
     assert ci[-1] == cmds[0]
+
+
+def test_readme_says_which_install_line_is_which():
+    """The CPU-only and the CUDA torch each have their line, and the README no longer claims the tested
+    command installs the CPU build (on the public index on Linux it installs the CUDA one)."""
+    quick = README[README.index("## Quickstart"):README.index("## Bring your own robot")]
+    cpu = next(line for line in quick.splitlines() if line.startswith("- **CPU-only torch**"))
+    cuda = next(line for line in quick.splitlines() if line.startswith("- **CUDA torch**"))
+    assert "Get Started" in quick and "CPU" in cpu
+    assert "`pip install torch==2.13.0`" in quick[quick.index(cuda):] and "CUDA build" in quick
+    assert "puts the CPU build of torch first" not in README
+
+
+def test_nothing_points_outside_the_repository():
+    """The README, the docs, the configs and the package name no file outside the clone (the paper is cited
+    by its reference, not by a path on the developers' machine)."""
+    outside = re.compile(r"(?:\.\./)+shared/|/work/|shared/paper")
+    texts = {"README.md": README}
+    for folder, pattern in (("bemlearn", "*.py"), ("docs", "*.md"), ("configs", "*.yaml")):
+        texts |= {str(p.relative_to(ROOT)): p.read_text() for p in sorted((ROOT / folder).rglob(pattern)) if "api" not in p.parts}
+    assert len(texts) > 100
+    bad = sorted(name for name, text in texts.items() if outside.search(text))
+    assert not bad, bad
+    assert "On the Learned Balance" in README and "F. Han and J. Yi" in README
+
+
+def test_license_file_matches_the_metadata():
+    import tomllib
+
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    text = (ROOT / "LICENSE").read_text()
+    assert meta["license"] == {"text": "MIT"} and text.startswith("MIT License")
+    assert "Copyright (c) 2026 bemlearn developers" in text and "WITHOUT WARRANTY OF ANY KIND" in text
 
 
 def test_readme_check_catches_a_c_export_without_out():

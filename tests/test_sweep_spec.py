@@ -112,7 +112,8 @@ def test_the_shipped_sweep_files_validate():
         loaded = load_sweep(f.relative_to(ROOT))
         if f.stem == "furuta-mismatch":  # needs the predictor of a furuta run first (the error says which file)
             if not Path(loaded.base["simulate"]["predictor"]).is_file():
-                with pytest.raises(ConfigError, match="simulate.predictor: no file runs/furuta/bem_predictor.pt"):
+                # relative to the sweep file's folder: the runs/ folder next to configs/
+                with pytest.raises(ConfigError, match=f"simulate.predictor: no file {ROOT.resolve()}/runs/furuta/bem_predictor.pt"):
                     expand_cells(loaded)
             continue
         cells = expand_cells(loaded)
@@ -122,9 +123,37 @@ def test_the_shipped_sweep_files_validate():
         assert len(cells) == n, f.name
 
 
+def test_paths_in_a_sweep_file_are_relative_to_its_folder(tmp_path, monkeypatch):
+    """base:, the inline base's, the overrides' and the grid's paths against the sweep file's folder; a
+    base file's own paths against the base file's folder; the current folder plays no part."""
+    (tmp_path / "robots").mkdir()
+    (tmp_path / "sweeps" / "deep").mkdir(parents=True)
+    for name in ("a.xml", "b.xml"):  # two files (a comment apart: cells are told apart by the file's sha256)
+        (tmp_path / "robots" / name).write_text((ROOT / CARTPOLE).read_text() + f"<!-- {name} -->\n")
+    (tmp_path / "base.yaml").write_text("robot: robots/a.xml\ncollect: {n_trials: 2, duration_s: 2.0}\n")
+    (tmp_path / "sweeps" / "deep" / "s.yaml").write_text("base: ../../base.yaml\ngrid: {robot: [../../robots/a.xml, ../../robots/b.xml]}\n")
+    (tmp_path / "sweeps" / "inline.yaml").write_text("base: {robot: ../robots/b.xml, collect: {n_trials: 2, duration_s: 2.0}}\n"
+                                                    "overrides: {data: ../nowhere.npz}\n")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    loaded = load_sweep(Path("../sweeps/deep/s.yaml"))
+    assert loaded.base["robot"] == str(tmp_path.resolve() / "robots" / "a.xml")
+    cells = expand_cells(loaded)
+    assert [c.config.config.robot for c in cells] == [str(tmp_path.resolve() / "robots" / n) for n in ("a.xml", "b.xml")]
+    assert [c.label for c in cells] == ["robot=../../robots/a.xml", "robot=../../robots/b.xml"]  # as written
+    inline = load_sweep(tmp_path / "sweeps" / "inline.yaml")
+    assert inline.base["robot"] == str(tmp_path.resolve() / "robots" / "b.xml")
+    assert inline.base["data"] == str(tmp_path.resolve() / "nowhere.npz")
+    (elsewhere / "base.yaml").write_text((tmp_path / "base.yaml").read_text())  # in the current folder: not looked at
+    with pytest.raises(ConfigError, match=r"base: no config file base\.yaml \(relative to the sweep file's folder"):
+        (tmp_path / "sweeps" / "bad.yaml").write_text("base: base.yaml\n")
+        load_sweep(tmp_path / "sweeps" / "bad.yaml")
+
+
 def test_dry_run_lists_the_cells_and_resume_with_force_is_refused(tmp_path, capsys):
     sweep = tmp_path / "s.yaml"
-    sweep.write_text(f"base: {{robot: {CARTPOLE}, collect: {{n_trials: 2, duration_s: 2.0}}}}\n"
+    sweep.write_text(f"base: {{robot: {ROOT / CARTPOLE}, collect: {{n_trials: 2, duration_s: 2.0}}}}\n"
                      "grid: {collect.seed: [0, 1]}\nstage: train\n")
     assert main(["sweep", str(sweep), "--dry-run"]) == 0
     out = capsys.readouterr().out

@@ -24,6 +24,7 @@ import argparse
 from pathlib import Path
 
 from bemlearn.errors import ArgumentError
+from bemlearn.examples import config_argument
 
 __all__ = ["add_parser", "run_predict"]
 
@@ -47,7 +48,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--threads", type=int, default=1, help="torch/BLAS threads of the single-query cases (default 1)")
     p.add_argument("--batch-threads", type=int, default=None,
                    help="torch/BLAS threads of the batch case (default: every core)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the synthetic posterior and of the query points (default 0)")
     p.add_argument("--no-pt2", action="store_true", help="skip the torch.export artifact")
     p.add_argument("--no-c", action="store_true", help="skip the C export (compiled with the system cc)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -58,7 +59,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         "code, constants and stack (needs cc and binutils size).")
     cf.set_defaults(func=_c_footprint)
     t = sub.add_parser("train", help="GP fit times (exact / sgpr / svgp) and learned-BEM accuracy of a config on a data file")
-    t.add_argument("config", type=Path, help="pipeline YAML naming the robot (its model BEM is the reference)")
+    t.add_argument("config", type=config_argument, help="pipeline YAML naming the robot (its model BEM is the reference)")
     t.add_argument("--data", type=Path, required=True, help="trajectory file to train on")
     t.add_argument("--no-svgp", action="store_true", help="skip the 10⁶-point svgp run (minutes)")
     t.set_defaults(func=_train)
@@ -66,19 +67,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("run_dir", type=Path, help="a run folder (its robot, closed-loop config and bem_predictor.pt are used)")
     s.add_argument("--mismatch-bodies", nargs="+", default=None, metavar="BODY",
                    help="bodies whose mass and lengths the mismatch study scales (default: all)")
-    s.add_argument("--refs", type=int, default=5)
-    s.add_argument("--seeds", type=int, default=5)
+    s.add_argument("--refs", type=int, default=5, help="random composite-sinusoid references (default 5)")
+    s.add_argument("--seeds", type=int, default=5, help="seeds (sensor noise, initial state) per reference (default 5)")
     s.add_argument("--duration", type=float, default=60.0, help="simulated seconds per run")
-    s.add_argument("--no-mismatch", action="store_true")
+    s.add_argument("--no-mismatch", action="store_true", help="skip the model-mismatch study")
     s.set_defaults(func=_sim)
     d = sub.add_parser("derivatives", help="derivative estimators vs ground truth and their effect on the learned BEM "
                        "(design region and held-out references; first row: the exact-derivative oracle)")
-    d.add_argument("config", type=Path, help="pipeline YAML naming the robot (a run folder's config.yaml works)")
+    d.add_argument("config", type=config_argument, help="pipeline YAML naming the robot (a run folder's config.yaml works)")
     d.add_argument("--data", type=Path, required=True, help="trajectory file with its <stem>.truth file beside it")
     d.add_argument("--no-gp", action="store_true", help="only the derivative errors")
     d.set_defaults(func=_derivatives)
     g = sub.add_parser("gpdm", help="GPDM fit time and recovery of c and χ on synthetic gait data")
-    g.add_argument("--max-iter", type=int, default=500)
+    g.add_argument("--max-iter", type=int, default=500, help="GPDM optimizer iterations (default 500)")
     g.set_defaults(func=_gpdm)
     from bemlearn.applications import applications
 
@@ -93,7 +94,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     im.add_argument("--files", type=int, default=10, help="files the rows are spread over (default 10)")
     im.add_argument("--repeats", type=int, default=5, help="timed imports; the median is reported (default 5)")
     im.add_argument("--accuracy", action="store_true", help="also fit the GP on the imported and the original file")
-    im.add_argument("--config", type=Path, default=None, help="pipeline YAML (robot, dataset and train sections); needed with --accuracy")
+    im.add_argument("--config", type=config_argument, default=None, help="pipeline YAML (robot, dataset and train sections); needed with --accuracy")
     im.add_argument("--figures", type=Path, default=None, help="folder for the BEM slice figures")
     im.set_defaults(func=_import)
     rb = sub.add_parser("robots", help="the whole chain on MJCF robots with derived values only")
@@ -110,16 +111,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         description="Run SWEEP with --backend serial into OUT/serial and with --backend ray into OUT/ray "
                         "(a local Ray instance with this machine's cores), resume the finished one, and report wall "
                         "times, Ray's overhead per cell and whether the results agree (see bemlearn/bench/sweep_bench.py).")
-    sw.add_argument("sweep", type=Path, help="a sweep file, e.g. configs/sweeps/robots-quick.yaml")
+    sw.add_argument("sweep", type=config_argument, help="a sweep file, e.g. configs/sweeps/robots-quick.yaml")
     sw.add_argument("--out", type=Path, required=True, help="folder of the two sweeps (OUT/serial, OUT/ray)")
     sw.add_argument("--max-parallel", type=int, default=None, help="cells at once on Ray (default: the cores)")
     sw.add_argument("--force", action="store_true", help="run every cell again in existing OUT/serial and OUT/ray")
-    sw.add_argument("--no-progress", action="store_true")
+    sw.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
     sw.set_defaults(func=_sweep)
     u = sub.add_parser("uncertainty", help="candidate BEM bands: coverage of the model BEM, sharpness, bound violations, cost",
                        description="Fit the config's robot (and a generated cart-pole) BEM GP and score each candidate band "
                        "on held-out references against the model-based BEM (see bemlearn/bench/uncertainty_bench.py).")
-    u.add_argument("--config", type=Path, required=True, help="pipeline YAML of the robot (e.g. the shipped configs/*.yaml)")
+    u.add_argument("--config", type=config_argument, required=True, help="pipeline YAML of the robot (e.g. the shipped configs/*.yaml)")
     u.add_argument("--data", type=Path, required=True, help="its excitation data (e.g. the shipped data/*.npz)")
     u.add_argument("--no-cartpole", action="store_true", help="only the config's robot (the cart-pole collects ~10 s of trials)")
     u.add_argument("--workdir", type=Path, default=None, help="keep the cart-pole MJCF and data here (default: a temp dir)")
@@ -137,10 +138,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     g = sub.add_parser("sigint", help="Ctrl-C latency of `bemlearn train` (SIGINT → exit, checkpoint left)",
                        description="Start `bemlearn train` in a child process, send SIGINT a few seconds into the fit and "
                        "time until it exits; checks the interrupted checkpoint it leaves.")
-    g.add_argument("config", type=Path, help="pipeline YAML (e.g. the shipped configs/*.yaml)")
+    g.add_argument("config", type=config_argument, help="pipeline YAML (e.g. the shipped configs/*.yaml)")
     g.add_argument("--data", type=Path, required=True, help="trajectory file to train on (e.g. the shipped data/*.npz)")
     g.add_argument("--n-points", type=int, default=3000, help="training points (default 3000: the largest exact fit)")
-    g.add_argument("--kind", choices=["exact", "sgpr"], default="exact")
+    g.add_argument("--kind", choices=["exact", "sgpr"], default="exact", help="GP kind to fit (default exact)")
     g.add_argument("--delays", type=float, nargs="+", default=[3.0, 5.0, 7.0, 9.0, 11.0],
                    help="seconds after the fit starts at which SIGINT is sent, one run each")
     g.add_argument("--twice", action="store_true", help="also a run with a second SIGINT 0.2 s after the first")

@@ -7,6 +7,7 @@ import logging
 from pathlib import Path
 
 from bemlearn.errors import ArgumentError, ConfigError
+from bemlearn.examples import config_argument
 
 __all__ = ["add_parser"]
 
@@ -21,7 +22,7 @@ def add_parser(sub) -> None:
         "for many randomized trials and write what a rig logs (quantized angles, inputs, trial outcome) "
         "to FILE (.npz or .csv), plus the simulator's ground truth to <stem>.truth<suffix>.",
     )
-    p.add_argument("config", type=Path, help="pipeline YAML (its 'robot' and 'collect' sections are used)")
+    p.add_argument("config", type=config_argument, help="pipeline YAML (its 'robot' and 'collect' sections are used)")
     p.add_argument("--out", type=Path, help="output file, .npz or .csv (default: a new runs/collect-<timestamp>/data.npz)")
     p.add_argument("--force", action="store_true", help="replace FILE and its ground-truth file if they exist")
     p.add_argument("--trials", type=int, help="override collect.n_trials")

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
+
+from bemlearn.examples import config_argument
 
 __all__ = ["add_parser"]
 
@@ -16,7 +17,7 @@ def add_parser(sub) -> None:
                          description="Parse CONFIG strictly, derive what the robot's model determines (control rate, "
                          "physics step, excitation, evaluation references, EIC gains) and print every value with its "
                          "origin and, for derived values, how it was derived.")
-    show.add_argument("config", type=Path)
+    show.add_argument("config", type=config_argument, help="pipeline YAML, or the name of a shipped example (`bemlearn examples`)")
     show.add_argument("--json", action="store_true", help="machine-readable output")
     show.set_defaults(func=_show)
 

@@ -18,7 +18,7 @@ def add_parser(sub) -> None:
         "(|q_u^e| ≤ 0.2 rad on a Sobol set of actuated motions): RMSE, max and gain; writes RUN_DIR/evaluation.json and "
         "evaluation.png.",
     )
-    p.add_argument("run_dir", type=Path)
+    p.add_argument("run_dir", type=Path, help="a run folder of `bemlearn run` or `bemlearn train`")
     p.add_argument("--references", type=int, help="number of held-out references (default: the run's evaluate.n_references)")
     p.add_argument("--seed", type=int, help="seed of the references (default: the run's evaluate.seed)")
     p.add_argument("--model", help="compare with this robot instead (registry name or MJCF path), e.g. for a model-free run")

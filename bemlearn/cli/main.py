@@ -6,7 +6,8 @@ taking the parsed namespace and returning an exit code).
 
 Errors: a :class:`~bemlearn.errors.BemlearnError` (a bad config, a missing file, data that
 cannot be used, ...) is one line ``bemlearn COMMAND: error: MESSAGE`` and exit status 2; any
-other exception is a bug and keeps its traceback (exit status 1).  ``-v`` prints the traceback
+other exception is a bug and keeps its traceback (exit status 1).  A closed standard output
+(``bemlearn config show X | head -1``) ends the command quietly with status 141 (128 + SIGPIPE).  ``-v`` prints the traceback
 of every error.  Ctrl-C / SIGTERM exit with 130 / 143; a command's own status (e.g. 3 or 4
 for a verdict) is returned as it is.
 """
@@ -14,6 +15,7 @@ for a verdict) is returned as it is.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import logging
 import os
@@ -39,6 +41,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "bemlearn.cli.sweep_cmd",
     "bemlearn.cli.data_cmd",
     "bemlearn.cli.export_cmd",
+    "bemlearn.cli.examples_cmd",
     "bemlearn.cli.bench_cmd",
 )
 
@@ -61,7 +64,40 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Exit status when the reader of standard output went away (`bemlearn config show X | head -1`): 128 + SIGPIPE,
+#: what a shell reports for a program that SIGPIPE ended.
+CLOSED_PIPE_STATUS = 128 + 13
+
+
+def _stdout_closed() -> bool:
+    """Whether standard output is a pipe whose reading end is closed (poll reports an error on it)."""
+    import select
+
+    try:
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(ev & (select.POLLERR | select.POLLHUP) for _, ev in poller.poll(0))
+    except (OSError, ValueError, AttributeError):  # no real file behind stdout (captured, closed)
+        return False
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run ``bemlearn`` with ``argv``; its exit status.  A reader of standard output that leaves early
+    (``… | head -1``) ends the command quietly with :data:`CLOSED_PIPE_STATUS`, no traceback."""
+    try:
+        try:
+            return _main(argv)
+        finally:
+            sys.stdout.flush()  # a reader that left shows here, not at the interpreter's exit
+    except BrokenPipeError:
+        if not _stdout_closed():
+            raise
+        with contextlib.suppress(OSError, ValueError, AttributeError):  # what is still buffered goes nowhere
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return CLOSED_PIPE_STATUS
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(
@@ -85,7 +121,9 @@ def main(argv: list[str] | None = None) -> int:
             traceback.print_exc()
         print(f"bemlearn {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except Exception as exc:  # noqa: BLE001 - anything else is a bug in bemlearn: keep its traceback
+    except Exception as exc:
+        if isinstance(exc, BrokenPipeError) and _stdout_closed():
+            raise  # the reader of our output left: main() ends quietly
         traceback.print_exc()
         print(f"bemlearn {args.command}: internal error ({type(exc).__name__}), a bug in bemlearn: "
               "please report it with the traceback above", file=sys.stderr)

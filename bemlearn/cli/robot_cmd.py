@@ -14,7 +14,7 @@ def add_parser(sub) -> None:
     info.add_argument("robot", help="shipped robot name or MJCF path")
     info.set_defaults(func=_info)
     bem = rs.add_parser("bem", help="model-based BEM q_u^e for given actuated q_a, q̇_a, q̈_a (eq. 6–9)")
-    bem.add_argument("robot")
+    bem.add_argument("robot", help="registry name or MJCF path")
     bem.add_argument("--qa", type=float, nargs="+", required=True, help="actuated coordinates, in their joints' units (rad for a hinge, m for a slide)")
     bem.add_argument("--qad", type=float, nargs="+", required=True, help="actuated rates (rad/s or m/s)")
     bem.add_argument("--qadd", type=float, nargs="+", required=True, help="actuated accelerations (rad/s² or m/s²)")

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from bemlearn.errors import ConfigError
+from bemlearn.examples import config_argument
 
 __all__ = ["add_parser"]
 
@@ -19,13 +20,13 @@ def add_parser(sub) -> None:
         "for ok and degraded, 3 for unusable (4 for degraded with --strict). A robot its model says cannot be balanced "
         "over the design region stops after the model checks, with the verdict written.",
     )
-    p.add_argument("config", type=Path, help="pipeline YAML; `robot: path/to/robot.xml` alone is enough")
+    p.add_argument("config", type=config_argument, help="pipeline YAML; `robot: path/to/robot.xml` alone is enough")
     p.add_argument("--out", type=Path, help="run folder (default: a new runs/<robot>-<timestamp>)")
     p.add_argument("--force", action="store_true", help="write into a non-empty --out folder, replacing its files")
     p.add_argument("--device", choices=["cpu", "cuda"], help="GP training device (default: the config's train.device)")
     p.add_argument("--strict", action="store_true",
                    help="exit non-zero (4) for a degraded verdict too (default: 0 for ok and degraded, 3 for unusable)")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
     p.set_defaults(func=_run)
     s = sub.add_parser(
         "simulate",
@@ -33,13 +34,13 @@ def add_parser(sub) -> None:
         description="Simulate the EIC controller (eq. 3, 8) in MuJoCo with the configured BEM source; writes "
         "OUT/simulate/{metrics.json,fig2_<source>.png} and TensorBoard logs.",
     )
-    s.add_argument("config", type=Path)
+    s.add_argument("config", type=config_argument, help="pipeline YAML naming the robot, or the name of a shipped example")
     s.add_argument("--predictor", type=Path, help="exported bem_predictor.pt (overrides simulate.predictor)")
     s.add_argument("--source", action="append", choices=["predictor", "model", "zero"], help="BEM source(s); default: simulate.bem_source")
     s.add_argument("--out", type=Path, help="output folder (default: a new runs/simulate-<timestamp>)")
     s.add_argument("--force", action="store_true", help="replace an existing OUT/simulate folder's files")
     s.add_argument("--gif", action="store_true", help="also render OUT/simulate/<source>.gif (offscreen: picks a working OpenGL backend by itself, EGL first)")
-    s.add_argument("--no-progress", action="store_true")
+    s.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
     s.set_defaults(func=_simulate)
 
 
@@ -117,7 +118,11 @@ def _simulate_into(args, cfg, simulate_stage) -> int:
     sources = tuple(args.source or [cfg.simulate.bem_source])
     res = simulate_stage(cfg, args.out, predictor=args.predictor, sources=sources, progress=not args.no_progress, gif=args.gif)
     print(f"{'source':<10}{'fell':>6}{'duration s':>12}{'RMSE q_a':>10}{'max|u|':>8}{'×real time':>12}")
+    from bemlearn.pipeline.report import ZERO_BASELINE_NOTE, ZERO_SOURCE
+
     for src, m in res.items():
-        print(f"{src:<10}{m['fell']!s:>6}{m['duration_s']:>12.1f}{m['tracking_rmse']:>10.4f}{m['u_max']:>8.2f}{m['real_time_factor']:>12.1f}")
+        note = ZERO_BASELINE_NOTE if src == ZERO_SOURCE else ""
+        print(f"{src:<10}{m['fell']!s:>6}{m['duration_s']:>12.1f}{m['tracking_rmse']:>10.4f}{m['u_max']:>8.2f}"
+              f"{m['real_time_factor']:>12.1f}{note}")
     print(f"wrote {args.out / 'simulate'}")
     return 1 if any(m["fell"] for m in res.values() if m["bem_source"] != "zero") else 0

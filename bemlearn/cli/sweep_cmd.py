@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from bemlearn.errors import ArgumentError
+from bemlearn.examples import config_argument
 
 __all__ = ["add_parser"]
 
@@ -18,7 +19,7 @@ def add_parser(sub) -> None:
         "summary.png. Every cell is validated before any runs; a failed cell is retried, then recorded; --resume "
         "skips complete cells. Stages: run, train, simulate, and those of installed applications. See docs/sweeps.md.",
     )
-    p.add_argument("sweep", type=Path, metavar="SWEEP.yaml", help="sweep file: base, grid, stage, resources, retries")
+    p.add_argument("sweep", type=config_argument, metavar="SWEEP.yaml", help="sweep file: base, grid, stage, resources, retries")
     p.add_argument("--out", type=Path, help="sweep folder (default: a new runs/<sweep name>-<timestamp>)")
     p.add_argument("--backend", choices=["ray", "serial"], default="ray",
                    help="ray: each cell a Ray task (a local Ray instance with this machine's cores unless --address); "
@@ -29,7 +30,7 @@ def add_parser(sub) -> None:
     p.add_argument("--max-parallel", type=int, default=None, metavar="N",
                    help="at most N cells at once (default: as many as the cluster's CPUs hold at resources.cpus each)")
     p.add_argument("--dry-run", action="store_true", help="validate every cell and list them (id, grid values, complete?)")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
     p.set_defaults(func=_sweep)
 
 

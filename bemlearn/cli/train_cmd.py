@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from bemlearn.errors import ArgumentError, MissingFileError
+from bemlearn.examples import config_argument
 
 __all__ = ["add_parser"]
 
@@ -16,15 +17,17 @@ def add_parser(sub) -> None:
         description="Build the GP dataset (eq. 11) from a trajectory file, fit the GP by maximizing the marginal "
         "likelihood, and write RUN_DIR/{config.yaml,checkpoint.pt,metrics.json,tb/}. Ctrl-C leaves a usable checkpoint.",
     )
-    p.add_argument("config", type=Path, help="pipeline YAML ('robot', 'dataset' and 'train' sections)")
+    p.add_argument("config", type=config_argument, help="pipeline YAML ('robot', 'dataset' and 'train' sections)")
     p.add_argument("--data", type=Path, help="trajectory file (.npz/.csv); default: the config's 'data:'")
     p.add_argument("--out", type=Path, help="run folder (default: runs/train-<timestamp>)")
     p.add_argument("--device", choices=["cpu", "cuda"], help="override train.device")
     p.add_argument("--resume", action="store_true", help="continue from the run folder's checkpoint")
     p.add_argument("--force", action="store_true",
                    help="train into an existing run folder, replacing its checkpoint and metrics (stale predictors are removed)")
-    p.add_argument("--threads", type=int, default=1, help="torch threads during training (default 1; see README)")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--threads", type=int, default=1, help="torch intra-op threads of the GP fit (default 1). More threads can be faster on an idle machine, but "
+                   "on a loaded 2-core machine the 500-point exact fit took 28 s with 2 threads against 4.5 s with 1 "
+                   "(docs/design.md)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
     p.set_defaults(func=run)
 
 

@@ -64,9 +64,11 @@ class EICGains:
     """Gains of the EIC law (module docstring).
 
     Attributes:
-        kp_a, kd_a: external loop, 1/s², 1/s (same for every actuated joint; ``null``: derived from the
+        kp_a: external loop, proportional, 1/s² (same for every actuated joint; ``null``: derived from the
             model, ``bemlearn.pipeline.derive.eic_gains``).
-        kp_u, kd_u: internal loop on q_u, 1/s², 1/s (``null``: derived from the model).
+        kd_a: external loop, derivative, 1/s (same for every actuated joint; ``null``: derived from the model).
+        kp_u: internal loop on q_u, proportional, 1/s² (``null``: derived from the model).
+        kd_u: internal loop on q_u, derivative, 1/s (``null``: derived from the model).
         deriv_step: h of the BEM derivatives along the reference, s.
         momentum_correction: evaluate the BEM source's full map (eq. 11) at the BEM's own
             rates, q_u^* = f(v_a^ext, q̇_a, q_a, q̈_u^e, q̇_u^e), instead of at q̇_u = q̈_u = 0

@@ -58,9 +58,13 @@ class LQRResult:
     Attributes:
         K: ``(nu, 2n)`` gains for u = K e, e = [q − q_t, q̇ − q̇_t] in the robot's coordinates
             (ctrl units per rad or m, per rad/s or m/s).
-        A, B: ``(2n, 2n)``, ``(2n, nu)`` the tick map in coordinates.
-        Q, R: the weights used.
-        rate_hz: control rate.  substeps: physics steps per tick.  timestep: physics step, s.
+        A: ``(2n, 2n)`` the tick map's state matrix in coordinates.
+        B: ``(2n, nu)`` its input matrix.
+        Q: the state weight used.
+        R: the input weight used.
+        rate_hz: control rate.
+        substeps: physics steps per tick.
+        timestep: physics step, s.
         spectral_radius: of A + B K (< 1 when stabilising).
         u_peak: max |u| / u_max of the linear closed loop from the check's initial error.
         r_scale: factor applied to Bryson's R to respect ctrlrange and forcerange.

@@ -146,7 +146,7 @@ def verify_predictor(
     for name, x, ref_x, n_in, band in cases:
         mean, std = getattr(predictor, name)(x)
         ref_mean, ref_std, bound = reference_posterior(state, ref_x)
-        if band:  # eq. (B1): c² σ² + Σ_{i < n_in} (s_i ∂μ/∂x_i)² + the estimator term
+        if band:  # eq. (B1): c² σ² + max(Σ_{i < n_in} (s_i ∂μ/∂x_i)², the estimator term)
             assert state.std_scale is not None  # filled by PredictorState.__post_init__
             ref_std = (state.std_scale**2 * ref_std.square() + band_extra_variance(state, ref_x, n_inputs=n_in)).sqrt()
             bound = bound * float(state.std_scale) ** 2 + _estimator_rounding(state, ref_x)

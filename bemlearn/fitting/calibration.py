@@ -63,7 +63,9 @@ class ReplicaCalibration:
         raw_scale: q_level(|z|) / Φ⁻¹((1 + level)/2) before the floor at 1.
         level: the calibrated nominal level (0.95: μ ± 1.96 σ holds 95 %).
         z_std: RMS of z over all pairs (c if z were Gaussian).
-        n_pairs, n_points, n_queries: replica pairs, points per replica, queries per pair.
+        n_pairs: replica pairs.
+        n_points: points per replica.
+        n_queries: queries per pair.
         method: ``"trial-split replicas"``.
     """
 

@@ -167,7 +167,7 @@ def minimize(
     if optimizer not in ("lbfgs", "adam"):
         raise ArgumentError(f"optimizer: unknown {optimizer!r}; valid are ['adam', 'lbfgs']")
     kept = KeptParameters(params, desc=desc)
-    state = {"since_best": 0}
+    state = {"since_best": 0, "iter_base": 0}
     max_eval = int(max_iter * 1.5) if optimizer == "lbfgs" else max_iter
 
     def lbfgs(max_iter: int, max_eval: int) -> torch.optim.LBFGS:
@@ -188,12 +188,14 @@ def minimize(
         if callback is not None:
             callback(kept.count, metrics)
         kept.count += 1
-        bar.update(1)
-        bar.set_postfix(loss=f"{value:.5f}")
+        # the bar counts what max_iter bounds: L-BFGS iterations (an iteration may evaluate several times), Adam steps
+        done = state["iter_base"] + _lbfgs_iterations(opt) if optimizer == "lbfgs" else kept.count
+        bar.update(max(0, min(done, max_iter) - bar.n))
+        bar.set_postfix(loss=f"{value:.5f}", evals=kept.count)
         return loss
 
     stop = "max_iter"
-    with tqdm(total=max_eval, desc=desc, disable=not progress, leave=False) as bar, kept.guard():
+    with tqdm(total=max_iter, desc=desc, unit="it", disable=not progress, leave=False) as bar, kept.guard():
         if optimizer == "lbfgs":
             # a line-search trial far out (e.g. an overflowing lengthscale) fails numerically:
             # restart from the best point with a fresh curvature history, up to 3 times
@@ -206,10 +208,11 @@ def minimize(
                     logger.info("%s: numerical failure after %d evaluations (%s); restarting L-BFGS from the best "
                                 "parameters", desc, kept.count, exc)
                     kept.restore()
+                    state["iter_base"] += _lbfgs_iterations(opt)
                     left = max_eval - kept.count
                     opt = lbfgs(max(1, int(left / 1.5)), left)
                     continue
-                n_iter = opt.state[cast(torch.optim.LBFGS, opt)._params[0]].get("n_iter", 0)
+                n_iter = _lbfgs_iterations(opt)
                 if n_iter < opt.defaults["max_iter"] and kept.count < max_eval:
                     stop = "converged"
                 break
@@ -226,3 +229,8 @@ def minimize(
         final = float(checked_loss(loss_fn))
     metrics = {"loss": final, **metrics_fn(), "lr": float(opt.param_groups[0]["lr"])}
     return final, kept.count, stop, metrics
+
+
+def _lbfgs_iterations(opt: torch.optim.Optimizer) -> int:
+    """Iterations an L-BFGS optimizer has completed (its own count, kept in the first parameter's state)."""
+    return int(opt.state[cast(torch.optim.LBFGS, opt)._params[0]].get("n_iter", 0))

@@ -28,7 +28,12 @@ from bemlearn.errors import ArgumentError
 from bemlearn.models.input_noise import mean_gradient
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["band_extra_variance", "band_reference"]
+__all__ = ["band_extra_variance", "band_reference", "BAND_FORMULA"]
+
+#: Eq. (B1) as computed by :func:`band_extra_variance`, in plain ASCII: the one text of the formula that
+#: the exported C header (and any other plain-text description of the band) prints.
+BAND_FORMULA = ("std^2 = std_scale^2 latent_std^2 + max(sum_i (input_std_i dmean/dx_i)^2, "
+                "(1/K) sum_k (mean's shift under derivative estimator k)^2)")
 
 
 def band_reference(state: PredictorState, x: torch.Tensor, *, n_inputs: int | None = None

@@ -116,8 +116,10 @@ def predictor_state(
     Args:
         model: a trained ``ExactBEMGP``, ``SGPRBEMGP`` or ``SVGPBEMGP``.
         likelihood: its Gaussian likelihood (σ_0²).
-        x_mean, x_std: ``(d,)`` input normalization, physical units of each column.
-        y_mean, y_std: ``()`` output normalization, in q_u's unit (rad for a hinge, m for a slide).
+        x_mean: ``(d,)`` input normalization's mean, physical units of each column.
+        x_std: ``(d,)`` input normalization's std, physical units of each column.
+        y_mean: ``()`` output normalization's mean, in q_u's unit (rad for a hinge, m for a slide).
+        y_std: ``()`` output normalization's std, in q_u's unit.
         input_names: the d column names in order.
         n_train: number of training points the posterior was conditioned on.
 

@@ -76,8 +76,10 @@ class PredictorState:
         lengthscale: ``(d,)`` ARD lengthscales ℓ in normalized input units (W = diag(ℓ⁻²)).
         outputscale: ``()`` σ_f² (normalized output units squared).
         noise: ``()`` σ_0² (normalized output units squared).
-        x_mean, x_std: ``(d,)`` input normalization, physical units of each column.
-        y_mean, y_std: ``()`` output normalization, in q_u's unit (rad for a hinge, m for a slide).
+        x_mean: ``(d,)`` input normalization's mean, physical units of each column.
+        x_std: ``(d,)`` input normalization's std, physical units of each column.
+        y_mean: ``()`` output normalization's mean, in q_u's unit (rad for a hinge, m for a slide).
+        y_std: ``()`` output normalization's std, in q_u's unit.
         input_names: the d column names, in order, e.g. ``("qdd_theta", ..., "qd_alpha")``.
         n_train: number of training points the posterior was conditioned on.
         std_scale: ``()`` c ≥ 1 of the calibrated band (default 1).

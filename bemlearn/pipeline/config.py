@@ -32,7 +32,11 @@ from bemlearn.pipeline.evaluation import EvaluationConfig
 from bemlearn.sim.closed_loop import SimulateConfig
 from bemlearn.sim.collect import CollectConfig
 
-__all__ = ["PipelineConfig", "MAX_SAMPLES"]
+__all__ = ["PipelineConfig", "MAX_SAMPLES", "PATH_KEYS"]
+
+#: The keys whose values name input files: in a config file, relative to the file's folder
+#: (:func:`bemlearn.config.rebase_paths`; docs/config.md, "Paths").
+PATH_KEYS: tuple[str, ...] = ("robot", "data", "model", "simulate.predictor")
 
 #: Most samples a stage may produce (collect: trials × duration × rate; evaluate and simulate alike).
 MAX_SAMPLES = 10**9

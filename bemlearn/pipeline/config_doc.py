@@ -48,6 +48,19 @@ the data were recorded elsewhere, so there is no collection or closed loop).
 
 Units follow the joint: rad, rad/s, rad/s² for hinges; m, m/s, m/s² for slides.
 
+## Paths
+
+A relative path written **in a file** is relative to **that file's folder**; a path given **on the
+command line** is relative to the **current folder**. This holds for every file bemlearn reads: a
+pipeline config (`robot:`, `data:`, `model:`, `simulate.predictor`), an application's config (its
+input files, such as `walk.predictor`), and a sweep file (`base:`, and the paths of its inline
+base, `overrides:` and `grid:`; a base config *file* keeps its own paths relative to its own folder).
+So `configs/sweeps/example.yaml` names `../../tests/robots/cartpole.xml`, and a config works the same
+from whatever folder the command runs. A value is a path when it holds a `/` or ends in a file
+extension (`my.xml`, `data/rig.npz`); a bare word is a registry name (`bemlearn robot list`). The run folder's saved
+`config.yaml` holds the resolved, absolute paths. A command's `CONFIG` argument may also be the name
+of an example shipped with bemlearn (`bemlearn run NAME`; `bemlearn examples` lists them).
+
 This page is generated from the config classes (`python -m bemlearn.pipeline.config_doc`).
 """
 
@@ -106,12 +119,16 @@ def _rows(cls, prefix: str, rows: list[str], sections: list[tuple[str, type]]) -
             sections.append((key, tp))
             continue
         derived = "derived" if key in DERIVED_KEYS else ""
-        desc = docs.get(f.name, "").replace("|", "\\|")
+        desc = _ROLE.sub(r"`\g<target>`", docs.get(f.name, "")).replace("|", "\\|")
         limit = LIMITS.get(cls, {}).get(f.name)
         bounds = "" if limit is None else ", ".join(b for b in (limit.describe(), "min ≤ max" if limit.ordered else "",
                                                                  f"≥ {limit.min_len} entries" if limit.min_len else "") if b)
         kind = _type_name(tp).replace('|', 'or') + (f" ({bounds})" if bounds else "")
         rows.append(f"| `{key}` | {kind} | {_default(f)} | {derived} | {desc} |")
+
+
+#: A Sphinx role of a docstring (``:mod:`x```): a code span on this Markdown page.
+_ROLE = re.compile(r":(?:py:)?(?:func|meth|attr|class|mod|data|exc|obj|const):`~?(?P<target>[^`]+)`")
 
 
 def config_markdown() -> str:

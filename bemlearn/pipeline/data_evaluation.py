@@ -37,7 +37,11 @@ from bemlearn.models.learned_bem import LearnedBEM
 from bemlearn.models.predictor_state import PredictorState
 from bemlearn.units import joint_unit
 
-__all__ = ["SliceSpec", "bem_slice_figure", "bem_slices", "heldout_prediction", "bem_resolution"]
+__all__ = ["SliceSpec", "bem_slice_figure", "bem_slices", "heldout_prediction", "bem_resolution", "COVERED_QUANTILES"]
+
+#: The range the data cover, as quantiles of the training points: the slices' covered q̈_a range and each
+#: input's range in :func:`bem_resolution` (the report's "data covers lo … hi"), one rule for both.
+COVERED_QUANTILES = (0.025, 0.975)
 
 
 def _state(model: PredictorState | LearnedBEM) -> PredictorState:
@@ -180,7 +184,7 @@ def bem_slices(model: PredictorState | LearnedBEM, train: BEMDataset, spec: Slic
             near = np.all(np.abs(x[:, held] - base[held]) <= spec.radius * reach[held], axis=1)
             covered = None
             if near.sum() >= 5:
-                covered = [float(v) for v in np.quantile(x[near, qdd_col], [0.025, 0.975])]
+                covered = [float(v) for v in np.quantile(x[near, qdd_col], COVERED_QUANTILES)]
                 cov = (grid >= covered[0]) & (grid <= covered[1])
                 inside_std.append(pred[cov])
                 outside_std.append(pred[~cov])
@@ -251,10 +255,11 @@ def bem_resolution(model: PredictorState | LearnedBEM, train: BEMDataset, *, max
     """(c) of the module docstring: does the BEM vary over the data by more than its own band?
 
     Returns:
-        ``{"spread", "band_std", "ratio", "unit", "inputs": [{"input", "slope", "amplitude", "unit",
+        ``{"spread", "band_std", "ratio", "unit", "inputs": [{"input", "slope", "amplitude", "range", "unit",
         "share", "factor"}]}`` with ``spread`` = std of μ(x_0^e) over the training motions, ``band_std``
         the median exported σ there, ``ratio`` = spread / band_std, and per actuated input (largest
-        share first) the mean slope, the data's amplitude (std), the share |slope| · amplitude of
+        share first) the mean slope, the data's amplitude (std) and range ([lo, hi] at
+        :data:`COVERED_QUANTILES`, the rule of the slices' covered range), the share |slope| · amplitude of
         the BEM it explains and ``factor`` (``None`` where the learned slope is 0).
     """
     from bemlearn.models.band import band_reference
@@ -267,6 +272,7 @@ def bem_resolution(model: PredictorState | LearnedBEM, train: BEMDataset, *, max
     mean, band, _ = band_reference(state, x, n_inputs=state.dim - 2)
     grad = mean_gradient(state, x).mean(0).numpy()
     amp = train.x.to(torch.float64).std(0, correction=0).numpy()
+    ranges = np.quantile(train.x.to(torch.float64).numpy(), COVERED_QUANTILES, axis=0)  # (2, d)
     spread, bstd = float(mean.std(correction=0)), float(band.median())
     meta = train.meta
     unit = joint_unit(meta.kind_of(meta.unactuated))
@@ -275,6 +281,7 @@ def bem_resolution(model: PredictorState | LearnedBEM, train: BEMDataset, *, max
         prefix, joint = name.split("_", 1)
         share = abs(float(grad[i])) * float(amp[i])
         inputs.append({"input": name, "slope": float(grad[i]), "amplitude": float(amp[i]),
+                       "range": [float(ranges[0, i]), float(ranges[1, i])],
                        "unit": joint_unit(meta.kind_of(joint), {"q": 0, "qd": 1, "qdd": 2}[prefix]),
                        "share": share, "factor": (2.0 * bstd / share) if share > 0 else None})
     inputs.sort(key=lambda r: -r["share"])

@@ -9,7 +9,7 @@ posterior std (eq. 12) and for the predictive std (latent + noise σ_0², eq. 11
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -46,6 +46,10 @@ class EvaluationConfig:
         seed: seed of the references and of the design-region points (independent of training data).
         design_points: points drawn in the design region's box of actuated motions (learned vs model BEM
             over the whole design region, :mod:`bemlearn.pipeline.design_evaluation`); 0 turns it off.
+        slope_signs: model-free runs: the sign (+1 or −1) your joints' conventions give the learned BEM's
+            mean slope ∂μ/∂x_i, by input name (``{qdd_theta: -1}``: the pendulum leans into the arm's
+            acceleration, docs/log-import.md); the report says when a slope the data resolve has the other
+            sign (a flipped ``sign:`` in the import map). Empty: not checked.
     """
 
     n_references: int = 5
@@ -57,6 +61,12 @@ class EvaluationConfig:
     rate_hz: float = 100.0
     seed: int = 12345
     design_points: int = 4096
+    slope_signs: dict[str, int] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        bad = {k: v for k, v in self.slope_signs.items() if v not in (1, -1)}
+        if bad:
+            raise ConfigError(f"evaluate.slope_signs: expected +1 or -1 per input name, got {bad}")
 
 
 def held_out_references(config: EvaluationConfig, m: int) -> list[CompositeSinusoid]:
@@ -149,7 +159,8 @@ class DesignRegionErrors:
     Attributes:
         bound: the design region's half width d, in q_u's unit.
         n_points: the points inside.
-        rmse, max_abs: RMSE and largest |error| over them, in q_u's unit (NaN without points).
+        rmse: RMSE over them, in q_u's unit (NaN without points).
+        max_abs: largest |error| over them, in q_u's unit (NaN without points).
     """
 
     bound: float
@@ -205,7 +216,8 @@ class BEMEvaluation:
     Errors are learned minus model BEM in q_u's unit (rad or m); coverages are fractions in [0, 1].
 
     Attributes:
-        rmse, max_abs: RMSE and largest |error| over all points.
+        rmse: RMSE over all points.
+        max_abs: largest |error| over all points.
         coverage_2sigma_latent: fraction of points with |error| ≤ 2σ, σ the latent std (eq. 12).
         coverage_2sigma_predictive: the same with the predictive std √(σ² + σ_0²) (eq. 11).
         coverage_2sigma_band: the same with the calibrated band σ_band (:mod:`bemlearn.models.band`).

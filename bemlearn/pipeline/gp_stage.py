@@ -40,7 +40,8 @@ class GPStageResult:
 
     Attributes:
         state: the frozen float64 posterior (eq. 12 in normalized coordinates + the normalization).
-        model, likelihood: the fitted GPyTorch modules (eval mode), for further evaluation.
+        model: the fitted GPyTorch model (eval mode), for further evaluation.
+        likelihood: its fitted likelihood (eval mode).
         fit: ``loss``, ``steps``, ``seconds``, ``stop_reason`` of the fit.
         hyperparameters: :func:`~bemlearn.fitting.hyperparameter_metrics` (normalized units).
         lengthscale_physical: per input column, the lengthscale in the column's own unit.

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from bemlearn.config import load_yaml
+from bemlearn.config import config_folder, load_yaml, rebase_paths
 from bemlearn.errors import BemlearnError, ConfigError, EnvironmentProblem, MissingFileError
 from bemlearn.files import check_outputs, check_writable
 
@@ -68,7 +68,9 @@ def check_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
         ConfigError: the file is missing, not YAML, not a mapping, or names neither
             ``robot:`` nor ``data:`` (an empty config would silently run on hidden defaults).
     """
-    data = load_yaml(Path(path))
+    from bemlearn.pipeline.config import PATH_KEYS
+
+    data = rebase_paths(load_yaml(Path(path)), PATH_KEYS, config_folder(path))  # relative to the config's folder
     if not any(k in data for k in REQUIRED_ANY):
         what = "is empty (or only comments)" if not data else f"names neither {' nor '.join(f'{k}:' for k in REQUIRED_ANY)} (keys: {sorted(data)})"
         raise ConfigError(

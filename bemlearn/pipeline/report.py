@@ -6,7 +6,15 @@ from pathlib import Path
 
 from bemlearn.files import atomic_write_text
 
-__all__ = ["write_report"]
+__all__ = ["write_report", "ZERO_SOURCE", "ZERO_BASELINE_NOTE"]
+
+#: The BEM source that is a baseline (q_u^e = 0): expected to fail, labelled so in the report and on the console.
+ZERO_SOURCE = "zero"
+ZERO_BASELINE_NOTE = " (the baseline: expected to fail)"
+
+
+def _source_label(name: str) -> str:
+    return f"{name} (baseline)" if name == ZERO_SOURCE else name
 
 
 def _f(v, spec=".4f"):
@@ -64,7 +72,7 @@ def write_report(out: str | Path, *, config, resolved, data: dict | None, train:
                   *_feasibility_lines(train)]
     else:
         lines += [*_source_lines(config, resolved, robot), *_feasibility_lines(train), *_data_lines(data, train),
-                  *_fit_lines(config, train), *_data_only_lines(train, unit), *_heldout_lines(train, unit),
+                  *_fit_lines(config, train), *_data_only_lines(train, unit, config), *_heldout_lines(train, unit),
                   *_design_region_lines(train, unit, out), *_band_lines(train, unit),
                   "## Exported predictor", *[f"- `{p.name}`" for p in export], "", *_closed_loop_lines(sim, data, train, unit)]
     path = out / "report.md"
@@ -113,7 +121,7 @@ def _fit_lines(config, train: dict) -> list[str]:
             f"in {_f(fit.get('seconds'), '.1f')} s" + (" (interrupted)" if train.get("interrupted") else "") + ".", ""]
 
 
-def _data_only_lines(train: dict, unit: str) -> list[str]:
+def _data_only_lines(train: dict, unit: str, config=None) -> list[str]:
     """Held-out trials, slices and resolution: what the data alone say (no model)."""
     lines: list[str] = []
     h = train.get("data_heldout")
@@ -139,9 +147,45 @@ def _data_only_lines(train: dict, unit: str) -> list[str]:
         top = res["inputs"][:3]
         lines += [f"Over the data's actuated motions the learned BEM varies by {_f(res['spread'], '.3g')} {unit} (std), "
                   f"{_f(res['ratio'], '.1f')}× the exported band's median σ ({_f(res['band_std'], '.3g')} {unit}). The inputs that "
-                  "move it most: " + ", ".join(f"{w['input']} (slope {_f(w['slope'], '.3g')} {unit} per {w['unit']}, data ±"
-                                                f"{_f(w['amplitude'], '.3g')} {w['unit']})" for w in top) + ".", ""]
+                  "move it most: " + ", ".join(f"{w['input']} (slope {_f(w['slope'], '.3g')} {unit} per {w['unit']}, "
+                                                f"{_data_range(w)})" for w in top) + ".", ""]
+        signs = dict(getattr(getattr(config, "evaluate", None), "slope_signs", None) or {})
+        lines += _slope_sign_lines(res, signs, unit)
     return lines
+
+
+def _data_range(w: dict) -> str:
+    """The data's range of an input: the slices' covered-range rule (``COVERED_QUANTILES``), as the slice figure marks it."""
+    r = w.get("range")
+    if r is None:
+        return f"data std {_f(w['amplitude'], '.3g')} {w['unit']}"
+    return f"data cover {_f(r[0], '.3g')} … {_f(r[1], '.3g')} {w['unit']} (95 %)"
+
+
+def _slope_sign_lines(res: dict, signs: dict, unit: str) -> list[str]:
+    """The learned slopes against the sign convention the config declares (``evaluate.slope_signs``, docs/log-import.md)."""
+    if not signs:
+        return []
+    by_name = {w["input"]: w for w in res["inputs"]}
+    out = []
+    for name, expected in signs.items():
+        w = by_name.get(name)
+        if w is None:
+            out.append(f"- {name}: not an input of this BEM ({', '.join(by_name)}); its sign is not checked.")
+            continue
+        slope, factor = w["slope"], w.get("factor")
+        want = "negative" if expected < 0 else "positive"
+        resolved = factor is not None and factor < 1.0   # the input's share of the BEM exceeds the band's ±2σ
+        if not resolved:
+            out.append(f"- {name}: slope {_f(slope, '.3g')} {unit} per {w['unit']} lies within the band over the data "
+                       f"(expected {want}): the data cannot tell its sign.")
+        elif slope * expected > 0:
+            out.append(f"- {name}: slope {_f(slope, '.3g')} {unit} per {w['unit']} is {want}, as the convention says.")
+        else:
+            out.append(f"- **{name}: the sign looks flipped**: slope {_f(slope, '.3g')} {unit} per {w['unit']}, the convention "
+                       f"(`evaluate.slope_signs`) says {want}. Check the `sign:` of the unactuated joint and of this input's "
+                       "joint in the import map (docs/log-import.md, sign convention).")
+    return ["Sign convention of the learned slopes (`evaluate.slope_signs`):", "", *out, ""]
 
 
 def _heldout_lines(train: dict, unit: str) -> list[str]:
@@ -218,15 +262,20 @@ def _closed_loop_lines(sim: dict, data: dict, train: dict, unit: str) -> list[st
              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name, m in sim.items():
         outcome = f"fell at {m['duration_s']:.2f} s" if m["fell"] else "diverged (q_a left the reference)" if m.get("diverged") else "stayed up"
-        lines.append(f"| {name} | {outcome} | {_f(m['duration_s'], '.1f')} | {_f(m['tracking_rmse'])} | {_f(m['qu_max'], '.3f')} | "
+        if name == ZERO_SOURCE:
+            outcome += ZERO_BASELINE_NOTE if (m["fell"] or m.get("diverged")) else " (the baseline, expected to fail, did not)"
+        lines.append(f"| {_source_label(name)} | {outcome} | {_f(m['duration_s'], '.1f')} | {_f(m['tracking_rmse'])} | {_f(m['qu_max'], '.3f')} | "
                      f"{_f(m['u_max'], '.2f')} | {m.get('bem_rejected', 0)} | {_f(m['real_time_factor'], '.1f')} |")
     if "predictor" in sim and "lemma1" in sim["predictor"]:
         L = sim["predictor"]["lemma1"]
         lines += ["", f"Lemma 1 along the reference: model-based max |ΔΓ − Ḣ_u − b_u q̇_u^e| = {L['model_gap']:.1e}; "
                   f"learned ΔΓ vs Ḣ_u correlation r = {L['r_learned_vs_hdot']:.4f} (vs the model's ΔΓ: {L['r_learned_vs_model_delta_gamma']:.4f})."]
+    if ZERO_SOURCE in sim:
+        lines += ["", f"The {ZERO_SOURCE} BEM (q_u^e = 0, no BEM at all) is the baseline of the paper's Fig. 2: it is expected "
+                  "to fall or diverge, and its failure is not a failure of the run."]
     lines += [""]
     for name in sim:
-        lines += [f"### BEM source: {name}", "", f"![fig2 {name}](simulate/fig2_{name}.png)", ""]
+        lines += [f"### BEM source: {_source_label(name)}", "", f"![fig2 {name}](simulate/fig2_{name}.png)", ""]
     return lines
 
 

@@ -13,14 +13,15 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bemlearn.config import ConfigError, from_dict, load_yaml, set_dotted, to_dict
+from bemlearn.config import ConfigError, config_folder, from_dict, load_yaml, rebase_paths, set_dotted, to_dict
 from bemlearn.errors import BemlearnError
-from bemlearn.pipeline.config import PipelineConfig
+from bemlearn.pipeline.config import PATH_KEYS, PipelineConfig
 
 __all__ = ["ResolvedConfig", "resolve_pipeline_config", "load_pipeline_config", "complete_section", "format_resolved", "flatten"]
 
@@ -75,6 +76,9 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
                             source: str | None = None) -> ResolvedConfig:
     """Parse ``config`` (a YAML path or a mapping) strictly and fill in what the robot's model derives.
 
+    The relative paths of a file (``robot:``, ``data:``, ``model:``, ``simulate.predictor``) are
+    relative to its folder; those of a mapping to the current folder (docs/config.md, "Paths").
+
     ``source`` names a mapping in error messages and in :attr:`ResolvedConfig.source` (default ``"<dict>"``).
 
     Raises:
@@ -83,7 +87,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
     if isinstance(config, Mapping):
         raw, source = copy.deepcopy(dict(config)), source or "<dict>"
     else:
-        raw, source = load_yaml(config), str(config)
+        raw, source = rebase_paths(load_yaml(config), PATH_KEYS, config_folder(config)), str(config)
     if not raw:
         raise ConfigError(f"{source}: the config is empty; it must at least name the robot "
                           "('robot: path/to/robot.xml' or a registry name) or the data ('data: FILE')")
@@ -97,7 +101,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
         try:
             robot = load(parsed.robot)
         except (BemlearnError, OSError) as exc:
-            raise ConfigError(f"{source}: robot: {exc}") from exc
+            raise ConfigError(f"{source}: robot: {str(exc).removeprefix('robot: ')}") from exc
         for key, (value, note) in derive_pipeline_values(robot, parsed, given).items():
             if not _has(raw, key):
                 set_dotted(raw, key, value)
@@ -172,12 +176,24 @@ def format_resolved(resolved: ResolvedConfig) -> str:
     lines = [f"# {resolved.source}: every value with its origin (given / derived from the model / data: chosen from the "
              "training data when training / default)"]
     for key, r in rows.items():
-        value = json.dumps(r["value"], ensure_ascii=False) if not isinstance(r["value"], str) else r["value"]
+        value = json.dumps(_shown(r["value"]), ensure_ascii=False) if not isinstance(r["value"], str) else r["value"]
         if len(value) > 60:
             value = value[:57] + "..."
         note = f"  # {r['note']}" if "note" in r else ""
         lines.append(f"{key:<{width}}  {value:<40}  {r['origin']:<8}{note}")
     return "\n".join(lines)
+
+
+def _shown(value: Any) -> Any:
+    """``value`` for the table: floats to 12 significant digits (``0.6000000000000001`` → ``0.6``; the
+    exact values are in ``--json`` and ``config_resolved.json``)."""
+    if isinstance(value, float) and math.isfinite(value):
+        return float(f"{value:.12g}")
+    if isinstance(value, (list, tuple)):
+        return [_shown(v) for v in value]
+    if isinstance(value, Mapping):
+        return {k: _shown(v) for k, v in value.items()}
+    return value
 
 
 def _strip_none(data: Any) -> Any:

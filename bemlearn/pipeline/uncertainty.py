@@ -48,7 +48,9 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, train_rows: t
         train_rows: ``(N,)`` the rows of ``traj`` the posterior was trained on
             (``BEMDataset.row``); default: drawn again by ``build_datasets(traj, dataset_config)``.
         n_queries: held-out BEM queries x_0^e for the replica calibration.
-        n_pairs, level, seed: see :func:`~bemlearn.fitting.calibration.calibrate_replicas`.
+        n_pairs: random trial splits (:func:`~bemlearn.fitting.calibration.calibrate_replicas`).
+        level: nominal level the band is calibrated to.
+        seed: seed of the splits and draws.
     """
     t0 = time.perf_counter()
     meta = traj.meta

@@ -122,8 +122,8 @@ class MujocoRobot(Robot):
     Attributes:
         identity_coordinates: True when the coordinates are the MJCF joints themselves (T = I; see
             the module docstring), so joint ranges and kinds apply to the coordinates directly.
-        T_np, Tinv_np: ``(n, n)`` the coordinate map T and T⁻¹ as NumPy arrays (:attr:`T`, :attr:`Tinv`
-            are the same numbers as torch tensors).
+        T_np: ``(n, n)`` the coordinate map T as a NumPy array (:attr:`T` is the same numbers as a torch tensor).
+        Tinv_np: ``(n, n)`` T⁻¹ as a NumPy array (:attr:`Tinv` in torch).
         input_matrix_np: ``(n, nu)`` B = T⁻ᵀ B_j as a NumPy array (:attr:`input_matrix` in torch).
     """
 

@@ -2,7 +2,7 @@
 
 (a) q_a and q_a^d; (b) q_u, the BEM used in the loop with its ±2σ band (learned
 predictor) and the model-based BEM; (c) Lemma 1: ΔΓ against Ḣ_u (eq. 10); (d) the
-actuator command.
+actuator command ((c) when there is no Lemma 1 panel).
 """
 
 from __future__ import annotations
@@ -91,7 +91,7 @@ def run_figure(result, *, model_bem: np.ndarray | None = None, band: tuple[np.nd
     ax[k].plot(t, result.u[:, 0], lw=0.8)
     ax[k].set_ylabel(input_label)
     ax[k].set_xlabel("t (s)")
-    ax[k].set_title("(d) actuator command")
+    ax[k].set_title(f"({'abcd'[k]}) actuator command")  # (c) without the Lemma 1 panel: no gap in the letters
     if t.size:
         ax[k].set_xlim(t[0], t[-1])
     if lemma is not None and len(lemma["t"]):

@@ -72,18 +72,24 @@ class CellOutcome:
     """What ``cell.json`` holds.
 
     Attributes:
-        cell_id, index, grid, stage: the cell.
+        cell_id: the cell's id.
+        index: its index in the grid.
+        grid: its grid values.
+        stage: the stage it ran.
         status: ``"ok"`` or ``"failed"``.
         error: the error's first line (``failed``), else ``None``.
         traceback: the full traceback (``failed``), else ``None``.
-        verdict, verdict_reasons: the run's own verdict (``metrics.json["verdict"]``) where it has one.
+        verdict: the run's own verdict (``metrics.json["verdict"]``) where it has one.
+        verdict_reasons: that verdict's reasons.
         metrics: the stage's headline figures (:attr:`~bemlearn.sweep.stage.SweepStage.headline`).
         attempt: the attempt that produced this record.
         wall_s: the stage's wall time, s.
         cpu_s: the CPU time the stage used (user + system, its threads and finished child
             processes), s; ``wall_s`` above it on a cell declaring one CPU means the core was shared.
-        started, finished: Unix times of the stage's start and end (the host's clock).
-        host, pid: where it ran.
+        started: Unix time of the stage's start (the host's clock).
+        finished: Unix time of its end.
+        host: the host it ran on.
+        pid: the process it ran in.
         reused: ``True`` when the cell was already complete and nothing ran (see :func:`run_cell`).
     """
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bemlearn.config import set_dotted, to_dict
+from bemlearn.config import rebase_paths, set_dotted, to_dict
 from bemlearn.errors import ConfigError
 from bemlearn.files import file_sha256
 from bemlearn.sweep.config import LoadedSweep
@@ -105,6 +105,7 @@ def expand_cells(sweep: LoadedSweep) -> list[Cell]:
         raw = copy.deepcopy(sweep.base)
         for key, value in grid.items():
             set_dotted(raw, key, copy.deepcopy(value))
+        rebase_paths(raw, stage.path_keys, sweep.folder)  # the grid's paths: relative to the sweep file's folder
         _absolute_paths(raw, stage.path_keys)
         where = f"{source}: cell {index} ({', '.join(f'{k}={v}' for k, v in grid.items()) or 'base'})"
         resolved = stage.resolve(raw, where)

@@ -2,6 +2,7 @@
 
 .. code-block:: yaml
 
+    # in the repository's root folder: paths are relative to the sweep file's folder
     base: {robot: tests/robots/cartpole.xml, collect: {n_trials: 6, duration_s: 6.0}}   # or a config file path
     overrides: {simulate.duration_s: 10.0}      # optional: dotted keys set on the base (one value each)
     grid:                                       # every combination of the lists is a cell
@@ -14,18 +15,19 @@
 :func:`load_sweep` parses it strictly (:class:`SweepConfig`; an unknown key is an error naming
 it) and checks every grid and override key against the stage's config schema; the cells
 themselves are resolved and validated by :func:`~bemlearn.sweep.cells.expand_cells`.  Paths
-(``base:``, and the files a config names) are relative to the current directory, as in every
-bemlearn config.
+in a sweep file (``base:``, and the files its inline base, overrides and grid name) are relative to the
+sweep file's folder, those of a base config file to that file's folder (docs/config.md, "Paths").
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from bemlearn.config import check_dotted_key, from_dict, load_yaml, set_dotted
+from bemlearn.config import check_dotted_key, config_folder, from_dict, load_yaml, rebase_paths, set_dotted
 from bemlearn.errors import ConfigError
 
 __all__ = ["SweepResources", "SweepConfig", "LoadedSweep", "load_sweep"]
@@ -103,11 +105,14 @@ class LoadedSweep:
         base: the base config as a mapping (read from ``spec.base`` when that is a path), with
             ``spec.overrides`` applied.
         source: the sweep file's path (or ``"<dict>"``); error messages start with it.
+        folder: the folder the grid's relative paths are resolved against: the sweep file's (the
+            current folder for a mapping).
     """
 
     spec: SweepConfig
     base: dict[str, Any]
     source: str
+    folder: Path = field(default_factory=Path.cwd)
 
 
 def load_sweep(sweep: str | Path | dict[str, Any]) -> LoadedSweep:
@@ -121,21 +126,29 @@ def load_sweep(sweep: str | Path | dict[str, Any]) -> LoadedSweep:
     from bemlearn.sweep.stage import get_stage
 
     if isinstance(sweep, dict):
-        raw, source = copy.deepcopy(sweep), "<dict>"
+        raw, source, folder = copy.deepcopy(sweep), "<dict>", Path.cwd()
     else:
-        raw, source = load_yaml(sweep), str(sweep)
+        raw, source, folder = load_yaml(sweep), str(sweep), config_folder(sweep)
+    base_path = raw.get("base")
+    if isinstance(base_path, str) and not Path(base_path).expanduser().is_absolute():
+        raw["base"] = str(folder / base_path)
     spec = from_dict(SweepConfig, raw, where=source)
     if isinstance(spec.base, str):
         base = load_yaml(spec.base) if Path(spec.base).is_file() else None
         if base is None:
-            raise ConfigError(f"{source}: base: no config file {spec.base} (a path relative to the current directory, "
-                              "or an inline mapping)")
+            where = "relative to the current folder" if isinstance(sweep, dict) else "relative to the sweep file's folder"
+            raise ConfigError(f"{source}: base: no config file {base_path} ({where}, or give an inline mapping)")
+        base_folder = config_folder(spec.base)
     else:
-        base = copy.deepcopy(spec.base)
+        base, base_folder = copy.deepcopy(spec.base), folder
     stage = get_stage(spec.stage, base.get("application"), where=f"{source}: stage")
+    # paths: a base file's relative to its own folder; an inline base's and the overrides' to the sweep file's
+    # (the grid's too, when expand_cells sets them: the grid keeps the values as written, for the cells' labels)
+    rebase_paths(base, stage.path_keys, base_folder)
+    spec = dataclasses.replace(spec, overrides=rebase_paths(copy.deepcopy(spec.overrides), stage.path_keys, folder))
     for key, value in spec.overrides.items():
         check_dotted_key(stage.schema, key, where=f"{source}: overrides")
         set_dotted(base, key, copy.deepcopy(value))
     for key in spec.grid:
         check_dotted_key(stage.schema, key, where=f"{source}: grid")
-    return LoadedSweep(spec, base, source)
+    return LoadedSweep(spec, base, source, folder)

@@ -82,7 +82,8 @@ class SweepResult:
         timings: every attempt of this call.
         wall_s: this call's wall time, s (validation included).
         backend_startup_s: the backend's start, s (Ray: ``ray.init``).
-        columns, rows: ``results.csv``.
+        columns: the header of ``results.csv``.
+        rows: its rows.
     """
 
     out_dir: Path

@@ -210,10 +210,10 @@ def _execute_simulate(resolved, out: Path, cpus: int) -> None:
 
 def core_stages() -> dict[str, SweepStage]:
     """The stages of pipeline configs (module docstring), by name."""
-    from bemlearn.pipeline.config import PipelineConfig
+    from bemlearn.pipeline.config import PATH_KEYS, PipelineConfig
 
     common: dict[str, Any] = dict(schema=PipelineConfig, config_of=lambda r: r.config,
-                  path_keys=("robot", "data", "model", "simulate.predictor"), execution_keys=("collect.workers",))
+                  path_keys=PATH_KEYS, execution_keys=("collect.workers",))
     return {
         "run": SweepStage("run", "the whole `bemlearn run`: collect → train → export → evaluate → closed loop → report",
                           resolve=_resolve_pipeline, execute=_execute_run, metrics_file="metrics.json",

@@ -14,8 +14,9 @@ from typing import Any, Literal
 
 from bemlearn.apps.biped.controller import WalkExcitation
 from bemlearn.apps.biped.human_gait import HumanGaitConfig
+from bemlearn.apps.biped.walk_config import PATH_KEYS
 from bemlearn.apps.biped.walker import WalkConfig
-from bemlearn.config import from_dict, load_yaml
+from bemlearn.config import config_folder, from_dict, load_yaml, rebase_paths
 from bemlearn.errors import ConfigError
 from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.fitting.gpdm_fit import GPDMConfig
@@ -168,5 +169,6 @@ def is_biped_config(path: str | Path) -> bool:
 
 
 def load_biped_config(path: str | Path) -> BipedConfig:
-    """Parse a biped config strictly (unknown keys / bad types name the key path)."""
-    return from_dict(BipedConfig, load_yaml(path), where=str(path))
+    """Parse a biped config strictly (unknown keys / bad types name the key path); its relative paths
+    (:data:`~bemlearn.apps.biped.walk_config.PATH_KEYS`) are relative to the file's folder."""
+    return from_dict(BipedConfig, rebase_paths(load_yaml(path), PATH_KEYS, config_folder(path)), where=str(path))

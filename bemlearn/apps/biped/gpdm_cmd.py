@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 from bemlearn.errors import MissingFileError
+from bemlearn.examples import config_argument
 
 __all__ = ["add_parser"]
 
@@ -21,12 +22,12 @@ def add_parser(sub) -> None:
         "the human gait CSV (data/human_gait/human_gait_right.csv). Writes OUT/{metrics.json,latents.npz,tb/} "
         "(TensorBoard: every objective term per step).",
     )
-    p.add_argument("config", type=Path, help="biped YAML (its 'gpdm' and 'walk' sections), e.g. configs/biped.yaml")
+    p.add_argument("config", type=config_argument, help="biped YAML (its 'gpdm' and 'walk' sections), e.g. configs/biped.yaml")
     p.add_argument("--data", type=Path, help="trajectory file or human gait CSV (default: simulate the config's walk)")
     p.add_argument("--out", type=Path, help="output folder (default runs/gpdm-<timestamp>)")
     p.add_argument("--max-iter", type=int, help="override gpdm.fit.max_iter")
     p.add_argument("--force", action="store_true", help="replace OUT/{metrics.json,latents.npz,tb/} if they exist")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
     p.set_defaults(func=run)
 
 

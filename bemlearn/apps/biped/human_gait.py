@@ -55,7 +55,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: The shipped converted dataset (present in a source checkout).
-HUMAN_GAIT_CSV = Path(__file__).resolve().parents[3] / "data" / "human_gait" / "human_gait_right.csv"
+HUMAN_GAIT_CSV = Path(__file__).resolve().parents[2] / "examples" / "data" / "human_gait" / "human_gait_right.csv"
 #: Marker / force columns read from the raw file.
 RAW_COLUMNS = ("RSHO.PosX", "RSHO.PosY", "RGTRO.PosX", "RGTRO.PosY", "RLEK.PosX", "RLEK.PosY",
                "RLM.PosX", "RLM.PosY", "FP2.ForY")

@@ -24,12 +24,12 @@ from pathlib import Path
 from typing import Any
 
 from bemlearn.apps.biped.config import BipedConfig
+from bemlearn.apps.biped.walk_config import PATH_KEYS
 from bemlearn.config import from_dict, save_yaml
 
 __all__ = ["biped_bem_stage", "biped_run_stage"]
 
 #: Input files a biped config may name.
-PATH_KEYS = ("walk.predictor", "walk.gait.human.path", "gpdm.human.path")
 
 
 def _resolve(raw: dict[str, Any], where: str) -> BipedConfig:

@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 from bemlearn.errors import ArgumentError, MissingFileError
+from bemlearn.examples import config_argument
 
 __all__ = ["add_parser"]
 
@@ -17,7 +18,7 @@ def add_parser(sub) -> None:
         description="Simulate the walker of the config's 'walk' section (EIC internal loop on the torso, eq. 3, 8, 9) "
         "and write OUT/{walk.json,walk.npz,walk.truth.npz,walk.png}. Exit code 1 if the walker falls.",
     )
-    p.add_argument("config", type=Path, help="biped YAML (its 'robot' and 'walk' sections), e.g. configs/biped.yaml")
+    p.add_argument("config", type=config_argument, help="biped YAML (its 'robot' and 'walk' sections), e.g. configs/biped.yaml")
     p.add_argument("--source", choices=["model", "zero", "predictor"], help="torso BEM source (default: walk.bem_source)")
     p.add_argument("--predictor", type=Path, help="exported bem_predictor.pt (implies --source predictor)")
     p.add_argument("--gait", choices=["default", "human"], help="override walk.gait.kind")
@@ -26,7 +27,7 @@ def add_parser(sub) -> None:
     p.add_argument("--seed", type=int, help="override walk.seed")
     p.add_argument("--out", type=Path, help="output folder (default: a new runs/walk-<timestamp>)")
     p.add_argument("--force", action="store_true", help="replace OUT/walk.* if they exist")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
     p.set_defaults(func=run)
 
 

@@ -10,10 +10,10 @@ from dataclasses import dataclass, field
 
 from bemlearn.apps.biped.controller import WalkExcitation, WalkingGains
 from bemlearn.apps.biped.gait import GaitConfig
-from bemlearn.config import ConfigError, from_dict, load_yaml
+from bemlearn.config import ConfigError, config_folder, from_dict, load_yaml, rebase_paths
 from bemlearn.data.sensors import SensorConfig
 
-__all__ = ["WalkConfig", "load_walk_config"]
+__all__ = ["WalkConfig", "load_walk_config", "PATH_KEYS"]
 
 
 @dataclass(frozen=True)
@@ -62,12 +62,16 @@ class WalkConfig:
             raise ConfigError(f"walk.max_steps must be >= 0, got {self.max_steps}")
 
 
+#: The keys of a biped config naming input files: in a file, relative to its folder (docs/config.md, "Paths").
+PATH_KEYS: tuple[str, ...] = ("walk.predictor", "walk.gait.human.path", "gpdm.human.path")
+
+
 def load_walk_config(path) -> WalkConfig:
     """The ``walk:`` section of a biped config file (e.g. ``configs/biped.yaml``), parsed strictly.
 
     Other top-level sections are left to their own parsers; ``robot``, when present, must be ``biped``.
     """
-    data = load_yaml(path)
+    data = rebase_paths(load_yaml(path), PATH_KEYS, config_folder(path))
     if data.get("application", "biped") != "biped":
         raise ConfigError(f"{path}: application: the walking simulation needs 'biped', got {data['application']!r}")
     if data.get("robot", "biped") != "biped":

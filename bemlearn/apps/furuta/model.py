@@ -4,9 +4,8 @@ Coordinates q = [θ, α]: θ the arm angle about the vertical motor axis (actuat
 α the pendulum angle about the arm's long axis (unactuated, q_u), α = 0 upright; a
 positive α tips the pendulum towards −y of the arm frame (right-hand rule about the arm).
 
-Parameters are Quanser's SRV02 + ROTPEN values from Quanser's setup scripts (as listed in
-``shared/paper/NOTES.md``; J. Apkarian, P. Karam, M. Levis, *Inverted Pendulum
-Experiment*, Quanser, 2011 — ref. [23] of the paper).
+Parameters are Quanser's SRV02 + ROTPEN values from Quanser's setup scripts (J. Apkarian,
+P. Karam, M. Levis, *Inverted Pendulum Experiment*, Quanser, 2011 — ref. [23] of the paper).
 
 Rigid-body model (this module's :class:`AnalyticFuruta`, ``variant="rigid"``): the
 pendulum is a slender rod of mass m_p and length L_p, centre of mass at l = L_p/2 from
