@@ -70,7 +70,7 @@ def check_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
     """
     from bemlearn.pipeline.config import PATH_KEYS
 
-    data = rebase_paths(load_yaml(Path(path)), PATH_KEYS, config_folder(path))  # relative to the config's folder
+    data = rebase_paths(load_yaml(Path(path)), PATH_KEYS, config_folder(Path(path)))  # relative to the config's folder
     if not any(k in data for k in REQUIRED_ANY):
         what = "is empty (or only comments)" if not data else f"names neither {' nor '.join(f'{k}:' for k in REQUIRED_ANY)} (keys: {sorted(data)})"
         raise ConfigError(
