@@ -8,21 +8,25 @@ input is, linearised at x* = [q_a = 0, q_u = q_u,nominal, q̇ = 0], u = 0,
 where (A, B) is one physics step's Jacobian from ``mujoco.mjd_transitionFD`` (joint state
 [q_j, q̇_j], inputs in actuator ``ctrl`` units; an RK4 model is linearised with its
 integrator set to Euler, which ``mjd_transitionFD`` supports).  In the robot's coordinates q = T q_j the
-state is S x_j, S = diag(T, T).  The gain minimises Σ δxᵀQδx + uᵀR_u u + fᵀR_f f (``scipy.linalg.
-solve_discrete_are`` with its cross term) with Bryson's rule
-
-    Q = diag(1/x_max²),   R_u = diag(1/u_ctrl²),   R_f = diag(1/f_max²),   f = G u + F δx
-
+state is S x_j, S = diag(T, T).  The gain minimises Σ δxᵀQδx + uᵀR_u u (+ fᵀR_f f, below; ``scipy.linalg.solve_discrete_are``)
+with Bryson's rule Q = diag(1/x_max²),
 x_max from the design region (|q_u − nominal| ≤ 0.2 rad or less if the joint range is
 smaller; actuated positions from their joint ranges, 0.5 rad / 0.5 m when unlimited;
-rates from those times the instability rate); u_ctrl = half the ``ctrlrange`` width and
-f_max = the ``forcerange`` bound of each actuator, whose force MuJoCo computes as
-f = gain·ctrl + b0 + b1·l + b2·l̇ (l = gear·q_j) and clips to the ``forcerange``: linearised,
-f = G u + F δx, so a servo's force limit (its ``ctrl`` is a setpoint) is weighed with the state
-it depends on (cross term S = Fᵀ R_f G).  An actuator with neither limit gets R_u = 1.  If the
-linear closed loop started at a typical error (q_u off by ``qu0``) needs more than the ``ctrlrange``
-or more force than the ``forcerange``, both effort weights are raised by 4× until it does not (at
-most 12 times).
+rates from those times the instability rate).  Two designs, in order:
+
+1. effort weight on ``ctrl`` alone, R = 1/u_ctrl² (half the ``ctrlrange`` width, 1 where unlimited),
+   raised ×4 until the linear response to a q_u error ``qu0`` stays within the ``ctrlrange``;
+2. if MuJoCo itself (every limit clipped) does not bring the robot back with design 1 from the
+   q_u start and from each actuated start ``qa0`` (:func:`holds_in_mujoco`), the actuator force
+   f = gain·ctrl + b0 + b1·l + b2·l̇ (l = gear·q_j, MuJoCo clips it to the ``forcerange``) is
+   weighed too: linearised f = G u + F δx, so a servo's force limit (its ``ctrl`` is a setpoint) is
+   weighed with the state it depends on (R = R_u + G R_f G, Q += Fᵀ R_f F, cross term
+   S = Fᵀ R_f G, R_f = 1/f_max²), raised ×4 until every start's linear response stays within both
+   ranges.  Design 2 is kept when MuJoCo brings the robot back with it; :attr:`LQRResult.notes`
+   says which design was kept and why.
+
+A short saturation of a servo's force is harmless where the plant recovers from it (design 1
+keeps the gains such files always had); where it is not, the check in MuJoCo says so.
 
 Dry friction (joint ``frictionloss``) makes the dynamics non-smooth at rest: finite differences
 there see the joint stick (B collapses).  The linearisation is taken with ``frictionloss`` set to
@@ -46,7 +50,7 @@ from bemlearn.errors import ArgumentError, NumericalError
 if TYPE_CHECKING:
     from bemlearn.robots.mujoco_robot import MujocoRobot
 
-__all__ = ["LQRResult", "ActuatorLimits", "actuator_limits", "linearize", "discrete_lqr"]
+__all__ = ["LQRResult", "ActuatorLimits", "actuator_limits", "holds_in_mujoco", "linearize", "discrete_lqr"]
 
 log = logging.getLogger(__name__)
 
@@ -229,6 +233,73 @@ def _limited_actuated(robot: MujocoRobot) -> np.ndarray:
     return np.array([bool(robot.model.jnt_limited[j]) for j in robot.actuated_index])
 
 
+def _lqr_scaled(robot: MujocoRobot, A: np.ndarray, B: np.ndarray, Q0: np.ndarray, R0: np.ndarray, Qf: np.ndarray | None,
+                S0: np.ndarray | None, starts: list[np.ndarray], steps: int, limits: ActuatorLimits, *,
+                force: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """``(K, Q, R, peak, scale)``: the effort weights (R0, and Qf, S0 of a force weight) raised ×4 until the linear
+    response from every start stays within the limits (ctrl only unless ``force``); at most 12 times."""
+    from scipy.linalg import solve_discrete_are
+
+    scale = 1.0
+    for _ in range(13):
+        R = scale * R0
+        Q = Q0 + (scale * Qf if Qf is not None else 0.0)
+        S = scale * S0 if S0 is not None else None
+        try:
+            P = solve_discrete_are(A, B, Q, R, s=S)
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            raise NumericalError(
+                f"discrete_lqr: {robot.name}: no stabilising LQR for MuJoCo's linearisation ({exc}); "
+                "the upright may be uncontrollable from the actuators at this rate") from None
+        K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A + (S.T if S is not None else 0.0))
+        Acl = A - B @ K
+        peak = 0.0
+        for x0 in starts:
+            x = x0.copy()
+            for _ in range(steps):
+                u = -K @ x
+                peak = max(peak, limits.peak(u, x) if force else float(np.max(np.abs(u) / np.minimum(limits.u_ctrl, 1e300))))
+                x = Acl @ x
+        if peak <= 1.0:
+            break
+        scale *= 4.0
+    return K, Q, R, peak, scale
+
+
+def holds_in_mujoco(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, timestep: float | None, starts: list[np.ndarray],
+                    check_s: float, qu0: float) -> tuple[bool, str]:
+    """Whether u = K e (collect's convention, ctrl clipped to ``ctrlrange``, forces to ``forcerange`` by MuJoCo)
+    brings the robot back in MuJoCo itself from each start ``(2n,)`` (deviation from upright, coordinates): at the
+    end |q_u − nominal| ≤ qu0/2 and |q̇_u| small, never beyond 4·qu0 on the way.  Returns ``(holds, why not)``."""
+    model = _model_copy(robot.model, timestep)
+    data = mujoco.MjData(model)
+    n, iu = robot.n, robot.unactuated_index
+    N = max(1, int(round(1.0 / (rate_hz * float(model.opt.timestep)))))
+    lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
+    limited = model.actuator_ctrllimited.astype(bool)
+    T, Tinv = robot.T_np, robot.Tinv_np
+    nominal = np.zeros(n)
+    nominal[iu] = robot.qu_nominal
+    ticks = int(math.ceil(check_s * rate_hz))
+    for k, x0 in enumerate(starts):
+        mujoco.mj_resetData(model, data)
+        data.qpos[robot._qadr] = Tinv @ (nominal + x0[:n])
+        data.qvel[robot._dadr] = Tinv @ x0[n:]
+        for _ in range(ticks):
+            q = T @ data.qpos[robot._qadr]
+            qd = T @ data.qvel[robot._dadr]
+            if not abs(q[iu] - robot.qu_nominal) <= 4 * qu0:
+                return False, f"it leaves |q_u − nominal| ≤ {4 * qu0:.3g} from start {k} in MuJoCo"
+            u = K @ np.concatenate([q - nominal, qd])
+            data.ctrl[:] = np.where(limited, np.clip(u, lo, hi), u)
+            for _ in range(N):
+                mujoco.mj_step(model, data)
+        q = T @ data.qpos[robot._qadr]
+        if not abs(q[iu] - robot.qu_nominal) <= qu0 / 2:
+            return False, f"q_u is still {abs(q[iu] - robot.qu_nominal):.3g} from nominal after {check_s:g} s from start {k} in MuJoCo"
+    return True, ""
+
+
 def discrete_lqr(
     robot: MujocoRobot,
     *,
@@ -250,8 +321,6 @@ def discrete_lqr(
             the excitation trials' initial range), and its peak is the worst of all starts.
         check_s: duration of the check, s.
     """
-    from scipy.linalg import solve_discrete_are
-
     A, B, N, h = linearize(robot, rate_hz=rate_hz, timestep=timestep)
     xmax, umax, _ = bryson_scales(robot, design_qu=design_qu)
     limits = actuator_limits(robot)
@@ -262,42 +331,36 @@ def discrete_lqr(
     if forced:
         notes.append(f"forcerange binds before ctrlrange on {', '.join(forced)}")
     Q0 = np.diag(1.0 / xmax**2)
-    # effort weights: ctrl against its range, actuator force f = G u + F x against its range (a servo's force
-    # depends on the state too: the cross term S = Fᵀ R_f G), Bryson's 1 where an actuator has neither limit
-    G, F = np.diag(limits.gain), limits.f_state
-    Ru = np.diag(np.where(np.isfinite(limits.u_ctrl), 1.0 / limits.u_ctrl**2, 0.0))
-    Rf = np.diag(np.where(np.isfinite(limits.f_max), 1.0 / limits.f_max**2, 0.0))
-    Ru += np.diag(np.where(np.isfinite(limits.u_ctrl) | np.isfinite(limits.f_max), 0.0, 1.0 / umax**2))
-    starts = [np.zeros(A.shape[0])]
-    starts[0][robot.unactuated_index] = qu0
-    for j in (robot.actuated_index if qa0 else ()):
-        starts.append(np.zeros(A.shape[0]))
-        starts[-1][j] = qa0
     steps = int(math.ceil(check_s * rate_hz))
-    scale = 1.0
-    for _ in range(13):
-        R = scale * (Ru + G @ Rf @ G)
-        Q = Q0 + scale * (F.T @ Rf @ F)
-        S = scale * (F.T @ Rf @ G)
-        try:
-            P = solve_discrete_are(A, B, Q, R, s=S)
-        except (np.linalg.LinAlgError, ValueError) as exc:
-            raise NumericalError(
-                f"discrete_lqr: {robot.name}: no stabilising LQR for MuJoCo's linearisation at {rate_hz:g} Hz ({exc}); "
-                "the upright may be uncontrollable from the actuators at this rate") from None
-        K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A + S.T)
-        Acl = A - B @ K
-        peak = 0.0
-        for x0 in starts:
-            x = x0.copy()
-            for _ in range(steps):
-                u = -K @ x
-                peak = max(peak, limits.peak(u, x))
-                x = Acl @ x
-        if peak <= 1.0:
-            break
-        scale *= 4.0
-    else:
+    qu_start = np.zeros(A.shape[0])
+    qu_start[robot.unactuated_index] = qu0
+    qa_starts = []
+    for j in (robot.actuated_index if qa0 else ()):
+        qa_starts.append(np.zeros(A.shape[0]))
+        qa_starts[-1][j] = qa0
+    # First design: weights on ctrl alone, its linear response to a q_u error within ctrlrange (a short
+    # saturation of a servo's force is harmless where the plant recovers from it).  It is kept when MuJoCo
+    # itself, with every limit clipped, brings the robot back from each start; else the second design also
+    # weighs the actuator force f = G u + F x against its forcerange (a servo's force depends on the state: the
+    # cross term S = Fᵀ R_f G) and checks every start's linear response against all limits.
+    G, F = np.diag(limits.gain), limits.f_state
+    Ru = np.diag(1.0 / np.where(np.isfinite(limits.u_ctrl), limits.u_ctrl, 1.0) ** 2)
+    first = _lqr_scaled(robot, A, B, Q0, Ru, None, None, [qu_start], steps, limits, force=False)
+    starts = [qu_start, *qa_starts]
+    K, Q, R, peak, scale = first
+    holds, why = holds_in_mujoco(robot, -K, rate_hz=rate_hz, timestep=timestep, starts=starts, check_s=check_s, qu0=qu0)
+    if not holds:
+        Ru2 = np.diag(np.where(np.isfinite(limits.u_ctrl), 1.0 / limits.u_ctrl**2, 0.0))
+        Rf = np.diag(np.where(np.isfinite(limits.f_max), 1.0 / limits.f_max**2, 0.0))
+        Ru2 += np.diag(np.where(np.isfinite(limits.u_ctrl) | np.isfinite(limits.f_max), 0.0, 1.0 / umax**2))
+        second = _lqr_scaled(robot, A, B, Q0, Ru2 + G @ Rf @ G, F.T @ Rf @ F, F.T @ Rf @ G, starts, steps, limits, force=True)
+        holds2, why2 = holds_in_mujoco(robot, -second[0], rate_hz=rate_hz, timestep=timestep, starts=starts, check_s=check_s, qu0=qu0)
+        if holds2:
+            K, Q, R, peak, scale = second
+            notes.append(f"weighs the actuator force too: with ctrl weights alone {why}")
+        else:
+            notes.append(f"neither design brings the robot back in MuJoCo ({why}; with force weights: {why2})")
+    if peak > 1.0:
         log.warning("discrete_lqr: %s needs %.2f× its actuator limits for a %.3g initial q_u error%s even with R × %g", robot.name,
                     peak, qu0, f" (or {qa0:.3g} of an actuated coordinate)" if qa0 else "", scale)
     rho = float(np.max(np.abs(np.linalg.eigvals(A - B @ K))))
