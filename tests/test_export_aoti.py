@@ -64,9 +64,13 @@ def test_aoti_input_errors_and_range_rule(compiled):
                      (x[0], r"got shape \[3\]"), (x[:0], r"got shape \[0, 3\]"), (x[None], r"got shape \[1, 3, 3\]")):
         with pytest.raises(PredictorInputError, match=r"BEMPredictor.bem_mean: expected x of shape \(B, 3\), B >= 1.*" + got):
             aoti.bem_mean(bad)
-    # a transposed (non-contiguous) view gives the same numbers as its contiguous copy
-    xt = x.T.contiguous().T
-    assert not xt.is_contiguous() and torch.equal(aoti.bem_mean(xt), aoti.bem_mean(x))
+    # non-contiguous views (transposed, a column slice of a wider tensor, a broadcast row) give the
+    # numbers of their contiguous copies: the compiled code would read the strides as contiguous
+    wide = torch.cat([x, torch.ones(3, 2, dtype=F64)], 1)[:, :3]
+    for view in (x.T.contiguous().T, wide, x[:1].expand(4, 3)):
+        assert not view.is_contiguous()
+        assert float((aoti.bem_mean(view) - scripted.bem_mean(view.contiguous())).abs().max()) <= 1e-14
+        assert torch.equal(aoti(view)[1], aoti(view.contiguous())[1])
     x[1, 2] = float("nan")
     with pytest.raises(PredictorInputError, match=r"BEMPredictor.bem_mean: x\[1, 2\] is nan; inputs must be finite \(1 non-finite"):
         aoti.bem_mean(x)
@@ -82,7 +86,7 @@ def test_aoti_input_errors_and_range_rule(compiled):
             with pytest.raises(PredictorInputError, match="x has finite entries too large to evaluate"):
                 aoti.bem_mean(xr)
         else:
-            assert torch.equal(aoti.bem_mean(xr), scripted.bem_mean(xr))
+            assert float(aoti.bem_mean(xr)) == float(scripted.bem_mean(xr))
             assert float(aoti.bem_mean(xr)) == pytest.approx(float(state.y_mean), abs=1e-12)
 
 

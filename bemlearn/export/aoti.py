@@ -140,8 +140,8 @@ def _package_contents(data: bytes, where: str) -> tuple[set[str], str]:
 class AotiPredictor(CheckedPredictor):
     """The loaded AOTInductor package: the contract's methods on the compiled models.
 
-    Each call checks ``x`` (rank, width, B, dtype, device; attribute reads only) and runs the
-    model's ``AOTIModelPackageLoader.run`` on ``x.contiguous()``.
+    Each call checks ``x`` (rank, width, dtype, device, contiguity: attribute reads only; a
+    non-contiguous tensor is copied) and runs the model's ``AOTIModelPackageLoader.run``.
 
     Args:
         path: the package file (read when constructed; torch extracts it to a temporary folder).
@@ -160,13 +160,13 @@ class AotiPredictor(CheckedPredictor):
 
 def _mean_method(run: Callable[[list[torch.Tensor]], list[torch.Tensor]]) -> Callable[[torch.Tensor], torch.Tensor]:
     def call(x: torch.Tensor) -> torch.Tensor:
-        return run([x.contiguous()])[0]
+        return run([x])[0]
     return call
 
 
 def _pair_method(run: Callable[[list[torch.Tensor]], list[torch.Tensor]]) -> Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]]:
     def call(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        out = run([x.contiguous()])
+        out = run([x])
         return out[0], out[1]
     return call
 

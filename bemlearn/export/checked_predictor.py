@@ -8,7 +8,8 @@ the mean non-finite through the sentinel kernel column of
 the wrong width or a 1-D tensor *reads the memory as if it were right* and returns numbers.
 :class:`CheckedPredictor` therefore checks rank, width, B, dtype and device before the call
 (attribute reads only), and turns the graph's assertion into the TorchScript module's message,
-naming the first non-finite entry (computed only when the assertion fired).
+naming the first non-finite entry (computed only when the assertion fired).  A contiguous CPU
+float64 ``(B, n)`` tensor passes with four attribute reads (strides, width, dtype, device).
 """
 
 from __future__ import annotations
@@ -58,9 +59,12 @@ class CheckedPredictor:
             for full, key in ((False, "inputs"), (True, "full_inputs"))
         }
         self._methods = dict(methods)
+        # the strides of a contiguous (B, n) tensor: with the width, they check rank, width and layout
+        self._strides = {m: (self._columns[m in FULL_METHODS][0], 1) for m in (*FULL_METHODS, "forward", "bem_mean",
+                                                                             "forward_latent")}
 
-    def _call(self, fn: Callable[[torch.Tensor], Any], x: torch.Tensor, method: str) -> Any:
-        """Check ``x`` as the TorchScript module does (same messages), then run ``fn``."""
+    def _checked(self, x: Any, method: str) -> torch.Tensor:
+        """``x`` as a contiguous tensor after the full check (the slow path of :meth:`_call`)."""
         n, columns = self._columns[method in FULL_METHODS]
         if (not isinstance(x, torch.Tensor) or x.dim() != 2 or x.size(1) != n or x.size(0) == 0
                 or x.dtype != torch.float64 or x.device.type != "cpu"):
@@ -71,10 +75,28 @@ class CheckedPredictor:
                 f"BEMPredictor.{method}: expected x of shape (B, {n}), B >= 1, and dtype torch.float64 with columns "
                 f"[{columns}]; got shape {shape} and dtype {dtype}{where}"
             )
+        return x.contiguous()
+
+    def _call(self, fn: Callable[[torch.Tensor], Any], x: torch.Tensor, method: str) -> Any:
+        """Check ``x`` as the TorchScript module does (same messages), then run ``fn`` on it.
+
+        Fast path (four attribute reads): a contiguous CPU float64 ``(B, n)`` tensor; anything else
+        takes the full check, which raises or makes the tensor contiguous.  B = 0 and non-finite
+        entries are left to the compiled assertions.
+        """
+        try:
+            stride = self._strides[method]   # (n, 1): with x.shape[1] == n, a contiguous (B, n) tensor
+            fast = x.stride() == stride and x.shape[1] == stride[0] and x.dtype is torch.float64 and x.is_cpu
+        except AttributeError:   # not a tensor
+            fast = False
+        if not fast:
+            x = self._checked(x, method)
         try:
             return fn(x)
-        except RuntimeError as exc:   # the graph's own assertion: a non-finite mean
+        except RuntimeError as exc:   # the graph's own assertions: B = 0, or a non-finite mean
             if "BEMPredictor." in str(exc):
+                if x.size(0) == 0:
+                    self._checked(x, method)   # raises the shape message
                 raise PredictorInputError(nonfinite_message(x, method)) from None
             raise
 
