@@ -74,10 +74,11 @@ def test_export_aoti_cli_and_cpp_program(tmp_path, exe, capsys):
     assert main(["export", str(tmp_path / "run"), "--format", "aoti"]) == 0
     package = tmp_path / "run" / "bem_predictor_aoti.pt2"
     assert capsys.readouterr().out.strip() == f"wrote {package}"
+    assert main(["export", str(tmp_path / "run")]) == 0     # the TorchScript file of the same checkpoint
+    pt = tmp_path / "run" / "bem_predictor.pt"
     aoti = load_aoti_predictor(package)
     dm, dv = verify_predictor(aoti, state, n=2000, seed=3)     # every method against the dense posterior
     assert dm <= 1e-10 and dv <= 1e-8
-    pt = save_torchscript(BEMPredictor(state, meta), tmp_path / "bem_predictor.pt")
     x = (state.x_mean[:6] + 0.3 * state.x_std[:6]).tolist()
     out = {}
     for path in (pt, package):
@@ -91,6 +92,8 @@ def test_export_aoti_cli_and_cpp_program(tmp_path, exe, capsys):
             assert abs(a - b) <= 1e-14 * max(abs(b), 1e-3), (key, a, b)
     xt = torch.tensor([x], dtype=torch.float64)
     assert float(ao["bem_mean"]) == float(aoti.bem_mean(xt)[0])
+    plain = torch._inductor.aoti_load_package(str(package))       # torch alone: the default model is forward
+    assert all(torch.equal(a, b) for a, b in zip(plain(xt), aoti(xt)))
     assert float(ao["bem_mean_us"]) > 0 and float(ao["forward_us"]) > 0
     bad = subprocess.run([str(exe), str(package), "nan", *map(repr, x[1:])], capture_output=True, text=True, timeout=300)
     assert bad.returncode == 1 and "error: BEMPredictor.bem_mean: x has non-finite entries" in bad.stderr
