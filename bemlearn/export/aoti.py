@@ -45,7 +45,7 @@ from typing import Any
 
 import torch
 
-from bemlearn.errors import CheckpointError, EnvironmentProblem, MissingFileError
+from bemlearn.errors import ArgumentError, CheckpointError, EnvironmentProblem, MissingFileError
 from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.export.checked_predictor import CheckedPredictor
 from bemlearn.export.pt2 import PT2_METADATA_FILE, PT2_PROGRAMS, export_programs
@@ -94,7 +94,7 @@ def aoti_bytes(predictor: BEMPredictor, *, programs: tuple[str, ...] = tuple(AOT
         raise EnvironmentProblem("--format aoti: AOTInductor needs a C++ compiler (c++, g++ or clang++ on PATH, or CXX)")
     unknown = sorted(set(programs) - set(AOTI_PROGRAMS))
     if unknown:
-        raise CheckpointError(f"programs: unknown {unknown}; expected names from {sorted(AOTI_PROGRAMS)}")
+        raise ArgumentError(f"programs: unknown {unknown}; expected names from {sorted(AOTI_PROGRAMS)}")
     exported = export_programs(predictor, names=programs)
     files: dict[str, list] = {}
     with tempfile.TemporaryDirectory(prefix="bemlearn-aoti-") as tmp, _quiet_compile():
@@ -111,7 +111,7 @@ def aoti_bytes(predictor: BEMPredictor, *, programs: tuple[str, ...] = tuple(AOT
             try:
                 with torch.no_grad():
                     out = torch._inductor.aot_compile(ep.module(), ep.example_inputs[0], options=options)
-            except Exception as exc:   # compiler errors arrive as many classes (CppCompileError, RuntimeError, ...)
+            except (RuntimeError, OSError) as exc:   # CppCompileError is a RuntimeError; a missing tool an OSError
                 raise EnvironmentProblem(f"AOTInductor could not compile {name}: {type(exc).__name__}: "
                                          f"{str(exc).strip()[-2000:]}") from exc
             assert isinstance(out, list)   # aot_inductor.package: the generated files
@@ -146,7 +146,7 @@ class AotiPredictor(CheckedPredictor):
     Args:
         path: the package file (read when constructed; torch extracts it to a temporary folder).
         metadata_json: the metadata document.
-        programs: the model names to load (default: every name in :data:`AOTI_PROGRAMS` present).
+        programs: the model names to load (default: all of :data:`AOTI_PROGRAMS`).
     """
 
     def __init__(self, path: str | os.PathLike[str], metadata_json: str, *, programs: tuple[str, ...] = tuple(AOTI_PROGRAMS)) -> None:
