@@ -68,14 +68,25 @@ def find_cxx() -> str | None:
     return None
 
 
+def _drop_proxy_fallback(record: logging.LogRecord) -> bool:
+    return "is missing a c-shim implementation, using proxy executor as fallback" not in record.getMessage()
+
+
 @contextlib.contextmanager
 def _quiet_compile() -> Iterator[None]:
-    """Silence the two messages torch 2.13 prints while compiling every program, both about its own code
-    (pytree's ``LeafSpec`` deprecation inside AOTInductor's pickling; the shared-weight group note)."""
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=r".*isinstance\(treespec, LeafSpec\)` is deprecated", category=FutureWarning)
-        warnings.filterwarnings("ignore", message="No complete tensor found in the group")
-        yield
+    """Silence the messages torch 2.13 prints while compiling the programs, all about its own code:
+    pytree's ``LeafSpec`` deprecation inside AOTInductor's pickling, the shared-weight group note,
+    and the log line that ``linalg_solve_triangular`` (the exact variance, eq. 12) has no C shim
+    and runs through torch's proxy executor (correct, and measured: docs/predictor-speed.md)."""
+    inductor_log = logging.getLogger("torch._inductor.ir")
+    inductor_log.addFilter(_drop_proxy_fallback)
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=r".*isinstance\(treespec, LeafSpec\)` is deprecated", category=FutureWarning)
+            warnings.filterwarnings("ignore", message="No complete tensor found in the group")
+            yield
+    finally:
+        inductor_log.removeFilter(_drop_proxy_fallback)
 
 
 def aoti_bytes(predictor: BEMPredictor, *, programs: tuple[str, ...] = tuple(AOTI_PROGRAMS)) -> bytes:
