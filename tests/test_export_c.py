@@ -317,7 +317,7 @@ def test_bench_times_the_c_export_with_its_floor():
             assert (r.n_exp, r.n_fma_mean, r.n_fma_forward, r.n_fma_band) == (64, 64 * 4, 64 * 4 + 64 * 65 // 2 + band, band)
             assert 0 < r.mean_ns < r.forward_ns and 0 < r.mean_ns < r.forward_latent_ns and r.exp_ns > 0 and r.fma_ns > 0
     result = run_predict_bench(n_train=64, repeats=50, warmup=5, gpytorch_repeats=2, batch=200, n_parity=100,
-                               pt2=False, progress=False)
+                               pt2=False, progress=False, aoti=False)
     text = format_predict_bench(result)
     assert "C export, single queries in a C loop" in text and "C mean / TS bem_mean" in text
     assert len(result.c_timings) == 2

@@ -82,7 +82,8 @@ def test_verify_predictor_catches_a_wrong_mean(posterior):
 
 def test_predict_bench_small_run(posterior):
     result = run_predict_bench(
-        n_train=80, repeats=30, warmup=3, gpytorch_repeats=3, batch=500, n_parity=300, pt2=False, progress=False
+        n_train=80, repeats=30, warmup=3, gpytorch_repeats=3, batch=500, n_parity=300, pt2=False, progress=False,
+        aoti=False,
     )
     expected = {
         "torchscript forward", "torchscript bem_mean", "numpy folded bem_mean", "numpy folded forward",

@@ -5,12 +5,13 @@ import os
 import subprocess
 import sys
 import textwrap
+import warnings
 
 import pytest
 import torch
 
 from bemlearn.bench.predict_bench import synthetic_posterior
-from bemlearn.export import BEMPredictor, load_torchscript, save_torchscript, script_predictor
+from bemlearn.export import BEMPredictor, export_run, load_torchscript, save_torchscript, script_predictor, write_checkpoint
 from tests.isolation import BLOCK_BEMLEARN
 
 F64 = torch.float64
@@ -172,3 +173,18 @@ def test_full_mean_equals_predict_full_mean(model):
     torch.testing.assert_close(scripted.full_mean(x), mean, rtol=0, atol=1e-15)
     with pytest.raises(Exception, match="full_mean"):
         scripted.full_mean(x[:, :6])
+
+
+def test_export_emits_no_torch_jit_deprecation_warning(model, tmp_path):
+    """torch 2.13 warns "`torch.jit.script` is deprecated" (and .freeze/.save/.load); bemlearn silences
+    exactly those at its call sites, so exporting and loading the .pt shows none even with every
+    warning enabled (pyproject's test filter is overridden by ``simplefilter("always")``)."""
+    state, meta, _, _ = model
+    write_checkpoint(tmp_path / "run", model_state={}, predictor_state=state, metadata=meta)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        (path,) = export_run(tmp_path / "run", fmt="torchscript")
+        load_torchscript(path)
+        warnings.warn("`torch.jit.probe` is deprecated. Please switch to `torch.export`.", DeprecationWarning, stacklevel=1)  # the recorder works
+    jit = [str(w.message) for w in caught if issubclass(w.category, DeprecationWarning) and "torch.jit" in str(w.message)]
+    assert jit == ["`torch.jit.probe` is deprecated. Please switch to `torch.export`."]

@@ -48,13 +48,17 @@ from tqdm import tqdm
 
 from bemlearn.bench.c_parity import c_parity, in_range_inputs
 from bemlearn.bench.c_timing import CTiming, time_c_predictor
+from bemlearn.bench.cpp_timing import CppTiming, time_cpp_predictors
+from bemlearn.export.aoti import aoti_bytes, find_cxx, load_aoti_predictor
 from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.export.c_build import find_cc
 from bemlearn.export.c_source import c_sources
 from bemlearn.export.checkpoint import load_checkpoint
+from bemlearn.export.export_run import AOTI_NAME
 from bemlearn.export.metadata import PredictorMetadata
 from bemlearn.export.pt2 import load_pt2_predictor, save_pt2
-from bemlearn.export.torchscript import load_torchscript, save_torchscript
+from bemlearn.export.torchscript import load_torchscript, quiet_jit, save_torchscript
+from bemlearn.export.verify import verify_predictor
 from bemlearn.models.predictor_state import PredictorState
 
 __all__ = ["Latency", "PredictBenchResult", "run_predict_bench", "format_predict_bench", "synthetic_posterior"]
@@ -87,6 +91,9 @@ class PredictBenchResult:
     notes: list[str] = field(default_factory=list)
     c_timings: list[CTiming] = field(default_factory=list)
     c_parity: dict[str, float] = field(default_factory=dict)
+    export_seconds: dict[str, float] = field(default_factory=dict)
+    aoti_parity: dict[str, float] = field(default_factory=dict)
+    cpp: CppTiming | None = None
 
 
 def synthetic_posterior(*, n_train: int = 500, m: int = 1, seed: int = 0, noise: float = 1e-3) -> tuple[PredictorState, PredictorMetadata]:
@@ -279,6 +286,8 @@ def run_predict_bench(
     pt2: bool = True,
     progress: bool = True,
     c: bool = True,
+    aoti: bool = True,
+    cpp: bool = True,
 ) -> PredictBenchResult:
     """Run the benchmark (see module docstring) and return the numbers.
 
@@ -294,6 +303,11 @@ def run_predict_bench(
         pt2: also time the torch.export artifact (exporting takes a few seconds).
         progress: show a tqdm bar over the cases.
         c: also time the C export (:mod:`bemlearn.bench.c_timing`; needs a C compiler).
+        aoti: also compile the AOTInductor package (:mod:`bemlearn.export.aoti`, 1–2 min) and time it
+            from Python, in the same alternating rounds as TorchScript; check it against the dense
+            posterior (:func:`~bemlearn.export.verify.verify_predictor`) and TorchScript.
+        cpp: with ``aoti``, also time both artifacts from C++ (:mod:`bemlearn.bench.cpp_timing`;
+            builds a libtorch program, ≈ 30–60 s).
     """
     if checkpoint is None:
         state, meta = synthetic_posterior(n_train=n_train, seed=seed)
@@ -317,20 +331,50 @@ def run_predict_bench(
     c_par: dict[str, float] = {}
     batch_s: dict[str, float] = {}
     parity: dict[str, float] = {}
+    export_s: dict[str, float] = {}
+    aoti_par: dict[str, float] = {}
+    cpp_timing: CppTiming | None = None
     with tempfile.TemporaryDirectory() as tmp, _threads(threads) as notes:
-        ts = load_torchscript(save_torchscript(predictor, Path(tmp) / "bem_predictor.pt"))
+        t0 = time.perf_counter()
+        ts_path = save_torchscript(predictor, Path(tmp) / "bem_predictor.pt")
+        export_s["torchscript (.pt)"] = time.perf_counter() - t0
+        ts = load_torchscript(ts_path)
+        with quiet_jit():
+            empty = torch.jit.script(_Identity())
         single: dict[str, tuple[Callable[[Any], Any], Any]] = {
-            "torchscript empty call (x -> x)": (torch.jit.script(_Identity()), x1),
+            "torchscript empty call (x -> x)": (empty, x1),
             "torchscript forward": (ts.forward, x1),
             "torchscript bem_mean": (ts.bem_mean, x1),
         }
         if hasattr(ts, "forward_latent"):   # the same module's mean + latent std: the forward before the band
             single["torchscript forward_latent"] = (ts.forward_latent, x1)
+        aoti_path = None
+        if aoti and find_cxx() is None:
+            notes.append("no C++ compiler: AOTInductor package not compiled")
+        elif aoti:
+            t0 = time.perf_counter()
+            data = aoti_bytes(predictor)
+            export_s["AOTInductor package (.pt2, 6 methods)"] = time.perf_counter() - t0
+            aoti_path = Path(tmp) / AOTI_NAME
+            aoti_path.write_bytes(data)
+            ao = load_aoti_predictor(aoti_path)
+            single["aoti forward"] = (ao.forward, x1)
+            single["aoti bem_mean"] = (ao.bem_mean, x1)
+            dm, dv = verify_predictor(ao, state, n=1000, seed=seed)
+            ts_mean, ts_std = ts.forward(xp)
+            ao_mean, ao_std = ao.forward(xp)
+            aoti_par = {"n": 1000.0, "mean_abs_vs_dense": dm, "var_rel_vs_dense": dv, "n_ts": float(n_parity),
+                        "mean_abs_vs_torchscript": float((ao_mean - ts_mean).abs().max()),
+                        "std_rel_vs_torchscript": float(((ao_std - ts_std) / ts_std).abs().max()),
+                        "bem_mean_abs_vs_torchscript": float((ao.bem_mean(xp) - ts.bem_mean(xp)).abs().max())}
         single |= {name: (fn, x1.numpy()) for name, fn in _numpy_baselines(predictor, state).items()}
-        steps = ["single", *(["c"] if c else []), *(["pt2"] if pt2 else []), *(["gpytorch"] if gp is not None else []), "batch"]
+        steps = ["single", *(["cpp"] if cpp and aoti_path is not None else []), *(["c"] if c else []), *(["pt2"] if pt2 else []), *(["gpytorch"] if gp is not None else []), "batch"]
         for step in tqdm(steps, desc="bench predict", disable=not progress, leave=False):
             if step == "single":
                 lat.update(_interleaved(single, repeats=repeats, warmup=warmup))
+            elif step == "cpp":
+                assert aoti_path is not None   # the step is listed with a package only
+                cpp_timing = time_cpp_predictors(ts_path, aoti_path, x1[0].tolist(), rounds=10, per_round=max(repeats // 10, 10))
             elif step == "c":
                 if find_cc() is None:
                     notes.append("no C compiler: C export not timed")
@@ -340,7 +384,10 @@ def run_predict_bench(
                 c_timings = time_c_predictor(c_src, xc, kind=state.kind, calls=100, batches=max(repeats // 100, 5))
                 c_par = c_parity(c_src, ts, in_range_inputs(state, 3000, seed=seed), n_bem=n_bem)
             elif step == "pt2":
-                p2 = load_pt2_predictor(save_pt2(predictor, Path(tmp) / "bem_predictor.pt2"))
+                t0 = time.perf_counter()
+                p2_path = save_pt2(predictor, Path(tmp) / "bem_predictor.pt2")
+                export_s["torch.export (.pt2)"] = time.perf_counter() - t0
+                p2 = load_pt2_predictor(p2_path)
                 n2 = max(repeats // 10, 100)
                 for name, fn in (("pt2 forward", p2.forward), ("pt2 bem_mean", p2.bem_mean)):
                     lat[name] = _latency(name, fn, x1, repeats=n2, warmup=min(warmup, n2))
@@ -366,7 +413,7 @@ def run_predict_bench(
                     if predictor.bem.triangular:
                         batch_s["floor: v = L⁻¹k alone"] = _solve_floor(predictor, xb)
     return PredictBenchResult(model, threads, lat, batch, batch_s, n_batch, parity, (load_before, _loadavg()), notes, c_timings,
-                              c_par)
+                              c_par, export_s, aoti_par, cpp_timing)
 
 
 def _extended_precision_mean(state: PredictorState, x: torch.Tensor) -> np.ndarray:
@@ -459,6 +506,40 @@ def _format_c(result: PredictBenchResult) -> list[str]:
     return lines
 
 
+def _format_aoti(result: PredictBenchResult) -> list[str]:
+    """Export times, the AOTInductor package against TorchScript from Python and from C++, its parity."""
+    lat, lines = result.latencies, []
+    if result.export_seconds:
+        lines.append("export time (serialize; AOTInductor: export + C++ compile of every method):")
+        lines += [f"  {name:42s} {sec:8.1f} s" for name, sec in result.export_seconds.items()]
+    for method in ("forward", "bem_mean"):
+        a, t = lat.get(f"aoti {method}"), lat.get(f"torchscript {method}")
+        if a and t:
+            lines.append(f"AOTI {method} / TorchScript {method} (Python):{' ' * (11 - len(method))}{a.median_us / t.median_us:.2f}"
+                         "    (target <= 0.6)")
+    if result.cpp is not None:
+        cl = result.cpp.latencies
+        lines.append(f"from C++ (libtorch, one thread; harness built in {result.cpp.build_seconds:.0f} s):")
+        lines.append(f"  {'case (B = 1)':40s} {'median µs':>10s} {'p99 µs':>10s}")
+        lines += [f"  {name:40s} {med:10.2f} {p99:10.2f}" for name, (med, p99) in cl.items()]
+        for method in ("forward", "bem_mean"):
+            ca, ct = cl.get(f"aoti {method}"), cl.get(f"torchscript {method}")
+            if ca and ct:
+                lines.append(f"  AOTI {method} / TorchScript {method} (C++):{' ' * (11 - len(method))}{ca[0] / ct[0]:.2f}"
+                             "    (target <= 1)")
+        v = result.cpp.values
+        if "aoti forward" in v and "torchscript forward" in v:
+            d = max(abs(p - q) for p, q in zip(v["aoti forward"] + v["aoti bem_mean"], v["torchscript forward"] + v["torchscript bem_mean"]))
+            lines.append(f"  C++ AOTI vs C++ TorchScript on the timed query: max |Δ| {d:.2e} rad")
+    par = result.aoti_parity
+    if par:
+        lines.append(f"AOTI parity: vs the dense posterior on {int(par['n'])} inputs (every method): max |Δmean| "
+                     f"{par['mean_abs_vs_dense']:.2e} rad (target 1e-10), max rel |Δvar| {par['var_rel_vs_dense']:.2e}; "
+                     f"vs TorchScript on {int(par['n_ts'])}: forward |Δmean| {par['mean_abs_vs_torchscript']:.2e} rad, "
+                     f"|Δstd|/std {par['std_rel_vs_torchscript']:.2e}, bem_mean |Δ| {par['bem_mean_abs_vs_torchscript']:.2e} rad")
+    return [*lines, ""] if lines else []
+
+
 def format_predict_bench(result: PredictBenchResult) -> str:
     """The report table, with the ratios the targets are stated in."""
     lat = result.latencies
@@ -483,6 +564,7 @@ def format_predict_bench(result: PredictBenchResult) -> str:
         "    (the call alone, before any formula)",
         "",
     ]
+    lines += _format_aoti(result)
     lines += _format_c(result)
     lines.append(f"batch of {result.batch} queries on {result.batch_threads} thread(s) (target: 1e5 in <= 0.5 s):")
     for name, sec in result.batch_seconds.items():

@@ -35,7 +35,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "predict",
         help="latency, throughput and GPyTorch parity of the exported BEM predictor",
-        description="Time the exported BEM predictor (TorchScript and torch.export) against NumPy and "
+        description="Time the exported BEM predictor (TorchScript, torch.export, AOTInductor; from Python and "
+        "from C++) against NumPy and "
         "GPyTorch, single queries (B = 1) and a 1e5 batch.  Without CHECKPOINT a synthetic 500-point "
         "exact GP (d = 5, m = 1) is used.  Other load on the machine changes the numbers; the "
         "load average is printed.",
@@ -51,6 +52,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the synthetic posterior and of the query points (default 0)")
     p.add_argument("--no-pt2", action="store_true", help="skip the torch.export artifact")
     p.add_argument("--no-c", action="store_true", help="skip the C export (compiled with the system cc)")
+    p.add_argument("--no-aoti", action="store_true",
+                   help="skip the AOTInductor package (compiling it takes 1-2 min) and the C++ timings")
+    p.add_argument("--no-cpp", action="store_true",
+                   help="skip timing TorchScript and AOTInductor from C++ (builds a libtorch program, 30-60 s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_predict)
     cf = sub.add_parser("c-footprint", help="flash/RAM footprint of the C export per model size and kind",
@@ -178,6 +183,8 @@ def run_predict(args: argparse.Namespace) -> int:
         pt2=not args.no_pt2,
         progress=not args.no_progress,
         c=not args.no_c,
+        aoti=not args.no_aoti,
+        cpp=not args.no_cpp,
     )
     print(format_predict_bench(result))
     return 0

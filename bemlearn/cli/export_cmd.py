@@ -1,4 +1,4 @@
-"""``bemlearn export RUN_DIR [--out FILE] [--format torchscript|pt2|both]``;
+"""``bemlearn export RUN_DIR [--out FILE] [--format torchscript|pt2|both|aoti]``;
 ``bemlearn export RUN_DIR --format c --out DIR [--prefix bem] [--dtype float64|float32] [--force]``.
 
 Writes the BEM predictor of a trained run (``RUN_DIR/bem_predictor.pt`` by default), a
@@ -20,19 +20,21 @@ __all__ = ["add_parser", "check_args", "run"]
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "export",
-        help="write the BEM predictor (TorchScript .pt / torch.export .pt2) of a trained run",
+        help="write the BEM predictor (TorchScript .pt / torch.export .pt2 / AOTInductor package) of a trained run",
         description="Write RUN_DIR/bem_predictor.pt: forward(x) -> (mean, std) of the learned BEM "
         "(eq. 12, 14) for x = [qdd_a, qd_a, q_a] float64 (B, 3m), plus bem_mean(x), predict_full(x) "
         "and metadata().  The file loads with torch.jit.load, without bemlearn.",
     )
     parser.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="run directory holding checkpoint.pt (or the checkpoint file)")
-    parser.add_argument("--out", metavar="FILE", type=Path, default=None, help="output file (default RUN_DIR/bem_predictor.pt or .pt2); with --format c the output folder (required)")
+    parser.add_argument("--out", metavar="FILE", type=Path, default=None, help="output file (default RUN_DIR/bem_predictor.pt, .pt2 or _aoti.pt2); with --format c the output folder (required)")
     parser.add_argument(
         "--format",
         dest="fmt",
-        choices=("torchscript", "pt2", "both", "c"),
+        choices=("torchscript", "pt2", "both", "aoti", "c"),
         default="torchscript",
-        help="torchscript (.pt, default), pt2 (torch.export), both (.pt and .pt2 side by side), or c "
+        help="torchscript (.pt, default), pt2 (torch.export), both (.pt and .pt2 side by side), aoti "
+        "(AOTInductor package RUN_DIR/bem_predictor_aoti.pt2, compiled with the C++ compiler for this "
+        "machine's CPU, 1-2 min; loads in Python and in C++ with torch::inductor::AOTIModelPackageLoader), or c "
         "(--out DIR gets <prefix>_predictor.h/.c, C99 + libm; docs/c-export.md)",
     )
     _add_c_arguments(parser)

@@ -1,10 +1,11 @@
-"""Exported BEM predictors (TorchScript ``.pt``, torch.export ``.pt2``, C99 source) and checkpoints.
+"""Exported BEM predictors (TorchScript ``.pt``, torch.export ``.pt2``, AOTInductor package, C99 source) and checkpoints.
 
 Everything here consumes a :class:`~bemlearn.models.predictor_state.PredictorState` plus
 metadata, never a GPyTorch model.  The contract of the exported files is in
 docs/predictor-contract.md.
 """
 
+from bemlearn.export.aoti import AotiPredictor, load_aoti_predictor
 from bemlearn.export.bem_predictor import EXPORTED_METHODS, BEMPredictor
 from bemlearn.export.c_export import export_c
 from bemlearn.export.c_source import c_sources
@@ -27,6 +28,7 @@ from bemlearn.export.verify import reference_posterior, verify_predictor
 
 __all__ = [
     "ARTIFACT_FORMAT",
+    "AotiPredictor",
     "BEMPredictor",
     "CHECKPOINT_FORMAT",
     "CHECKPOINT_NAME",
@@ -44,6 +46,7 @@ __all__ = [
     "check_run_predictors",
     "export_run",
     "load_checkpoint",
+    "load_aoti_predictor",
     "load_learned_bem",
     "load_pt2_predictor",
     "remove_stale_predictors",

@@ -2,7 +2,8 @@
 
 ``export_run(RUN_DIR)`` reads ``RUN_DIR/checkpoint.pt``, builds the
 :class:`~bemlearn.export.bem_predictor.BEMPredictor`, writes ``RUN_DIR/bem_predictor.pt``
-(TorchScript) and/or ``RUN_DIR/bem_predictor.pt2`` (torch.export): each is serialized in
+(TorchScript) and/or ``RUN_DIR/bem_predictor.pt2`` (torch.export), or
+``RUN_DIR/bem_predictor_aoti.pt2`` (AOTInductor, :mod:`bemlearn.export.aoti`): each is serialized in
 memory, loaded back from those bytes and compared on random inputs with a slow dense
 evaluation of eq. (12) (:func:`~bemlearn.export.verify.verify_predictor`), and only then are
 the files written, all or none, after checking the disk has room for them
@@ -19,6 +20,7 @@ from pathlib import Path
 from typing import Literal
 
 from bemlearn.errors import ArgumentError
+from bemlearn.export.aoti import aoti_bytes, load_aoti_predictor
 from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.export.checkpoint import load_checkpoint
 from bemlearn.export.pt2 import load_pt2_predictor, pt2_bytes
@@ -27,20 +29,26 @@ from bemlearn.export.torchscript import load_torchscript, torchscript_bytes
 from bemlearn.export.verify import verify_predictor
 from bemlearn.files import atomic_write_files, check_outputs, check_writable
 
-__all__ = ["export_run", "export_targets", "ExportFormat", "DEFAULT_NAME"]
+__all__ = ["export_run", "export_targets", "ExportFormat", "DEFAULT_NAME", "AOTI_NAME"]
 
 log = logging.getLogger(__name__)
 
-ExportFormat = Literal["torchscript", "pt2", "both"]
+ExportFormat = Literal["torchscript", "pt2", "both", "aoti"]
 DEFAULT_NAME = "bem_predictor"
+#: Default file of ``fmt="aoti"`` (an AOTInductor package is a ``.pt2`` too: a distinct name keeps both).
+AOTI_NAME = f"{DEFAULT_NAME}_aoti.pt2"
 
 
 def export_targets(run_dir_or_file: str | os.PathLike[str], *, out: str | os.PathLike[str] | None = None,
                    fmt: ExportFormat = "torchscript") -> list[Path]:
     """The files :func:`export_run` writes for these arguments (TorchScript first)."""
-    if fmt not in ("torchscript", "pt2", "both"):
-        raise ArgumentError(f"fmt: expected 'torchscript', 'pt2' or 'both', got {fmt!r}")
+    if fmt not in ("torchscript", "pt2", "both", "aoti"):
+        raise ArgumentError(f"fmt: expected 'torchscript', 'pt2', 'both' or 'aoti', got {fmt!r}")
     src = Path(run_dir_or_file)
+    if fmt == "aoti":
+        if out is not None and Path(out).suffix != ".pt2":
+            raise ArgumentError(f"--out {out}: an AOTInductor package must end in .pt2")
+        return [Path(out) if out is not None else (src if src.is_dir() else src.parent) / AOTI_NAME]
     base = Path(out) if out is not None else (src if src.is_dir() else src.parent) / f"{DEFAULT_NAME}.pt"
     targets = []
     if fmt in ("torchscript", "both"):
@@ -62,9 +70,11 @@ def export_run(
 
     Args:
         run_dir_or_file: the run directory (or its ``checkpoint.pt``).
-        out: output file; default ``<run dir>/bem_predictor.pt`` (``.pt2`` for ``fmt="pt2"``).
-            With ``fmt="both"`` it names the TorchScript file and the ``.pt2`` goes next to it.
-        fmt: ``"torchscript"``, ``"pt2"`` or ``"both"``.
+        out: output file; default ``<run dir>/bem_predictor.pt`` (``.pt2`` for ``fmt="pt2"``,
+            ``bem_predictor_aoti.pt2`` for ``fmt="aoti"``). With ``fmt="both"`` it names the
+            TorchScript file and the ``.pt2`` goes next to it.
+        fmt: ``"torchscript"``, ``"pt2"``, ``"both"`` or ``"aoti"`` (AOTInductor package,
+            :mod:`bemlearn.export.aoti`: compiled with the system C++ compiler, ≈ 1–2 min).
         verify: load each file back and check it with :func:`verify_predictor`.
         force: replace existing files; ``False`` raises
             :class:`~bemlearn.errors.OutputExistsError` naming them (the CLI's default).
@@ -81,8 +91,9 @@ def export_run(
     meta = ckpt.metadata
     meta = dataclasses.replace(meta, extra={**meta.extra, "checkpoint_sha256": file_sha256(ckpt.path)})
     predictor = BEMPredictor(state, meta)
-    kinds = {"torchscript": ["torchscript"], "pt2": ["pt2"], "both": ["torchscript", "pt2"]}[fmt]
-    tools = {"torchscript": (torchscript_bytes, load_torchscript), "pt2": (pt2_bytes, load_pt2_predictor)}
+    kinds = {"torchscript": ["torchscript"], "pt2": ["pt2"], "both": ["torchscript", "pt2"], "aoti": ["aoti"]}[fmt]
+    tools = {"torchscript": (torchscript_bytes, load_torchscript), "pt2": (pt2_bytes, load_pt2_predictor),
+             "aoti": (aoti_bytes, load_aoti_predictor)}
     targets = [(p, *tools[kind]) for p, kind in zip(paths, kinds)]
     check_outputs(paths, force, what="export")
     for folder in {p.parent for p in paths}:

@@ -27,17 +27,19 @@ import json
 import logging
 import os
 import warnings
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 import torch
 from torch import nn
 
-from bemlearn.errors import CheckpointError, PredictorInputError
+from bemlearn.errors import CheckpointError
 from bemlearn.export.bem_predictor import BEMPredictor
+from bemlearn.export.checked_predictor import FULL_METHODS, CheckedPredictor
 from bemlearn.files import atomic_write_files
 
-__all__ = ["save_pt2", "pt2_bytes", "load_pt2_predictor", "Pt2Predictor", "PT2_PROGRAMS", "PT2_METADATA_FILE"]
+__all__ = ["save_pt2", "pt2_bytes", "export_programs", "load_pt2_predictor", "Pt2Predictor", "PT2_PROGRAMS", "PT2_METADATA_FILE"]
 
 log = logging.getLogger(__name__)
 
@@ -65,12 +67,14 @@ class _Method(nn.Module):
         return getattr(self.predictor, self.method)(x)
 
 
-def _export_programs(predictor: BEMPredictor) -> dict[str, torch.export.ExportedProgram]:
+def export_programs(predictor: BEMPredictor, *, names: Iterable[str] = tuple(PT2_PROGRAMS)) -> dict[str, torch.export.ExportedProgram]:
+    """``torch.export`` of each method named in ``names`` (archive names, :data:`PT2_PROGRAMS`), batch dimension dynamic (B ≥ 1)."""
     predictor = predictor.eval()
     batch = torch.export.Dim("batch", min=1)
     programs = {}
-    for name, method in PT2_PROGRAMS.items():
-        width = predictor.n_full if method in ("predict_full", "full_mean", "predict_full_latent") else predictor.n_bem
+    for name in names:
+        method = PT2_PROGRAMS[name]
+        width = predictor.n_full if method in FULL_METHODS else predictor.n_bem
         example = torch.zeros(4, width, dtype=torch.float64)
         with torch.no_grad():
             programs[name] = torch.export.export(
@@ -84,7 +88,7 @@ def pt2_bytes(predictor: BEMPredictor) -> bytes:
     C++ archive writer aborts the process on a full disk; :mod:`bemlearn.files` writes the bytes)."""
     from torch.export.pt2_archive._package import package_pt2
 
-    programs = _export_programs(predictor)
+    programs = export_programs(predictor)
     buf = io.BytesIO()
     with warnings.catch_warnings():
         # bem and full share their weight/factor tensors; torch warns about the shared group,
@@ -106,8 +110,9 @@ def save_pt2(predictor: BEMPredictor, path: str | os.PathLike[str]) -> Path:
     return path
 
 
-class Pt2Predictor:
-    """The loaded ``.pt2`` predictor: callables with the BEMPredictor contract.
+class Pt2Predictor(CheckedPredictor):
+    """The loaded ``.pt2`` predictor: callables with the BEMPredictor contract, inputs checked as the
+    TorchScript module checks them (:class:`~bemlearn.export.checked_predictor.CheckedPredictor`).
 
     Args:
         programs: the ExportedPrograms by archive name (``model`` is ``forward``).
@@ -116,87 +121,8 @@ class Pt2Predictor:
 
     def __init__(self, programs: dict[str, torch.export.ExportedProgram], metadata_json: str) -> None:
         self.programs = dict(programs)
-        self.metadata_json = metadata_json
-        doc = json.loads(metadata_json)
-        units = doc.get("units", {})
-        self._columns = {
-            False: (len(doc["inputs"]), ", ".join(f"{n} [{units.get(n, '?')}]" for n in doc["inputs"])),
-            True: (len(doc["full_inputs"]), ", ".join(f"{n} [{units.get(n, '?')}]" for n in doc["full_inputs"])),
-        }
-        self._forward = self.programs["model"].module()
-        self._bem_mean = self.programs["bem_mean"].module()
-        self._predict_full = self.programs["predict_full"].module()
-        self._full_mean = self.programs["full_mean"].module() if "full_mean" in self.programs else None
-        self._forward_latent = self.programs["forward_latent"].module() if "forward_latent" in self.programs else None
-        self._predict_full_latent = (
-            self.programs["predict_full_latent"].module() if "predict_full_latent" in self.programs else None
-        )
-
-    def _call(self, program, x: torch.Tensor, method: str, full: bool):
-        """Check ``x`` as the TorchScript module does (same messages), then run ``program``."""
-        n, columns = self._columns[full]
-        if not isinstance(x, torch.Tensor) or x.dim() != 2 or x.size(1) != n or x.size(0) == 0 or x.dtype != torch.float64:
-            shape = list(x.shape) if isinstance(x, torch.Tensor) else type(x).__name__
-            dtype = x.dtype if isinstance(x, torch.Tensor) else "-"
-            raise PredictorInputError(
-                f"BEMPredictor.{method}: expected x of shape (B, {n}), B >= 1, and dtype torch.float64 with columns "
-                f"[{columns}]; got shape {shape} and dtype {dtype}"
-            )
-        bad = torch.nonzero(~torch.isfinite(x))
-        if bad.size(0) > 0:
-            r, c = int(bad[0, 0]), int(bad[0, 1])
-            raise PredictorInputError(
-                f"BEMPredictor.{method}: x[{r}, {c}] is {float(x[r, c])}; inputs must be finite ({bad.size(0)} non-finite entries)"
-            )
-        try:
-            return program(x)
-        except RuntimeError as exc:  # the program's own finite check: entries too large to evaluate
-            if "BEMPredictor." in str(exc):
-                raise PredictorInputError(
-                    f"BEMPredictor.{method}: x has finite entries too large to evaluate: the kernel cannot be evaluated in "
-                    "float64 (||(x - x_mean) / (x_std * lengthscale)|| above 1e150)"
-                ) from None
-            raise
-
-    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(μ(x_0^e), σ(x_0^e)) for ``x: (B, 3m)`` float64, each ``(B,)`` in q_u's unit (eq. 12, 14).
-
-        Raises:
-            PredictorInputError: (a ValueError) wrong rank, width or dtype, B = 0, or non-finite entries.
-        """
-        return self._call(self._forward, x, "forward", False)
-
-    def __call__(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        return self.forward(x)
-
-    def bem_mean(self, x: torch.Tensor) -> torch.Tensor:
-        """μ(x_0^e) ``(B,)`` in q_u's unit for ``x: (B, 3m)`` float64."""
-        return self._call(self._bem_mean, x, "bem_mean", False)
-
-    def predict_full(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(mean, std) of f(x) (eq. 11) for ``x: (B, 3m + 2)`` float64."""
-        return self._call(self._predict_full, x, "predict_full", True)
-
-    def full_mean(self, x: torch.Tensor) -> torch.Tensor:
-        """Mean of the full learned map only (eq. 11), ``(B,)`` in q_u's unit."""
-        if self._full_mean is None:
-            return self._call(self._predict_full, x, "full_mean", True)[0]
-        return self._call(self._full_mean, x, "full_mean", True)
-
-    def forward_latent(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(μ(x_0^e), latent σ(x_0^e)) (eq. 12, 14); archives without the program return ``forward``
-        (written before the calibrated band, when ``std`` was the latent std)."""
-        program = self._forward if self._forward_latent is None else self._forward_latent
-        return self._call(program, x, "forward_latent", False)
-
-    def predict_full_latent(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(mean, latent std) of f(x) (eq. 11, 12); see :meth:`forward_latent` for old archives."""
-        program = self._predict_full if self._predict_full_latent is None else self._predict_full_latent
-        return self._call(program, x, "predict_full_latent", True)
-
-    def metadata(self) -> str:
-        """The metadata JSON document."""
-        return self.metadata_json
+        super().__init__(metadata_json, {PT2_PROGRAMS[name]: program.module() for name, program in self.programs.items()
+                                         if name in PT2_PROGRAMS})
 
 
 def load_pt2_predictor(path: str | os.PathLike[str] | bytes, *, where: str | os.PathLike[str] | None = None) -> Pt2Predictor:

@@ -33,7 +33,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Predictor files :func:`export_run` writes into a run folder by default.
-PREDICTOR_NAMES = ("bem_predictor.pt", "bem_predictor.pt2")
+PREDICTOR_NAMES = ("bem_predictor.pt", "bem_predictor.pt2", "bem_predictor_aoti.pt2")
 _CHECKPOINT = "checkpoint.pt"
 
 

@@ -23,7 +23,7 @@ from bemlearn.errors import CheckpointError
 from bemlearn.export.bem_predictor import EXPORTED_METHODS, LATENT_METHODS, BEMPredictor
 from bemlearn.files import atomic_write_files
 
-__all__ = ["script_predictor", "save_torchscript", "torchscript_bytes", "load_torchscript", "METADATA_FILE"]
+__all__ = ["quiet_jit", "script_predictor", "save_torchscript", "torchscript_bytes", "load_torchscript", "METADATA_FILE"]
 
 log = logging.getLogger(__name__)
 
@@ -32,7 +32,8 @@ METADATA_FILE = "metadata.json"
 
 
 @contextlib.contextmanager
-def _quiet_jit() -> Iterator[None]:
+def quiet_jit() -> Iterator[None]:
+    """Silence exactly torch's "`torch.jit.<name>` is deprecated" DeprecationWarning (torch ≥ 2.10) inside the block."""
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=r".*torch\.jit\..* is deprecated", category=DeprecationWarning)
         yield
@@ -41,7 +42,7 @@ def _quiet_jit() -> Iterator[None]:
 def script_predictor(predictor: BEMPredictor, *, freeze: bool = True) -> torch.jit.ScriptModule:
     """Compile ``predictor`` with ``torch.jit.script`` (and ``torch.jit.freeze`` it: buffers
     become constants, submodule calls are inlined; the exported methods are preserved)."""
-    with _quiet_jit():
+    with quiet_jit():
         scripted = torch.jit.script(predictor.eval())
         if freeze:
             scripted = torch.jit.freeze(scripted, preserved_attrs=list(EXPORTED_METHODS))
@@ -52,7 +53,7 @@ def torchscript_bytes(predictor: BEMPredictor, *, freeze: bool = True) -> bytes:
     """The TorchScript file of ``predictor``, serialized in memory (torch's C++ file writer aborts the
     process on a full disk; the bytes are written by :mod:`bemlearn.files`, which reports it)."""
     buf = io.BytesIO()
-    with _quiet_jit():
+    with quiet_jit():
         torch.jit.save(script_predictor(predictor, freeze=freeze), buf, _extra_files={METADATA_FILE: predictor.metadata_json})
     return buf.getvalue()
 
