@@ -33,7 +33,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from bemlearn.errors import CheckpointError, PredictorInputError
+from bemlearn.errors import CheckpointError, MissingFileError, PredictorInputError
 from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.files import atomic_write_files
 
@@ -199,6 +199,20 @@ class Pt2Predictor:
         return self.metadata_json
 
 
+def _program_json(data: bytes) -> dict[str, bytes]:
+    """``models/<name>.json`` → bytes of an archive :func:`bemlearn.safe_load.check_pt2_archive` accepted."""
+    import re
+    import zipfile
+
+    out = {}
+    with zipfile.ZipFile(io.BytesIO(data)) as zf:
+        for name in zf.namelist():
+            match = re.fullmatch(r"[^/]+/models/([\w.-]+)\.json", name)
+            if match:
+                out[match.group(1)] = zf.read(name)
+    return out
+
+
 def load_pt2_predictor(path: str | os.PathLike[str] | bytes, *, where: str | os.PathLike[str] | None = None) -> Pt2Predictor:
     """Load a ``.pt2`` written by :func:`save_pt2`, refusing archives that would run pickled code
     or native libraries (:func:`bemlearn.safe_load.read_pt2_archive`).
@@ -207,10 +221,24 @@ def load_pt2_predictor(path: str | os.PathLike[str] | bytes, *, where: str | os.
         MissingFileError: (a FileNotFoundError) no such file.
         CheckpointError: a foreign or tampered archive, or not a bemlearn predictor.
     """
-    from bemlearn.safe_load import read_pt2_archive
+    from bemlearn.export.archive_check import check_pt2_programs
+    from bemlearn.safe_load import check_pt2_archive, read_pt2_archive
 
-    contents = read_pt2_archive(path, where=where)
-    path = where or ("<.pt2 bytes>" if isinstance(path, bytes) else Path(path))
+    if isinstance(path, bytes):
+        data, path = path, where or "<.pt2 bytes>"
+    else:
+        source = Path(path)
+        path = where or source
+        if not source.is_file():
+            raise MissingFileError(f"{path}: no such .pt2 predictor file")
+        try:
+            data = source.read_bytes()
+        except OSError as exc:
+            raise CheckpointError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+    check_pt2_archive(data, where=path)
+    # the graph names the operators torch will run and holds strings torch evaluates: only the exporter's own
+    check_pt2_programs(_program_json(data), where=path)
+    contents = read_pt2_archive(data, where=path)
     missing = [k for k in PT2_PROGRAMS if k not in contents.exported_programs and k not in _OPTIONAL_PROGRAMS]
     meta = contents.extra_files.get(PT2_METADATA_FILE)
     if missing or not meta:
