@@ -33,7 +33,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from bemlearn.errors import CheckpointError, MissingFileError, PredictorInputError
+from bemlearn.errors import ArgumentError, CheckpointError, MissingFileError, PredictorInputError
 from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.files import atomic_write_files
 
@@ -47,6 +47,8 @@ PT2_PROGRAMS = {"model": "forward", "bem_mean": "bem_mean", "predict_full": "pre
 #: Programs that archives written before the calibrated band lack.
 _OPTIONAL_PROGRAMS = ("forward_latent", "predict_full_latent")
 PT2_METADATA_FILE = "metadata.json"
+#: Rows per block of a large batch (FoldedPosterior's default chunk, the TorchScript module's).
+PT2_CHUNK = 1024
 
 
 class _Method(nn.Module):
@@ -112,9 +114,15 @@ class Pt2Predictor:
     Args:
         programs: the ExportedPrograms by archive name (``model`` is ``forward``).
         metadata_json: the metadata document.
+        chunk: batches larger than this run in row blocks of this size (as the TorchScript
+            module does): peak memory stays that of one block, whatever B.
     """
 
-    def __init__(self, programs: dict[str, torch.export.ExportedProgram], metadata_json: str) -> None:
+    def __init__(self, programs: dict[str, torch.export.ExportedProgram], metadata_json: str, *,
+                 chunk: int = PT2_CHUNK) -> None:
+        if chunk < 1:
+            raise ArgumentError(f"chunk: expected a positive row count, got {chunk}")
+        self.chunk = chunk
         self.programs = dict(programs)
         self.metadata_json = metadata_json
         doc = json.loads(metadata_json)
@@ -149,7 +157,13 @@ class Pt2Predictor:
                 f"BEMPredictor.{method}: x[{r}, {c}] is {float(x[r, c])}; inputs must be finite ({bad.size(0)} non-finite entries)"
             )
         try:
-            return program(x)
+            if x.size(0) <= self.chunk:
+                return program(x)
+            # row blocks: the program holds (B, M + 1) kernel blocks, several of them, for the whole batch
+            parts = [program(x[i : i + self.chunk]) for i in range(0, x.size(0), self.chunk)]
+            if isinstance(parts[0], torch.Tensor):
+                return torch.cat(parts)
+            return tuple(torch.cat([p[k] for p in parts]) for k in range(len(parts[0])))
         except RuntimeError as exc:  # the program's own finite check: entries too large to evaluate
             if "BEMPredictor." in str(exc):
                 raise PredictorInputError(
