@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 
 from bemlearn.errors import RobotModelError
-from bemlearn.robots import load
-from bemlearn.robots import mjcf_compile
+from bemlearn.robots import load, mjcf_compile
 
 REPO = Path(__file__).resolve().parents[1]
 CARTPOLE = REPO / "tests" / "robots" / "cartpole.xml"
