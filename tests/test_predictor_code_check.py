@@ -202,3 +202,15 @@ def test_untampered_archives_of_every_structure_load(files, tmp_path):
         p = _with_flags(base, flags, flags)
         loaded = load_torchscript(save_torchscript(p, tmp_path / f"p{i}.pt"))
         assert torch.equal(loaded.bem_mean(x), p.bem_mean(x))
+
+
+@pytest.mark.parametrize("out", ["--out", None])
+def test_a_failing_simulate_removes_the_folder_it_created(files, tmp_path, out):
+    """Issue 29, item 10: a simulate that failed (here: a predictor for another robot, found once the loop's
+    robot is loaded) left the folder it created, with an empty tb/."""
+    argv = ["simulate", _simulate_config(tmp_path), "--predictor", files["pt"], "--no-progress"]
+    argv += ["--out", tmp_path / "out"] if out else []
+    res = _cli(*argv, cwd=tmp_path)
+    assert res.returncode == 2, res.stderr[-2000:]
+    assert "predictor is for robot 'synthetic'" in res.stderr
+    assert not (tmp_path / "out").exists() and not (tmp_path / "runs").exists()

@@ -252,7 +252,7 @@ def check_torchscript_archive(data: bytes, *, where: str | os.PathLike[str]) -> 
             a pickle naming another global; a storage declaring more bytes than its payload.
     """
     allow = torchscript_allowlist()
-    zf, root, infos = _zip_members(data, where, "a TorchScript predictor")
+    zf, root, infos = _zip_members(data, where, "a TorchScript file")
     with zf:
         sizes = {i.filename[len(root):]: i.file_size for i in infos}
         code_files = [r for r in sizes if r.startswith("code/") and r.endswith(".py")]
