@@ -31,6 +31,7 @@ are data), fail, or be slow — the operators of a GP posterior on a float64 bat
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 import hashlib
 import io
@@ -41,6 +42,7 @@ import os
 import re
 import sys
 import zipfile
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -86,11 +88,11 @@ def reference_predictor(*, m: int = 1, n_support: int = 4):
     Z = torch.randn(n_support, d, generator=g, **f64)
     names = tuple([f"qdd_a{i}" for i in range(m)] + [f"qd_a{i}" for i in range(m)] + [f"q_a{i}" for i in range(m)]
                   + ["qdd_u", "qd_u"])
-    K = torch.exp(-0.5 * torch.cdist(Z, Z) ** 2) + 0.1 * torch.eye(n_support, **f64)
-    state = PredictorState(kind="exact", Z=Z, alpha=torch.linspace(-1, 1, n_support, **f64), S=torch.cholesky_inverse(torch.linalg.cholesky(K)),
+    state = PredictorState(kind="exact", Z=Z, alpha=torch.linspace(-1, 1, n_support, **f64), S=torch.zeros(n_support, n_support, **f64),
                            lengthscale=torch.ones(d, **f64), outputscale=torch.tensor(1.0, **f64), noise=torch.tensor(0.1, **f64),
                            x_mean=torch.zeros(d, **f64), x_std=torch.ones(d, **f64), y_mean=torch.tensor(0.0, **f64),
                            y_std=torch.tensor(1.0, **f64), input_names=names, n_train=n_support)
+    state = dataclasses.replace(state, S=torch.cholesky_inverse(torch.linalg.cholesky(state.gram())))
     actuated = tuple(f"a{i}" for i in range(m))
     meta = PredictorMetadata(robot="reference", joint_names=(*actuated, "u"), actuated_names=actuated, unactuated_name="u", m=m,
                              input_names=names, units={n: "rad" for n in names}, n_train=n_support, n_inducing=None,
@@ -184,17 +186,15 @@ def _pickle_kind(rel: str) -> str | None:
 
 
 @functools.cache
-def torchscript_allowlist() -> TorchScriptAllowList:
-    """Export the reference predictors (every flag combination) and collect their code (cached:
-    :func:`_cache_file`)."""
-    doc = _cached("torchscript-allowlist", _derive_torchscript_allowlist)
+def torchscript_allowlist(export: Callable[[Any], bytes]) -> TorchScriptAllowList:
+    """Export the reference predictors (every flag combination) with ``export`` (the exporter's
+    ``torchscript_bytes``) and collect their code (cached: :func:`_cache_file`)."""
+    doc = _cached("torchscript-allowlist", functools.partial(_derive_torchscript_allowlist, export))
     return TorchScriptAllowList(frozenset(doc["skeletons"]), {k: frozenset(v) for k, v in doc["methods"].items()},
                                 {k: frozenset(v) for k, v in doc["pickle_globals"].items()})
 
 
-def _derive_torchscript_allowlist() -> dict[str, Any]:
-    from bemlearn.export.torchscript import torchscript_bytes
-
+def _derive_torchscript_allowlist(torchscript_bytes: Callable[[Any], bytes]) -> dict[str, Any]:
     base = reference_predictor()
     combos = _flag_combinations()
     skeletons: set[str] = set()
@@ -240,18 +240,19 @@ def _read(zf: zipfile.ZipFile, info: zipfile.ZipInfo, where: str | os.PathLike[s
         raise CheckpointError(f"{where}: not a readable archive (member {info.filename[:200]!r}: {exc})") from None
 
 
-def check_torchscript_archive(data: bytes, *, where: str | os.PathLike[str]) -> None:
+def check_torchscript_archive(data: bytes, *, where: str | os.PathLike[str], export: Callable[[Any], bytes]) -> None:
     """Refuse a TorchScript file unless its code, pickles and members are what this exporter writes.
 
     Nothing in ``data`` is executed: code is parsed with :mod:`ast`, pickles are scanned with
-    inert stubs (:func:`bemlearn.safe_load.scan_pickle`).
+    inert stubs (:func:`bemlearn.safe_load.scan_pickle`).  ``export`` is the exporter
+    (:func:`bemlearn.export.torchscript.torchscript_bytes`) the allow-list is derived from.
 
     Raises:
         CheckpointError: not a zip archive; a member, class, method, statement or operator
             call this exporter does not write (e.g. an added ``__setstate__``, a foreign module);
             a pickle naming another global; a storage declaring more bytes than its payload.
     """
-    allow = torchscript_allowlist()
+    allow = torchscript_allowlist(export)
     zf, root, infos = _zip_members(data, where, "a TorchScript file")
     with zf:
         sizes = {i.filename[len(root):]: i.file_size for i in infos}
@@ -295,16 +296,14 @@ def check_torchscript_archive(data: bytes, *, where: str | os.PathLike[str]) -> 
 
 
 @functools.cache
-def pt2_allowlist() -> frozenset[str]:
+def pt2_allowlist(method_module: Callable[[Any, str], torch.nn.Module]) -> frozenset[str]:
     """The operators of the reference ``.pt2`` programs: ``forward`` and ``predict_full`` (whose
     operators include those of the mean-only and latent methods) exported with every flag on
     and with every flag off (each branch of the code is taken by one of the two); cached (:func:`_cache_file`)."""
-    return frozenset(_cached("pt2-allowlist", _derive_pt2_allowlist)["operators"])
+    return frozenset(_cached("pt2-allowlist", functools.partial(_derive_pt2_allowlist, method_module))["operators"])
 
 
-def _derive_pt2_allowlist() -> dict[str, Any]:
-    from bemlearn.export.pt2 import _Method
-
+def _derive_pt2_allowlist(method_module: Callable[[Any, str], torch.nn.Module]) -> dict[str, Any]:
     base = reference_predictor()
     names = structural_flags()
     on = dict.fromkeys(names, True)
@@ -315,7 +314,7 @@ def _derive_pt2_allowlist() -> dict[str, Any]:
         p = _with_flags(base, flags, flags).eval()
         for method, width in (("forward", p.n_bem), ("predict_full", p.n_full)):
             with torch.no_grad():
-                program = torch.export.export(_Method(p, method), (torch.zeros(4, width, dtype=torch.float64),),
+                program = torch.export.export(method_module(p, method), (torch.zeros(4, width, dtype=torch.float64),),
                                               dynamic_shapes={"x": {0: batch}}, strict=False)
             ops.update(f"torch.ops.{n.target}" for n in program.graph.nodes if n.op == "call_function")
     return {"operators": sorted(ops)}
@@ -347,9 +346,12 @@ def _walk(node: Any, path: str = ""):
             yield from _walk(v, path)
 
 
-def check_pt2_programs(programs: dict[str, bytes], *, where: str | os.PathLike[str]) -> None:
+def check_pt2_programs(programs: dict[str, bytes], *, where: str | os.PathLike[str],
+                       names: Iterable[str], method_module: Callable[[Any, str], torch.nn.Module]) -> None:
     """Refuse ``.pt2`` programs (``models/<name>.json`` → bytes) with operators, guards or
-    symbolic strings this exporter does not write (nothing is executed).
+    symbolic strings this exporter does not write (nothing is executed).  ``names`` are the
+    program names the exporter writes (``PT2_PROGRAMS``), ``method_module`` its wrapper of one
+    predictor method (the allow-list is derived by exporting it, :func:`pt2_allowlist`).
 
     Raises:
         CheckpointError: a program name outside ``PT2_PROGRAMS``; a node calling an operator the
@@ -357,11 +359,10 @@ def check_pt2_programs(programs: dict[str, bytes], *, where: str | os.PathLike[s
             code; a symbolic-shape string using names other than sympy's ``Symbol``, ``Integer``,
             ``Add``, ``Mul`` and symbols ``s<N>`` / ``u<N>``.
     """
-    from bemlearn.export.pt2 import PT2_PROGRAMS
-
-    ops = pt2_allowlist()
+    ops = pt2_allowlist(method_module)
+    allowed = set(names)
     for name, raw in programs.items():
-        if name not in PT2_PROGRAMS:
+        if name not in allowed:
             raise CheckpointError(f"{where}: {_REFUSED}: unexpected program models/{name[:100]}.json; {_REEXPORT}")
         try:
             doc = json.loads(raw)

@@ -159,11 +159,21 @@ class Pt2Predictor:
         try:
             if x.size(0) <= self.chunk:
                 return program(x)
-            # row blocks: the program holds (B, M + 1) kernel blocks, several of them, for the whole batch
-            parts = [program(x[i : i + self.chunk]) for i in range(0, x.size(0), self.chunk)]
-            if isinstance(parts[0], torch.Tensor):
-                return torch.cat(parts)
-            return tuple(torch.cat([p[k] for p in parts]) for k in range(len(parts[0])))
+            # row blocks: the program holds (B, M + 1) kernel blocks, several of them, for the whole batch;
+            # each block's results are copied out at once (a program's output keeps its block's buffers alive)
+            outs: tuple[torch.Tensor, ...] | None = None
+            single = False
+            for i in range(0, x.size(0), self.chunk):
+                got = program(x[i : i + self.chunk])
+                single = isinstance(got, torch.Tensor)
+                parts = (got,) if single else tuple(got)
+                if outs is None:
+                    outs = tuple(torch.empty((x.size(0), *p.shape[1:]), dtype=p.dtype) for p in parts)
+                for out, part in zip(outs, parts):
+                    out[i : i + part.size(0)].copy_(part)
+                del got, parts
+            assert outs is not None  # x has at least one row
+            return outs[0] if single else outs
         except RuntimeError as exc:  # the program's own finite check: entries too large to evaluate
             if "BEMPredictor." in str(exc):
                 raise PredictorInputError(
@@ -251,7 +261,7 @@ def load_pt2_predictor(path: str | os.PathLike[str] | bytes, *, where: str | os.
             raise CheckpointError(f"{path}: cannot be read ({exc.strerror or exc})") from None
     check_pt2_archive(data, where=path)
     # the graph names the operators torch will run and holds strings torch evaluates: only the exporter's own
-    check_pt2_programs(_program_json(data), where=path)
+    check_pt2_programs(_program_json(data), where=path, names=PT2_PROGRAMS, method_module=_Method)
     contents = read_pt2_archive(data, where=path)
     missing = [k for k in PT2_PROGRAMS if k not in contents.exported_programs and k not in _OPTIONAL_PROGRAMS]
     meta = contents.extra_files.get(PT2_METADATA_FILE)

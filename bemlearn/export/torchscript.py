@@ -100,7 +100,7 @@ def load_torchscript(path: str | os.PathLike[str] | bytes, *, where: str | os.Pa
         data = _read_predictor_file(Path(path))
         path = where or Path(path)
     # the code in the file is compiled by torch.jit.load: only the exporter's own code is let through
-    check_torchscript_archive(data, where=path)
+    check_torchscript_archive(data, where=path, export=torchscript_bytes)
     extra = {METADATA_FILE: ""}
     module = load_script_module(data, extra, where=path)  # C++ loader: no Python unpickling (bemlearn.safe_load)
     missing = [m for m in EXPORTED_METHODS if not hasattr(module, m) and m not in LATENT_METHODS]

@@ -57,8 +57,8 @@ def _files(path: Path, depth: int = 0) -> list[tuple[Path, ET.Element]]:
     """The parsed file and, recursively, the files its ``<include file=…>`` elements name."""
     try:
         root = ET.parse(path).getroot()
-    except (ET.ParseError, OSError, ValueError) as exc:
-        raise RobotModelError(f"{path}: not a readable MJCF (XML) file ({exc})") from None
+    except (ET.ParseError, OSError, ValueError):   # MuJoCo's compiler reports a malformed file in its own words
+        return []
     out = [(path, root)]
     if depth < _MAX_INCLUDE_DEPTH:
         for inc in root.iter("include"):
