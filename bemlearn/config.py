@@ -25,13 +25,18 @@ Example::
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import functools
+import json
 import math
 import os
 import re
 import reprlib
 import types
 import typing
+from collections.abc import Iterator
+from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -41,8 +46,8 @@ import yaml
 from bemlearn.errors import ArgumentError, ConfigError
 from bemlearn.files import atomic_write_text
 
-__all__ = ["ConfigError", "from_dict", "to_dict", "load_yaml", "save_yaml", "replace_path", "Limit", "config_limits",
-           "show_value", "MAX_NODES", "MAX_CONFIG_BYTES", "set_dotted", "check_dotted_key", "is_relative_path",
+__all__ = ["memoized_parsing", "ConfigError", "from_dict", "to_dict", "load_yaml", "save_yaml", "replace_path", "Limit",
+           "config_limits", "show_value", "MAX_NODES", "MAX_CONFIG_BYTES", "set_dotted", "check_dotted_key", "is_relative_path",
            "rebase_paths", "config_folder"]
 
 if TYPE_CHECKING:
@@ -198,7 +203,43 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
     raise ConfigError(f"{where}: unsupported config type {_type_name(tp)}")
 
 
+@functools.cache
+def _type_hints(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+#: Parsed frozen dataclasses by (class, canonical JSON of the mapping), while :func:`memoized_parsing` is active.
+_PARSED: ContextVar[dict[tuple[type, str], Any] | None] = ContextVar("bemlearn_parsed_configs", default=None)
+
+
+@contextlib.contextmanager
+def memoized_parsing() -> Iterator[None]:
+    """Within the block, :func:`from_dict` parses each distinct mapping of a frozen dataclass once (a
+    sweep's cells share most of their sections); errors are never memoized."""
+    token = _PARSED.set({})
+    try:
+        yield
+    finally:
+        _PARSED.reset(token)
+
+
 def from_dict(cls: type[T], data: dict[str, Any] | None, *, where: str = "config") -> T:
+    memo = _PARSED.get()
+    key = None
+    if memo is not None and isinstance(data, dict) and getattr(getattr(cls, "__dataclass_params__", None), "frozen", False):
+        try:
+            key = (cls, json.dumps(data, sort_keys=True, allow_nan=True))
+        except (TypeError, ValueError):  # not plain JSON (e.g. a tuple key): parse it every time
+            key = None
+        if key is not None and key in memo:
+            return memo[key]
+    parsed = _from_dict(cls, data, where=where)
+    if key is not None and memo is not None:
+        memo[key] = parsed
+    return parsed
+
+
+def _from_dict(cls: type[T], data: dict[str, Any] | None, *, where: str = "config") -> T:
     """Build dataclass ``cls`` from ``data``, rejecting unknown keys and bad types.
 
     Args:
@@ -212,7 +253,7 @@ def from_dict(cls: type[T], data: dict[str, Any] | None, *, where: str = "config
     data = {} if data is None else data
     if not isinstance(data, dict):
         raise ConfigError(f"{where}: expected a mapping, got {show_value(data)}")
-    hints = typing.get_type_hints(cls)
+    hints = _type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     unknown = sorted(set(data) - set(fields))
     if unknown:

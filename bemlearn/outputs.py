@@ -468,6 +468,17 @@ def _discard(backup: Path | None) -> None:
         shutil.rmtree(backup, ignore_errors=True)
 
 
+def _prune_empty_parents(out: Path, name: str) -> None:
+    """Remove the folders between ``out`` and the entry ``name`` (e.g. ``tb`` of ``tb/simulate``) left empty."""
+    parent = (out / name).parent
+    while parent != out and out in parent.parents:
+        try:
+            parent.rmdir()   # only when empty
+        except OSError:
+            return
+        parent = parent.parent
+
+
 def _undo(out: Path, created: bool, first_new: Path | None, entries: Sequence[str] | None, backup: Path | None) -> None:
     """A failed command: remove the folder it created, or put its outputs back as they were."""
     if created:
@@ -477,6 +488,7 @@ def _undo(out: Path, created: bool, first_new: Path | None, entries: Sequence[st
         else:
             for name in entries:
                 _remove(out / name)
+                _prune_empty_parents(out, name)
         if first_new is not None and not any(_entries(out, None)):
             shutil.rmtree(first_new, ignore_errors=True)
             log.info("removed %s after the failure", first_new)

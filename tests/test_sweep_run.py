@@ -118,7 +118,7 @@ def test_a_cell_larger_than_the_ray_cluster_is_refused_before_any_runs(ray_insta
 
     with pytest.raises(SweepError, match=r"a cell asks for 3 CPU\(s\) and 0 GPU\(s\); the Ray cluster has 2 CPU\(s\)"):
         run_sweep({**SWEEP, "resources": {"cpus": 3}}, tmp_path / "big", backend="ray", progress=False)
-    assert not list((tmp_path / "big" / "cells").iterdir())
+    assert not (tmp_path / "big").exists()   # a sweep that ran no cell leaves no folder it created (issue 29)
 
 
 def _driver(args: list[str], *, block_ray: bool) -> subprocess.Popen:

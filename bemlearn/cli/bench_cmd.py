@@ -16,6 +16,7 @@
 * ``bench c-footprint`` — flash/RAM footprint of the C export per model size and kind.
 * ``bench sigint CONFIG --data FILE`` — Ctrl-C latency of ``train`` on the 3,000-point exact GP;
 * ``bench fuzz`` — bad-input classes fed to every reader and how many end in a named error.
+* ``bench hostile`` — issue 29: predictor peak memory on 10⁶ rows (TorchScript vs ``.pt2``), 10⁴-cell grid validation.
 """
 
 from __future__ import annotations
@@ -156,6 +157,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                        "files to bemlearn's readers and count the bad-input classes that end in a named error.")
     z.add_argument("--examples", type=int, default=20, help="generated examples per class (default 20)")
     z.set_defaults(func=_fuzz)
+    h = sub.add_parser("hostile", help="issue 29's figures: predictor peak memory on large batches, large-grid validation",
+                       description="Peak RSS growth of the TorchScript and .pt2 predictors on --rows rows (child processes) "
+                       "and the wall time of validating a --cells-cell sweep grid.")
+    h.add_argument("--rows", type=int, default=10**6, help="batch rows (default 10⁶)")
+    h.add_argument("--n-train", type=int, default=500, help="support points of the synthetic exact GP (default 500)")
+    h.add_argument("--cells", type=int, default=10**4, help="sweep grid cells to validate (default 10⁴; 0: skip)")
+    h.set_defaults(func=_hostile)
 
 def _c_footprint(args: argparse.Namespace) -> int:
     from bemlearn.bench.c_footprint import format_footprints, measure_footprints
@@ -324,6 +332,15 @@ def _sigint(args: argparse.Namespace) -> int:
         rows.append(measure_sigint(args.config, args.data, n_points=args.n_points, kind=args.kind, delay_s=args.delays[0], twice=True))
     print(format_sigint(rows))
     print(f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f} on {os.cpu_count()} cores")
+    return 0
+
+
+def _hostile(args: argparse.Namespace) -> int:
+    from bemlearn.bench.hostile_bench import format_hostile, predictor_memory, sweep_validation_s
+
+    memory = predictor_memory(rows=args.rows, n_train=args.n_train)
+    validation = sweep_validation_s(cells=args.cells) if args.cells else None
+    print(format_hostile(memory, validation, args.cells))
     return 0
 
 

@@ -104,6 +104,10 @@ def _simulate(args) -> int:
     pred = args.predictor or (Path(cfg.simulate.predictor) if cfg.simulate.predictor else None)
     if pred is not None and pred.is_file() and (pred.parent / "checkpoint.pt").is_file():
         check_predictor_matches(pred, pred.parent / "checkpoint.pt")
+    if pred is not None and "predictor" in (args.source or [cfg.simulate.bem_source]):
+        from bemlearn.control.bem_sources import PredictorBEM
+
+        PredictorBEM(pred)  # a foreign or tampered file is refused before any folder exists
     if args.gif:
         from bemlearn.sim.render import require_offscreen_backend
 

@@ -61,12 +61,13 @@ class PredictorBEM:
     name = "predictor"
 
     def __init__(self, path: str | Path, *, robot: BalanceRobot | None = None) -> None:
-        from bemlearn.safe_load import load_script_module
+        from bemlearn.export.torchscript import load_torchscript
 
         path = Path(path)
         if not path.is_file():
             raise MissingFileError(f"BEM predictor file {path} not found (run `bemlearn export RUN_DIR` first)")
-        self.module = load_script_module(path)  # CheckpointError (a ValueError) for a foreign or tampered file
+        # CheckpointError (a ValueError) for a foreign or tampered file, before any of its code is loaded
+        self.module = load_torchscript(path)
         self.meta = json.loads(self.module.metadata())
         if robot is not None and (self.meta.get("robot") != robot.name or int(self.meta.get("m", -1)) != robot.m):
             raise ArgumentError(

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from bemlearn.data.import_map import DELIMITERS, WHITESPACE, ImportMap, delimiter_name
+from bemlearn.data.text_extent import text_extent
 from bemlearn.data.trajectory import TrajectoryFormatError
 from bemlearn.errors import MissingFileError
 
@@ -102,10 +103,13 @@ def _uncomment(line: str, comment: str) -> str:
 def _data_lines(path: Path, header_line: int, comment: str) -> np.ndarray:
     """1-based file line of each data row (blank and comment lines are not rows)."""
     lines = []
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        for n, line in enumerate(fh, start=1):
-            if n > header_line and not _is_skipped(line, comment):
-                lines.append(n)
+    n_text, _ = text_extent(path)
+    with open(path, "rb") as fh:
+        text = fh.read(n_text).decode("utf-8", errors="replace")
+    for n, line in enumerate(io.StringIO(text, newline=None), start=1):   # universal newlines, as open() reads
+
+        if n > header_line and not _is_skipped(line, comment):
+            lines.append(n)
     return np.asarray(lines, dtype=np.int64)
 
 
@@ -334,7 +338,11 @@ def read_log_table(path: str | Path, imap: ImportMap) -> LogTable:
     path = Path(path)
     if not path.is_file():
         raise MissingFileError(f"{path}: log file not found")
-    raw = path.read_bytes()
+    n_text, size = text_extent(path, what="a text log")   # binary files refused before anything is read
+    if n_text < size:
+        logger.warning("%s: %d NUL bytes after byte %d (padding a logger left): not imported", path, size - n_text, n_text)
+    with open(path, "rb") as fh:
+        raw = fh.read(n_text)
     first = _first_lines(raw, imap.comment, 2)
     if not first:
         raise TrajectoryFormatError(
@@ -396,7 +404,7 @@ def read_log_table(path: str | Path, imap: ImportMap) -> LogTable:
     usecols = [index[c] for c in names_used]
     bom_data = not imap.header and raw.startswith(b"\xef\xbb\xbf")
     source: Any = path  # a path or the cleaned text
-    if cut is not None or bom_data:
+    if cut is not None or bom_data or n_text < size:
         source = io.StringIO(raw[:stop].decode("utf-8", errors="replace").lstrip("\ufeff"))
     try:
         table = np.loadtxt(

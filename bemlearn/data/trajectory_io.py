@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import zipfile
 import zlib
 from pathlib import Path
@@ -19,11 +20,15 @@ from typing import Any
 
 import numpy as np
 
+from bemlearn.data.text_extent import text_extent
 from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
 from bemlearn.data.validation import JITTER_RTOL, MIN_TRIAL_SAMPLES, RATE_RTOL, RobotLike, column_names, validate
 from bemlearn.errors import MissingFileError, TrajectoryFormatError
 from bemlearn.files import atomic_path
 from bemlearn.safe_load import open_npz
+
+#: Largest uncompressed / compressed size ratio deflate can reach (about 1032:1).
+_DEFLATE_RATIO = 1100
 
 __all__ = ["read_trajectory", "read_ground_truth", "write_trajectory", "ground_truth_path", "CSV_MAGIC", "SUFFIXES"]
 
@@ -163,8 +168,40 @@ def _write_npz(traj: Trajectory, path: Path) -> None:
         np.savez_compressed(fh, **arrays)  # type: ignore[arg-type]  # mypy also matches the ** dict against the bool allow_pickle
 
 
+def _check_npz_sizes(path: Path) -> None:
+    """Each array's header (shape × item size) against the bytes the archive holds for it, before
+    numpy allocates what the header declares (a forged 10¹¹ × 2 header asked for 1.46 TiB).
+
+    Raises:
+        TrajectoryFormatError: an array declaring more bytes than its member holds, or a member
+            declaring an uncompressed size deflate cannot reach from its compressed bytes.
+    """
+    with zipfile.ZipFile(path) as zf:
+        for info in zf.infolist():
+            name = info.filename.removesuffix(".npy")
+            stored = info.compress_type == zipfile.ZIP_STORED
+            if (stored and info.file_size != info.compress_size) or info.file_size > _DEFLATE_RATIO * info.compress_size + 4096:
+                raise TrajectoryFormatError(f"{path}: array {name!r} declares {info.file_size} bytes in {info.compress_size} "
+                                            "stored bytes: a forged archive")
+            if not info.filename.endswith(".npy"):
+                continue
+            with zf.open(info) as fh:
+                version = np.lib.format.read_magic(fh)
+                if version == (1, 0):
+                    shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+                elif version == (2, 0):
+                    shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+                else:
+                    raise TrajectoryFormatError(f"{path}: array {name!r}: .npy format version {version} is not supported")
+            declared = math.prod(int(d) for d in shape) * dtype.itemsize
+            if declared > info.file_size:
+                raise TrajectoryFormatError(f"{path}: array {name!r}: its header declares shape {tuple(shape)} of {dtype} "
+                                            f"({declared} bytes), but the file holds {info.file_size} bytes for it")
+
+
 def _read_npz(path: Path) -> Trajectory:
     try:
+        _check_npz_sizes(path)
         with open_npz(path) as npz:  # allow_pickle=False: object arrays are refused
             arrays = {k: npz[k] for k in npz.files}
     except (zipfile.BadZipFile, OSError, ValueError, EOFError, zlib.error) as exc:
@@ -259,9 +296,10 @@ def _write_csv(traj: Trajectory, path: Path) -> None:
 
 def _read_csv(path: Path) -> tuple[Trajectory, int]:
     """The trajectory and the file line (1-based) of its first data row."""
+    n_text, _ = text_extent(path, what="a bemlearn trajectory CSV")   # binary files refused before reading
     try:
-        with open(path, encoding="utf-8") as fh:
-            lines = fh.read().splitlines()
+        with open(path, "rb") as fh:
+            lines = fh.read(n_text).decode("utf-8").splitlines()
     except UnicodeDecodeError as exc:
         raise TrajectoryFormatError(f"{path}: not a UTF-8 text file (byte {exc.start}); expected a bemlearn trajectory CSV") from None
     if not lines or lines[0].strip() != CSV_MAGIC:

@@ -34,7 +34,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from bemlearn.errors import CheckpointError
+from bemlearn.errors import ArgumentError, CheckpointError, MissingFileError
 from bemlearn.export.bem_predictor import BEMPredictor
 from bemlearn.export.checked_predictor import FULL_METHODS, CheckedPredictor
 from bemlearn.files import atomic_write_files
@@ -49,6 +49,8 @@ PT2_PROGRAMS = {"model": "forward", "bem_mean": "bem_mean", "predict_full": "pre
 #: Programs that archives written before the calibrated band lack.
 _OPTIONAL_PROGRAMS = ("forward_latent", "predict_full_latent")
 PT2_METADATA_FILE = "metadata.json"
+#: Rows per block of a large batch (FoldedPosterior's default chunk, the TorchScript module's).
+PT2_CHUNK = 1024
 
 
 class _Method(nn.Module):
@@ -117,12 +119,56 @@ class Pt2Predictor(CheckedPredictor):
     Args:
         programs: the ExportedPrograms by archive name (``model`` is ``forward``).
         metadata_json: the metadata document.
+        chunk: batches larger than this run in row blocks of this size (as the TorchScript
+            module does): peak memory stays that of one block, whatever B.
     """
 
-    def __init__(self, programs: dict[str, torch.export.ExportedProgram], metadata_json: str) -> None:
+    def __init__(self, programs: dict[str, torch.export.ExportedProgram], metadata_json: str, *,
+                 chunk: int = PT2_CHUNK) -> None:
+        if chunk < 1:
+            raise ArgumentError(f"chunk: expected a positive row count, got {chunk}")
+        self.chunk = chunk
         self.programs = dict(programs)
-        super().__init__(metadata_json, {PT2_PROGRAMS[name]: program.module() for name, program in self.programs.items()
-                                         if name in PT2_PROGRAMS})
+        super().__init__(metadata_json, {PT2_PROGRAMS[name]: _in_chunks(program.module(), chunk)
+                                         for name, program in self.programs.items() if name in PT2_PROGRAMS})
+
+
+def _in_chunks(program, chunk: int):
+    """``program`` evaluated in row blocks of ``chunk`` when the batch is larger: an exported program holds
+    several (B, M + 1) kernel blocks for the whole batch, so peak memory then stays that of one block."""
+
+    def run(x: torch.Tensor):
+        if x.size(0) <= chunk:
+            return program(x)
+        outs: tuple[torch.Tensor, ...] | None = None
+        single = False
+        for i in range(0, x.size(0), chunk):
+            got = program(x[i : i + chunk])
+            single = isinstance(got, torch.Tensor)
+            parts = (got,) if single else tuple(got)
+            if outs is None:
+                outs = tuple(torch.empty((x.size(0), *p.shape[1:]), dtype=p.dtype) for p in parts)
+            for out, part in zip(outs, parts):
+                out[i : i + part.size(0)].copy_(part)   # copied out at once: an output keeps its block's buffers alive
+            del got, parts
+        assert outs is not None  # x has at least one row
+        return outs[0] if single else outs
+
+    return run
+
+
+def _program_json(data: bytes) -> dict[str, bytes]:
+    """``models/<name>.json`` → bytes of an archive :func:`bemlearn.safe_load.check_pt2_archive` accepted."""
+    import re
+    import zipfile
+
+    out = {}
+    with zipfile.ZipFile(io.BytesIO(data)) as zf:
+        for name in zf.namelist():
+            match = re.fullmatch(r"[^/]+/models/([\w.-]+)\.json", name)
+            if match:
+                out[match.group(1)] = zf.read(name)
+    return out
 
 
 def load_pt2_predictor(path: str | os.PathLike[str] | bytes, *, where: str | os.PathLike[str] | None = None) -> Pt2Predictor:
@@ -133,10 +179,24 @@ def load_pt2_predictor(path: str | os.PathLike[str] | bytes, *, where: str | os.
         MissingFileError: (a FileNotFoundError) no such file.
         CheckpointError: a foreign or tampered archive, or not a bemlearn predictor.
     """
-    from bemlearn.safe_load import read_pt2_archive
+    from bemlearn.export.archive_check import check_pt2_programs
+    from bemlearn.safe_load import check_pt2_archive, read_pt2_archive
 
-    contents = read_pt2_archive(path, where=where)
-    path = where or ("<.pt2 bytes>" if isinstance(path, bytes) else Path(path))
+    if isinstance(path, bytes):
+        data, path = path, where or "<.pt2 bytes>"
+    else:
+        source = Path(path)
+        path = where or source
+        if not source.is_file():
+            raise MissingFileError(f"{path}: no such .pt2 predictor file")
+        try:
+            data = source.read_bytes()
+        except OSError as exc:
+            raise CheckpointError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+    check_pt2_archive(data, where=path)
+    # the graph names the operators torch will run and holds strings torch evaluates: only the exporter's own
+    check_pt2_programs(_program_json(data), where=path, names=PT2_PROGRAMS, method_module=_Method)
+    contents = read_pt2_archive(data, where=path)
     missing = [k for k in PT2_PROGRAMS if k not in contents.exported_programs and k not in _OPTIONAL_PROGRAMS]
     meta = contents.extra_files.get(PT2_METADATA_FILE)
     if missing or not meta:

@@ -70,19 +70,40 @@ def save_torchscript(predictor: BEMPredictor, path: str | os.PathLike[str], *, f
     return path
 
 
+def _read_predictor_file(path: Path) -> bytes:
+    from bemlearn.errors import MissingFileError
+
+    if not path.is_file():
+        raise MissingFileError(f"{path}: no such TorchScript predictor file")
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise CheckpointError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+
+
 def load_torchscript(path: str | os.PathLike[str] | bytes, *, where: str | os.PathLike[str] | None = None) -> torch.jit.ScriptModule:
     """``torch.jit.load(path)`` with a clear error for a missing, foreign or tampered file (:mod:`bemlearn.safe_load`).
+
+    The archive is first checked without running it
+    (:func:`bemlearn.export.archive_check.check_torchscript_archive`): code other than what this
+    version's exporter writes is refused, and torch is handed the very bytes that were checked.
 
     Raises:
         MissingFileError: (a FileNotFoundError) no such file.
         CheckpointError: not a TorchScript file, or not a bemlearn predictor.
     """
+    from bemlearn.export.archive_check import check_torchscript_archive
     from bemlearn.safe_load import load_script_module
 
-    path = path if isinstance(path, bytes) else Path(path)
+    if isinstance(path, bytes):
+        data, path = path, where or "<TorchScript bytes>"
+    else:
+        data = _read_predictor_file(Path(path))
+        path = where or Path(path)
+    # the code in the file is compiled by torch.jit.load: only the exporter's own code is let through
+    check_torchscript_archive(data, where=path, export=torchscript_bytes)
     extra = {METADATA_FILE: ""}
-    module = load_script_module(path, extra, where=where)  # C++ loader: no Python unpickling (bemlearn.safe_load)
-    path = where or ("<TorchScript bytes>" if isinstance(path, bytes) else path)
+    module = load_script_module(data, extra, where=path)  # C++ loader: no Python unpickling (bemlearn.safe_load)
     missing = [m for m in EXPORTED_METHODS if not hasattr(module, m) and m not in LATENT_METHODS]
     if missing or not extra[METADATA_FILE]:
         raise CheckpointError(f"{path}: not a bemlearn BEM predictor (missing {missing or [METADATA_FILE]})")

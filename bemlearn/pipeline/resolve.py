@@ -11,10 +11,12 @@ derived; ``bemlearn config show CONFIG`` prints it, and each run saves it next t
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,7 +25,36 @@ from bemlearn.config import ConfigError, config_folder, from_dict, load_yaml, re
 from bemlearn.errors import BemlearnError
 from bemlearn.pipeline.config import PATH_KEYS, PipelineConfig
 
-__all__ = ["ResolvedConfig", "resolve_pipeline_config", "load_pipeline_config", "complete_section", "format_resolved", "flatten"]
+__all__ = ["ResolvedConfig", "resolve_pipeline_config", "load_pipeline_config", "complete_section", "format_resolved", "flatten",
+           "memoized_derivation"]
+
+#: Robots and derived values kept while :func:`memoized_derivation` is active.
+_MEMO: ContextVar[dict[Any, Any] | None] = ContextVar("bemlearn_resolve_memo", default=None)
+
+
+@contextlib.contextmanager
+def memoized_derivation() -> Iterator[None]:
+    """Within the block, :func:`resolve_pipeline_config` loads each robot file once and derives its values
+    once per set of given keys and given rates (all the derivation reads: see
+    :func:`~bemlearn.pipeline.derived_defaults.derive_pipeline_values`): a sweep resolves thousands of
+    cells that differ only in values the derivation does not read."""
+    from bemlearn.config import memoized_parsing
+
+    token = _MEMO.set({})
+    try:
+        with memoized_parsing():
+            yield
+    finally:
+        _MEMO.reset(token)
+
+
+def _robot_key(name: str) -> tuple[Any, ...]:
+    path = Path(name)
+    try:
+        st = path.stat()
+        return (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    except OSError:
+        return (name,)
 
 Origin = str  # "given" | "derived" | "default"
 
@@ -98,13 +129,23 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
         from bemlearn.pipeline.derived_defaults import derive_pipeline_values
         from bemlearn.robots import load
 
+        memo = _MEMO.get()
+        robot_key = ("robot", _robot_key(parsed.robot))
         try:
-            robot = load(parsed.robot)
+            robot = memo[robot_key] if memo is not None and robot_key in memo else load(parsed.robot)
         except (BemlearnError, OSError) as exc:
             raise ConfigError(f"{source}: robot: {str(exc).removeprefix('robot: ')}") from exc
-        for key, (value, note) in derive_pipeline_values(robot, parsed, given).items():
+        derived_key = ("derived", robot_key, frozenset(given), parsed.collect.rate_hz, parsed.simulate.rate_hz,
+                       parsed.collect.physics_timestep, parsed.simulate.physics_timestep)
+        if memo is not None and derived_key in memo:
+            derived = memo[derived_key]
+        else:
+            derived = derive_pipeline_values(robot, parsed, given)
+        if memo is not None:
+            memo[robot_key], memo[derived_key] = robot, derived
+        for key, (value, note) in derived.items():
             if not _has(raw, key):
-                set_dotted(raw, key, value)
+                set_dotted(raw, key, copy.deepcopy(value))
                 notes[key] = note
         parsed = from_dict(PipelineConfig, raw, where=source)
         _check_for_robot(parsed, robot, source)
@@ -130,11 +171,13 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
                                                    f"the smoothed q_u keeps {KEPT_MOTION:.0%} of its motion; docs/derivatives.md)")
     origins: dict[str, Origin] = {}
     for key in flatten(to_dict(parsed)):
+        parts = key.split(".")
+        heads = {".".join(parts[:i]) for i in range(1, len(parts) + 1)}   # the key and the sections holding it
         if key == "dataset.derivative_options" and key in notes and key not in given:
             origins[key] = "data"
-        elif key in given or any(key.startswith(g + ".") for g in given):
+        elif not heads.isdisjoint(given):
             origins[key] = "given"
-        elif key in notes or any(key.startswith(n + ".") for n in notes):
+        elif not heads.isdisjoint(notes):
             origins[key] = "derived"
         else:
             origins[key] = "default"

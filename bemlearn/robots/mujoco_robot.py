@@ -269,10 +269,9 @@ class MujocoRobot(Robot):
         path = Path(path)
         if not path.is_file():
             raise MissingFileError(f"{path}: MJCF file not found")
-        try:
-            model = mujoco.MjModel.from_xml_path(str(path))
-        except ValueError as exc:
-            raise RobotModelError(f"{path}: MuJoCo could not load the model: {exc}") from exc
+        from bemlearn.robots.mjcf_compile import compile_mjcf
+
+        model = compile_mjcf(path)   # non-finite attributes refused; large files compiled where a signal can stop them
         return cls(model, name=name or path.stem, source=str(path))
 
     @classmethod

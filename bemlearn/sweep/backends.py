@@ -31,7 +31,7 @@ from bemlearn.errors import ArgumentError, EnvironmentProblem, SweepError
 from bemlearn.sweep.cell_runner import CellJob, CellOutcome, failed_outcome, run_cell, warm_worker
 from bemlearn.sweep.config import SweepResources
 
-__all__ = ["SerialBackend", "RayBackend", "make_backend", "ray_available"]
+__all__ = ["SerialBackend", "RayBackend", "make_backend", "ray_available", "probe_address", "CONNECT_TIMEOUT_S"]
 
 log = logging.getLogger(__name__)
 
@@ -115,6 +115,8 @@ class RayBackend:
                 if "RAY_worker_niceness" not in os.environ:  # the raylet reads it when it starts
                     os.environ["RAY_worker_niceness"] = "0"
                     niceness_set = True
+            if address is not None:
+                probe_address(address)
             try:
                 ray.init(address=address or "local", **kwargs)
             except (ConnectionError, RuntimeError, ValueError) as exc:
@@ -190,6 +192,34 @@ class RayBackend:
         """Shut the Ray instance down if this backend started it."""
         if self.started_here and self._ray.is_initialized():
             self._ray.shutdown()
+
+
+#: Seconds to wait for a TCP connection to a Ray cluster's address before giving up.
+CONNECT_TIMEOUT_S = 10.0
+
+
+def probe_address(address: str, *, timeout: float = CONNECT_TIMEOUT_S) -> None:
+    """Fail at once when nothing listens at ``address`` (``HOST:PORT`` or ``ray://HOST:PORT``): Ray itself
+    retries an unreachable cluster for minutes.  ``auto`` (a cluster Ray finds itself) is left to Ray.
+
+    Raises:
+        EnvironmentProblem: the address has no port, or no TCP connection within ``timeout`` s.
+    """
+    import socket
+
+    if address in ("auto", "local"):
+        return
+    hostport = address.split("://", 1)[-1].rstrip("/")
+    host, sep, port = hostport.rpartition(":")
+    if not sep or not port.isdigit() or not host:
+        raise EnvironmentProblem(f"--address {address}: expected HOST:PORT or ray://HOST:PORT (or auto)")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
+            pass
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__ if not isinstance(exc, TimeoutError) else f"no answer within {timeout:g} s"
+        raise EnvironmentProblem(f"--address {address}: cannot connect to a Ray cluster there ({reason}); start one with "
+                                 "`ray start --head` or give the address it printed") from None
 
 
 def make_backend(kind: str, resources: SweepResources, *, address: str | None = None, max_parallel: int | None = None):

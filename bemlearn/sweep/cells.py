@@ -27,6 +27,7 @@ from typing import Any
 from bemlearn.config import rebase_paths, set_dotted, to_dict
 from bemlearn.errors import ConfigError
 from bemlearn.files import file_sha256
+from bemlearn.pipeline.resolve import memoized_derivation
 from bemlearn.sweep.config import LoadedSweep
 from bemlearn.sweep.stage import SweepStage, dotted_get, get_stage
 
@@ -97,6 +98,12 @@ def expand_cells(sweep: LoadedSweep) -> list[Cell]:
     application = sweep.base.get("application")
     stage = get_stage(spec.stage, application, where=f"{source}: stage")
     keys = list(spec.grid)
+    with memoized_derivation():
+        return _expand(sweep, stage, application, keys)
+
+
+def _expand(sweep: LoadedSweep, stage: SweepStage, application: str | None, keys: list[str]) -> list[Cell]:
+    spec, source = sweep.spec, sweep.source
     cells: list[Cell] = []
     seen: dict[str, Cell] = {}
     hashes: dict[str, str] = {}

@@ -23,14 +23,19 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from bemlearn.config import check_dotted_key, config_folder, from_dict, load_yaml, rebase_paths, set_dotted
+from bemlearn.config import check_dotted_key, config_folder, from_dict, load_yaml, rebase_paths, set_dotted, show_value
 from bemlearn.errors import ConfigError
 
-__all__ = ["SweepResources", "SweepConfig", "LoadedSweep", "load_sweep"]
+__all__ = ["SweepResources", "SweepConfig", "LoadedSweep", "load_sweep", "MAX_CELLS"]
+
+
+#: The largest grid a sweep accepts (cells); larger grids are refused before any cell is resolved.
+MAX_CELLS = 10_000
 
 
 @dataclass(frozen=True)
@@ -83,14 +88,22 @@ class SweepConfig:
     def __post_init__(self) -> None:
         if self.retries < 0:
             raise ConfigError(f"retries: expected an integer ≥ 0, got {self.retries}")
+        n_cells = 1
         for key, values in self.grid.items():
             if not values:
                 raise ConfigError(f"grid.{key}: expected a non-empty list of values")
-            seen = []
+            n_cells *= len(values)
+        if n_cells > MAX_CELLS:   # before anything is resolved: a 10⁶ grid is refused at once
+            sizes = " × ".join(str(len(v)) for v in self.grid.values())
+            raise ConfigError(f"grid: {sizes} = {n_cells} cells; a sweep holds at most {MAX_CELLS} (split it into "
+                              "several sweeps, docs/sweeps.md)")
+        for key, values in self.grid.items():
+            seen: set[str] = set()
             for v in values:
-                if v in seen:
-                    raise ConfigError(f"grid.{key}: the value {v!r} is listed twice")
-                seen.append(v)
+                text = json.dumps(v, sort_keys=True, default=repr)
+                if text in seen:
+                    raise ConfigError(f"grid.{key}: the value {show_value(v)} is listed twice")
+                seen.add(text)
         both = sorted(set(self.grid) & set(self.overrides))
         if both:
             raise ConfigError(f"{both}: a key is either in grid or in overrides, not both")

@@ -36,8 +36,8 @@ from typing import Any
 
 import yaml
 
-from bemlearn.errors import ArgumentError, OutputExistsError, SweepError
-from bemlearn.files import atomic_write_text, new_run_dir
+from bemlearn.errors import ArgumentError, EnvironmentProblem, OutputExistsError, SweepError
+from bemlearn.files import atomic_write_text, check_writable, new_run_dir, write_problem
 from bemlearn.sweep.backends import make_backend
 from bemlearn.sweep.cell_runner import MARKER, CellJob, CellOutcome, cell_folder, cell_lock, read_outcome
 from bemlearn.sweep.cells import Cell, expand_cells
@@ -128,7 +128,10 @@ def _driver_lock(out: Path) -> Iterator[None]:
     except ImportError:  # pragma: no cover - not POSIX
         yield
         return
-    fd = os.open(out / ".sweep.lock", os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fd = os.open(out / ".sweep.lock", os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as exc:
+        raise (write_problem(out / ".sweep.lock", exc) or EnvironmentProblem(f"--out {out}: cannot write there ({exc})")) from None
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -210,8 +213,45 @@ def run_sweep(sweep: str | Path | dict[str, Any], out_dir: str | Path | None = N
     stem = Path(loaded.source).stem if loaded.source != "<dict>" else "sweep"
     out = Path(out_dir if out_dir is not None else new_run_dir(stem)).absolute()
     _prepare(out, resume=resume, force=force)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "cells").mkdir(exist_ok=True)
+    check_writable(out)   # a read-only or missing disk: one line, before anything is created
+    first_new = _first_new(out)
+    try:
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            (out / "cells").mkdir(exist_ok=True)
+        except OSError as exc:
+            raise (write_problem(out, exc) or EnvironmentProblem(f"--out {out}: cannot create it ({exc})")) from None
+        return _run_in(out, loaded, cells, t0, backend=backend, address=address, force=force, max_parallel=max_parallel,
+                       progress=progress)
+    except BaseException:
+        # a sweep that fails before any cell left its record leaves no folder it created (a cell's
+        # record, complete or failed, is worth keeping: --resume continues from it)
+        if first_new is not None and not _holds_a_cell(out):
+            shutil.rmtree(first_new, ignore_errors=True)
+            log.info("removed %s after the failure", first_new)
+        raise
+
+
+def _first_new(folder: Path) -> Path | None:
+    """The outermost of ``folder`` and its parents that does not exist yet (``None``: it exists)."""
+    first = None
+    p = folder
+    while not p.exists():
+        first = p
+        if p.parent == p:
+            break
+        p = p.parent
+    return first
+
+
+def _holds_a_cell(out: Path) -> bool:
+    cells = out / "cells"
+    return cells.is_dir() and any((c / MARKER).exists() for c in cells.iterdir())
+
+
+def _run_in(out: Path, loaded: LoadedSweep, cells: list[Cell], t0: float, *, backend: str, address: str | None,
+            force: bool, max_parallel: int | None, progress: bool) -> SweepResult:
+    """The sweep into the prepared folder ``out`` (:func:`run_sweep`, steps 2–4)."""
     with _driver_lock(out):
         atomic_write_text(out / "sweep.yaml", _record(loaded, cells))
         outcomes: dict[str, CellOutcome] = {}
