@@ -13,17 +13,23 @@ grow for the input's own share of the BEM to exceed the band's ±2σ.
 
 (b) The learned BEM on slices (eq. 14): μ(x_0^e) and μ ± 2σ_pred against q̈_a of one actuated
 joint, x_0^e = [q̈_a, q̇_a, q_a, 0, 0], at a few (q̇_a, q_a) taken from the training data's
-quantiles (other actuated joints at their medians).  For each slice the training points
-*near* it — within ``radius`` kernel lengthscales ℓ_c (physical units, ℓ_c · x_std,c) of the
-slice in every held coordinate c (q̇_a, q_a of all actuated joints, q̈_u, q̇_u), the distance
-the GP's correlation reaches — give the covered q̈_a range [2.5 %, 97.5 %] quantiles;
-outside it the BEM is an extrapolation (shaded in the figure).
+quantiles (other actuated joints at their medians).  A grid point is *covered* when it is
+supported by the training inputs jointly ((S1) below: a training point within ``radius``
+nearest-neighbour spacings in the data's whitened input space); the covered q̈_a range is that
+of the covered grid points, outside it the BEM is an extrapolation (shaded in the figure).
+
+(d) Joint support of the BEM queries (:func:`design_support`): (S1) the share of the queries
+x_0^e at the data's actuated motions that a training sample supports, all inputs together, and
+(S2) whether the data determine the extrapolation from the samples (q̈_u ≠ 0) to the queries
+(q̈_u = 0): the least-squares slope of q_u in q̈_u and its t statistic from the leverage matrix.
+Inputs that move in lockstep under a balancing controller (q̈_u ≈ b q̈_a) fail both.
 
 Units follow the joint kind (hinge: rad, rad/s, rad/s²; slide: m, m/s, m/s²).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,9 +41,16 @@ from bemlearn.data.dataset_types import BEMDataset
 from bemlearn.errors import DataError
 from bemlearn.models.learned_bem import LearnedBEM
 from bemlearn.models.predictor_state import PredictorState
+from bemlearn.pipeline.verdict import EXTRAPOLATION_T, SUPPORT_OK_SHARE
 from bemlearn.units import joint_unit
 
-__all__ = ["SliceSpec", "bem_slice_figure", "bem_slices", "heldout_prediction", "bem_resolution"]
+#: A BEM query is supported when its nearest training sample, in the data's whitened input space,
+#: is within this many times the training samples' own median nearest-neighbour spacing ((S1),
+#: docs/verdict.md "Joint support").
+SUPPORT_RATIO = 3.0
+
+__all__ = ["SliceSpec", "bem_slice_figure", "bem_slices", "heldout_prediction", "bem_resolution", "design_support",
+           "support_of_queries", "extrapolation_leverage", "SUPPORT_RATIO", "SUPPORT_OK_SHARE", "EXTRAPOLATION_T"]
 
 
 def _state(model: PredictorState | LearnedBEM) -> PredictorState:
@@ -123,7 +136,9 @@ class SliceSpec:
     Attributes:
         velocity_quantiles: q̇_a levels (with q_a at its median).
         angle_quantiles: q_a levels (with q̇_a at its median); the median pair is not repeated.
-        radius: "near the slice" = within this many kernel lengthscales in every held coordinate.
+        radius: a grid point is covered when a training point lies within this many times the
+            training points' median nearest-neighbour spacing of it, in the data's whitened input
+            space ((S1) of :func:`support_of_queries`; all inputs jointly).
         n_grid: points along q̈_a.
         extend: the q̈_a axis spans the training points' [0.5 %, 99.5 %] range widened by this
             fraction on each side.
@@ -131,7 +146,7 @@ class SliceSpec:
 
     velocity_quantiles: tuple[float, ...] = (0.1, 0.5, 0.9)
     angle_quantiles: tuple[float, ...] = (0.1, 0.9)
-    radius: float = 1.0
+    radius: float = SUPPORT_RATIO
     n_grid: int = 201
     extend: float = 0.5
 
@@ -156,8 +171,10 @@ def bem_slices(model: PredictorState | LearnedBEM, train: BEMDataset, spec: Slic
     meta = train.meta
     act = list(meta.actuated_names)
     m = len(act)
-    x = train.x.numpy()
-    reach = (state.lengthscale * state.x_std).to(torch.float64).numpy()  # physical lengthscales
+    x = train.x.to(torch.float64).numpy()
+    mu, w = _whitener(x)                     # (S1): whitened by the data's covariance, not the GP's lengthscales
+    z = (x - mu) @ w
+    spacing = float(np.median(_nearest(z, z, exclude_self=True)))
     med = np.median(x, axis=0)
     slices = []
     inside_std, outside_std = [], []
@@ -176,12 +193,13 @@ def bem_slices(model: PredictorState | LearnedBEM, train: BEMDataset, spec: Slic
             query = np.tile(base, (spec.n_grid, 1))
             query[:, qdd_col] = grid
             mean, lat, pred = _predict(state, torch.from_numpy(query))
-            held = [c for c in range(x.shape[1]) if c != qdd_col]
-            near = np.all(np.abs(x[:, held] - base[held]) <= spec.radius * reach[held], axis=1)
+            zq = (query - mu) @ w
+            sup = _nearest(zq, z) <= spec.radius * spacing          # (S1) for each grid point
+            near = _nearest(z, zq) <= spec.radius * spacing         # training points near the supported slice
             covered = None
-            if near.sum() >= 5:
-                covered = [float(v) for v in np.quantile(x[near, qdd_col], [0.025, 0.975])]
-                cov = (grid >= covered[0]) & (grid <= covered[1])
+            if sup.any():
+                covered = [float(grid[sup].min()), float(grid[sup].max())]
+                cov = sup
                 inside_std.append(pred[cov])
                 outside_std.append(pred[~cov])
             else:
@@ -280,3 +298,164 @@ def bem_resolution(model: PredictorState | LearnedBEM, train: BEMDataset, *, max
     inputs.sort(key=lambda r: -r["share"])
     return {"spread": spread, "band_std": bstd, "ratio": spread / bstd if bstd > 0 else float("inf"), "unit": unit,
             "inputs": inputs}
+
+
+# SUPPORT_OK_SHARE: share of the BEM queries that must be supported by (S1) for the extrapolation check
+# (S2) to be skipped; EXTRAPOLATION_T: the t statistic of (S2) at which the extrapolation counts as resolved.
+
+
+def _whitener(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(mean (d,), W (d, d)) with z = (x − mean) W of identity covariance: W = V Λ^{-1/2} Vᵀ of the
+    data's covariance C = V Λ Vᵀ (eigenvalues floored at 1e-12 · max so a constant column stays finite)."""
+    mu = x.mean(0)
+    c = np.cov(x - mu, rowvar=False).reshape(x.shape[1], x.shape[1])
+    lam, v = np.linalg.eigh(c)
+    lam = np.maximum(lam, max(float(lam.max()), 1e-300) * 1e-12)
+    return mu, (v / np.sqrt(lam)) @ v.T
+
+
+def _nearest(a: np.ndarray, b: np.ndarray, *, exclude_self: bool = False, chunk: int = 1024) -> np.ndarray:
+    """Euclidean distance of each row of ``a`` to its nearest row of ``b`` (itself excluded when ``a`` is ``b``)."""
+    out = np.empty(len(a))
+    bb = np.einsum("ij,ij->i", b, b)
+    for s in range(0, len(a), chunk):
+        p = a[s:s + chunk]
+        d2 = np.einsum("ij,ij->i", p, p)[:, None] + bb[None, :] - 2.0 * p @ b.T
+        if exclude_self:
+            d2[np.arange(len(p)), np.arange(s, s + len(p))] = np.inf
+        out[s:s + chunk] = np.sqrt(np.maximum(d2.min(1), 0.0))
+    return out
+
+
+def support_of_queries(x: np.ndarray, queries: np.ndarray, *, ratio: float = SUPPORT_RATIO) -> dict[str, Any]:
+    """Joint support of BEM queries by training inputs (eq. 14's x_0^e against eq. 11's x_i).
+
+    With z = (x − x̄) W the training inputs whitened by their own covariance (Mahalanobis
+    coordinates, :func:`_whitener`), s = median_i min_{j≠i} ‖z_i − z_j‖ the training samples'
+    typical nearest-neighbour spacing, and for each query q
+
+        r(q) = min_i ‖z(q) − z_i‖ / s,      supported ⇔ r(q) ≤ ``ratio``.             (S1)
+
+    Inputs that move together (q̈_u ≈ b q̈_a under a balancing controller) span a thin slab
+    in x; whitening stretches the slab's thin direction to unit scale, so a query off the slab
+    (q̈_u = 0 at large |q̈_a|) lies many spacings from every sample although each of its inputs
+    is inside its own range.
+
+    Args:
+        x: ``(N, d)`` training inputs, physical units.
+        queries: ``(B, d)`` queries, same columns.
+        ratio: the limit of (S1).
+
+    Returns:
+        ``{"ratio": (B,) r, "supported": (B,) bool, "share": float, "spacing": s, "limit": ratio,
+        "r_median", "r_q90"}``.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    queries = np.asarray(queries, dtype=np.float64)
+    if len(x) < 3:
+        raise DataError(f"support_of_queries: need at least 3 training inputs, got {len(x)}")
+    mu, w = _whitener(x)
+    z, zq = (x - mu) @ w, (queries - mu) @ w
+    s = float(np.median(_nearest(z, z, exclude_self=True)))
+    r = _nearest(zq, z) / max(s, 1e-300)
+    sup = r <= ratio
+    return {"ratio": r, "supported": sup, "share": float(sup.mean()) if len(r) else float("nan"), "spacing": s,
+            "limit": ratio, "r_median": float(np.median(r)), "r_q90": float(np.quantile(r, 0.9))}
+
+
+def _lockstep_pairs(x: np.ndarray, names: tuple[str, ...], n_act: int) -> list[dict[str, Any]]:
+    """Per unactuated input (q̈_u, q̇_u): the actuated input it moves with most (largest |corr|), the
+    correlation and the least-squares ratio b of u ≈ b a + c."""
+    pairs = []
+    for c in range(n_act, x.shape[1]):
+        best = None
+        for a in range(n_act):
+            sa, sc = x[:, a].std(), x[:, c].std()
+            if not (sa > 0 and sc > 0):
+                continue
+            r = float(np.corrcoef(x[:, a], x[:, c])[0, 1])
+            if best is None or abs(r) > abs(best[1]):
+                best = (a, r, r * sc / sa)
+        if best is not None:
+            pairs.append({"input": names[c], "with": names[best[0]], "corr": best[1], "ratio": best[2]})
+    pairs.sort(key=lambda p: -abs(p["corr"]))
+    return pairs
+
+
+def design_support(train: BEMDataset, *, max_queries: int = 2000, ratio: float = SUPPORT_RATIO) -> dict[str, Any]:
+    """Are the BEM queries x_0^e = [q̈_a, q̇_a, q_a, 0, 0] (eq. 14) at the data's actuated motions
+    supported by the training inputs *jointly* (:func:`support_of_queries`, (S1))?
+
+    The queries are the training points' own actuated motions with q̈_u = q̇_u = 0: the actuated
+    ranges the data cover, where the BEM will be used.  Every column enters together, so inputs
+    that each span their range but move in lockstep do not count as covering the BEM.
+
+    Returns:
+        ``{"share", "ratio_median", "ratio_q90", "limit", "spacing", "n_queries", "n_train",
+        "pairs": [{"input", "with", "corr", "ratio"}] (largest |corr| first), "inputs": [{"input",
+        "unit", "data": [lo, hi], "supported": [lo, hi] or None, "reach": max |x| of the supported
+        queries or None}]}``; ``data`` are the training inputs' 2.5 / 97.5 % quantiles,
+        ``supported`` those of the supported queries.
+    """
+    meta = train.meta
+    names = tuple(train.input_names)
+    x = train.x.to(torch.float64).numpy()
+    n_act = x.shape[1] - 2
+    q = x[:max_queries].copy()
+    q[:, n_act:] = 0.0                                               # x_0^e (eq. 14)
+    res = support_of_queries(x, q, ratio=ratio)
+    sup = res["supported"]
+    inputs = []
+    for i, name in enumerate(names[:n_act]):
+        prefix, joint = name.split("_", 1)
+        rng = [float(v) for v in np.quantile(x[:, i], [0.025, 0.975])]
+        inputs.append({"input": name, "unit": joint_unit(meta.kind_of(joint), {"q": 0, "qd": 1, "qdd": 2}[prefix]),
+                       "data": rng,
+                       "supported": [float(v) for v in np.quantile(q[sup, i], [0.025, 0.975])] if sup.any() else None,
+                       "reach": float(np.abs(q[sup, i]).max()) if sup.any() else None})
+    out = {"share": res["share"], "ratio_median": res["r_median"], "ratio_q90": res["r_q90"], "limit": ratio,
+           "spacing": res["spacing"], "n_queries": len(q), "n_train": len(x), "pairs": _lockstep_pairs(x, names, n_act),
+           "inputs": inputs, "unit": joint_unit(meta.kind_of(meta.unactuated))}
+    out.update(extrapolation_leverage(x, train.y.to(torch.float64).numpy(), names))
+    return out
+
+
+def extrapolation_leverage(x: np.ndarray, y: np.ndarray, names: tuple[str, ...]) -> dict[str, Any]:
+    """(S2): do the data determine q_u's dependence on q̈_u apart from the actuated inputs?
+
+    Linearised at upright, the unactuated row (eq. 5) gives q_u − q_u^e(q̈_a, q̇_a, q_a) = q̈_u / λ²
+    (+ a damping term in q̇_u), λ² = Γ_q / D_uu > 0 for an equilibrium that needs balancing.  Moving
+    a sample to its BEM query (q̈_u → 0) is therefore an extrapolation along q̈_u by the slope 1/λ².
+    The ordinary least-squares fit y ≈ β₀ + Σ β_i x_i on the training points (columns centred and
+    scaled) gives that slope's standard error from the leverage matrix (XᵀX)⁻¹,
+
+        se(β_q̈u) = σ̂ √[(XᵀX)⁻¹]_{q̈u,q̈u},   t = β_q̈u / se(β_q̈u),                          (S2)
+
+    σ̂² the residual variance; se grows as 1/√(1 − R²) when q̈_u moves in lockstep with the actuated
+    inputs (R² of q̈_u on the other inputs).  The extrapolation is *resolved* when t ≥
+    :data:`EXTRAPOLATION_T` (a positive, well-determined 1/λ²); t ≤ −EXTRAPOLATION_T says the data
+    were taken about an equilibrium that is stable without control (λ² < 0).
+
+    Returns:
+        ``{"qdd_u": name, "slope": β_q̈u in q_u's unit per q̈_u's, "t": t, "lambda2": 1/β_q̈u (1/s²),
+        "vif": 1/(1 − R²)}``; an empty dict when the fit is degenerate.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    sd = x.std(0)
+    if len(x) <= x.shape[1] + 2 or not np.all(sd > 0):
+        return {}
+    a = np.c_[np.ones(len(x)), (x - x.mean(0)) / sd]
+    g = np.linalg.pinv(a.T @ a)
+    beta = g @ (a.T @ y)
+    res = y - a @ beta
+    s2 = float(res @ res) / (len(y) - a.shape[1])
+    c = x.shape[1] - 2 + 1                                   # q̈_u's column in a (after the intercept)
+    se = math.sqrt(max(s2 * g[c, c], 1e-300))
+    slope = float(beta[c] / sd[c - 1])
+    others = np.delete(a, c, axis=1)
+    coef, *_ = np.linalg.lstsq(others, a[:, c], rcond=None)
+    r = a[:, c] - others @ coef
+    r2 = 1.0 - float(r @ r) / float(a[:, c] @ a[:, c])
+    return {"qdd_u": names[-2], "slope": slope, "t": float(beta[c] / se),
+            "lambda2": (1.0 / slope) if slope != 0 else math.inf, "vif": 1.0 / max(1.0 - r2, 1e-300)}

@@ -216,10 +216,16 @@ def _closed_loop_lines(sim: dict, data: dict, train: dict, unit: str) -> list[st
              f"| BEM source | outcome | duration (s) | tracking RMSE of q_a ({qa_unit}) | max \\|{qu or 'q_u'}\\| ({unit}) | "
              f"max \\|u\\| ({data.get('input_units', 'actuator units')}) | BEM values held | real-time factor |",
              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    stable = bool((train.get("equilibrium") or {}).get("stable_without_control"))
     for name, m in sim.items():
-        outcome = f"fell at {m['duration_s']:.2f} s" if m["fell"] else "diverged (q_a left the reference)" if m.get("diverged") else "stayed up"
+        outcome = f"fell at {m['duration_s']:.2f} s" if m["fell"] else "diverged (q_a left the reference)" if m.get("diverged") else \
+            "stayed near an equilibrium that is stable without control (not balanced)" if stable else "stayed up"
         lines.append(f"| {name} | {outcome} | {_f(m['duration_s'], '.1f')} | {_f(m['tracking_rmse'])} | {_f(m['qu_max'], '.3f')} | "
                      f"{_f(m['u_max'], '.2f')} | {m.get('bem_rejected', 0)} | {_f(m['real_time_factor'], '.1f')} |")
+    if stable:
+        eq = train["equilibrium"]
+        lines += ["", f"The equilibrium these loops held ({eq['joint']} = {eq['qu']:.4g} {eq['unit']}) is stable without control "
+                  f"(gravity stiffness Γ_q = {eq['gravity_stiffness']:.3g} < 0): none of them balanced the robot."]
     if "predictor" in sim and "lemma1" in sim["predictor"]:
         L = sim["predictor"]["lemma1"]
         lines += ["", f"Lemma 1 along the reference: model-based max |ΔΓ − Ḣ_u − b_u q̇_u^e| = {L['model_gap']:.1e}; "
