@@ -59,16 +59,17 @@ class ClosedLoopCase:
     seed: int = 0
 
 
-def _schedule_offsets(schedule: dict[str, Any] | None, names: tuple[str, ...], t: float) -> tuple[np.ndarray, np.ndarray]:
-    """q_t and q̇_t offsets of the actuated joints ``names`` at time ``t`` from an excite schedule."""
+def _schedule_offsets(schedule: dict[str, Any] | None, names: tuple[str, ...], t: float, trial: int) -> tuple[np.ndarray, np.ndarray]:
+    """q_t and q̇_t offsets of the actuated joints ``names`` at time ``t`` of ``trial`` from an excite schedule."""
     q, qd = np.zeros(len(names)), np.zeros(len(names))
     if schedule is None:
         return q, qd
+    phases = schedule["phases"][trial % len(schedule["phases"])]
     for j, name in enumerate(names):
-        for c in schedule["joints"][name]["sines"]:
+        for c, ph in zip(schedule["joints"][name]["sines"], phases[name]):
             w = 2 * math.pi * c["frequency_hz"]
-            q[j] += c["amplitude"] * math.sin(w * t + c["phase"])
-            qd[j] += c["amplitude"] * w * math.cos(w * t + c["phase"])
+            q[j] += c["amplitude"] * math.sin(w * t + ph)
+            qd[j] += c["amplitude"] * w * math.cos(w * t + ph)
     return q, qd
 
 
@@ -80,10 +81,13 @@ def simulate_logs(case: ClosedLoopCase, out: Path, *, schedule: dict[str, Any] |
     """
     from bemlearn.control.lqr import discrete_lqr
     from bemlearn.data.sensors import SensorConfig
-    from bemlearn.robots import load
+    from bemlearn.errors import RobotModelError
+    from bemlearn.robots import MujocoRobot, load
     from bemlearn.sim.plant import SensedPlant
 
     robot = load(case.robot)
+    if not isinstance(robot, MujocoRobot):
+        raise RobotModelError(f"bench closed-loop-data: {case.robot!r} has no MuJoCo model to simulate")
     lqr = discrete_lqr(robot, rate_hz=case.rate_hz)
     n, iu, ia = robot.n, robot.unactuated_index, list(robot.actuated_index)
     act_names = tuple(robot.joint_names[j] for j in ia)
@@ -114,7 +118,11 @@ def simulate_logs(case: ClosedLoopCase, out: Path, *, schedule: dict[str, Any] |
             y, v = plant.measure(q_true)
             q_ref, qd_ref = np.zeros(n), np.zeros(n)
             q_ref[iu] = robot.qu_nominal
-            q_ref[ia], qd_ref[ia] = _schedule_offsets(schedule, act_names, t)
+            q_ref[ia], qd_ref[ia] = _schedule_offsets(schedule, act_names, t, i)
+            if schedule is not None:            # the passive joint's rest position for those offsets (E1)
+                sp = np.array([schedule["unactuated"]["static_slope"][nm] for nm in act_names])
+                q_ref[iu] += float(sp @ q_ref[ia])
+                qd_ref[iu] += float(sp @ qd_ref[ia])
             u = np.clip(lqr.K @ np.concatenate([y - q_ref, v - qd_ref]), lo, hi)
             u_peak = max(u_peak, float(np.max(np.abs(u) / np.maximum(hi, 1e-300))))
             d = rho * d + case.disturbance_rms * math.sqrt(1 - rho * rho) * rng.normal(size=n)

@@ -15,6 +15,12 @@ derivatives               S[q̈] noise > 4 % of its std                 —
 fit                       did not converge (max_iter, numerical)      —
 learned vs model BEM      gain ∉ [0.95, 1.05], RMSE > 0.05 d or       gain ∉ [0.5, 2] or
 over the design region    max > 0.2 d; band covers < 80 %             RMSE > 0.25 d
+equilibrium (robot runs)  —                                           gravity's stiffness Γ_q < 0
+                                                                      at the equilibrium held
+                                                                      (stable without control)
+support of the BEM        < 90 % of the queries x_0^e supported       t < 2, or t ≤ −5 (data
+queries (S1, S2)          jointly (S1) and t of q_u's slope in        from a stable equilibrium)
+                          q̈_u < 5 (S2)
 data resolve the BEM      its spread over the data < 4 × the larger    < 2 × that scale
                           of band σ and the held-out trials' median
                           q_u error
@@ -227,7 +233,7 @@ def _support_sentence(sup: dict[str, Any]) -> str:
             hi = max(abs(inp["data"][0]), abs(inp["data"][1]))
             where = (f"no training sample near {pairs[0]['input']} = 0 beyond |{inp['input']}| ≈ {inp['reach']:.3g} {inp['unit']} "
                      f"(the data reach ±{hi:.3g})")
-    share = sup.get("share")
+    share = float(sup.get("share", math.nan))
     head = f"{100 * (1 - share):.0f} % of the BEM queries (q̈_u = q̇_u = 0 at the data's actuated motions) lie beyond the training data jointly" \
         if _finite(share) else "the BEM queries lie beyond the training data jointly"
     return "; ".join(t for t in (text, head + (f": {where}" if where else "")) if t)
@@ -240,14 +246,14 @@ def _check_support(metrics: dict[str, Any], notes: _Notes) -> None:
         return
     notes.checked.append("support")
     t = sup.get("t")
-    if sup["share"] >= SUPPORT_OK_SHARE or not _finite(t):
+    if not _finite(t):
         return
     if t <= -EXTRAPOLATION_T:
         notes.add("unusable", "support", f"the data were taken about an equilibrium that is stable without control: q_u rises "
                   f"as {sup['qdd_u']} falls (slope {sup['slope']:.3g}, t = {t:.1f}; an upright that needs balancing gives a "
                   "positive slope 1/λ²): this is not a balanced upright, and no BEM of one can be learned from it")
         return
-    if t >= EXTRAPOLATION_T:
+    if sup["share"] >= SUPPORT_OK_SHARE or t >= EXTRAPOLATION_T:
         return
     sev = "unusable" if t < 2.0 else "degraded"
     notes.add(sev, "support", _support_sentence(sup) + f"; and the data do not resolve how q_u depends on {sup['qdd_u']} apart "
