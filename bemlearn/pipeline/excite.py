@@ -65,8 +65,8 @@ def _data_scales(config) -> dict[str, Any]:
     a = np.c_[np.ones(len(x)), x]
     beta = np.linalg.lstsq(a, y, rcond=None)[0][1:]
     fs = meta.sample_rate_hz
-    f90 = []
-    for j, joint in enumerate(meta.actuated_names):
+    f75 = []
+    for joint in meta.actuated_names:
         col = meta.joint_names.index(joint)
         psd, freqs = None, None
         for s in traj.trial_slices():
@@ -79,7 +79,7 @@ def _data_scales(config) -> dict[str, Any]:
         if psd is None or freqs is None or not psd[1:].sum() > 0:
             raise ConfigError(f"bemlearn excite: {config.data}: {joint} does not move in the data; no time scale to excite at")
         c = np.cumsum(psd[1:]) / psd[1:].sum()
-        f90.append(float(freqs[1:][min(np.searchsorted(c, 0.75), len(c) - 1)]))
+        f75.append(float(freqs[1:][min(np.searchsorted(c, 0.75), len(c) - 1)]))
     u_gain = None
     if traj.u is not None and traj.u.size:
         rows = ds.train.row.numpy()
@@ -89,7 +89,7 @@ def _data_scales(config) -> dict[str, Any]:
     else:
         u_max = math.nan
     return {"qdd_std": x[:, :m].std(0), "s_p": beta[2 * m:3 * m], "unactuated": meta.unactuated,
-            "unactuated_kind": meta.kind_of(meta.unactuated), "f75": np.array(f90), "leverage": lev, "u_gain": u_gain,
+            "unactuated_kind": meta.kind_of(meta.unactuated), "f75": np.array(f75), "leverage": lev, "u_gain": u_gain,
             "u_max": u_max, "names": tuple(meta.actuated_names), "kinds": [meta.kind_of(j) for j in meta.actuated_names],
             "n_trials": len(traj.trial_ids), "rate_hz": fs}
 
@@ -102,9 +102,8 @@ def excitation_schedule(config, *, n_sines: int = N_SINES, seed: int = 0) -> dic
         "sines": [{"amplitude", "frequency_hz", "phase"}], "peak", "peak_acceleration", "limited_by"}},
         "phases": [{name: [φ_k]}] per trial, "why"}``.
     """
-    from bemlearn.units import joint_unit
-
     from bemlearn.robots import MujocoRobot, load
+    from bemlearn.units import joint_unit
 
     robot: MujocoRobot | None = None
     if config.robot:
@@ -171,7 +170,7 @@ def excitation_schedule(config, *, n_sines: int = N_SINES, seed: int = 0) -> dic
         acc = np.full(n_sines, a_tot[j] / n_sines)
         A = acc / w**2
         limited = []
-        if np.isfinite(q_cap[j]) and np.any(A > q_cap[j] / n_sines):
+        if np.isfinite(q_cap[j]) and np.any(q_cap[j] / n_sines < A):
             A = np.minimum(A, q_cap[j] / n_sines)
             limited.append(f"position: Σ A ≤ {q_cap[j]:.3g}")
         # the input the sines add (module docstring): scale down to half the headroom
