@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.distance import cdist
 
-from bemlearn.pipeline.data_evaluation import EXTRAPOLATION_T, extrapolation_leverage, support_of_queries
+from bemlearn.pipeline.support import EXTRAPOLATION_T, extrapolation_leverage, support_of_queries
 from bemlearn.pipeline.verdict import judge_run
 
 NAMES = ("qdd_a", "qd_a", "q_a", "qdd_u", "qd_u")
@@ -67,7 +67,7 @@ def test_lockstep_data_do_not_resolve_the_extrapolation_spread_data_do(seed):
 
 
 def _support_metrics(x: np.ndarray, y: np.ndarray) -> dict:
-    from bemlearn.pipeline.data_evaluation import _lockstep_pairs
+    from bemlearn.pipeline.support import _lockstep_pairs
 
     q = x.copy()
     q[:, 3:] = 0.0

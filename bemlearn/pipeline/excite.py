@@ -10,8 +10,8 @@ off any one line.  Per actuated joint j the schedule is
 
 * frequencies f_k log-spaced over [f_hi / 10, f_hi]: f_hi = 1.5 λ / 2π from the upright's
   instability rate λ = √(Γ_q / D_uu) (the model's, or the data's 1/slope of (S2) when resolved),
-  else 2 × the frequency below which 75 % of the data's q_a motion power lies (Welch, without the
-  mean; the top quarter is left out because an encoder's quantization noise is white);
+  else 2 × the frequency below which 75 % of the data's q_a motion power lies (periodograms of 10 s
+  pieces, without the mean; the top quarter is left out because an encoder's quantization noise is white);
 * equal acceleration amplitudes A_jk (2π f_k)² = a_j / K with a_j = 1.3 d / |s_a,j| (the model's
   BEM slope in q̈_a, as the design region's box (D1)) or, from data, 4 × the data's std of q̈_a,j
   (the new motion then dominates the old line);
@@ -50,10 +50,8 @@ DESIGN_BOUND = 0.2
 def _data_scales(config) -> dict[str, Any]:
     """The data's own scales (module docstring): per actuated joint std(q̈_a), the least-squares slope of q_u
     in q_a, the input regression, the q_a spectrum's 75 % frequency, and (S2)."""
-    from scipy.signal import welch
-
     from bemlearn.data import build_datasets, read_trajectory
-    from bemlearn.pipeline.data_evaluation import extrapolation_leverage
+    from bemlearn.pipeline.support import extrapolation_leverage
 
     traj = read_trajectory(config.data)
     ds = build_datasets(traj, config.dataset)
@@ -69,17 +67,21 @@ def _data_scales(config) -> dict[str, Any]:
     for joint in meta.actuated_names:
         col = meta.joint_names.index(joint)
         psd, freqs = None, None
-        for s in traj.trial_slices():
+        for s in traj.trial_slices():       # periodograms of 10 s pieces (Welch without overlap), summed
             q = traj.q[s.rows, col]
             n = min(len(q), int(fs * 10))
             if n < 16:
                 continue
-            freqs, p = welch(q - q.mean(), fs=fs, nperseg=n)
-            psd = p if psd is None else psd[:len(p)] + p[:len(psd)]
+            for k in range(len(q) // n):
+                piece = q[k * n:(k + 1) * n]
+                p = np.abs(np.fft.rfft((piece - piece.mean()) * np.hanning(n))) ** 2
+                if psd is None or len(psd) == len(p):
+                    psd = p if psd is None else psd + p
+                    freqs = np.fft.rfftfreq(n, 1.0 / fs)
         if psd is None or freqs is None or not psd[1:].sum() > 0:
             raise ConfigError(f"bemlearn excite: {config.data}: {joint} does not move in the data; no time scale to excite at")
         c = np.cumsum(psd[1:]) / psd[1:].sum()
-        f75.append(float(freqs[1:][min(np.searchsorted(c, 0.75), len(c) - 1)]))
+        f75.append(float(freqs[1 + min(int(np.searchsorted(c, 0.75)), len(c) - 1)]))
     u_gain = None
     if traj.u is not None and traj.u.size:
         rows = ds.train.row.numpy()
