@@ -176,7 +176,8 @@ def bem_slices(model: PredictorState | LearnedBEM, train: BEMDataset, spec: Slic
     x = train.x.to(torch.float64).numpy()
     mu, w = _whitener(x)                     # (S1): whitened by the data's covariance, not the GP's lengthscales
     z = (x - mu) @ w
-    spacing = float(np.median(_nearest(z, z, exclude_self=True)))
+    nn = _nearest(z, z, exclude_self=True)
+    spacing = float(np.median(nn[nn > 0])) if np.any(nn > 0) else 0.0
     med = np.median(x, axis=0)
     slices = []
     inside_std, outside_std = [], []

@@ -75,7 +75,9 @@ def support_of_queries(x: np.ndarray, queries: np.ndarray, *, ratio: float = SUP
         raise DataError(f"support_of_queries: need at least 3 training inputs, got {len(x)}")
     mu, w = _whitener(x)
     z, zq = (x - mu) @ w, (queries - mu) @ w
-    s = float(np.median(_nearest(z, z, exclude_self=True)))
+    nn = _nearest(z, z, exclude_self=True)
+    pos = nn[nn > 0]                       # repeated samples (a rig at rest on its encoder grid) are no spacing
+    s = float(np.median(pos)) if len(pos) else 0.0
     r = _nearest(zq, z) / max(s, 1e-300)
     sup = r <= ratio
     return {"ratio": r, "supported": sup, "share": float(sup.mean()) if len(r) else float("nan"), "spacing": s,

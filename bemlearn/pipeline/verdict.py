@@ -263,9 +263,11 @@ def _check_support(metrics: dict[str, Any], notes: _Notes) -> None:
 
 
 def _lockstep(metrics: dict[str, Any]) -> bool:
-    """The support check (S2) failed: the inputs move together and the extrapolation to the BEM is unresolved."""
+    """The inputs move together (|corr| ≥ 0.9 between an unactuated and an actuated input) and (S2) does not
+    resolve q_u's dependence on q̈_u apart from them: more of the same motion cannot separate them."""
     sup = metrics.get("support") or {}
-    return _finite(sup.get("t")) and _finite(sup.get("share")) and sup["share"] < SUPPORT_OK_SHARE and sup["t"] < EXTRAPOLATION_T
+    together = any(abs(p.get("corr", 0.0)) >= 0.9 for p in sup.get("pairs") or [])
+    return together and _finite(sup.get("t")) and sup["t"] < EXTRAPOLATION_T
 
 
 def _check_equilibrium(metrics: dict[str, Any], notes: _Notes) -> None:
