@@ -17,9 +17,11 @@ off any one line.  Per actuated joint j the schedule is
   (the new motion then dominates the old line);
 * each A_jk clipped to Q_j / K so that the position offset stays within Q_j: half the joint's
   range and 0.5 d / |s_p,j| (the model's BEM slope in q_a, or the data's least-squares slope);
-* all amplitudes scaled down together until the input they add, estimated from a least-squares
-  fit of the logged input on [q̈_a, q̇_a, q_a, q̈_u, q̇_u] (data) or from D_aa q̈_a / gear (model),
-  is at most half the actuator's headroom (half the ctrl range, or half the largest logged |u|);
+* all amplitudes scaled down together until the input they add — the peak acceleration Σ A ω²
+  times std(u) / std(q̈_a) of the data (the input moves with the acceleration as it does in the
+  logs; a regression of u on the state would return the loop's feedback gains, not the plant's
+  inertia), or D_aa / gear from the model — is at most half the actuator's headroom (a quarter of
+  the ctrl range; from data, half the largest logged |u|);
 * phases φ_jk drawn per trial (seeded);
 * the unactuated joint's reference moves with the offsets by the BEM's static slope,
   q_u,t = Σ_j s_p,j q_t,j (the model's s_p, or the data's least-squares slope of q_u in q_a): where
@@ -60,8 +62,7 @@ def _data_scales(config) -> dict[str, Any]:
     meta = traj.meta
     m = len(meta.actuated_names)
     lev = extrapolation_leverage(x, y, names)
-    a = np.c_[np.ones(len(x)), x]
-    beta = np.linalg.lstsq(a, y, rcond=None)[0][1:]
+    beta = np.linalg.lstsq(np.c_[np.ones(len(x)), x], y, rcond=None)[0][1:]
     fs = meta.sample_rate_hz
     f75 = []
     for joint in meta.actuated_names:
@@ -82,16 +83,15 @@ def _data_scales(config) -> dict[str, Any]:
             raise ConfigError(f"bemlearn excite: {config.data}: {joint} does not move in the data; no time scale to excite at")
         c = np.cumsum(psd[1:]) / psd[1:].sum()
         f75.append(float(freqs[1 + min(int(np.searchsorted(c, 0.75)), len(c) - 1)]))
-    u_gain = None
+    u_per_acc, u_max = None, math.nan
     if traj.u is not None and traj.u.size:
-        rows = ds.train.row.numpy()
-        u = traj.u[rows]
-        coef = np.linalg.lstsq(a, u, rcond=None)[0][1:]             # (d, m): ∂u/∂x
-        u_gain, u_max = coef, float(np.abs(traj.u).max())
-    else:
-        u_max = math.nan
+        # the input moves with the actuated acceleration as it does in the data: std(u) / std(q̈_a), the
+        # largest over the inputs (a regression of u on the state would return the loop's feedback gains)
+        u_std = traj.u[ds.train.row.numpy()].std(0)
+        u_per_acc = float(u_std.max()) / np.maximum(x[:, :m].std(0), 1e-300)
+        u_max = float(np.abs(traj.u).max())
     return {"qdd_std": x[:, :m].std(0), "s_p": beta[2 * m:3 * m], "unactuated": meta.unactuated,
-            "unactuated_kind": meta.kind_of(meta.unactuated), "f75": np.array(f75), "leverage": lev, "u_gain": u_gain,
+            "unactuated_kind": meta.kind_of(meta.unactuated), "f75": np.array(f75), "leverage": lev, "u_per_acc": u_per_acc,
             "u_max": u_max, "names": tuple(meta.actuated_names), "kinds": [meta.kind_of(j) for j in meta.actuated_names],
             "n_trials": len(traj.trial_ids), "rate_hz": fs}
 
@@ -163,7 +163,6 @@ def excitation_schedule(config, *, n_sines: int = N_SINES, seed: int = 0) -> dic
         sp = np.abs(s_p)
         q_cap = np.where(sp > 1e-9, 0.5 * d / np.maximum(sp, 1e-300), np.inf)
         trials, rate = max(12, data["n_trials"]), data["rate_hz"]
-    m = len(names)
     rng = np.random.default_rng(seed)
     joints: dict[str, Any] = {}
     for j, name in enumerate(names):
@@ -181,9 +180,8 @@ def excitation_schedule(config, *, n_sines: int = N_SINES, seed: int = 0) -> dic
             room = u_room[j]
         else:
             assert data is not None
-            g = data["u_gain"]
-            du = float(np.sum(np.abs(g[j, :]) * A * w**2 + np.abs(g[m + j, :]) * A * w + np.abs(g[2 * m + j, :]) * A)) \
-                if g is not None else 0.0
+            g = data["u_per_acc"]
+            du = float(np.sum(A * w**2)) * float(g[j]) if g is not None else 0.0
             room = 0.5 * data["u_max"] if math.isfinite(data["u_max"]) else math.inf
         if du > room > 0:
             A = A * room / du
