@@ -16,7 +16,8 @@ off any one line.  Per actuated joint j the schedule is
   BEM slope in q̈_a, as the design region's box (D1)) or, from data, 4 × the data's std of q̈_a,j
   (the new motion then dominates the old line);
 * each A_jk clipped to Q_j / K so that the position offset stays within Q_j: half the joint's
-  range and 0.5 d / |s_p,j| (the model's BEM slope in q_a, or the data's least-squares slope);
+  range and d / |s_p,j| (the BEM it moves stays in the design region; s_p,j the model's BEM
+  slope in q_a, or the data's least-squares slope);
 * all amplitudes scaled down together until the input they add — the peak acceleration Σ A ω²
   times std(u) / std(q̈_a) of the data (the input moves with the acceleration as it does in the
   logs; a regression of u on the state would return the loop's feedback gains, not the plant's
@@ -130,7 +131,7 @@ def excitation_schedule(config, *, n_sines: int = N_SINES, seed: int = 0) -> dic
         basis = f"1.5 × the model's instability rate λ = {lam:.3g} 1/s"
         s = bem_slopes(robot)
         a_tot = np.where(np.abs(s[2]) > 0, 1.3 * d / np.maximum(np.abs(s[2]), 1e-300), np.inf)
-        q_cap = np.minimum(0.5 * qa_half_ranges(robot), np.where(np.abs(s[0]) > 1e-9, 0.5 * d / np.maximum(np.abs(s[0]), 1e-300), np.inf))
+        q_cap = np.minimum(0.5 * qa_half_ranges(robot), np.where(np.abs(s[0]) > 1e-9, d / np.maximum(np.abs(s[0]), 1e-300), np.inf))
         names = tuple(robot.actuated_names)
         kinds = [robot.coordinate_kinds[j] for j in robot.actuated_index]
         s_p = s[0]
@@ -161,7 +162,7 @@ def excitation_schedule(config, *, n_sines: int = N_SINES, seed: int = 0) -> dic
         s_p = data["s_p"]
         qu_name, qu_kind = data["unactuated"], data["unactuated_kind"]
         sp = np.abs(s_p)
-        q_cap = np.where(sp > 1e-9, 0.5 * d / np.maximum(sp, 1e-300), np.inf)
+        q_cap = np.where(sp > 1e-9, d / np.maximum(sp, 1e-300), np.inf)
         trials, rate = max(12, data["n_trials"]), data["rate_hz"]
     rng = np.random.default_rng(seed)
     joints: dict[str, Any] = {}
