@@ -139,7 +139,7 @@ def _data_only_lines(train: dict, unit: str) -> list[str]:
         pair = next((p for p in sup.get("pairs") or [] if p["input"] == sup.get("qdd_u")), None)
         moved = (f" {pair['input']} moves with {pair['with']} (≈ {pair['ratio']:+.3g}×, corr {pair['corr']:+.3f})." if pair else "")
         ext = (f" Extrapolating from the samples to q̈_u = 0 along {sup['qdd_u']}: least-squares slope {_f(sup.get('slope'), '.3g')} "
-               f"{unit} per unit, t = {_f(sup.get('t'), '.1f')} (resolved when ≥ 5; 1/slope = λ̂² = {_f(sup.get('lambda2'), '.3g')} 1/s²)."
+               f"{unit} per {unit}/s², t = {_f(sup.get('t'), '.1f')} (resolved when ≥ 5; 1/slope = λ̂² = {_f(sup.get('lambda2'), '.3g')} 1/s²)."
                if _finite(sup.get("t")) else "")
         lines += [f"Joint support of the BEM queries (q̈_u = q̇_u = 0 at the data's actuated motions, all inputs together; "
                   f"docs/verdict.md): {_pct(sup['share'])} have a training sample within {sup['limit']:g} nearest-neighbour "
