@@ -210,7 +210,8 @@ def _check_resolution(metrics: dict[str, Any], notes: _Notes) -> None:
         weak = [(w, 2 * scale / w["share"]) for w in res.get("inputs", []) if w.get("share")]
         weak = [(w, f) for w, f in weak if f > 1.0][:3]
         if _lockstep(metrics):      # more of the same motion cannot separate inputs that move together
-            text += "; more amplitude of the same motion cannot help while the inputs move in lockstep (finding 'support')"
+            text += ("; more amplitude of the same motion cannot help while the inputs move in lockstep: a reference motion "
+                     "that changes their ratio can (`bemlearn excite CONFIG`)")
         elif weak:
             text += "; at the learned slopes, " + ", ".join(
                 f"{w['input']} (±{w['amplitude']:.3g} {w['unit']} in the data) would need about {f:.1f}× that amplitude"
