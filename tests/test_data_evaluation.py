@@ -105,28 +105,38 @@ def test_slices_mean_band_and_coverage(fitted, tmp_path):
     mean, sd = numpy_posterior(state, query)
     np.testing.assert_allclose(s["mean"], mean, rtol=0, atol=1e-10)
     np.testing.assert_allclose(s["std_pred"], sd, rtol=0, atol=1e-10)
-    # covered range: q̈_a quantiles of the training points within one lengthscale in every held coordinate
-    reach = (state.lengthscale * state.x_std).numpy()
-    near = np.all(np.abs(x[:, 1:] - np.array([s["qd"], s["q"], 0.0, 0.0])) <= reach[1:], axis=1)
-    assert s["n_near"] == near.sum() >= 5
-    assert s["covered"] == pytest.approx(list(np.quantile(x[near, 0], [0.025, 0.975])))
-    assert s["units"] == {"qdd": "rad/s^2", "qd": "rad/s", "q": "rad", "qu": "rad"}
+    # covered: grid points with a training point within 3 median nearest-neighbour spacings, Mahalanobis
+    # distance under the training inputs' covariance (scipy, independent of the module's whitening)
+    from scipy.spatial.distance import cdist
+
+    vi = np.linalg.inv(np.cov(x, rowvar=False))
+    dtt = cdist(x, x, "mahalanobis", VI=vi)
+    np.fill_diagonal(dtt, np.inf)
+    spacing = np.median(dtt.min(1))
+    dq = cdist(query, x, "mahalanobis", VI=vi)
+    sup = dq.min(1) <= 3.0 * spacing
+    assert s["covered"] == pytest.approx([s["grid"][sup].min(), s["grid"][sup].max()])
+    assert s["n_near"] == int((dq.min(0) <= 3.0 * spacing).sum()) >= 5
     # the band is wider outside the data than inside
     assert res["summary"]["std_pred_mean_extrapolated"] > 2 * res["summary"]["std_pred_mean_covered"]
     fig = bem_slice_figure(res, tmp_path / "slices.png", unactuated="alpha")
     assert (tmp_path / "slices.png").stat().st_size > 10_000 and len(fig.axes) == 6
 
 
-def test_slices_without_nearby_data_are_all_extrapolation(fitted):
+def test_slice_coverage_ignores_the_gp_lengthscales(fitted):
+    """A lengthscale of 1000 (or 1e-3) on an input must not make the data cover more (or less): the
+    coverage is the data's own (S1), whatever the fit."""
     train, state = fitted
-    tight = dataclasses.replace(state, lengthscale=torch.full((5,), 1e-3, dtype=torch.float64))
-    res = bem_slices(tight, train, SliceSpec(n_grid=11))
-    assert all(s["covered"] is None and s["n_near"] == 0 for s in res["slices"])
+    spec = SliceSpec(n_grid=11)
+    ref = bem_slices(state, train, spec)
+    for ls in (1e-3, 1e3):
+        other = bem_slices(dataclasses.replace(state, lengthscale=torch.full((5,), ls, dtype=torch.float64)), train, spec)
+        assert [s["covered"] for s in other["slices"]] == [s["covered"] for s in ref["slices"]]
 
 
-def test_resolution_ranges_use_the_slices_covered_rule(fitted):
-    """Each input's range in bem_resolution is the 2.5–97.5 % quantile range of the training data, the rule
-    the slices use for their covered q̈_a range (the report quotes it; it once quoted ±1 std)."""
+def test_resolution_ranges_are_the_covered_quantiles(fitted):
+    """Each input's range in bem_resolution is the 2.5–97.5 % quantile range of the training data (the report
+    quotes it; it once quoted ±1 std)."""
     from bemlearn.pipeline.data_evaluation import COVERED_QUANTILES, bem_resolution
 
     train, state = fitted

@@ -92,6 +92,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     for app in applications().values():
         if app.add_bench is not None:
             app.add_bench(sub)
+    cl = sub.add_parser("closed-loop-data", help="a rig's own LQR loop as the only data: verdict on lockstep data, and on "
+                        "the same loop playing `bemlearn excite`'s schedule (slopes vs the model's)",
+                        description="Balance ROBOT by a plain discrete LQR with small random torques on every joint, log "
+                        "CSVs, import them with `bemlearn data import`, run model-free; then play the schedule `bemlearn "
+                        "excite` writes for those data and run again (bemlearn/bench/closed_loop_bench.py).")
+    cl.add_argument("--robot", default="tests/robots/pendubot.xml", help="MJCF file (default tests/robots/pendubot.xml)")
+    cl.add_argument("--out", type=Path, required=True, help="work folder (logs, data, runs)")
+    cl.add_argument("--trials", type=int, default=12)
+    cl.add_argument("--duration", type=float, default=20.0, help="seconds per lockstep trial (default 20)")
+    cl.add_argument("--rate", type=float, default=500.0, help="control and log rate, Hz (default 500)")
+    cl.add_argument("--disturbance", type=float, default=3e-4, help="rms torque on every joint, N·m (default 3e-4)")
+    cl.add_argument("--seed", type=int, default=0)
+    cl.set_defaults(func=_closed_loop_data)
     im = sub.add_parser("import", help="logger CSV import speed (10⁶ rows) and, with --accuracy, the model-free "
                         "path's learned BEM vs the simulator file's")
     im.add_argument("--data", type=Path, required=True,
@@ -348,4 +361,30 @@ def _fuzz(args: argparse.Namespace) -> int:
     from bemlearn.bench.fuzz_bench import format_fuzz, run_fuzz
 
     print(format_fuzz(run_fuzz(examples=args.examples)))
+    return 0
+
+
+def _closed_loop_data(args) -> int:
+    from bemlearn.bench.closed_loop_bench import ClosedLoopCase, bench_closed_loop_data
+
+    case = ClosedLoopCase(robot=args.robot, trials=args.trials, duration_s=args.duration, rate_hz=args.rate,
+                          disturbance_rms=args.disturbance, seed=args.seed)
+    res = bench_closed_loop_data(case, args.out)
+    model = res["model_slopes"]
+    print(f"robot {args.robot}: {args.trials} trials, LQR at {args.rate:g} Hz, {1e3 * args.disturbance:g} mN·m rms on every joint")
+    print("| data | trials fell | verdict | support share | t of q̈_u slope (S2) | corr(q̈_u, q̈_a) | slope ∂q_u^e/∂q_a (model) "
+          "| error | slope ∂q_u^e/∂q̈_a (model) | error |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for c in res["cases"]:
+        sup = c["support"] or {}
+        pair = next((p for p in sup.get("pairs", []) if p["input"].startswith("qdd_")), None)
+        cells = []
+        for key in [k for k in model if k.startswith("q_")] + [k for k in model if k.startswith("qdd_")]:
+            got, ref = c["slopes"][key], model[key]
+            cells += [f"{got:.4g} ({ref:.4g})", f"{100 * (got - ref) / ref:+.1f} %" if ref else "—"]
+        print(f"| {c['label']} | {c['sim']['fell']} | {c['verdict']['status']} | {sup.get('share', float('nan')):.2f} | "
+              f"{sup.get('t', float('nan')):.1f} | {pair['corr'] if pair else float('nan'):+.3f} | " + " | ".join(cells) + " |")
+    for c in res["cases"]:
+        print(f"{c['label']}: Verdict: {c['verdict']['status']}" + (" — " + "; ".join(c["verdict"]["reasons"]) if c["verdict"]["reasons"] else ""))
+    print(res["excite_stdout"].rstrip())
     return 0

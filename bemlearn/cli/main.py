@@ -40,6 +40,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "bemlearn.cli.run_cmd",
     "bemlearn.cli.sweep_cmd",
     "bemlearn.cli.data_cmd",
+    "bemlearn.cli.excite_cmd",
     "bemlearn.cli.export_cmd",
     "bemlearn.cli.examples_cmd",
     "bemlearn.cli.bench_cmd",

@@ -13,11 +13,16 @@ grow for the input's own share of the BEM to exceed the band's ±2σ.
 
 (b) The learned BEM on slices (eq. 14): μ(x_0^e) and μ ± 2σ_pred against q̈_a of one actuated
 joint, x_0^e = [q̈_a, q̇_a, q_a, 0, 0], at a few (q̇_a, q_a) taken from the training data's
-quantiles (other actuated joints at their medians).  For each slice the training points
-*near* it — within ``radius`` kernel lengthscales ℓ_c (physical units, ℓ_c · x_std,c) of the
-slice in every held coordinate c (q̇_a, q_a of all actuated joints, q̈_u, q̇_u), the distance
-the GP's correlation reaches — give the covered q̈_a range [2.5 %, 97.5 %] quantiles;
-outside it the BEM is an extrapolation (shaded in the figure).
+quantiles (other actuated joints at their medians).  A grid point is *covered* when it is
+supported by the training inputs jointly ((S1) below: a training point within ``radius``
+nearest-neighbour spacings in the data's whitened input space); the covered q̈_a range is that
+of the covered grid points, outside it the BEM is an extrapolation (shaded in the figure).
+
+(d) Joint support of the BEM queries (:func:`design_support`): (S1) the share of the queries
+x_0^e at the data's actuated motions that a training sample supports, all inputs together, and
+(S2) whether the data determine the extrapolation from the samples (q̈_u ≠ 0) to the queries
+(q̈_u = 0): the least-squares slope of q_u in q̈_u and its t statistic from the leverage matrix.
+Inputs that move in lockstep under a balancing controller (q̈_u ≈ b q̈_a) fail both.
 
 Units follow the joint kind (hinge: rad, rad/s, rad/s²; slide: m, m/s, m/s²).
 """
@@ -35,12 +40,23 @@ from bemlearn.data.dataset_types import BEMDataset
 from bemlearn.errors import DataError
 from bemlearn.models.learned_bem import LearnedBEM
 from bemlearn.models.predictor_state import PredictorState
+from bemlearn.pipeline.support import (
+    SUPPORT_RATIO,
+    _lockstep_pairs,
+    _nearest,
+    _whitener,
+    extrapolation_leverage,
+    support_of_queries,
+)
+from bemlearn.pipeline.verdict import EXTRAPOLATION_T, SUPPORT_OK_SHARE
 from bemlearn.units import joint_unit
 
-__all__ = ["SliceSpec", "bem_slice_figure", "bem_slices", "heldout_prediction", "bem_resolution", "COVERED_QUANTILES"]
+__all__ = ["SliceSpec", "bem_slice_figure", "bem_slices", "heldout_prediction", "bem_resolution", "COVERED_QUANTILES",
+           "design_support", "support_of_queries", "extrapolation_leverage", "SUPPORT_RATIO", "SUPPORT_OK_SHARE",
+           "EXTRAPOLATION_T"]
 
-#: The range the data cover, as quantiles of the training points: the slices' covered q̈_a range and each
-#: input's range in :func:`bem_resolution` (the report's "data covers lo … hi"), one rule for both.
+#: The range each input's data cover, as quantiles of the training points (the report's "data covers lo … hi"
+#: in :func:`bem_resolution`).  The slices' covered range is the joint support of their queries (:func:`support_of_queries`).
 COVERED_QUANTILES = (0.025, 0.975)
 
 
@@ -127,7 +143,9 @@ class SliceSpec:
     Attributes:
         velocity_quantiles: q̇_a levels (with q_a at its median).
         angle_quantiles: q_a levels (with q̇_a at its median); the median pair is not repeated.
-        radius: "near the slice" = within this many kernel lengthscales in every held coordinate.
+        radius: a grid point is covered when a training point lies within this many times the
+            training points' median nearest-neighbour spacing of it, in the data's whitened input
+            space ((S1) of :func:`support_of_queries`; all inputs jointly).
         n_grid: points along q̈_a.
         extend: the q̈_a axis spans the training points' [0.5 %, 99.5 %] range widened by this
             fraction on each side.
@@ -135,7 +153,7 @@ class SliceSpec:
 
     velocity_quantiles: tuple[float, ...] = (0.1, 0.5, 0.9)
     angle_quantiles: tuple[float, ...] = (0.1, 0.9)
-    radius: float = 1.0
+    radius: float = SUPPORT_RATIO
     n_grid: int = 201
     extend: float = 0.5
 
@@ -160,8 +178,11 @@ def bem_slices(model: PredictorState | LearnedBEM, train: BEMDataset, spec: Slic
     meta = train.meta
     act = list(meta.actuated_names)
     m = len(act)
-    x = train.x.numpy()
-    reach = (state.lengthscale * state.x_std).to(torch.float64).numpy()  # physical lengthscales
+    x = train.x.to(torch.float64).numpy()
+    mu, w = _whitener(x)                     # (S1): whitened by the data's covariance, not the GP's lengthscales
+    z = (x - mu) @ w
+    nn = _nearest(z, z, exclude_self=True)
+    spacing = float(np.median(nn[nn > 0])) if np.any(nn > 0) else 0.0
     med = np.median(x, axis=0)
     slices = []
     inside_std, outside_std = [], []
@@ -180,12 +201,13 @@ def bem_slices(model: PredictorState | LearnedBEM, train: BEMDataset, spec: Slic
             query = np.tile(base, (spec.n_grid, 1))
             query[:, qdd_col] = grid
             mean, lat, pred = _predict(state, torch.from_numpy(query))
-            held = [c for c in range(x.shape[1]) if c != qdd_col]
-            near = np.all(np.abs(x[:, held] - base[held]) <= spec.radius * reach[held], axis=1)
+            zq = (query - mu) @ w
+            sup = _nearest(zq, z) <= spec.radius * spacing          # (S1) for each grid point
+            near = _nearest(z, zq) <= spec.radius * spacing         # training points near the supported slice
             covered = None
-            if near.sum() >= 5:
-                covered = [float(v) for v in np.quantile(x[near, qdd_col], COVERED_QUANTILES)]
-                cov = (grid >= covered[0]) & (grid <= covered[1])
+            if sup.any():
+                covered = [float(grid[sup].min()), float(grid[sup].max())]
+                cov = sup
                 inside_std.append(pred[cov])
                 outside_std.append(pred[~cov])
             else:
@@ -287,3 +309,43 @@ def bem_resolution(model: PredictorState | LearnedBEM, train: BEMDataset, *, max
     inputs.sort(key=lambda r: -r["share"])
     return {"spread": spread, "band_std": bstd, "ratio": spread / bstd if bstd > 0 else float("inf"), "unit": unit,
             "inputs": inputs}
+
+
+
+
+def design_support(train: BEMDataset, *, max_queries: int = 2000, ratio: float = SUPPORT_RATIO) -> dict[str, Any]:
+    """Are the BEM queries x_0^e = [q̈_a, q̇_a, q_a, 0, 0] (eq. 14) at the data's actuated motions
+    supported by the training inputs *jointly* (:func:`support_of_queries`, (S1))?
+
+    The queries are the training points' own actuated motions with q̈_u = q̇_u = 0: the actuated
+    ranges the data cover, where the BEM will be used.  Every column enters together, so inputs
+    that each span their range but move in lockstep do not count as covering the BEM.
+
+    Returns:
+        ``{"share", "ratio_median", "ratio_q90", "limit", "spacing", "n_queries", "n_train",
+        "pairs": [{"input", "with", "corr", "ratio"}] (largest |corr| first), "inputs": [{"input",
+        "unit", "data": [lo, hi], "supported": [lo, hi] or None, "reach": max |x| of the supported
+        queries or None}]}``; ``data`` are the training inputs' 2.5 / 97.5 % quantiles,
+        ``supported`` those of the supported queries.
+    """
+    meta = train.meta
+    names = tuple(train.input_names)
+    x = train.x.to(torch.float64).numpy()
+    n_act = x.shape[1] - 2
+    q = x[:max_queries].copy()
+    q[:, n_act:] = 0.0                                               # x_0^e (eq. 14)
+    res = support_of_queries(x, q, ratio=ratio)
+    sup = res["supported"]
+    inputs = []
+    for i, name in enumerate(names[:n_act]):
+        prefix, joint = name.split("_", 1)
+        rng = [float(v) for v in np.quantile(x[:, i], [0.025, 0.975])]
+        inputs.append({"input": name, "unit": joint_unit(meta.kind_of(joint), {"q": 0, "qd": 1, "qdd": 2}[prefix]),
+                       "data": rng,
+                       "supported": [float(v) for v in np.quantile(q[sup, i], [0.025, 0.975])] if sup.any() else None,
+                       "reach": float(np.abs(q[sup, i]).max()) if sup.any() else None})
+    out = {"share": res["share"], "ratio_median": res["r_median"], "ratio_q90": res["r_q90"], "limit": ratio,
+           "spacing": res["spacing"], "n_queries": len(q), "n_train": len(x), "pairs": _lockstep_pairs(x, names, n_act),
+           "inputs": inputs, "unit": joint_unit(meta.kind_of(meta.unactuated))}
+    out.update(extrapolation_leverage(x, train.y.to(torch.float64).numpy(), names))
+    return out

@@ -37,6 +37,7 @@ if TYPE_CHECKING:
     from bemlearn.control.actuator_inverse import MujocoActuatorInverse
     from bemlearn.pipeline.config import PipelineConfig
     from bemlearn.robots.mujoco_robot import MujocoRobot
+    from bemlearn.robots.protocol import ControlRobot
 
 __all__ = ["FeasibilityCheck", "model_feasibility", "hold_effort"]
 
@@ -167,3 +168,29 @@ def model_feasibility(robot: MujocoRobot, config: PipelineConfig) -> list[Feasib
 
 def _gains(g) -> str:
     return "(" + ", ".join(f"{k} {getattr(g, k):.3g}" for k in ("kp_a", "kd_a", "kp_u", "kd_u")) + ")"
+
+
+def equilibrium_stiffness(robot: ControlRobot, *, step: float = 1e-5) -> dict:
+    """Gravity's stiffness of the unactuated row at the equilibrium the run balances, with its sign.
+
+    With the actuated joints held at rest, eq. (5) linearised at q_u = q_u,nominal reads
+    D_uu δq̈_u = Γ_q δq_u,  Γ_q = −∂Γ_0/∂q_u (central difference, ``step``): Γ_q > 0 is an
+    equilibrium that falls without control (the upright, λ = √(Γ_q/D_uu)); Γ_q < 0 one that is
+    stable by itself (a hanging branch), which no run may report as balanced.
+
+    Returns:
+        ``{"joint", "qu", "unit", "gravity_stiffness": Γ_q (N·m/rad or N/m), "d_uu",
+        "stable_without_control": Γ_q < 0}``.
+    """
+    from bemlearn.units import joint_unit
+
+    z = np.zeros(robot.m)
+    qu = float(robot.qu_nominal)
+    gq = -(robot.gamma0_scalar(qu + step, z, z, z) - robot.gamma0_scalar(qu - step, z, z, z)) / (2 * step)
+    q0 = np.zeros(robot.n)
+    q0[robot.unactuated_index] = qu
+    duu = float(robot.terms(q0, np.zeros(robot.n))[0][robot.unactuated_index, robot.unactuated_index])
+    kinds = getattr(robot, "coordinate_kinds", None)
+    kind = kinds[robot.unactuated_index] if kinds else "hinge"
+    return {"joint": robot.unactuated_name, "qu": qu, "unit": joint_unit(kind), "gravity_stiffness": float(gq), "d_uu": duu,
+            "stable_without_control": bool(gq < 0)}

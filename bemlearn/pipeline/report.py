@@ -142,6 +142,16 @@ def _data_only_lines(train: dict, unit: str, config=None) -> list[str]:
         where += f", where extrapolated {_f(ext, '.4f')} {unit}." if _finite(ext) else "."
         lines += [f"The learned BEM μ(x₀ᵉ) ± 2σ on {sm['n_slices']} slices through the data (grey: beyond the q̈_a the "
                   f"training data cover near the slice, i.e. extrapolation). {where}", "", "![BEM slices](bem_slices.png)", ""]
+    sup = train.get("support")
+    if sup is not None and _finite(sup.get("share")):
+        pair = next((p for p in sup.get("pairs") or [] if p["input"] == sup.get("qdd_u")), None)
+        moved = (f" {pair['input']} moves with {pair['with']} (≈ {pair['ratio']:+.3g}×, corr {pair['corr']:+.3f})." if pair else "")
+        ext = (f" Extrapolating from the samples to q̈_u = 0 along {sup['qdd_u']}: least-squares slope {_f(sup.get('slope'), '.3g')} "
+               f"{unit} per {unit}/s², t = {_f(sup.get('t'), '.1f')} (resolved when ≥ 5; 1/slope = λ̂² = {_f(sup.get('lambda2'), '.3g')} 1/s²)."
+               if _finite(sup.get("t")) else "")
+        lines += [f"Joint support of the BEM queries (q̈_u = q̇_u = 0 at the data's actuated motions, all inputs together; "
+                  f"docs/verdict.md): {_pct(sup['share'])} have a training sample within {sup['limit']:g} nearest-neighbour "
+                  f"spacings in the data's whitened input space.{moved}{ext}", ""]
     res = train.get("resolution")
     if res is not None:
         top = res["inputs"][:3]
@@ -260,12 +270,18 @@ def _closed_loop_lines(sim: dict, data: dict, train: dict, unit: str) -> list[st
              f"| BEM source | outcome | duration (s) | tracking RMSE of q_a ({qa_unit}) | max \\|{qu or 'q_u'}\\| ({unit}) | "
              f"max \\|u\\| ({data.get('input_units', 'actuator units')}) | BEM values held | real-time factor |",
              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    stable = bool((train.get("equilibrium") or {}).get("stable_without_control"))
     for name, m in sim.items():
-        outcome = f"fell at {m['duration_s']:.2f} s" if m["fell"] else "diverged (q_a left the reference)" if m.get("diverged") else "stayed up"
+        outcome = f"fell at {m['duration_s']:.2f} s" if m["fell"] else "diverged (q_a left the reference)" if m.get("diverged") else \
+            "stayed near an equilibrium that is stable without control (not balanced)" if stable else "stayed up"
         if name == ZERO_SOURCE:
             outcome += ZERO_BASELINE_NOTE if (m["fell"] or m.get("diverged")) else " (the baseline, expected to fail, did not)"
         lines.append(f"| {_source_label(name)} | {outcome} | {_f(m['duration_s'], '.1f')} | {_f(m['tracking_rmse'])} | {_f(m['qu_max'], '.3f')} | "
                      f"{_f(m['u_max'], '.2f')} | {m.get('bem_rejected', 0)} | {_f(m['real_time_factor'], '.1f')} |")
+    if stable:
+        eq = train["equilibrium"]
+        lines += ["", f"The equilibrium these loops held ({eq['joint']} = {eq['qu']:.4g} {eq['unit']}) is stable without control "
+                  f"(gravity stiffness Γ_q = {eq['gravity_stiffness']:.3g} < 0): none of them balanced the robot."]
     if "predictor" in sim and "lemma1" in sim["predictor"]:
         L = sim["predictor"]["lemma1"]
         lines += ["", f"Lemma 1 along the reference: model-based max |ΔΓ − Ḣ_u − b_u q̇_u^e| = {L['model_gap']:.1e}; "

@@ -58,11 +58,13 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
     t0 = time.perf_counter()
     stages = 5 if cfg.robot else 3
     feasibility: list = []
+    equilibrium: dict | None = None
     if cfg.robot:
-        from bemlearn.pipeline.feasibility import model_feasibility
+        from bemlearn.pipeline.feasibility import equilibrium_stiffness, model_feasibility
         from bemlearn.robots import MujocoRobot, load
 
         robot = load(cfg.robot)
+        equilibrium = equilibrium_stiffness(robot)      # a stable equilibrium is never reported as balanced
         if isinstance(robot, MujocoRobot):
             feasibility = [c.to_dict() for c in model_feasibility(robot, cfg)]
             stop = [c for c in feasibility if not c["passed"] and c["severity"] == "unusable"]
@@ -106,6 +108,8 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
         stage = "verdict"
         train["data"] = data_info
         train["feasibility"] = feasibility
+        if equilibrium is not None:
+            train["equilibrium"] = equilibrium
         train["verdict"] = judge_run(train).to_dict()
         atomic_write_text(out / "metrics.json", json.dumps(train, indent=2, default=float))
         _record_data_choices(out, resolved, train)

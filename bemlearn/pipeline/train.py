@@ -192,7 +192,7 @@ def _validation_metrics(stage: GPStageResult, train: BEMDataset, val: BEMDataset
 def _data_only_metrics(state: PredictorState, train: BEMDataset, val: BEMDataset, unactuated: str, out: Path, writer) -> dict:
     """Data-only evaluation (no model): held-out trials' q_u from f(x), and the BEM on slices with the
     region the data cover marked, so that extrapolation is visible (writes ``bem_slices.png``)."""
-    from bemlearn.pipeline.data_evaluation import bem_resolution, bem_slice_figure, bem_slices, heldout_prediction
+    from bemlearn.pipeline.data_evaluation import bem_resolution, bem_slice_figure, bem_slices, design_support, heldout_prediction
 
     metrics: dict = {}
     if len(val):
@@ -200,6 +200,7 @@ def _data_only_metrics(state: PredictorState, train: BEMDataset, val: BEMDataset
         metrics["data_heldout"] = {k: v for k, v in held.items() if k != "per_trial"}
         metrics["data_heldout"]["per_trial"] = {str(k): v for k, v in held["per_trial"].items()}
     metrics["resolution"] = bem_resolution(state, train)   # do the data resolve the BEM at all (model-free)?
+    metrics["support"] = design_support(train)             # are its queries supported by the data jointly?
     slices = bem_slices(state, train)
     metrics["bem_slices"] = {"summary": slices["summary"],
                              "slices": [{k: v for k, v in sl.items() if not hasattr(v, "shape")} for sl in slices["slices"]]}

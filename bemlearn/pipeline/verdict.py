@@ -15,6 +15,12 @@ derivatives               S[q̈] noise > 4 % of its std                 —
 fit                       did not converge (max_iter, numerical)      —
 learned vs model BEM      gain ∉ [0.95, 1.05], RMSE > 0.05 d or       gain ∉ [0.5, 2] or
 over the design region    max > 0.2 d; band covers < 80 %             RMSE > 0.25 d
+equilibrium (robot runs)  —                                           gravity's stiffness Γ_q < 0
+                                                                      at the equilibrium held
+                                                                      (stable without control)
+support of the BEM        < 90 % of the queries x_0^e supported       t < 2, or t ≤ −5 (data
+queries (S1, S2)          jointly (S1) and t of q_u's slope in        from a stable equilibrium)
+                          q̈_u < 5 (S2)
 data resolve the BEM      its spread over the data < 4 × the larger    < 2 × that scale
                           of band σ and the held-out trials' median
                           q_u error
@@ -38,6 +44,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from typing import Any
+
+#: (S1), (S2) of :mod:`bemlearn.pipeline.data_evaluation` (kept here so reading a verdict needs no torch).
+SUPPORT_OK_SHARE = 0.9
+EXTRAPOLATION_T = 5.0
 
 __all__ = ["Finding", "Verdict", "judge_run", "GAIN_RANGE", "EXIT_UNUSABLE", "EXIT_DEGRADED_STRICT"]
 
@@ -206,11 +216,79 @@ def _check_resolution(metrics: dict[str, Any], notes: _Notes) -> None:
                 f"{res['spread']:.3g} {unit} (std), {r:.1f}× {what} ({scale:.3g} {unit})")
         weak = [(w, 2 * scale / w["share"]) for w in res.get("inputs", []) if w.get("share")]
         weak = [(w, f) for w, f in weak if f > 1.0][:3]
-        if weak:
+        if _lockstep(metrics):      # more of the same motion cannot separate inputs that move together
+            text += ("; more amplitude of the same motion cannot help while the inputs move in lockstep: a reference motion "
+                     "that changes their ratio can (`bemlearn excite CONFIG`)")
+        elif weak:
             text += "; at the learned slopes, " + ", ".join(
                 f"{w['input']} (±{w['amplitude']:.3g} {w['unit']} in the data) would need about {f:.1f}× that amplitude"
                 for w, f in weak) + " to move the BEM by more than ±2× that uncertainty"
         notes.add("unusable" if r < 2 else "degraded", "resolution", text)
+
+
+def _support_sentence(sup: dict[str, Any]) -> str:
+    """Which inputs move together, and where the BEM queries have no training sample near them."""
+    qdd_u = sup.get("qdd_u") or ""
+    pairs = sorted(sup.get("pairs") or [], key=lambda p: (p["input"] != qdd_u, -abs(p["corr"])))
+    text = ""
+    if pairs:
+        p = pairs[0]
+        text = f"{p['input']} ≈ {p['ratio']:+.3g}·{p['with']} (corr {p['corr']:+.3f})"
+    where = ""
+    if pairs:
+        inp = next((i for i in sup.get("inputs") or [] if i["input"] == pairs[0]["with"]), None)
+        if inp and inp.get("reach") is not None:
+            hi = max(abs(inp["data"][0]), abs(inp["data"][1]))
+            where = (f"no training sample near {pairs[0]['input']} = 0 beyond |{inp['input']}| ≈ {inp['reach']:.3g} {inp['unit']} "
+                     f"(the data reach ±{hi:.3g})")
+    share = float(sup.get("share", math.nan))
+    head = f"{100 * (1 - share):.0f} % of the BEM queries (q̈_u = q̇_u = 0 at the data's actuated motions) lie beyond the training data jointly" \
+        if _finite(share) else "the BEM queries lie beyond the training data jointly"
+    return "; ".join(t for t in (text, head + (f": {where}" if where else "")) if t)
+
+
+def _check_support(metrics: dict[str, Any], notes: _Notes) -> None:
+    """Joint support of the BEM queries (docs/verdict.md, (S1) and (S2) of bemlearn.pipeline.data_evaluation)."""
+    sup = metrics.get("support")
+    if not (sup and _finite(sup.get("share"))):
+        return
+    notes.checked.append("support")
+    t = sup.get("t")
+    if not _finite(t):
+        return
+    if t <= -EXTRAPOLATION_T:
+        notes.add("unusable", "support", f"the data were taken about an equilibrium that is stable without control: q_u rises "
+                  f"as {sup['qdd_u']} falls (slope {sup['slope']:.3g}, t = {t:.1f}; an upright that needs balancing gives a "
+                  "positive slope 1/λ²): this is not a balanced upright, and no BEM of one can be learned from it")
+        return
+    if sup["share"] >= SUPPORT_OK_SHARE or t >= EXTRAPOLATION_T:
+        return
+    sev = "unusable" if t < 2.0 else "degraded"
+    notes.add(sev, "support", _support_sentence(sup) + f"; and the data do not resolve how q_u depends on {sup['qdd_u']} apart "
+              f"from the actuated inputs (t = {t:.1f}, need ≥ {EXTRAPOLATION_T:g}): the BEM there is extrapolation the data "
+              "cannot check. More amplitude along the same line cannot help; a motion of the actuated reference that changes "
+              "that ratio can: play the schedule `bemlearn excite CONFIG` writes during balance and log again")
+
+
+def _lockstep(metrics: dict[str, Any]) -> bool:
+    """The inputs move together (|corr| ≥ 0.9 between an unactuated and an actuated input) and (S2) does not
+    resolve q_u's dependence on q̈_u apart from them: more of the same motion cannot separate them."""
+    sup = metrics.get("support") or {}
+    together = any(abs(p.get("corr", 0.0)) >= 0.9 for p in sup.get("pairs") or [])
+    return together and _finite(sup.get("t")) and sup["t"] < EXTRAPOLATION_T
+
+
+def _check_equilibrium(metrics: dict[str, Any], notes: _Notes) -> None:
+    """An equilibrium that is stable without control is never reported as balanced (its gravity stiffness Γ_q < 0)."""
+    eq = metrics.get("equilibrium")
+    if not (eq and _finite(eq.get("gravity_stiffness"))):
+        return
+    notes.checked.append("equilibrium")
+    if eq.get("stable_without_control"):
+        notes.add("unusable", "equilibrium", f"the equilibrium the run held ({eq.get('joint', 'q_u')} = {eq.get('qu', math.nan):.4g} "
+                  f"{eq.get('unit', 'rad')}) is stable without control: gravity's stiffness there Γ_q = −∂Γ₀/∂q_u = "
+                  f"{eq['gravity_stiffness']:.3g} < 0 (eq. 5 linearised), so it is a hanging branch, not the upright; "
+                  "nothing was balanced and the learned BEM is not the upright's")
 
 
 def _check_heldout(metrics: dict[str, Any], notes: _Notes) -> None:
@@ -233,7 +311,9 @@ def _check_closed_loop(metrics: dict[str, Any], notes: _Notes) -> None:
         notes.add("unusable", "closed_loop", f"the closed loop with the learned BEM fell at {p.get('duration_s', math.nan):.2f} s"
                   + (" (so did the model BEM's: the EIC cannot balance this robot with these gains)" if both else ""))
     elif p.get("diverged"):
-        notes.add("degraded", "closed_loop", "the closed loop with the learned BEM stayed up but its actuated joints left the reference")
+        stable = bool((metrics.get("equilibrium") or {}).get("stable_without_control"))
+        notes.add("degraded", "closed_loop", "the closed loop with the learned BEM " + ("kept q_u near its stable equilibrium"
+                  if stable else "stayed up") + " but its actuated joints left the reference")
     lem = p.get("lemma1")
     if lem and _finite(lem.get("r_learned_vs_model_delta_gamma")):
         notes.checked.append("lemma1")
@@ -280,5 +360,5 @@ def _check_unactuated_torque(metrics: dict[str, Any], notes: _Notes) -> None:
 
 
 #: The checks of the module docstring's table, in the order their findings are listed (before sorting by severity).
-_CHECKS = (_check_failed, _check_model, _check_excitation, _check_derivatives, _check_fit, _check_design_region, _check_resolution,
-           _check_heldout, _check_closed_loop, _check_unactuated_torque)
+_CHECKS = (_check_failed, _check_model, _check_equilibrium, _check_excitation, _check_derivatives, _check_fit, _check_support,
+           _check_design_region, _check_resolution, _check_heldout, _check_closed_loop, _check_unactuated_torque)
