@@ -99,11 +99,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         "excite` writes for those data and run again (bemlearn/bench/closed_loop_bench.py).")
     cl.add_argument("--robot", default="tests/robots/pendubot.xml", help="MJCF file (default tests/robots/pendubot.xml)")
     cl.add_argument("--out", type=Path, required=True, help="work folder (logs, data, runs)")
-    cl.add_argument("--trials", type=int, default=12)
+    cl.add_argument("--trials", type=int, default=12, help="trials per data set (default 12)")
     cl.add_argument("--duration", type=float, default=20.0, help="seconds per lockstep trial (default 20)")
     cl.add_argument("--rate", type=float, default=500.0, help="control and log rate, Hz (default 500)")
     cl.add_argument("--disturbance", type=float, default=3e-4, help="rms torque on every joint, N·m (default 3e-4)")
-    cl.add_argument("--seed", type=int, default=0)
+    cl.add_argument("--seed", type=int, default=0, help="seed of the disturbances, encoders and schedule (default 0)")
     cl.set_defaults(func=_closed_loop_data)
     im = sub.add_parser("import", help="logger CSV import speed (10⁶ rows) and, with --accuracy, the model-free "
                         "path's learned BEM vs the simulator file's")
