@@ -108,7 +108,7 @@ def test_run_into_a_non_empty_folder_refuses(small, capsys, tmp_path):
         ("# robot: furuta\n# collect: {n_trials: 3}\n", [], "config is empty (or only comments)"),
         ("collect: {n_trials: 3}\n", [], "names neither robot: nor data:"),
         ("robot: nosuch\n", [], "robot: unknown robot 'nosuch'"),
-        ("robot: no/such.xml\n", [], "MJCF file no/such.xml not found"),
+        ("robot: no/such.xml\n", [], "/no/such.xml not found"),   # resolved against the config's folder
         ("robot: furuta\n", ["--device", "cuda"], "CUDA was requested but no CUDA device is available"),
     ],
 )

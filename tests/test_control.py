@@ -78,21 +78,20 @@ def test_missing_predictor_file(tmp_path):
 
 
 def test_predictor_for_another_robot(tmp_path):
-    class Fake(torch.nn.Module):
-        def forward(self, x):
-            return x[:, 0], x[:, 0]
+    """A genuine predictor (its code is the exporter's) written for another robot is refused by the controller."""
+    from test_protocols import _tiny_state
 
-        @torch.jit.export
-        def bem_mean(self, x):
-            return x[:, 0]
+    from bemlearn.export import BEMPredictor, PredictorMetadata, save_torchscript
 
-        @torch.jit.export
-        def metadata(self) -> str:
-            return '{"robot": "biped", "m": 4}'
-
-    path = tmp_path / "p.pt"
-    torch.jit.save(torch.jit.script(Fake()), str(path))
-    with pytest.raises(ValueError, match=r"predictor is for robot 'biped' \(m = 4\).*'furuta' \(m = 1\)"):
+    state = _tiny_state()
+    names = state.input_names
+    meta = PredictorMetadata(
+        robot="cart", joint_names=("theta", "alpha"), actuated_names=("theta",), unactuated_name="alpha", m=1,
+        input_names=names, units={nm: "rad" for nm in names}, n_train=state.n_train, n_inducing=state.n_train,
+        hyperparameters={}, bemlearn_version="test", data_sha256="0" * 64,
+    )
+    path = save_torchscript(BEMPredictor(state, meta), tmp_path / "p.pt")
+    with pytest.raises(ValueError, match=r"predictor is for robot 'cart' \(m = 1\).*'furuta' \(m = 1\)"):
         PredictorBEM(path, robot=AnalyticFuruta())
 
 

@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from bemlearn.errors import EnvironmentProblem
+
 __all__ = ["ClosedLoopCase", "simulate_logs", "bench_closed_loop_data", "learned_slopes"]
 
 
@@ -168,13 +170,13 @@ def _run_case(label: str, case: ClosedLoopCase, work: Path, *, schedule: dict | 
     data = folder / "data.npz"
     p = _bemlearn("data", "import", *map(str, logs), "--map", str(map_path), "--out", str(data), "--force")
     if p.returncode:
-        raise RuntimeError(f"bemlearn data import failed ({p.returncode}): {p.stderr[-2000:]}")
+        raise EnvironmentProblem(f"bemlearn data import failed ({p.returncode}): {p.stderr[-2000:]}")
     cfg = folder / "config.yaml"
     cfg.write_text(f"data: {data}\n")
     run = folder / "run"
     p = _bemlearn("run", str(cfg), "--out", str(run), "--no-progress", "--force")
     if p.returncode not in (0, 3):
-        raise RuntimeError(f"bemlearn run failed ({p.returncode}): {p.stderr[-3000:]}")
+        raise EnvironmentProblem(f"bemlearn run failed ({p.returncode}): {p.stderr[-3000:]}")
     metrics = json.loads((run / "metrics.json").read_text())
     return {"label": label, "sim": sim, "verdict": metrics["verdict"], "support": metrics.get("support"),
             "slopes": learned_slopes(run), "config": cfg, "run": run}
@@ -196,7 +198,7 @@ def bench_closed_loop_data(case: ClosedLoopCase, work: Path) -> dict[str, Any]:
     sched_path = work / "excite.yaml"
     p = _bemlearn("excite", str(lock["config"]), "--out", str(sched_path), "--force")
     if p.returncode:
-        raise RuntimeError(f"bemlearn excite failed ({p.returncode}): {p.stderr[-2000:]}")
+        raise EnvironmentProblem(f"bemlearn excite failed ({p.returncode}): {p.stderr[-2000:]}")
     schedule = yaml.safe_load(sched_path.read_text())
     dur = float(schedule.get("log_seconds_per_trial", case.duration_s))
     excited = _run_case("excited", ClosedLoopCase(**{**case.__dict__, "duration_s": max(case.duration_s, dur)}), work,
