@@ -150,6 +150,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                        "files to bemlearn's readers and count the bad-input classes that end in a named error.")
     z.add_argument("--examples", type=int, default=20, help="generated examples per class (default 20)")
     z.set_defaults(func=_fuzz)
+    _add_family(sub)
+
+
+def _add_family(sub: argparse._SubParsersAction) -> None:
+    fam = sub.add_parser("family", help="a seeded family of in-class robots with an oracle; the pipeline scored on it",
+                         description="Generate MJCF robots of bemlearn's class from a seed, each with its oracle "
+                         "(true upright, model BEM from mj_inverse, whether its actuators can hold it), and score "
+                         "zero-config runs against the oracle (docs/family.md).")
+    fsub = fam.add_subparsers(dest="family_cmd", metavar="ACTION", required=True)
+    g = fsub.add_parser("generate", help="write the family: one MJCF + one oracle JSON per robot, and index.json")
+    g.add_argument("--seed", type=int, default=0, help="family seed (default 0)")
+    g.add_argument("--count", type=int, default=64, help="robots (default 64)")
+    g.add_argument("--out", type=Path, required=True, help="folder of the family")
+    g.add_argument("--force", action="store_true", help="replace existing family files")
+    g.set_defaults(func=_family_generate)
 
 def _c_footprint(args: argparse.Namespace) -> int:
     from bemlearn.bench.c_footprint import format_footprints, measure_footprints
@@ -316,6 +331,18 @@ def _sigint(args: argparse.Namespace) -> int:
         rows.append(measure_sigint(args.config, args.data, n_points=args.n_points, kind=args.kind, delay_s=args.delays[0], twice=True))
     print(format_sigint(rows))
     print(f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f} on {os.cpu_count()} cores")
+    return 0
+
+
+def _family_generate(args: argparse.Namespace) -> int:
+    import sys
+
+    from bemlearn.bench.family.family_bench import write_family
+
+    index = write_family(args.seed, args.count, args.out, force=args.force,
+                         progress=lambda s: print(s, file=sys.stderr, flush=True))
+    n_hold = sum(bool(r["holdable"]) for r in index["robots"])
+    print(f"{args.out}: {len(index['robots'])} robots of family seed {args.seed} ({n_hold} holdable by the oracle)")
     return 0
 
 
