@@ -165,6 +165,22 @@ def _add_family(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--out", type=Path, required=True, help="folder of the family")
     g.add_argument("--force", action="store_true", help="replace existing family files")
     g.set_defaults(func=_family_generate)
+    r = fsub.add_parser("run", help="run each robot zero-config (`robot: FILE`) with `bemlearn run` and score it against "
+                        "its oracle: results.csv/json and the per-feature table",
+                        description="Generate (or reuse) the family in OUT/robots, run `bemlearn run` on a config naming only "
+                        "each robot file (OUT/runs/NAME), compare each exported predictor with the oracle BEM on "
+                        "design-region queries and print the per-feature table (also OUT/table.md).  Finished runs "
+                        "(OUT/runs/NAME/family_run.json) are scored again, not rerun, unless --rerun.")
+    r.add_argument("--seed", type=int, default=0, help="family seed (default 0)")
+    r.add_argument("--count", type=int, default=64, help="robots in the family (default 64)")
+    r.add_argument("--out", type=Path, required=True, help="bench folder (robots/, configs/, runs/, logs/, results)")
+    r.add_argument("--only", type=int, nargs="+", default=None, metavar="IDX", help="run only these robot indices")
+    r.add_argument("--backend", choices=["serial", "ray"], default="serial", help="serial (default) or ray")
+    r.add_argument("--jobs", type=int, default=2, help="runs at once with --backend ray (default 2)")
+    r.add_argument("--timeout", type=float, default=3600.0, help="seconds per run before it is stopped (default 3600)")
+    r.add_argument("--rerun", action="store_true", help="run robots again that have a finished run")
+    r.add_argument("--force", action="store_true", help="replace a family of another seed/count in OUT/robots")
+    r.set_defaults(func=_family_run)
 
 def _c_footprint(args: argparse.Namespace) -> int:
     from bemlearn.bench.c_footprint import format_footprints, measure_footprints
@@ -343,6 +359,21 @@ def _family_generate(args: argparse.Namespace) -> int:
                          progress=lambda s: print(s, file=sys.stderr, flush=True))
     n_hold = sum(bool(r["holdable"]) for r in index["robots"])
     print(f"{args.out}: {len(index['robots'])} robots of family seed {args.seed} ({n_hold} holdable by the oracle)")
+    return 0
+
+
+def _family_run(args: argparse.Namespace) -> int:
+    import sys
+
+    from bemlearn.bench.family.family_bench import run_family
+
+    if args.jobs < 1:
+        raise ArgumentError(f"--jobs: expected a positive integer, got {args.jobs}")
+    res = run_family(args.seed, args.count, args.out, only=args.only, backend=args.backend, jobs=args.jobs,
+                     timeout_s=args.timeout, force=args.force, rerun=args.rerun,
+                     progress=lambda s: print(s, file=sys.stderr, flush=True))
+    print(f"family seed {args.seed}: {len(res['rows'])} robots scored ({args.out}/results.csv)")
+    print(res["markdown"])
     return 0
 
 

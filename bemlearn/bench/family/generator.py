@@ -331,7 +331,7 @@ def _actuators(d: _Draw, oracle: Oracle, dem: dict) -> list[dict]:
             continue
         gear = float(d.rng.choice([1.0, 1.0, float(d.rng.uniform(0.5, 3.0))]))
         L, Ld, f = gear * qa, gear * qd, np.sign(tau) * need / gear
-        ws = d.servo_speed[j] * omega
+        ws = min(d.servo_speed[j] * omega, 0.3 / d.timestep)  # a servo the time step resolves
         ieff = inertia / gear**2
         if kind == "position":
             kp = ieff * ws**2
@@ -360,7 +360,7 @@ def generate_robot(seed: int, index: int, *, hold_check: bool = True) -> tuple[s
     d = _Draw(seed, index)
     w = _Writer(d, seed, index)
     zeros = {"damping": [0.0] * d.m, "armature": [0.0] * d.m, "frictionloss": [0.0] * d.m}
-    qu_star = float(wrap_angle(d.ref - d.tilt))
+    qu_star = float(wrap_angle(d.ref - d.tilt)) + 0.0  # + 0.0: no −0.0 in the truth
     # pass 1: inertia and the upright's divergence rate, bare joints
     o1 = Oracle(w.xml(zeros, None), qu_upright=qu_star)
     Mdiag = _mass_matrix_diag(o1)

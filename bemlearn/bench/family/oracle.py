@@ -24,7 +24,7 @@ drives.
   widened by each joint's ``frictionloss``, lie inside what each actuator delivers at that state:
   gear · ([gain · ctrl + bias(L, L̇)] over ``ctrlrange``, ∩ ``forcerange``) for the affine actuators of MuJoCo
   (motor, position, velocity, general with fixed gain and affine bias); (2) *closed loop* — a discrete LQR
-  from ``mjd_transitionFD`` at the upright (frictionloss disabled for the linearisation only: finite differences
+  from ``mjd_transitionFD`` at the upright (central differences of one ``mj_step`` for RK4, which it does not take; frictionloss disabled for the linearisation only: finite differences
   at rest see dry friction stick), Bryson weights, balances the full model (friction on, controls clipped to
   ``ctrlrange`` by MuJoCo, ``forcerange`` by MuJoCo) for ``hold_s`` seconds from q_u* ± ``start_error``
   without leaving the joint ranges, and ends within 0.02 of the upright.
@@ -77,6 +77,34 @@ class HoldCheck:
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
+
+
+def _transition_fd_rk4(m: mujoco.MjModel, d: mujoco.MjData, eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """Central differences of one ``mj_step`` (RK4, which ``mjd_transitionFD`` does not take) in (qpos, qvel, ctrl)
+    at ``d``'s state; hinge/slide joints only (qpos is a vector space).  Returns A (2nv × 2nv), B (2nv × nu)."""
+    nv, nu = m.nv, m.nu
+    x0 = np.concatenate([d.qpos, d.qvel])
+    u0 = d.ctrl.copy()
+    w = mujoco.MjData(m)
+
+    def step(x, u):
+        w.time = 0.0
+        w.qpos[:], w.qvel[:], w.ctrl[:] = x[:nv], x[nv:], u
+        w.act[:] = 0.0
+        mujoco.mj_step(m, w)
+        return np.concatenate([w.qpos, w.qvel])
+
+    A = np.zeros((2 * nv, 2 * nv))
+    B = np.zeros((2 * nv, nu))
+    for i in range(2 * nv):
+        e = np.zeros(2 * nv)
+        e[i] = eps
+        A[:, i] = (step(x0 + e, u0) - step(x0 - e, u0)) / (2 * eps)
+    for i in range(nu):
+        e = np.zeros(nu)
+        e[i] = eps
+        B[:, i] = (step(x0, u0 + e) - step(x0, u0 - e)) / (2 * eps)
+    return A, B
 
 
 class Oracle:
@@ -342,14 +370,12 @@ class Oracle:
         d.ctrl[:] = u0
         mujoco.mj_forward(m, d)
         nx = 2 * m.nv
-        if int(m.opt.integrator) == int(mujoco.mjtIntegrator.mjINT_RK4):  # mjd_transitionFD has no RK4: Euler at the same step
-            m = mujoco.MjModel.from_xml_string(self.xml)
-            m.dof_frictionloss[:] = 0.0
-            m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
-            m.opt.integrator = int(mujoco.mjtIntegrator.mjINT_EULER)
         A = np.zeros((nx, nx))
         B = np.zeros((nx, m.nu))
-        mujoco.mjd_transitionFD(m, d, 1e-6, 1, A, B, None, None)
+        if int(m.opt.integrator) == int(mujoco.mjtIntegrator.mjINT_RK4):  # mjd_transitionFD has no RK4
+            A, B = _transition_fd_rk4(m, d)
+        else:
+            mujoco.mjd_transitionFD(m, d, 1e-6, 1, A, B, None, None)
         sc = self.scales()
         qw = np.zeros(m.nv)
         vw = np.zeros(m.nv)
