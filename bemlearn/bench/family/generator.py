@@ -32,8 +32,9 @@ import math
 import numpy as np
 
 from bemlearn.bench.family.oracle import Oracle, mass_matrix, wrap_angle
+from bemlearn.errors import ArgumentError
 
-__all__ = ["TOPOLOGIES", "ACTUATOR_KINDS", "generate_robot", "robot_name"]
+__all__ = ["TOPOLOGIES", "ACTUATOR_KINDS", "CONVENTION_KEYS", "generate_robot", "robot_name"]
 
 TOPOLOGIES = ("cartpole", "furuta", "reaction_wheel", "pendubot", "arm2_pole", "xy_cart")
 ACTUATOR_KINDS = ("motor", "position", "velocity", "general")
@@ -355,9 +356,22 @@ def _actuators(d: _Draw, oracle: Oracle, dem: dict) -> list[dict]:
     return acts
 
 
-def generate_robot(seed: int, index: int, *, hold_check: bool = True) -> tuple[str, dict]:
-    """Robot ``index`` of family ``seed``: ``(mjcf_text, truth)`` (module docstring; ``truth`` is JSON-able)."""
+#: draw attributes a caller may override (the same robot written in another convention, for tests)
+CONVENTION_KEYS = ("degrees", "tilt", "ref", "hanging_by_fromto", "defaults", "explicit_inertia")
+
+
+def generate_robot(seed: int, index: int, *, hold_check: bool = True, conventions: dict | None = None) -> tuple[str, dict]:
+    """Robot ``index`` of family ``seed``: ``(mjcf_text, truth)`` (module docstring; ``truth`` is JSON-able).
+
+    ``conventions`` overrides how the file writes the same robot (keys :data:`CONVENTION_KEYS`: angle unit, the
+    pole's modelled tilt, its joint ``ref``, a hanging pole by ``fromto``, default classes, explicit inertia); the
+    random draw is unchanged.
+    """
     d = _Draw(seed, index)
+    for key, value in (conventions or {}).items():
+        if key not in CONVENTION_KEYS:
+            raise ArgumentError(f"conventions: unknown key {key!r}; expected one of {', '.join(CONVENTION_KEYS)}")
+        setattr(d, key, value)
     w = _Writer(d, seed, index)
     zeros = {"damping": [0.0] * d.m, "armature": [0.0] * d.m, "frictionloss": [0.0] * d.m}
     qu_star = float(wrap_angle(d.ref - d.tilt)) + 0.0  # + 0.0: no −0.0 in the truth
