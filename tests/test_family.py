@@ -169,7 +169,7 @@ def test_degrees_radians_ref_and_geometry_give_the_same_physics(index):
 # ---- holdability ---------------------------------------------------------------------------------------------------
 
 def test_a_robot_sized_below_its_demand_cannot_hold_and_says_which_actuator():
-    xml, truth = generate_robot(0, 6)  # drawn infeasible by its force limit
+    _, truth = generate_robot(0, 6)  # drawn infeasible by its force limit
     assert truth["designed_holdable"] is False and truth["holdable"] is False
     assert "cannot hold the design region" in truth["hold"]["reason"] and "cart_act" in truth["hold"]["reason"]
     assert truth["hold"]["static_ratio"] > 1.0
@@ -252,6 +252,10 @@ def test_balance_and_reason_judgements_and_the_table():
     assert judge_reason("the model says it cannot be balanced over the design region", holdable=False, bem_right=None)[0] is True
     assert judge_reason("all 24 excitation trials fell", holdable=True, bem_right=None)[0] is False
     assert judge_reason("held-out RMSE 0.05 rad", holdable=True, bem_right=False)[0] is True
+    assert judge_reason("x", holdable=True, bem_right=None, check="model:hold")[0] is False
+    assert judge_reason("x", holdable=True, bem_right=True, check="closed_loop")[0] is False
+    assert judge_reason("x", holdable=True, bem_right=False, check="closed_loop")[0] is True
+    assert judge_reason("x", holdable=True, bem_right=True, check="resolution")[0] is False
     rows = [dict(name=f"r{i}", actuator_kind=k, friction=False, m=1, upright_at="0", zero_by="plain", angle="radian",
                  holdable=h, verdict=v, right=r, false_ok=f, rmse=e, gain=g, reason_true=t)
             for i, (k, h, v, r, f, e, g, t) in enumerate([("motor", True, "ok", True, False, 1e-3, 1.0, None),

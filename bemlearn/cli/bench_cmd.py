@@ -16,6 +16,8 @@
 * ``bench c-footprint`` — flash/RAM footprint of the C export per model size and kind.
 * ``bench sigint CONFIG --data FILE`` — Ctrl-C latency of ``train`` on the 3,000-point exact GP;
 * ``bench fuzz`` — bad-input classes fed to every reader and how many end in a named error.
+* ``bench family generate|run|score`` — a seeded family of in-class robots with an oracle; zero-config runs
+  scored against it, per feature (docs/family.md).
 """
 
 from __future__ import annotations
@@ -181,6 +183,12 @@ def _add_family(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--rerun", action="store_true", help="run robots again that have a finished run")
     r.add_argument("--force", action="store_true", help="replace a family of another seed/count in OUT/robots")
     r.set_defaults(func=_family_run)
+    sc = fsub.add_parser("score", help="score a `bemlearn sweep` over the family (configs/sweeps/family.yaml) against the oracles",
+                         description="Score each complete cell of SWEEP whose robot is a file of FAMILY against its oracle "
+                         "and write results.csv/json and table.md into SWEEP.")
+    sc.add_argument("--sweep", type=Path, required=True, help="the sweep folder (`bemlearn sweep ... --out SWEEP`)")
+    sc.add_argument("--family", type=Path, required=True, help="the family folder (`bench family generate --out FAMILY`)")
+    sc.set_defaults(func=_family_score)
 
 def _c_footprint(args: argparse.Namespace) -> int:
     from bemlearn.bench.c_footprint import format_footprints, measure_footprints
@@ -373,6 +381,15 @@ def _family_run(args: argparse.Namespace) -> int:
                      timeout_s=args.timeout, force=args.force, rerun=args.rerun,
                      progress=lambda s: print(s, file=sys.stderr, flush=True))
     print(f"family seed {args.seed}: {len(res['rows'])} robots scored ({args.out}/results.csv)")
+    print(res["markdown"])
+    return 0
+
+
+def _family_score(args: argparse.Namespace) -> int:
+    from bemlearn.bench.family.family_bench import score_sweep
+
+    res = score_sweep(args.sweep, args.family)
+    print(f"{len(res['rows'])} family runs scored ({args.sweep}/results.csv)")
     print(res["markdown"])
     return 0
 

@@ -163,20 +163,38 @@ def balanced_at_upright(metrics: dict, qu_upright: float) -> tuple[bool | None, 
 
 
 #: words of a verdict reason that claim the robot cannot be held, or that the learned BEM / data are at fault
+#: (used when the verdict carries no finding keys)
 _HOLD_WORDS = ("cannot be balanced", "cannot hold", "can not be balanced", "infeasible", "not feasible", "beyond the actuator",
                "exceeds the actuator", "outside the actuator", "limits cannot")
 _LEARN_WORDS = ("held-out", "heldout", "rmse", "slope", "resolve", "coverage", "extrapolat", "not supported", "correlat",
                 "gain", "flat", "design region", "lengthscale", "too few", "fewer than")
 _FALL_WORDS = ("fell", "fall", "diverged")
+#: the verdict's finding keys (bemlearn/pipeline/verdict.py) by what they claim
+_LEARN_CHECKS = ("design_region", "resolution", "heldout", "band", "derivatives", "fit", "lemma1", "coverage", "support")
 
 
-def judge_reason(reason: str, *, holdable: bool, bem_right: bool | None) -> tuple[bool | None, str]:
+def judge_reason(reason: str, *, holdable: bool, bem_right: bool | None, check: str = "") -> tuple[bool | None, str]:
     """Is a non-ok verdict's first reason true by the oracle?  ``(None, why)`` where it cannot be judged.
 
-    Claims that the robot cannot be held are true iff the oracle says it cannot; claims that the learned BEM (or its
-    data) is wrong or unresolved are true iff the comparison fails; a reason about falls during excitation or in the
-    loop is true only for a robot the oracle cannot hold (a holdable robot that falls is the pipeline's failure).
+    By the first finding's key (``check``) when there is one, else by the reason's words:
+
+    * ``model:*`` (the model says the robot cannot be held / balanced) — true iff the oracle cannot hold it;
+    * ``excitation`` (excitation trials fell) — true iff the oracle cannot hold it (a holdable robot whose
+      excitation falls is the pipeline's failure);
+    * ``closed_loop`` (the learned-BEM loop fell or wandered) — true iff the oracle cannot hold it or the learned
+      BEM is off;
+    * the learned BEM's own checks (design region, resolution, held-out, band, derivatives, fit, Lemma 1) — true iff
+      the comparison with the oracle fails.
     """
+    c = check.lower()
+    if c.startswith("model:"):
+        return (not holdable), f"{check}: the model says it cannot be held"
+    if c == "excitation":
+        return (not holdable), f"{check}: blames falls during excitation"
+    if c == "closed_loop":
+        return ((not holdable) or (bem_right is False)), f"{check}: the learned-BEM loop"
+    if c and any(c.startswith(k) for k in _LEARN_CHECKS):
+        return (None if bem_right is None else not bem_right), f"{check}: claims the learned BEM is unresolved or off"
     r = reason.lower()
     if any(w in r for w in _HOLD_WORDS):
         return (not holdable), "claims it cannot be held"
@@ -184,7 +202,7 @@ def judge_reason(reason: str, *, holdable: bool, bem_right: bool | None) -> tupl
         return (not holdable), "blames falls"
     if any(w in r for w in _LEARN_WORDS):
         return (None if bem_right is None else not bem_right), "claims the learned BEM is unresolved or off"
-    return None, "not judged"
+    return None, f"not judged ({check or 'no key'})"
 
 
 def score_run(run_dir: Path, xml: str, truth: dict, record: dict) -> dict:
@@ -195,11 +213,15 @@ def score_run(run_dir: Path, xml: str, truth: dict, record: dict) -> dict:
     mpath = run_dir / "metrics.json"
     metrics = json.loads(mpath.read_text()) if mpath.is_file() else {}
     verdict = metrics.get("verdict") or {}
-    row["verdict"] = verdict.get("status") or ("crash" if record.get("exit_code") not in (0, 3, 4) else "none")
+    # no verdict: exit 2 is a named error (BemlearnError, one line), anything else a crash (traceback, timeout)
+    code = record.get("exit_code")
+    row["verdict"] = verdict.get("status") or ("none" if code in (0, 3, 4) else "error" if code == 2 else "crash")
     reasons = verdict.get("reasons") or []
     first = reasons[0] if reasons else ""
     row["first_reason"] = first if isinstance(first, str) else json.dumps(first)
-    if row["verdict"] == "crash":
+    findings = verdict.get("findings") or []
+    row["first_check"] = findings[0].get("check", "") if findings and isinstance(findings[0], dict) else ""
+    if row["verdict"] in ("error", "crash"):
         row["first_reason"] = record.get("error_tail", "")
     pred = run_dir / "bem_predictor.pt"
     row.update({"rmse": None, "max_abs": None, "gain": None, "learned_at_rest_minus_upright": None})
@@ -216,9 +238,10 @@ def score_run(run_dir: Path, xml: str, truth: dict, record: dict) -> dict:
     row["right"] = bool(row["verdict"] == "ok" and bem_right and bal)
     row["false_ok"] = bool(row["verdict"] == "ok" and not (bem_right and bal))
     if row["verdict"] not in ("ok",):
-        row["reason_true"], row["reason_judged_as"] = judge_reason(row["first_reason"] or "", holdable=row["holdable"], bem_right=bem_right)
-        if row["verdict"] == "crash":
-            row["reason_true"], row["reason_judged_as"] = False, "crashed: no verdict"
+        row["reason_true"], row["reason_judged_as"] = judge_reason(row["first_reason"] or "", holdable=row["holdable"],
+                                                                   bem_right=bem_right, check=row["first_check"])
+        if row["verdict"] in ("error", "crash", "none"):
+            row["reason_true"], row["reason_judged_as"] = False, f"{row['verdict']}: no verdict"
     else:
         row["reason_true"], row["reason_judged_as"] = None, ""
     return row
@@ -246,7 +269,7 @@ def feature_table(rows: list[dict]) -> list[dict]:
                     "false_ok": sum(r["false_ok"] for r in rs), "median_rmse": _median([r["rmse"] for r in rs]),
                     "median_gain": _median([r["gain"] for r in rs]), "non_ok": len(nonok), "reason_judged": len(judged),
                     "reason_true": sum(bool(r["reason_true"]) for r in judged),
-                    "crashes": sum(r["verdict"] == "crash" for r in rs),
+                    "no_verdict": sum(r["verdict"] in ("error", "crash", "none") for r in rs),
                     "verdicts": {v: sum(r["verdict"] == v for r in rs) for v in sorted({r["verdict"] for r in rs})}})
     return out
 
@@ -379,7 +402,7 @@ def write_results(out: Path, rows: list[dict], table: list[dict], md: str, *, se
     from bemlearn.files import atomic_write_files
 
     cols = ["name", "topology", *FEATURES, "qu_upright", "holdable", "verdict", "right", "false_ok", "rmse", "max_abs", "gain",
-            "learned_at_rest_minus_upright", "balanced_at_upright", "bem_right", "reason_true", "first_reason", "hold_reason",
+            "learned_at_rest_minus_upright", "balanced_at_upright", "bem_right", "reason_true", "first_check", "first_reason", "hold_reason",
             "balance_note", "exit_code", "wall_s"]
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=cols, extrasaction="ignore")
@@ -392,3 +415,37 @@ def write_results(out: Path, rows: list[dict], table: list[dict], md: str, *, se
     atomic_write_files({out / "results.csv": buf.getvalue().encode(),
                         out / "results.json": to_json_text({"seed": seed, "count": count, "rows": rows, "table": table}).encode(),
                         out / "table.md": (head + md + "\n").encode()})
+
+
+def score_sweep(sweep_dir: str | Path, family_dir: str | Path) -> dict:
+    """Score the cells of a ``bemlearn sweep`` over family robots (``configs/sweeps/family.yaml``) against their oracles.
+
+    Each complete cell (``cells/<id>/cell.json``) whose ``robot`` is a family file ``NAME.xml`` is scored like a run of
+    :func:`run_family` (its folder is the run folder); a failed cell is a row without a verdict.  Writes and returns
+    the results as :func:`run_family` does, into ``sweep_dir``.
+    """
+    from bemlearn.errors import MissingFileError
+
+    sweep_dir, family_dir = Path(sweep_dir), Path(family_dir)
+    if not (family_dir / "index.json").is_file():
+        raise MissingFileError(f"--family {family_dir}: no index.json (write the family with `bemlearn bench family generate`)")
+    index = json.loads((family_dir / "index.json").read_text())
+    names = {r["name"] for r in index["robots"]}
+    rows = []
+    for marker in sorted((sweep_dir / "cells").glob("*/cell.json")):
+        cell = json.loads(marker.read_text())
+        robot = (cell.get("grid") or {}).get("robot")
+        name = Path(robot).stem if isinstance(robot, str) else None
+        if name not in names:
+            continue
+        failed = cell.get("status") != "ok"
+        record = {"exit_code": 1 if failed else 0, "wall_s": cell.get("wall_s"), "error_tail": (cell.get("error") or "")[-400:]}
+        rows.append(score_run(marker.parent, (family_dir / f"{name}.xml").read_text(),
+                              json.loads((family_dir / f"{name}.json").read_text()), record))
+    if not rows:
+        raise MissingFileError(f"--sweep {sweep_dir}: no complete cell runs a robot of {family_dir}")
+    rows.sort(key=lambda r: r["name"])
+    table = feature_table(rows)
+    md = format_table(table)
+    write_results(sweep_dir, rows, table, md, seed=index["seed"], count=index["count"])
+    return {"rows": rows, "table": table, "markdown": md}
