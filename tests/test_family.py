@@ -265,3 +265,25 @@ def test_balance_and_reason_judgements_and_the_table():
     assert table[("all", "")]["count"] == 3 and table[("all", "")]["holdable"] == 2 and table[("all", "")]["false_ok"] == 1
     assert table[("actuator_kind", "motor")]["ok_rate"] == 0.5 and table[("actuator_kind", "position")]["reason_true"] == 1
     assert table[("actuator_kind", "motor")]["median_gain"] == 0.75
+
+
+# ---- the whole chain on a small fixed sample (slow: three zero-config `bemlearn run`s) -------------------------------
+
+@pytest.mark.slow
+def test_three_family_robots_zero_config_through_the_pipeline_and_scored(tmp_path):
+    """fam0_000 (a plain cart-pole, velocity servo), fam0_002 (reaction wheel, zero by ref and geometry, degrees) and
+    fam0_003 (pendubot, upright at π by geometry), each `bemlearn run` on `robot: FILE`, scored against the oracle."""
+    from bemlearn.bench.family.family_bench import run_family
+
+    res = run_family(0, 6, tmp_path, only=[0, 2, 3])
+    rows = {r["name"]: r for r in res["rows"]}
+    assert set(rows) == {"fam0_000", "fam0_002", "fam0_003"}
+    for r in rows.values():
+        assert r["verdict"] in ("ok", "degraded", "unusable", "error", "crash", "none")
+        assert r["false_ok"] == (r["verdict"] == "ok" and not (r["bem_right"] and r["balanced_at_upright"]))
+    cart = rows["fam0_000"]  # the class's easiest member: right, on today's pipeline already
+    assert cart["holdable"] and cart["verdict"] == "ok" and cart["right"], cart
+    assert cart["rmse"] <= 0.01 and 0.95 <= cart["gain"] <= 1.05
+    for f in ("results.csv", "results.json", "table.md"):
+        assert (tmp_path / f).is_file()
+    assert "| all |  | 3 |" in (tmp_path / "table.md").read_text()
