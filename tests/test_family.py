@@ -145,7 +145,7 @@ def _trajectory(xml, qu_star, qu_offset, steps=300):
     return np.array(out), o
 
 
-@pytest.mark.parametrize("index", [1, 3, 4, 6, 8])
+@pytest.mark.parametrize("index", [1, 4, 8])
 def test_degrees_radians_ref_and_geometry_give_the_same_physics(index):
     base = {"degrees": False, "tilt": 0.0, "ref": 0.0, "hanging_by_fromto": False}
     variants = [dict(base), dict(base, degrees=True), dict(base, tilt=math.pi), dict(base, ref=math.pi),
@@ -223,7 +223,7 @@ def _predictor_file(tmp_path, xml, truth, *, scale=1.0, offset=0.0, n=300):
 
 
 def test_compare_predictor_scores_a_right_and_two_wrong_learned_bems(tmp_path):
-    from bemlearn.bench.family.family_bench import compare_predictor
+    from bemlearn.bench.family.score import compare_predictor
 
     xml, truth = generate_robot(0, 6, hold_check=False)  # a cart-pole whose upright is not at 0 (geometry)
     assert truth["features"]["upright_at"] == "other"
@@ -239,7 +239,7 @@ def test_compare_predictor_scores_a_right_and_two_wrong_learned_bems(tmp_path):
 
 
 def test_balance_and_reason_judgements_and_the_table():
-    from bemlearn.bench.family.family_bench import balanced_at_upright, feature_table, judge_reason
+    from bemlearn.bench.family.score import balanced_at_upright, feature_table, judge_reason
 
     up = {"closed_loop": {"predictor": {"fell": False, "diverged": False, "qu_max": 3.2}}}
     assert balanced_at_upright(up, math.pi)[0] is True

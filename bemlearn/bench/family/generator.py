@@ -36,7 +36,7 @@ from bemlearn.errors import ArgumentError
 
 __all__ = ["TOPOLOGIES", "ACTUATOR_KINDS", "CONVENTION_KEYS", "generate_robot", "robot_name"]
 
-TOPOLOGIES = ("cartpole", "furuta", "reaction_wheel", "pendubot", "arm2_pole", "xy_cart")
+TOPOLOGIES = ("cartpole", "rotary_arm", "reaction_wheel", "pendubot", "arm2_pole", "xy_cart")
 ACTUATOR_KINDS = ("motor", "position", "velocity", "general")
 G = 9.81
 
@@ -73,7 +73,7 @@ class _Draw:
         self.friction = bool(rng.random() < 0.3)
         self.feasible = bool(rng.random() >= 0.17)
         self.infeasible_how = str(rng.choice(["ctrl", "force", "rail"])) if not self.feasible else ""
-        m = {"cartpole": 1, "furuta": 1, "reaction_wheel": 1, "pendubot": 1, "arm2_pole": 2, "xy_cart": 2}[self.topology]
+        m = {"cartpole": 1, "rotary_arm": 1, "reaction_wheel": 1, "pendubot": 1, "arm2_pole": 2, "xy_cart": 2}[self.topology]
         self.turntable = bool(self.topology == "xy_cart" and rng.random() < 0.5)
         m += int(self.turntable)
         self.m = m
@@ -99,7 +99,7 @@ class _Draw:
         t = self.topology
         if t == "cartpole":
             return {"M": u(0.3, 3.0), "m": u(0.05, 0.5), "L": u(0.2, 1.0), "rail": u(0.3, 1.2)}
-        if t == "furuta":
+        if t == "rotary_arm":
             return {"ma": u(0.05, 0.4), "La": u(0.08, 0.3), "m": u(0.02, 0.3), "L": u(0.1, 0.4), "h": u(0.1, 0.3),
                     "arm_range": u(1.5, 3.0) if rng.random() < 0.5 else None}
         if t == "reaction_wheel":
@@ -183,7 +183,7 @@ class _Writer:
         """The pole body's orientation attribute: a tilt about the pole's hinge axis (y, or x for the Furuta)."""
         if self.d.tilt == 0.0 or self.d.hanging_by_fromto:
             return ""
-        ax = "1 0 0" if self.d.topology in ("furuta", "reaction_wheel") else "0 1 0"
+        ax = "1 0 0" if self.d.topology in ("rotary_arm", "reaction_wheel") else "0 1 0"
         return f' axisangle="{ax} {self.ang(self.d.tilt)}"'
 
     def pole_sign(self) -> float:
@@ -205,7 +205,7 @@ class _Writer:
             return (f'<body name="cart" pos="0 0 0">\n{J("cart", "slide", "1 0 0", 0, params, (-rail, rail))}\n'
                     f'{self.box("cart", (0.1, 0.06, 0.03), s["M"])}\n'
                     f'<body name="pole" pos="0 0 0.03"{self.pole_frame()}>\n{pj("0 1 0")}\n{pole()}\n</body>\n</body>')
-        if t == "furuta":
+        if t == "rotary_arm":
             ar = (-s["arm_range"], s["arm_range"]) if s["arm_range"] else None
             return (f'<body name="arm" pos="0 0 {_f(s["h"])}">\n{J("arm", "hinge", "0 0 1", 0, params, ar)}\n'
                     f'{self.link("arm", s["La"], s["ma"], 0.01, "x")}\n'
@@ -264,7 +264,7 @@ class _Writer:
         return "\n".join(lines)
 
     def joint_names(self) -> list[str]:
-        return {"cartpole": ["cart"], "furuta": ["arm"], "reaction_wheel": ["wheel"], "pendubot": ["shoulder"],
+        return {"cartpole": ["cart"], "rotary_arm": ["arm"], "reaction_wheel": ["wheel"], "pendubot": ["shoulder"],
                 "arm2_pole": ["shoulder", "elbow"], "xy_cart": ["x", "y"] + (["yaw"] if self.d.turntable else [])}[self.d.topology]
 
     def xml(self, params: dict, acts: list[dict] | None) -> str:
