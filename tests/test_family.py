@@ -256,6 +256,10 @@ def test_balance_and_reason_judgements_and_the_table():
     assert judge_reason("x", holdable=True, bem_right=True, check="closed_loop")[0] is False
     assert judge_reason("x", holdable=True, bem_right=False, check="closed_loop")[0] is True
     assert judge_reason("x", holdable=True, bem_right=True, check="resolution")[0] is False
+    # a BEM on the hanging branch: "max 0.044 rad" names the wrong cause, "the hanging equilibrium" the right one
+    assert judge_reason("max 0.044 rad", holdable=True, bem_right=False, check="design_region", off_branch=True)[0] is False
+    assert judge_reason("the learned BEM is the hanging branch", holdable=True, bem_right=False, check="design_region",
+                        off_branch=True)[0] is True
     rows = [dict(name=f"r{i}", actuator_kind=k, friction=False, m=1, upright_at="0", zero_by="plain", angle="radian",
                  holdable=h, verdict=v, right=r, false_ok=f, rmse=e, gain=g, reason_true=t)
             for i, (k, h, v, r, f, e, g, t) in enumerate([("motor", True, "ok", True, False, 1e-3, 1.0, None),

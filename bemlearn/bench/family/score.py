@@ -89,7 +89,14 @@ _FALL_WORDS = ("fell", "fall", "diverged")
 _LEARN_CHECKS = ("design_region", "resolution", "heldout", "band", "derivatives", "fit", "lemma1", "coverage", "support")
 
 
-def judge_reason(reason: str, *, holdable: bool, bem_right: bool | None, check: str = "") -> tuple[bool | None, str]:
+#: words by which a reason says the learned BEM or the loop sits at the wrong equilibrium
+_BRANCH_WORDS = ("upright", "hanging", "branch", "stable equilibrium", "stable without control")
+#: |learned BEM at rest − q_u*| (rad) beyond which the learned BEM is on another equilibrium branch
+OFF_BRANCH = 0.5
+
+
+def judge_reason(reason: str, *, holdable: bool, bem_right: bool | None, check: str = "",
+                 off_branch: bool = False) -> tuple[bool | None, str]:
     """Is a non-ok verdict's first reason true by the oracle?  ``(None, why)`` where it cannot be judged.
 
     By the first finding's key (``check``) when there is one, else by the reason's words:
@@ -100,9 +107,14 @@ def judge_reason(reason: str, *, holdable: bool, bem_right: bool | None, check: 
     * ``closed_loop`` (the learned-BEM loop fell or wandered) — true iff the oracle cannot hold it or the learned
       BEM is off;
     * the learned BEM's own checks (design region, resolution, held-out, band, derivatives, fit, Lemma 1) — true iff
-      the comparison with the oracle fails.
+      the comparison with the oracle fails; when the learned BEM sits on another equilibrium (``off_branch``: its
+      value at rest more than :data:`OFF_BRANCH` from q_u*), only a reason that says so (upright, hanging, branch,
+      stable equilibrium) is true — "max 0.044 rad against the model" about a BEM π away names the wrong cause.
     """
     c = check.lower()
+    r = reason.lower()
+    if off_branch and not c.startswith("model:") and c not in ("excitation",):
+        return any(w in r for w in _BRANCH_WORDS), "the learned BEM is on another branch: true only if the reason says so"
     if c.startswith("model:"):
         return (not holdable), f"{check}: the model says it cannot be held"
     if c == "excitation":
@@ -111,7 +123,6 @@ def judge_reason(reason: str, *, holdable: bool, bem_right: bool | None, check: 
         return ((not holdable) or (bem_right is False)), f"{check}: the learned-BEM loop"
     if c and any(c.startswith(k) for k in _LEARN_CHECKS):
         return (None if bem_right is None else not bem_right), f"{check}: claims the learned BEM is unresolved or off"
-    r = reason.lower()
     if any(w in r for w in _HOLD_WORDS):
         return (not holdable), "claims it cannot be held"
     if any(w in r for w in _FALL_WORDS):
@@ -154,8 +165,9 @@ def score_run(run_dir: Path, xml: str, truth: dict, record: dict) -> dict:
     row["right"] = bool(row["verdict"] == "ok" and bem_right and bal)
     row["false_ok"] = bool(row["verdict"] == "ok" and not (bem_right and bal))
     if row["verdict"] not in ("ok",):
+        off = row["learned_at_rest_minus_upright"] is not None and abs(row["learned_at_rest_minus_upright"]) > OFF_BRANCH
         row["reason_true"], row["reason_judged_as"] = judge_reason(row["first_reason"] or "", holdable=row["holdable"],
-                                                                   bem_right=bem_right, check=row["first_check"])
+                                                                   bem_right=bem_right, check=row["first_check"], off_branch=off)
         if row["verdict"] in ("error", "crash", "none"):
             row["reason_true"], row["reason_judged_as"] = False, f"{row['verdict']}: no verdict"
     else:
