@@ -182,6 +182,8 @@ def _add_family(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--timeout", type=float, default=3600.0, help="seconds per run before it is stopped (default 3600)")
     r.add_argument("--rerun", action="store_true", help="run robots again that have a finished run")
     r.add_argument("--force", action="store_true", help="replace a family of another seed/count in OUT/robots")
+    r.add_argument("--checkout", type=Path, default=None,
+                   help="run the pipeline of another bemlearn source tree (a worktree with a fix); default this one")
     r.set_defaults(func=_family_run)
     sc = fsub.add_parser("score", help="score a `bemlearn sweep` over the family (configs/sweeps/family.yaml) against the oracles",
                          description="Score each complete cell of SWEEP whose robot is a file of FAMILY against its oracle "
@@ -378,7 +380,7 @@ def _family_run(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         raise ArgumentError(f"--jobs: expected a positive integer, got {args.jobs}")
     res = run_family(args.seed, args.count, args.out, only=args.only, backend=args.backend, jobs=args.jobs,
-                     timeout_s=args.timeout, force=args.force, rerun=args.rerun,
+                     timeout_s=args.timeout, force=args.force, rerun=args.rerun, checkout=args.checkout,
                      progress=lambda s: print(s, file=sys.stderr, flush=True))
     print(f"family seed {args.seed}: {len(res['rows'])} robots scored ({args.out}/results.csv)")
     print(res["markdown"])

@@ -93,39 +93,62 @@ def write_family(seed: int, count: int, out: str | Path, *, force: bool = False,
     return index
 
 
-def _run_one(xml_path: str, cfg_path: str, run_dir: str, log_path: str, timeout_s: float) -> dict:
-    """``python -m bemlearn run CFG --out RUN --force --no-progress`` in a child process; its exit code, time, last error line."""
+def checkout_commit(checkout: str | Path | None) -> str | None:
+    """The git commit of the bemlearn checkout a child process runs (``None`` outside git)."""
+    import subprocess
+
+    where = Path(checkout) if checkout is not None else Path(__file__).resolve().parents[3]
+    try:
+        res = subprocess.run(["git", "-C", str(where), "rev-parse", "HEAD"], capture_output=True, text=True, check=False, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return res.stdout.strip() or None
+
+
+def _run_one(xml_path: str, cfg_path: str, run_dir: str, log_path: str, timeout_s: float, checkout: str | None = None) -> dict:
+    """``python -m bemlearn run CFG --out RUN --force --no-progress`` in a child process (in ``checkout``, the bemlearn
+    source tree whose pipeline is measured; default this one); its exit code, time, last error line."""
+    import os
     import subprocess
     import sys
 
     t0 = time.time()
+    env = None
+    if checkout is not None:  # `python -m` puts the working directory first on sys.path: that tree's bemlearn runs
+        env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     with open(log_path, "w") as log:
         try:
             proc = subprocess.run([sys.executable, "-m", "bemlearn", "run", cfg_path, "--out", run_dir, "--force", "--no-progress"],
-                                  stdout=log, stderr=subprocess.STDOUT, timeout=timeout_s, check=False)
+                                  stdout=log, stderr=subprocess.STDOUT, timeout=timeout_s, check=False, cwd=checkout, env=env)
             code = proc.returncode
         except subprocess.TimeoutExpired:
             code = -1
     text = Path(log_path).read_text(errors="replace").strip().splitlines()
     tail = next((ln for ln in reversed(text) if "error" in ln.lower() or "Error" in ln), text[-1] if text else "")
     return {"exit_code": code, "wall_s": time.time() - t0, "error_tail": tail[-400:] if code not in (0, 3, 4) else "",
-            "timed_out": code == -1}
+            "timed_out": code == -1, "checkout": checkout, "commit": checkout_commit(checkout)}
 
 
 def run_family(seed: int, count: int, out: str | Path, *, only: list[int] | None = None, backend: str = "serial",
                jobs: int = 1, timeout_s: float = 3600.0, force: bool = False, rerun: bool = False,
-               progress: Callable[[str], None] = lambda s: None) -> dict:
+               checkout: str | Path | None = None, progress: Callable[[str], None] = lambda s: None) -> dict:
     """Generate (or reuse) the family in ``OUT/robots``, run each selected robot zero-config (``robot: FILE``) with
     ``bemlearn run`` into ``OUT/runs/NAME``, score it against its oracle, write ``OUT/results.{csv,json}`` and
     ``OUT/table.md``; returns ``{"rows", "table", "markdown"}``.
 
     A robot whose run folder holds ``family_run.json`` (the record of a finished run) is not run again unless
     ``rerun``.  ``backend``: ``serial`` (one child process at a time) or ``ray`` (``jobs`` child processes at once
-    as Ray tasks).
+    as Ray tasks).  ``checkout``: run another bemlearn source tree's pipeline (e.g. a worktree with a fix); the
+    scoring is this one's, and each ``family_run.json`` records the commit that ran.
     """
+    from bemlearn.errors import MissingFileError
     from bemlearn.files import atomic_write_text
 
-    out = Path(out)
+    if checkout is not None:
+        checkout = str(Path(checkout).absolute())
+        if not (Path(checkout) / "bemlearn" / "__main__.py").is_file():
+            raise MissingFileError(f"--checkout {checkout}: no bemlearn source tree there (bemlearn/__main__.py)")
+    out = Path(out).absolute()
     robots = out / "robots"
     if (robots / "index.json").is_file():
         index = json.loads((robots / "index.json").read_text())
@@ -164,14 +187,14 @@ def run_family(seed: int, count: int, out: str | Path, *, only: list[int] | None
 
     if backend == "serial" or not todo:
         for item in todo:
-            finish(item, _run_one(*item[1:], timeout_s))
+            finish(item, _run_one(*item[1:], timeout_s, checkout))
     elif backend == "ray":
         import ray
 
         ray.init(num_cpus=jobs, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
         try:
             task = ray.remote(num_cpus=1)(_run_one)
-            pending = {task.remote(*item[1:], timeout_s): item for item in todo}
+            pending = {task.remote(*item[1:], timeout_s, checkout): item for item in todo}
             while pending:
                 ready, _ = ray.wait(list(pending), num_returns=1)
                 item = pending.pop(ready[0])
@@ -205,7 +228,7 @@ def write_results(out: Path, rows: list[dict], table: list[dict], md: str, *, se
 
     cols = ["name", "topology", *FEATURES, "qu_upright", "holdable", "verdict", "right", "false_ok", "rmse", "max_abs", "gain",
             "learned_at_rest_minus_upright", "balanced_at_upright", "bem_right", "reason_true", "first_check", "first_reason", "hold_reason",
-            "balance_note", "exit_code", "wall_s"]
+            "balance_note", "exit_code", "wall_s", "commit"]
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=cols, extrasaction="ignore")
     w.writeheader()

@@ -136,7 +136,7 @@ def score_run(run_dir: Path, xml: str, truth: dict, record: dict) -> dict:
     """One row of results: the run's verdict and closed loop, its learned BEM vs the oracle, the judgements."""
     row: dict = {"name": truth["name"], "topology": truth["topology"], **{f: truth["features"][f] for f in FEATURES},
                  "qu_upright": truth["qu_upright"], "holdable": bool(truth["holdable"]), "hold_reason": truth["hold"]["reason"],
-                 "exit_code": record.get("exit_code"), "wall_s": record.get("wall_s")}
+                 "exit_code": record.get("exit_code"), "wall_s": record.get("wall_s"), "commit": record.get("commit")}
     mpath = run_dir / "metrics.json"
     metrics = json.loads(mpath.read_text()) if mpath.is_file() else {}
     verdict = metrics.get("verdict") or {}
