@@ -16,7 +16,9 @@
 * ``bench c-footprint`` — flash/RAM footprint of the C export per model size and kind.
 * ``bench sigint CONFIG --data FILE`` — Ctrl-C latency of ``train`` on the 3,000-point exact GP;
 * ``bench fuzz`` — bad-input classes fed to every reader and how many end in a named error.
-* ``bench hostile`` — issue 29: predictor peak memory on 10⁶ rows (TorchScript vs ``.pt2``), 10⁴-cell grid validation.
+* ``bench hostile`` — predictor peak memory on 10⁶ rows (TorchScript vs ``.pt2``), 10⁴-cell grid validation.
+* ``bench family generate|run|score`` — a seeded family of in-class robots with an oracle; zero-config runs
+  scored against it, per feature (docs/family.md).
 """
 
 from __future__ import annotations
@@ -177,6 +179,45 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     h.add_argument("--n-train", type=int, default=500, help="support points of the synthetic exact GP (default 500)")
     h.add_argument("--cells", type=int, default=10**4, help="sweep grid cells to validate (default 10⁴; 0: skip)")
     h.set_defaults(func=_hostile)
+    _add_family(sub)
+
+
+def _add_family(sub: argparse._SubParsersAction) -> None:
+    fam = sub.add_parser("family", help="a seeded family of in-class robots with an oracle; the pipeline scored on it",
+                         description="Generate MJCF robots of bemlearn's class from a seed, each with its oracle "
+                         "(true upright, model BEM from mj_inverse, whether its actuators can hold it), and score "
+                         "zero-config runs against the oracle (docs/family.md).")
+    fsub = fam.add_subparsers(dest="family_cmd", metavar="ACTION", required=True)
+    g = fsub.add_parser("generate", help="write the family: one MJCF + one oracle JSON per robot, and index.json")
+    g.add_argument("--seed", type=int, default=0, help="family seed (default 0)")
+    g.add_argument("--count", type=int, default=64, help="robots (default 64)")
+    g.add_argument("--out", type=Path, required=True, help="folder of the family")
+    g.add_argument("--force", action="store_true", help="replace existing family files")
+    g.set_defaults(func=_family_generate)
+    r = fsub.add_parser("run", help="run each robot zero-config (`robot: FILE`) with `bemlearn run` and score it against "
+                        "its oracle: results.csv/json and the per-feature table",
+                        description="Generate (or reuse) the family in OUT/robots, run `bemlearn run` on a config naming only "
+                        "each robot file (OUT/runs/NAME), compare each exported predictor with the oracle BEM on "
+                        "design-region queries and print the per-feature table (also OUT/table.md).  Finished runs "
+                        "(OUT/runs/NAME/family_run.json) are scored again, not rerun, unless --rerun.")
+    r.add_argument("--seed", type=int, default=0, help="family seed (default 0)")
+    r.add_argument("--count", type=int, default=64, help="robots in the family (default 64)")
+    r.add_argument("--out", type=Path, required=True, help="bench folder (robots/, configs/, runs/, logs/, results)")
+    r.add_argument("--only", type=int, nargs="+", default=None, metavar="IDX", help="run only these robot indices")
+    r.add_argument("--backend", choices=["serial", "ray"], default="serial", help="serial (default) or ray")
+    r.add_argument("--jobs", type=int, default=2, help="runs at once with --backend ray (default 2)")
+    r.add_argument("--timeout", type=float, default=3600.0, help="seconds per run before it is stopped (default 3600)")
+    r.add_argument("--rerun", action="store_true", help="run robots again that have a finished run")
+    r.add_argument("--force", action="store_true", help="replace a family of another seed/count in OUT/robots")
+    r.add_argument("--checkout", type=Path, default=None,
+                   help="run the pipeline of another bemlearn source tree (a worktree with a fix); default this one")
+    r.set_defaults(func=_family_run)
+    sc = fsub.add_parser("score", help="score a `bemlearn sweep` over the family (configs/sweeps/family.yaml) against the oracles",
+                         description="Score each complete cell of SWEEP whose robot is a file of FAMILY against its oracle "
+                         "and write results.csv/json and table.md into SWEEP.")
+    sc.add_argument("--sweep", type=Path, required=True, help="the sweep folder (`bemlearn sweep ... --out SWEEP`)")
+    sc.add_argument("--family", type=Path, required=True, help="the family folder (`bench family generate --out FAMILY`)")
+    sc.set_defaults(func=_family_score)
 
 def _c_footprint(args: argparse.Namespace) -> int:
     from bemlearn.bench.c_footprint import format_footprints, measure_footprints
@@ -354,6 +395,42 @@ def _hostile(args: argparse.Namespace) -> int:
     memory = predictor_memory(rows=args.rows, n_train=args.n_train)
     validation = sweep_validation_s(cells=args.cells) if args.cells else None
     print(format_hostile(memory, validation, args.cells))
+    return 0
+
+
+def _family_generate(args: argparse.Namespace) -> int:
+    import sys
+
+    from bemlearn.bench.family.family_bench import write_family
+
+    index = write_family(args.seed, args.count, args.out, force=args.force,
+                         progress=lambda s: print(s, file=sys.stderr, flush=True))
+    n_hold = sum(bool(r["holdable"]) for r in index["robots"])
+    print(f"{args.out}: {len(index['robots'])} robots of family seed {args.seed} ({n_hold} holdable by the oracle)")
+    return 0
+
+
+def _family_run(args: argparse.Namespace) -> int:
+    import sys
+
+    from bemlearn.bench.family.family_bench import run_family
+
+    if args.jobs < 1:
+        raise ArgumentError(f"--jobs: expected a positive integer, got {args.jobs}")
+    res = run_family(args.seed, args.count, args.out, only=args.only, backend=args.backend, jobs=args.jobs,
+                     timeout_s=args.timeout, force=args.force, rerun=args.rerun, checkout=args.checkout,
+                     progress=lambda s: print(s, file=sys.stderr, flush=True))
+    print(f"family seed {args.seed}: {len(res['rows'])} robots scored ({args.out}/results.csv)")
+    print(res["markdown"])
+    return 0
+
+
+def _family_score(args: argparse.Namespace) -> int:
+    from bemlearn.bench.family.family_bench import score_sweep
+
+    res = score_sweep(args.sweep, args.family)
+    print(f"{len(res['rows'])} family runs scored ({args.sweep}/results.csv)")
+    print(res["markdown"])
     return 0
 
 
