@@ -46,6 +46,7 @@ __all__ = [
     "check_free_space",
     "atomic_write_files",
     "write_problem",
+    "first_new_folder",
     "INTERNAL_PREFIX",
 ]
 
@@ -294,13 +295,7 @@ def created_dir(folder: str | os.PathLike[str], *, keep_on_interrupt: Iterable[s
     interrupted command writes its best state on purpose), and removes it otherwise.
     """
     folder = Path(folder)
-    first_new = None
-    p = folder
-    while not p.exists():
-        first_new = p
-        if p.parent == p:
-            break
-        p = p.parent
+    first_new = first_new_folder(folder)
     folder.mkdir(parents=True, exist_ok=True)
     try:
         yield folder
@@ -314,3 +309,16 @@ def created_dir(folder: str | os.PathLike[str], *, keep_on_interrupt: Iterable[s
             shutil.rmtree(first_new, ignore_errors=True)
             log.info("removed %s after the failure", first_new)
         raise
+
+
+def first_new_folder(folder: str | Path) -> Path | None:
+    """The outermost of ``folder`` and its parents that does not exist yet (``None``: it exists): what a
+    command that creates ``folder`` must remove to leave nothing behind."""
+    first = None
+    p = Path(folder)
+    while not p.exists():
+        first = p
+        if p.parent == p:
+            break
+        p = p.parent
+    return first

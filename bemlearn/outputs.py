@@ -47,7 +47,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
 from bemlearn.errors import ArgumentError, EnvironmentProblem, OutputBusyError, OutputExistsError
-from bemlearn.files import INTERNAL_PREFIX, check_writable, new_run_dir, write_problem
+from bemlearn.files import INTERNAL_PREFIX, check_writable, first_new_folder, new_run_dir, write_problem
 
 try:  # POSIX
     import fcntl
@@ -335,17 +335,6 @@ def _rewritten(out: Path, name: str, backup: Path | None) -> bool:
     return not (path.is_file() and old.is_file() and filecmp.cmp(path, old, shallow=False))
 
 
-def _first_new(folder: Path) -> Path | None:
-    first = None
-    p = folder
-    while not p.exists():
-        first = p
-        if p.parent == p:
-            break
-        p = p.parent
-    return first
-
-
 @contextlib.contextmanager
 def claim_outputs(
     folder: str | os.PathLike[str] | None,
@@ -390,7 +379,7 @@ def claim_outputs(
         if default_name is None:
             raise ArgumentError("claim_outputs: give a folder or a default_name")
         check_writable(root)
-        first_new = _first_new(Path(root))
+        first_new = first_new_folder(Path(root))
         out = new_run_dir(default_name, root=root, create=True)
         first_new = first_new or out
         created = True
@@ -399,7 +388,7 @@ def claim_outputs(
         if out.exists() and not out.is_dir():
             raise EnvironmentProblem(f"{head}{out} is a file, expected a folder")
         check_writable(out)
-        first_new = _first_new(out)
+        first_new = first_new_folder(out)
         try:
             out.parent.mkdir(parents=True, exist_ok=True)
             out.mkdir()

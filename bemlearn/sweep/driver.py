@@ -37,7 +37,7 @@ from typing import Any
 import yaml
 
 from bemlearn.errors import ArgumentError, EnvironmentProblem, OutputExistsError, SweepError
-from bemlearn.files import atomic_write_text, check_writable, new_run_dir, write_problem
+from bemlearn.files import atomic_write_text, check_writable, first_new_folder, new_run_dir, write_problem
 from bemlearn.sweep.backends import make_backend
 from bemlearn.sweep.cell_runner import MARKER, CellJob, CellOutcome, cell_folder, cell_lock, read_outcome
 from bemlearn.sweep.cells import Cell, expand_cells
@@ -214,7 +214,7 @@ def run_sweep(sweep: str | Path | dict[str, Any], out_dir: str | Path | None = N
     out = Path(out_dir if out_dir is not None else new_run_dir(stem)).absolute()
     _prepare(out, resume=resume, force=force)
     check_writable(out)   # a read-only or missing disk: one line, before anything is created
-    first_new = _first_new(out)
+    first_new = first_new_folder(out)
     try:
         try:
             out.mkdir(parents=True, exist_ok=True)
@@ -230,18 +230,6 @@ def run_sweep(sweep: str | Path | dict[str, Any], out_dir: str | Path | None = N
             shutil.rmtree(first_new, ignore_errors=True)
             log.info("removed %s after the failure", first_new)
         raise
-
-
-def _first_new(folder: Path) -> Path | None:
-    """The outermost of ``folder`` and its parents that does not exist yet (``None``: it exists)."""
-    first = None
-    p = folder
-    while not p.exists():
-        first = p
-        if p.parent == p:
-            break
-        p = p.parent
-    return first
 
 
 def _holds_a_cell(out: Path) -> bool:
