@@ -240,6 +240,7 @@ def _lqr_scaled(robot: MujocoRobot, A: np.ndarray, B: np.ndarray, Q0: np.ndarray
     response from every start stays within the limits (ctrl only unless ``force``); at most 12 times."""
     from scipy.linalg import solve_discrete_are
 
+    u_ref = np.where(np.isfinite(limits.u_ctrl), limits.u_ctrl, 1.0)   # Bryson's 1 where ctrl is unlimited, as its weight
     scale = 1.0
     for _ in range(13):
         R = scale * R0
@@ -258,7 +259,7 @@ def _lqr_scaled(robot: MujocoRobot, A: np.ndarray, B: np.ndarray, Q0: np.ndarray
             x = x0.copy()
             for _ in range(steps):
                 u = -K @ x
-                peak = max(peak, limits.peak(u, x) if force else float(np.max(np.abs(u) / np.minimum(limits.u_ctrl, 1e300))))
+                peak = max(peak, limits.peak(u, x) if force else float(np.max(np.abs(u) / u_ref)))
                 x = Acl @ x
         if peak <= 1.0:
             break
