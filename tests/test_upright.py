@@ -15,7 +15,7 @@ import pytest
 from bemlearn.control.lqr import actuator_limits, discrete_lqr, holds_in_mujoco, linearize
 from bemlearn.errors import RobotModelError
 from bemlearn.robots import MujocoRobot
-from bemlearn.robots.scales import instability_rate
+from bemlearn.robots.scales import instability_rate, upright_stiffness
 from bemlearn.robots.upright import find_upright
 
 
@@ -65,7 +65,7 @@ def test_a_spring_that_makes_the_top_stable_leaves_no_upright():
 def test_mujoco_robot_finds_the_upright_by_its_physics(xml, expected):
     robot = MujocoRobot.from_xml_string(xml, name="cp")
     assert math.remainder(robot.qu_nominal - expected, 2 * math.pi) == pytest.approx(0.0, abs=1e-8)
-    assert robot.upright_stiffness > 0
+    assert upright_stiffness(robot)[0] > 0
     # the instability rate is that of the upright, √(m g l / D_uu) for a thin rod of length L (l = L/2)
     assert instability_rate(robot) > 0
     # the design region and the BEM search bracket sit around it
@@ -75,7 +75,7 @@ def test_mujoco_robot_finds_the_upright_by_its_physics(xml, expected):
 
 def test_a_declared_stable_nominal_is_refused_with_its_reason():
     robot = MujocoRobot.from_xml_string(_cartpole(pole_to="0 0 -0.6", nominal="0"), name="hanging")
-    assert robot.qu_nominal == 0.0 and robot.upright_stiffness < 0
+    assert robot.qu_nominal == 0.0 and upright_stiffness(robot)[0] < 0
     with pytest.raises(RobotModelError, match="stable pose without control"):
         instability_rate(robot)
 

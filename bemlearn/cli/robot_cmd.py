@@ -63,8 +63,10 @@ def _info(args) -> int:
     note = getattr(r, "qu_nominal_note", None)
     if note:
         print(f"upright    {note}")
-    stiffness = getattr(r, "upright_stiffness", None)
-    if stiffness is not None and not stiffness > 0:
+    from bemlearn.robots.scales import upright_stiffness
+
+    stiffness = upright_stiffness(r)[0]
+    if not stiffness > 0:
         print(f"warning    the nominal pose is stable without control (Γ_q = {stiffness:.4g} ≤ 0): it is not a pose to balance")
     return 0
 

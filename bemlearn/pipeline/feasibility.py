@@ -182,14 +182,11 @@ def equilibrium_stiffness(robot: ControlRobot, *, step: float = 1e-5) -> dict:
         ``{"joint", "qu", "unit", "gravity_stiffness": Γ_q (N·m/rad or N/m), "d_uu",
         "stable_without_control": Γ_q < 0}``.
     """
+    from bemlearn.robots.scales import upright_stiffness
     from bemlearn.units import joint_unit
 
-    z = np.zeros(robot.m)
     qu = float(robot.qu_nominal)
-    gq = -(robot.gamma0_scalar(qu + step, z, z, z) - robot.gamma0_scalar(qu - step, z, z, z)) / (2 * step)
-    q0 = np.zeros(robot.n)
-    q0[robot.unactuated_index] = qu
-    duu = float(robot.terms(q0, np.zeros(robot.n))[0][robot.unactuated_index, robot.unactuated_index])
+    gq, duu = upright_stiffness(robot, step=step)
     kinds = getattr(robot, "coordinate_kinds", None)
     kind = kinds[robot.unactuated_index] if kinds else "hinge"
     return {"joint": robot.unactuated_name, "qu": qu, "unit": joint_unit(kind), "gravity_stiffness": float(gq), "d_uu": duu,

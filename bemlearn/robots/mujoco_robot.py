@@ -236,14 +236,6 @@ class MujocoRobot(Robot):
         z = np.zeros(self.n - 1)
         return find_upright(lambda qu: self.gamma0_scalar(qu, z, z, z), kind=kind, limits=limits)
 
-    @property
-    def upright_stiffness(self) -> float:
-        """Γ_q = −∂Γ_0/∂q_u at :attr:`qu_nominal` with the actuated coordinates at 0 (N·m/rad or N/m):
-        positive where the nominal pose is unstable (a pose to balance), ≤ 0 where it is stable without control."""
-        z = np.zeros(self.n - 1)
-        h = 1e-6
-        return -(self.gamma0_scalar(self.qu_nominal + h, z, z, z) - self.gamma0_scalar(self.qu_nominal - h, z, z, z)) / (2 * h)
-
     @functools.cached_property
     def T(self) -> torch.Tensor:
         """``(n, n)`` the coordinate map q = T q_j (the identity unless the model declares one), float64."""

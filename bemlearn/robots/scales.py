@@ -22,10 +22,21 @@ from bemlearn.robots.bem import find_roots
 from bemlearn.robots.mujoco_robot import MujocoRobot
 from bemlearn.robots.protocol import BalanceRobot, ControlRobot
 
-__all__ = ["instability_rate", "bem_slopes", "qu_half_range", "qa_half_ranges", "bem_gain", "UNLIMITED_HALF_RANGE"]
+__all__ = ["upright_stiffness", "instability_rate", "bem_slopes", "qu_half_range", "qa_half_ranges", "bem_gain", "UNLIMITED_HALF_RANGE"]
 
 UNLIMITED_HALF_RANGE = 0.5
 """Half range assumed for an unlimited actuated coordinate, rad or m."""
+
+
+def upright_stiffness(robot: ControlRobot, *, step: float = 1e-5) -> tuple[float, float]:
+    """``(Γ_q, D_uu)`` at q_u,nominal with the actuated coordinates at rest at 0: Γ_q = −∂Γ_0/∂q_u by a central
+    difference of ``step`` (N·m/rad or N/m; > 0 where the pose falls without control) and D_uu (kg·m² or kg)."""
+    n, iu = robot.n, robot.unactuated_index
+    z = np.zeros(robot.m)
+    gq = -(robot.gamma0_scalar(robot.qu_nominal + step, z, z, z) - robot.gamma0_scalar(robot.qu_nominal - step, z, z, z)) / (2 * step)
+    q0 = np.zeros(n)
+    q0[iu] = robot.qu_nominal
+    return float(gq), float(robot.terms(q0, np.zeros(n))[0][iu, iu])
 
 
 def instability_rate(robot: ControlRobot, *, step: float = 1e-5) -> float:
@@ -35,14 +46,7 @@ def instability_rate(robot: ControlRobot, *, step: float = 1e-5) -> float:
         RobotModelError: Γ_q ≤ 0: the nominal pose is stable without control (a hanging pendulum),
             so there is nothing to balance there and no instability rate.
     """
-    n, iu = robot.n, robot.unactuated_index
-    z = np.zeros(robot.m)
-    g_plus = robot.gamma0_scalar(robot.qu_nominal + step, z, z, z)
-    g_minus = robot.gamma0_scalar(robot.qu_nominal - step, z, z, z)
-    gq = -(g_plus - g_minus) / (2 * step)
-    q0 = np.zeros(n)
-    q0[iu] = robot.qu_nominal
-    duu = float(robot.terms(q0, np.zeros(n))[0][iu, iu])
+    gq, duu = upright_stiffness(robot, step=step)
     if not gq > 0:
         raise RobotModelError(
             f"robot {robot.name!r}: q_u = {robot.qu_nominal:g} is a stable pose without control (Γ_q = −∂Γ_0/∂q_u = "
