@@ -203,33 +203,39 @@ def _effort_cap(robot, a_hi: float, n_max: int, omega: float, *, budget: float =
     return lo
 
 
+def actuator_effort(robot, inv, q: np.ndarray, qdd: np.ndarray) -> float:
+    """max over actuators of |ctrl| / ctrl limit and |force| / force limit to realise ``q`` (n,) at rest with
+    accelerations ``qdd`` (n,): τ = D q̈ + h (eq. 1), the forces and ``ctrl`` from MuJoCo's actuator model
+    (``inv``: a :class:`~bemlearn.control.actuator_inverse.MujocoActuatorInverse` of ``robot``); NumPy only."""
+    D, h = robot.terms(q, np.zeros(robot.n))
+    tau_a = (D @ qdd + h)[list(robot.actuated_index)]
+    ctrl = inv.command(tau_a, q, np.zeros(robot.n), clip=False)
+    force = inv.B_pinv @ tau_a
+    model = robot.model
+    out = float(np.max(np.abs(ctrl) / inv.limit)) if inv.limited.any() else 0.0
+    flim = model.actuator_forcelimited.astype(bool)
+    if flim.any():
+        fmax = np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1]))
+        out = max(out, float(np.max(np.abs(force[flim]) / fmax[flim])))
+    return out
+
+
 def reference_effort(robot, amplitude: float, omega: float) -> float:
-    """The effort (multiple of the actuator limits) of a sinusoidal reference of ``amplitude`` (rad or m) at
-    ``omega`` (rad/s) on any one actuated coordinate, at its extremes: q_a,j = ±A, q̈_a,j = ∓A ω², q̇ = 0, q_u at
-    its nominal value and q̈_u = 0; τ = D q̈ + h (eq. 1), the actuator forces and ``ctrl`` from MuJoCo's actuator
-    model (:class:`~bemlearn.control.actuator_inverse.MujocoActuatorInverse`); the worst of max |ctrl|/ctrl limit
-    and |force|/force limit over j and the sign (NumPy only)."""
+    """The effort (multiple of the actuator limits, :func:`actuator_effort`) of a sinusoidal reference of
+    ``amplitude`` (rad or m) at ``omega`` (rad/s) on any one actuated coordinate, at its extremes: q_a,j = ±A,
+    q̈_a,j = ∓A ω², q̇ = 0, q_u at its nominal value and q̈_u = 0; the worst over j and the sign."""
     from bemlearn.control.actuator_inverse import MujocoActuatorInverse
 
     inv = MujocoActuatorInverse(robot)
-    model = robot.model
-    fmax = np.where(model.actuator_forcelimited.astype(bool),
-                    np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1])), np.inf)
-    ia = list(robot.actuated_index)
     worst = 0.0
-    for j in ia:
+    for j in robot.actuated_index:
         for sign in (1.0, -1.0):
             q = np.zeros(robot.n)
             q[robot.unactuated_index] = robot.qu_nominal
             q[j] = sign * amplitude
             qdd = np.zeros(robot.n)
             qdd[j] = -sign * amplitude * omega**2
-            D, h = robot.terms(q, np.zeros(robot.n))
-            tau_a = (D @ qdd + h)[ia]
-            ctrl = inv.command(tau_a, q, np.zeros(robot.n), clip=False)
-            force = inv.B_pinv @ tau_a
-            e = max(float(np.max(np.abs(ctrl) / inv.limit, initial=0.0)), float(np.max(np.abs(force) / fmax, initial=0.0)))
-            worst = max(worst, e)
+            worst = max(worst, actuator_effort(robot, inv, q, qdd))
     return worst
 
 

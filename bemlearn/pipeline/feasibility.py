@@ -34,7 +34,6 @@ import torch
 from bemlearn.errors import NumericalError, RobotModelError
 
 if TYPE_CHECKING:
-    from bemlearn.control.actuator_inverse import MujocoActuatorInverse
     from bemlearn.pipeline.config import PipelineConfig
     from bemlearn.robots.mujoco_robot import MujocoRobot
     from bemlearn.robots.protocol import ControlRobot
@@ -66,27 +65,11 @@ class FeasibilityCheck:
                 "severity": self.severity, "text": self.text}
 
 
-def _effort(robot: MujocoRobot, inv: MujocoActuatorInverse, q: np.ndarray, qdd: np.ndarray) -> float:
-    """max over actuators of |ctrl|/ctrl limit and |force|/force limit to realise (q, q̇ = 0, q̈)."""
-    qt = torch.from_numpy(q[None])
-    z = torch.zeros_like(qt)
-    tau = (robot.mass_matrix(qt)[0].numpy() @ qdd + (robot.bias(qt, z) - robot.passive(qt, z))[0].numpy())
-    tau_a = tau[list(robot.actuated_index)]
-    ctrl = inv.command(tau_a, q, np.zeros_like(q), clip=False)
-    force = inv.B_pinv @ tau_a
-    model = robot.model
-    out = float(np.max(np.abs(ctrl) / inv.limit)) if inv.limited.any() else 0.0
-    flim = model.actuator_forcelimited.astype(bool)
-    if flim.any():
-        fmax = np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1]))
-        out = max(out, float(np.max(np.abs(force[flim]) / fmax[flim])))
-    return out
-
-
 def hold_effort(robot: MujocoRobot, bound: float) -> tuple[float, str]:
     """The smallest effort (multiple of the actuator limits) that holds the BEM at ±``bound``, the
     worse of the two signs, and how (module docstring); ``inf`` when no way is found."""
     from bemlearn.control.actuator_inverse import MujocoActuatorInverse
+    from bemlearn.pipeline.derive import actuator_effort
     from bemlearn.robots.scales import bem_slopes, qa_half_ranges
 
     inv = MujocoActuatorInverse(robot)
@@ -118,7 +101,7 @@ def hold_effort(robot: MujocoRobot, bound: float) -> tuple[float, str]:
                 q[iu] = float(res.qu[0])
                 qdd = np.zeros(robot.n)
                 qdd[ia] = qadd
-                e = _effort(robot, inv, q, qdd)
+                e = actuator_effort(robot, inv, q, qdd)
                 if e < best:
                     unit = "" if kind == "pose" else "/s²"
                     best, best_how = e, f"{names[j]} {kind} {amount:+.3g} {'rad' if robot.coordinate_kinds[ia[j]] == 'hinge' else 'm'}{unit}"
