@@ -46,7 +46,7 @@ import yaml
 from bemlearn.errors import ArgumentError, ConfigError
 from bemlearn.files import atomic_write_text
 
-__all__ = ["memoized_parsing", "ConfigError", "from_dict", "to_dict", "load_yaml", "save_yaml", "replace_path", "Limit",
+__all__ = ["memoized_parsing", "ConfigError", "from_dict", "to_dict", "load_yaml", "save_yaml", "replace_path", "replace_checked", "Limit",
            "config_limits", "show_value", "MAX_NODES", "MAX_CONFIG_BYTES", "set_dotted", "check_dotted_key", "is_relative_path",
            "rebase_paths", "config_folder"]
 
@@ -444,6 +444,56 @@ def replace_path(obj: T, dotted: str, value: Any) -> T:
     if not rest:
         return dataclasses.replace(obj, **{head: value})
     return dataclasses.replace(obj, **{head: replace_path(getattr(obj, head), rest, value)})
+
+
+def replace_checked(obj: T, dotted: str, value: Any, *, where: str = "config") -> T | None:
+    """``obj`` with the leaf field ``a.b.c`` set to ``value`` checked as :func:`from_dict` checks it.
+
+    The value is coerced to the field's type and checked against its declared :class:`Limit`;
+    every dataclass on the path is rebuilt (its ``__post_init__`` checks run again).  The result
+    equals ``from_dict`` of the plain form of ``obj`` with the value set (a sweep builds the cells
+    that differ from a resolved template only in such leaves this way).
+
+    Returns:
+        The new object, or ``None`` when ``dotted`` is not a plain leaf of ``obj``: a section, a
+        mapping field, or a field inside a section that is ``None``.
+
+    Raises:
+        ConfigError: the value has the wrong type or breaks a limit (named ``where.a.b.c``).
+    """
+    head, _, rest = dotted.partition(".")
+    cls = type(obj)
+    if not dataclasses.is_dataclass(cls) or head not in _init_fields(cls):
+        return None
+    tp = _type_hints(cls)[head]
+    if rest:
+        child = getattr(obj, head)
+        if child is None:
+            return None
+        new_child = replace_checked(child, rest, value, where=f"{where}.{head}")
+        return None if new_child is None else _rebuild(obj, head, new_child, where)
+    if _dataclass_of(tp) is not None or _is_mapping_type(tp) or isinstance(value, dict):
+        return None
+    coerced = _coerce(value, tp, f"{where}.{head}")
+    limit = LIMITS.get(cls, {}).get(head)
+    if limit is not None:
+        limit.check(coerced, f"{where}.{head}")
+    return _rebuild(obj, head, coerced, where)
+
+
+@functools.cache
+def _init_fields(cls: type) -> frozenset[str]:
+    return frozenset(f.name for f in dataclasses.fields(cls) if f.init)
+
+
+def _rebuild(obj: T, name: str, value: Any, where: str) -> T:
+    try:
+        return dataclasses.replace(obj, **{name: value})
+    except (TypeError, ValueError) as exc:
+        msg = str(exc)[:500]
+        if isinstance(exc, ConfigError) and msg.startswith(where.split(".")[0]):
+            raise
+        raise ConfigError(f"{where}: {msg}") from exc
 
 
 def set_dotted(raw: dict[str, Any], dotted: str, value: Any) -> None:

@@ -140,3 +140,65 @@ def test_memoized_validation_gives_the_cells_of_a_full_resolution():
         assert alone.config == cell.config.config
         assert cell_id(stage, None, alone) == cell.cell_id
     assert time.perf_counter() - t0 < 30
+
+
+def _count_full_resolutions(monkeypatch):
+    import bemlearn.sweep.stage as stage_mod
+
+    calls = []
+    real = stage_mod._resolve_pipeline
+
+    def counting(raw, where):
+        calls.append(where)
+        return real(raw, where)
+
+    monkeypatch.setattr(stage_mod, "_resolve_pipeline", counting)
+    return calls
+
+
+def test_a_seed_grid_is_resolved_in_full_once_per_value_and_patched_cells_equal_full_ones(monkeypatch):
+    """Item 5's speed: a 10⁴-cell grid took 10–15 s because every cell was resolved in full.  Cells that differ
+    from a resolved one only in leaf values are patched (bemlearn.sweep.cells._expand); each must equal its full
+    resolution, with the same cell id."""
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
+    from bemlearn.sweep.cells import cell_id
+    from bemlearn.sweep.stage import get_stage
+
+    calls = _count_full_resolutions(monkeypatch)
+    grid = {"collect.seed": list(range(12)), "dataset.seed": list(range(10))}
+    cells = expand_cells(load_sweep({"base": BASE, "stage": "run", "grid": grid}))
+    assert len(cells) == 120
+    assert len(calls) == 1 + 11 + 9          # the template, then each other value of each key once
+    stage = get_stage("run", None, where="test")
+    for cell in cells:
+        raw = {**BASE, "collect": {**BASE["collect"], "seed": cell.grid["collect.seed"]},
+               "dataset": {"seed": cell.grid["dataset.seed"]}}
+        alone = resolve_pipeline_config(raw, source="config")
+        assert cell.config == alone
+        assert cell_id(stage, None, alone) == cell.cell_id
+
+
+def test_a_grid_value_that_changes_derived_values_is_resolved_in_full(monkeypatch):
+    """simulate.rate_hz changes the derived EIC gains and references: patching it would give another config
+    than a full resolution, so the comparison of the first full resolution stops patching that key."""
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
+
+    calls = _count_full_resolutions(monkeypatch)
+    grid = {"simulate.rate_hz": [100.0, 250.0], "collect.seed": [0, 1, 2]}
+    cells = expand_cells(load_sweep({"base": BASE, "stage": "run", "grid": grid}))
+    for cell in cells:
+        raw = {**BASE, "collect": {**BASE["collect"], "seed": cell.grid["collect.seed"]},
+               "simulate": {**BASE["simulate"], "rate_hz": cell.grid["simulate.rate_hz"]}}
+        assert cell.config == resolve_pipeline_config(raw, source="config")
+    assert cells[0].config.config.simulate.rate_hz == 100.0 and cells[3].config.config.simulate.rate_hz == 250.0
+    assert len(calls) < 2 * 3 + 6   # not every cell twice
+
+
+def test_a_bad_value_in_a_patched_cell_is_named_with_its_cell():
+    """A value a patched cell sets is checked as the strict parse checks it (type and limits)."""
+    grid = {"collect.seed": [0, 1], "collect.n_trials": [2, -3]}
+    with pytest.raises(ConfigError, match=r"cell 1 \(collect.seed=0, collect.n_trials=-3\).*n_trials"):
+        expand_cells(load_sweep({"base": BASE, "stage": "run", "grid": grid}))
+    grid = {"collect.seed": [0, 1], "dataset.seed": [0, "one"]}
+    with pytest.raises(ConfigError, match=r"cell 1 \(collect.seed=0, dataset.seed=one\).*dataset.seed: expected an integer"):
+        expand_cells(load_sweep({"base": BASE, "stage": "run", "grid": grid}))
