@@ -20,7 +20,7 @@ def test_every_trial_falling_at_once_is_an_unusable_verdict(tmp_path, monkeypatc
     monkeypatch.setattr(collect_module, "collect", fell)
     cfg = tmp_path / "r.yaml"
     cfg.write_text(f"robot: {ROBOT}\n")
-    out = run_pipeline(resolve_pipeline_config(cfg), tmp_path / "run", progress=False)
+    out = run_pipeline(resolve_pipeline_config(cfg), tmp_path / "run", progress=False).out
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["verdict"]["status"] == "unusable"
     assert metrics["failed"]["stage"] == "collect"

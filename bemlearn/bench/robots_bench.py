@@ -62,7 +62,6 @@ def robot_chain(robot_path: str, out_dir: str | Path, *, n_trials: int = 24, dur
                 workers: int = 1, seed: int = 0, progress: Callable[[str], None] = lambda s: None) -> dict:
     """Run the chain of the module docstring on one MJCF file; returns a row of figures."""
     from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
-    from bemlearn.export.checkpoint import load_checkpoint
     from bemlearn.export.export_run import export_run
     from bemlearn.pipeline.evaluation import held_out_references
     from bemlearn.pipeline.train import train_run
@@ -89,8 +88,8 @@ def robot_chain(robot_path: str, out_dir: str | Path, *, n_trials: int = 24, dur
     t0 = time.perf_counter()
     train = train_run(cfg, data_path, out, progress=False)
     export_run(out)
-    row["train"] = {"val_rmse": train.get("val_rmse"), "seconds": time.perf_counter() - t0}
-    state = load_checkpoint(out).predictor_state
+    row["train"] = {"val_rmse": train.metrics.get("val_rmse"), "seconds": time.perf_counter() - t0}
+    state = train.state
     refs = held_out_references(cfg.evaluate, robot.m)
     bound = cfg.collect.fall_window / 3
     row["bem"] = heldout_bem_errors(state, robot, refs, bound=bound, duration_s=cfg.evaluate.duration_s, rate_hz=cfg.evaluate.rate_hz)

@@ -61,6 +61,7 @@ def _run(args) -> int:
     # claimed: created exclusively and locked; a failed --force puts the folder back as it was
     with claim_outputs(args.out, default_name=stem, force=args.force, keep=["data.npz", "checkpoint.pt"],
                        what="run") as claimed:
+        verdict = None
         if app is not None:
             assert app.run is not None  # checked above
             out = app.run(args.config, claimed, device=args.device, progress=not args.no_progress)
@@ -68,27 +69,25 @@ def _run(args) -> int:
             from bemlearn.pipeline.run import run_pipeline
 
             assert resolved is not None  # resolved above when no application runs
-            out = run_pipeline(resolved, claimed, device=args.device, progress=not args.no_progress)
+            result = run_pipeline(resolved, claimed, device=args.device, progress=not args.no_progress)
+            out, verdict = result.out, result.verdict
     print((out / "report.md").read_text())
     print(f"\nrun folder: {out}")
-    return _print_verdict(out, strict=args.strict)
-
-
-def _print_verdict(out: Path, *, strict: bool) -> int:
-    """Print the run's verdict as the last line; its exit status (:meth:`Verdict.exit_status`)."""
-    import json
-
-    from bemlearn.pipeline.verdict import Finding, Verdict
-
-    path = out / "metrics.json"
-    if not path.is_file():
+    if verdict is None:   # an application's run: its verdict is in the metrics.json it wrote
+        verdict = _written_verdict(out)
+    if verdict is None:
         return 0
-    v = json.loads(path.read_text()).get("verdict")
-    if not v:
-        return 0
-    verdict = Verdict(v["status"], tuple(Finding(f["severity"], f["check"], f["reason"]) for f in v.get("findings", [])))
     print(verdict.summary())
-    return verdict.exit_status(strict=strict)
+    return verdict.exit_status(strict=args.strict)
+
+
+def _written_verdict(out: Path):
+    """The verdict an application's run wrote to ``out/metrics.json`` (``None`` when it wrote none)."""
+    from bemlearn.pipeline.failure import read_metrics
+    from bemlearn.pipeline.verdict import Verdict
+
+    doc = read_metrics(out).get("verdict")
+    return Verdict.from_dict(doc) if isinstance(doc, dict) and "status" in doc else None
 
 
 def _simulate(args) -> int:
@@ -124,9 +123,9 @@ def _simulate_into(args, cfg, simulate_stage) -> int:
     print(f"{'source':<10}{'fell':>6}{'duration s':>12}{'RMSE q_a':>10}{'max|u|':>8}{'×real time':>12}")
     from bemlearn.pipeline.report import ZERO_BASELINE_NOTE, ZERO_SOURCE
 
-    for src, m in res.items():
+    for src, loop in res.loops.items():
         note = ZERO_BASELINE_NOTE if src == ZERO_SOURCE else ""
-        print(f"{src:<10}{m['fell']!s:>6}{m['duration_s']:>12.1f}{m['tracking_rmse']:>10.4f}{m['u_max']:>8.2f}"
-              f"{m['real_time_factor']:>12.1f}{note}")
+        print(f"{src:<10}{loop.fell!s:>6}{loop.duration_s:>12.1f}{loop.tracking_rmse:>10.4f}{loop.u_max:>8.2f}"
+              f"{loop.real_time_factor:>12.1f}{note}")
     print(f"wrote {args.out / 'simulate'}")
-    return 1 if any(m["fell"] for m in res.values() if m["bem_source"] != "zero") else 0
+    return 1 if any(loop.fell for loop in res.loops.values() if loop.source != ZERO_SOURCE) else 0

@@ -57,7 +57,8 @@ def run(args) -> int:
     with claim_outputs(args.out, default_name="train", force=args.force, resume=args.resume,
                        keep=["checkpoint.pt"], what="train") as out:
         try:
-            m = train_run(cfg, data, out, device=args.device, resume=args.resume, progress=not args.no_progress, threads=args.threads)
+            m = train_run(cfg, data, out, device=args.device, resume=args.resume, progress=not args.no_progress,
+                          threads=args.threads).metrics
         except BaseException:  # an interrupted or failed run keeps its new checkpoint: the old predictors no longer match it
             _remove_stale(out, args)
             raise

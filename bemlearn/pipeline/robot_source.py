@@ -14,15 +14,17 @@ from bemlearn.robots import RobotRef, resolve_robot
 __all__ = ["run_robot"]
 
 
-def run_robot(config):
+def run_robot(config, loaded=None):
     """``(robot, ref, truth_robot)`` of a pipeline config.
 
     ``robot`` is the robot that collects/simulates (``None`` for a model-free run), ``ref``
     what the run records, ``truth_robot`` the model whose BEM the learned one is compared
-    with (the robot itself, the ``model:`` of a model-free run, or ``None``).
+    with (the robot itself, the ``model:`` of a model-free run, or ``None``).  ``loaded``:
+    ``(robot, ref)`` of ``config.robot`` when the caller has resolved it already
+    (:func:`~bemlearn.robots.resolve_robot`; a run loads its robot once).
     """
     if config.robot is not None:
-        robot, ref = resolve_robot(config.robot)
+        robot, ref = loaded if loaded is not None else resolve_robot(config.robot)
         return robot, ref, robot
     truth = resolve_robot(config.model)[0] if config.model else None
     return None, RobotRef(name="data", mjcf=None, sha256=None, registry=None), truth

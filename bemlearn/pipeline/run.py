@@ -31,7 +31,8 @@ from bemlearn.errors import DataError
 from bemlearn.files import atomic_write_text, new_run_dir
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.resolve import ResolvedConfig, resolve_pipeline_config
-from bemlearn.pipeline.verdict import judge_run
+from bemlearn.pipeline.results import CollectResult, DataSummary, RunResult, SimulateResult
+from bemlearn.pipeline.verdict import Verdict, judge_run
 
 __all__ = ["run_pipeline"]
 
@@ -39,8 +40,14 @@ log = logging.getLogger(__name__)
 
 
 def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | None = None, *,
-                 device: str | None = None, progress: bool = True) -> Path:
-    """Run every stage of ``config`` into ``out_dir`` (default: a new ``runs/<robot or data stem>-<timestamp>``, :func:`~bemlearn.files.new_run_dir`); returns the folder."""
+                 device: str | None = None, progress: bool = True) -> RunResult:
+    """Run every stage of ``config`` into ``out_dir`` (default: a new ``runs/<robot or data stem>-<timestamp>``,
+    :func:`~bemlearn.files.new_run_dir`).
+
+    The stages hand their typed results to each other in memory (:mod:`bemlearn.pipeline.results`): the
+    robot is loaded once, the collected data go to training as they are, and ``metrics.json`` is written
+    once with the verdict judged once.
+    """
     from bemlearn.data.trajectory_io import ground_truth_path, read_trajectory, write_trajectory
     from bemlearn.export.export_run import export_run
     from bemlearn.pipeline.report import write_report
@@ -59,17 +66,20 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
     stages = 5 if cfg.robot else 3
     feasibility: list = []
     equilibrium: dict | None = None
+    loaded = None
     if cfg.robot:
         from bemlearn.pipeline.feasibility import equilibrium_stiffness, model_feasibility
-        from bemlearn.robots import MujocoRobot, load
+        from bemlearn.robots import MujocoRobot, resolve_robot
 
-        robot = load(cfg.robot)
+        loaded = resolve_robot(cfg.robot)
+        robot = loaded[0]
         equilibrium = equilibrium_stiffness(robot)      # a stable equilibrium is never reported as balanced
         if isinstance(robot, MujocoRobot):
             feasibility = [c.to_dict() for c in model_feasibility(robot, cfg)]
             stop = [c for c in feasibility if not c["passed"] and c["severity"] == "unusable"]
             if stop:
                 return _stop_after_preflight(out, cfg, resolved, feasibility, t0)
+    collected: CollectResult | None = None
     if cfg.data is None:
         log.info("[1/%d] collecting excitation data", stages)
         assert cfg.robot is not None  # PipelineConfig needs robot or data
@@ -79,52 +89,54 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
             return _stop_after_collect(out, cfg, resolved, feasibility, exc, t0)
         data_path = write_trajectory(data, out / "data.npz")
         write_trajectory(truth, ground_truth_path(data_path))
+        collected = CollectResult(data, truth, data_path, DataSummary.of(data, data_path, collected=True))
+        summary = collected.summary
     else:
         data_path = Path(cfg.data)
         data = read_trajectory(data_path)
+        summary = DataSummary.of(data, data_path, collected=False)
         log.info("[1/%d] training data: %s", stages, data_path)
-    data_info = {"file": str(data_path), "collected": cfg.data is None, "trials": len(data.meta.trial_failed),
-                 "failed": sum(data.meta.trial_failed.values()), "samples": data.n_samples,
-                 "rate_hz": data.meta.sample_rate_hz, "input_units": data.meta.units.get("u", "actuator units")}
     log.info("[2/%d] training the BEM GP", stages)
     t_train = time.time_ns()
     try:
-        train = train_run(cfg, data_path, out, device=device, progress=progress)
+        train = train_run(cfg, data_path, out, device=device, progress=progress, trajectory=data, loaded=loaded, part_of_run=True)
     except Exception as exc:
-        _train_failed(out, exc, data_info, collected=cfg.data is None, since_ns=t_train, started_ns=started_ns)
+        _train_failed(out, exc, summary.as_dict(), collected=cfg.data is None, since_ns=t_train, started_ns=started_ns)
         raise
+    metrics = train.metrics
     stage = "export"
+    sim: SimulateResult | None = None
     try:   # the checkpoint exists: a failure from here on keeps the folder, and metrics.json says where it stopped
         log.info("[3/%d] exporting the predictor", stages)
         files = export_run(out, fmt="both")
-        sim: dict = {}
         if cfg.robot:
             stage = "simulate"
             log.info("[4/%d] closed-loop simulation", stages)
-            sim = simulate_stage(cfg, out, predictor=out / "bem_predictor.pt", progress=progress)
-            train["closed_loop"] = {src: {k: m[k] for k in ("fell", "diverged", "tracking_rmse", "tracking_max", "qu_max", "u_max",
-                                                             "duration_s", "lemma1") if k in m}
-                                    for src, m in sim.items()}
+            sim = simulate_stage(cfg, out, predictor=out / "bem_predictor.pt", progress=progress, robot=train.robot)
+            metrics["closed_loop"] = sim.summary()
         stage = "verdict"
-        train["data"] = data_info
-        train["feasibility"] = feasibility
+        metrics["data"] = summary.as_dict()
+        metrics["feasibility"] = feasibility
         if equilibrium is not None:
-            train["equilibrium"] = equilibrium
-        train["verdict"] = judge_run(train).to_dict()
-        atomic_write_text(out / "metrics.json", json.dumps(train, indent=2, default=float))
-        _record_data_choices(out, resolved, train)
+            metrics["equilibrium"] = equilibrium
+        verdict = judge_run(metrics)
+        metrics["verdict"] = verdict.to_dict()
+        result = RunResult(out, verdict, metrics, collected, train, sim)
+        result.write_metrics()
+        _record_data_choices(out, resolved, metrics)
         stage = "report"
         log.info("[%d/%d] report", stages, stages)
-        report = write_report(out, config=cfg, resolved=resolved, data=data_info, train=train, export=files, sim=sim)
+        result.report = write_report(out, config=cfg, resolved=resolved, data=metrics["data"], train=metrics, export=files,
+                                     sim=sim.as_dict() if sim is not None else {})
     except Exception as exc:
         from bemlearn.pipeline.failure import record_failure
 
-        train.setdefault("data", data_info)
-        train.setdefault("feasibility", feasibility)
-        record_failure(out, stage, exc, train, since_ns=started_ns)
+        metrics.setdefault("data", summary.as_dict())
+        metrics.setdefault("feasibility", feasibility)
+        record_failure(out, stage, exc, metrics, since_ns=started_ns)
         raise
-    log.info("done in %.0f s: %s", time.perf_counter() - t0, report)
-    return out
+    log.info("done in %.0f s: %s", time.perf_counter() - t0, result.report)
+    return result
 
 
 def _train_failed(out: Path, exc: Exception, data_info: dict, *, collected: bool, since_ns: int, started_ns: int) -> None:
@@ -144,21 +156,23 @@ def _train_failed(out: Path, exc: Exception, data_info: dict, *, collected: bool
         record_failure(out, "train", exc, {"data": data_info}, since_ns=started_ns)
 
 
-def _stop_after_preflight(out: Path, cfg: PipelineConfig, resolved: ResolvedConfig, feasibility: list, t0: float) -> Path:
+def _stop_after_preflight(out: Path, cfg: PipelineConfig, resolved: ResolvedConfig, feasibility: list, t0: float) -> RunResult:
     """Write the verdict of a robot its model says cannot be balanced (metrics.json, report.md); no data."""
     from bemlearn.pipeline.report import write_report
 
     metrics: dict[str, Any] = {"robot": {"name": Path(str(cfg.robot)).stem, "source": str(cfg.robot)}, "feasibility": feasibility,
                "stopped_after": "preflight"}
-    metrics["verdict"] = judge_run(metrics).to_dict()
-    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
-    write_report(out, config=cfg, resolved=resolved, data=None, train=metrics, export=[], sim={})
-    log.warning("stopped after the model checks (%.1f s): %s", time.perf_counter() - t0, "; ".join(metrics["verdict"]["reasons"]))
-    return out
+    verdict = judge_run(metrics)
+    metrics["verdict"] = verdict.to_dict()
+    result = RunResult(out, verdict, metrics)
+    result.write_metrics()
+    result.report = write_report(out, config=cfg, resolved=resolved, data=None, train=metrics, export=[], sim={})
+    log.warning("stopped after the model checks (%.1f s): %s", time.perf_counter() - t0, "; ".join(verdict.reasons))
+    return result
 
 
 def _stop_after_collect(out: Path, cfg: PipelineConfig, resolved: ResolvedConfig, feasibility: list, exc: Exception,
-                        t0: float) -> Path:
+                        t0: float) -> RunResult:
     """Write the verdict of a run whose excitation produced no usable data (metrics.json, report.md)."""
     from bemlearn.pipeline.failure import record_failure
     from bemlearn.pipeline.report import write_report
@@ -166,9 +180,11 @@ def _stop_after_collect(out: Path, cfg: PipelineConfig, resolved: ResolvedConfig
     metrics: dict[str, Any] = {"robot": {"name": Path(str(cfg.robot)).stem, "source": str(cfg.robot)}, "feasibility": feasibility,
                                "stopped_after": "collect"}
     metrics = record_failure(out, "collect", exc, metrics)
-    write_report(out, config=cfg, resolved=resolved, data=None, train=metrics, export=[], sim={})
-    log.warning("stopped after collecting (%.1f s): %s", time.perf_counter() - t0, "; ".join(metrics["verdict"]["reasons"]))
-    return out
+    verdict = Verdict.from_dict(metrics["verdict"])
+    result = RunResult(out, verdict, metrics)
+    result.report = write_report(out, config=cfg, resolved=resolved, data=None, train=metrics, export=[], sim={})
+    log.warning("stopped after collecting (%.1f s): %s", time.perf_counter() - t0, "; ".join(verdict.reasons))
+    return result
 
 
 def _record_data_choices(out: Path, resolved: ResolvedConfig, metrics: dict) -> None:

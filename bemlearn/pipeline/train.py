@@ -8,6 +8,11 @@ The run folder holds::
     tb/              TensorBoard: loss, noise, outputscale, lengthscale/<input>, lr, validation, BEM figure
     bem_validation.png
 
+:func:`train_run` returns a :class:`~bemlearn.pipeline.results.TrainResult` (the metrics, the frozen
+predictor, the trajectory).  Within ``bemlearn run`` (``part_of_run=True``) the run writes
+``config.yaml`` and ``metrics.json`` and judges the verdict once, from the typed results of every
+stage; training alone writes them itself.
+
 Ctrl-C during the fit writes a checkpoint of the current hyperparameters (marked
 ``interrupted``) before exiting; ``resume=True`` loads the checkpoint's model state and
 continues the fit.
@@ -34,15 +39,18 @@ from bemlearn.models import predict
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.evaluation import BEMCurves, EvaluationConfig, evaluate_bem, held_out_references
 from bemlearn.pipeline.reliability import reliability_figure
+from bemlearn.pipeline.results import TrainResult
 from bemlearn.pipeline.uncertainty import calibrate_band
 from bemlearn.robots.protocol import BalanceRobot, ControlRobot
 from bemlearn.units import gp_input_units
 
 if TYPE_CHECKING:
     from bemlearn.data.dataset_types import BEMDataset
+    from bemlearn.data.trajectory import Trajectory
     from bemlearn.fitting.gp_config import GPConfig
     from bemlearn.models.predictor_state import PredictorState
     from bemlearn.pipeline.gp_stage import GPStageResult
+    from bemlearn.robots.registry import RobotRef
 
 __all__ = ["train_run", "file_sha256"]
 
@@ -64,13 +72,23 @@ def train_run(
     resume: bool = False,
     progress: bool = True,
     threads: int | None = 1,
-) -> dict:
-    """Train the BEM GP of ``config`` on ``data_path`` into ``out_dir``; returns the metrics dict.
+    trajectory: Trajectory | None = None,
+    loaded: tuple[BalanceRobot, RobotRef] | None = None,
+    part_of_run: bool = False,
+) -> TrainResult:
+    """Train the BEM GP of ``config`` on ``data_path`` into ``out_dir``.
 
     ``threads`` sets torch's intra-op threads for the run (restored afterwards; ``None``
     keeps the current setting).  One thread is the default, because a second thread slows
     the fit down when other processes share the cores (``bemlearn bench train`` times both;
     figures in docs/furuta.md).
+
+    Args:
+        trajectory: the data of ``data_path`` when the caller holds them already (a run that
+            collected them); ``data_path`` then only names them (provenance).
+        loaded: ``(robot, ref)`` of ``config.robot`` when the caller has loaded it already.
+        part_of_run: the caller (``bemlearn run``) writes ``config.yaml``, ``metrics.json`` and the
+            verdict from every stage's results; on failure training still records what it kept.
     """
     previous = torch.get_num_threads()
     if threads is not None:
@@ -78,12 +96,14 @@ def train_run(
             raise ArgumentError(f"threads: expected a positive integer, got {threads}")
         torch.set_num_threads(threads)
     try:
-        return _train_run(config, data_path, out_dir, device=device, resume=resume, progress=progress)
+        return _train_run(config, data_path, out_dir, device=device, resume=resume, progress=progress, trajectory=trajectory,
+                          loaded=loaded, part_of_run=part_of_run)
     finally:
         torch.set_num_threads(previous)
 
 
-def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, progress) -> dict:
+def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, progress, trajectory, loaded,
+               part_of_run) -> TrainResult:
     from torch.utils.tensorboard import SummaryWriter
 
     from bemlearn.pipeline.gp_stage import CheckpointProvenance, fit_bem_gp
@@ -98,9 +118,10 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     else:
         _resolve_device(gp_cfg.device)
     config = dataclasses.replace(config, train=gp_cfg)
-    save_yaml(config, out / "config.yaml")
-    robot, ref, truth_robot = run_robot(config)
-    traj = read_trajectory(data_path)
+    if not part_of_run:
+        save_yaml(config, out / "config.yaml")
+    robot, ref, truth_robot = run_robot(config, loaded)
+    traj = trajectory if trajectory is not None else read_trajectory(data_path)
     if robot is not None:  # the file's joints must be the robot's (its robot label matters only for registry names)
         check_robot(traj.meta, robot if ref.registry else _Named(robot, traj.meta.robot), source=str(data_path))
     else:
@@ -150,13 +171,12 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         record_failure(out, "train: evaluation", exc, metrics, since_ns=started_ns)
         raise
     writer.close()
-    from bemlearn.pipeline.verdict import judge_run
+    if not part_of_run:
+        from bemlearn.pipeline.verdict import judge_run
 
-    metrics["verdict"] = judge_run(metrics).to_dict()        # what training alone can tell; a run adds the rest
-    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
-    if interrupted:
-        raise KeyboardInterrupt
-    return metrics
+        metrics["verdict"] = judge_run(metrics).to_dict()        # what training alone can tell
+        atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
+    return TrainResult(metrics, state, traj, robot)
 
 
 def _torque_metrics(traj, truth_robot) -> dict | None:

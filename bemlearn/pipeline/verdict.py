@@ -89,6 +89,12 @@ class Verdict:
                 "findings": [{"severity": f.severity, "check": f.check, "reason": f.reason} for f in self.findings],
                 "checked": list(self.checked)}
 
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> Verdict:
+        """The verdict :meth:`to_dict` wrote (``metrics.json``'s ``verdict``)."""
+        findings = tuple(Finding(f["severity"], f["check"], f["reason"]) for f in doc.get("findings", []))
+        return cls(doc["status"], findings, tuple(doc.get("checked", [])))
+
     def exit_status(self, *, strict: bool = False) -> int:
         """0 for ok (and degraded unless ``strict``), :data:`EXIT_UNUSABLE`, :data:`EXIT_DEGRADED_STRICT`."""
         if self.status == "unusable":
