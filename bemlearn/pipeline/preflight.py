@@ -81,7 +81,7 @@ def check_config_file(path: str | os.PathLike[str]) -> dict[str, Any]:
 
 
 def check_config(path: str | os.PathLike[str], data: dict[str, Any]) -> ResolvedConfig | None:
-    """Parse every section of the config at ``path`` strictly, as the command will: an application's
+    """Parse every section of the config at ``path`` (read as ``data`` by :func:`check_config_file`) strictly, as the command will: an application's
     config by its application's parser, a pipeline config by
     :func:`~bemlearn.pipeline.resolve.resolve_pipeline_config` (types, finite numbers, limits, the
     rules between sections and those that need the robot, with the values derived from its model).
@@ -104,7 +104,7 @@ def check_config(path: str | os.PathLike[str], data: dict[str, Any]) -> Resolved
         return None
     from bemlearn.pipeline.resolve import resolve_pipeline_config
 
-    return resolve_pipeline_config(Path(path))
+    return resolve_pipeline_config(data, source=str(path))   # ``data``: read once, its paths already relative to its folder
 
 
 def check_robot(name: Any, *, where: str = "robot") -> None:
