@@ -17,6 +17,7 @@ SMALL = {"robot": str(ROBOT), "collect": {"n_trials": 3, "duration_s": 3.0, "wor
 
 @pytest.fixture(scope="module")
 def counted_run(tmp_path_factory):
+    import bemlearn.data.derivative_choice as derivative_choice
     import bemlearn.data.trajectory_io as trajectory_io
     import bemlearn.pipeline.run as run_module
     import bemlearn.pipeline.train as train_module
@@ -26,8 +27,14 @@ def counted_run(tmp_path_factory):
     from bemlearn.pipeline.run import run_pipeline
     from bemlearn.robots import MujocoRobot
 
-    counts = {"from_xml": 0, "read_trajectory": 0, "judge_run": 0, "metrics.json": 0}
+    counts = {"from_xml": 0, "read_trajectory": 0, "judge_run": 0, "metrics.json": 0, "estimates": []}
     mp = pytest.MonkeyPatch()
+    real_estimate = derivative_choice._estimate_states
+
+    def estimate(traj, est, within):
+        counts["estimates"].append((id(traj), repr(est), None if within is None else within.tobytes()))
+        return real_estimate(traj, est, within)
+
     real_from_xml = MujocoRobot.from_xml.__func__
     real_judge = verdict_module.judge_run
 
@@ -50,6 +57,7 @@ def counted_run(tmp_path_factory):
 
     resolved = resolve_pipeline_config(SMALL)
     mp.setattr(MujocoRobot, "from_xml", classmethod(from_xml))
+    mp.setattr(derivative_choice, "_estimate_states", estimate)
     mp.setattr(run_module, "judge_run", judge)
     mp.setattr(trajectory_io, "read_trajectory", read)
     mp.setattr(train_module, "read_trajectory", read)
@@ -69,6 +77,8 @@ def test_each_thing_is_done_once_per_run(counted_run):
     assert counts["judge_run"] == 1
     assert counts["metrics.json"] == 1
     assert counts["from_xml"] <= 2      # the run's robot, and the collect stage's own (its workers load theirs)
+    # derivatives: estimated once per trajectory, estimator and window (datasets, band calibration, estimator term)
+    assert counts["estimates"] and len(set(counts["estimates"])) == len(counts["estimates"])
 
 
 def test_the_typed_results_are_what_the_files_say(counted_run):

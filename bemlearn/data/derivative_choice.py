@@ -25,6 +25,7 @@ attenuated (the run's verdict says so).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import logging
 import math
 from dataclasses import dataclass
@@ -106,8 +107,21 @@ def estimate_states(traj: Trajectory, estimator, *, within: np.ndarray | None = 
 
     Returns:
         ``q, qd, qdd``: ``(T, n)`` each (joint units, per s, per s²; zeros where invalid) and
-        ``valid``: ``(T,)`` bool.
+        ``valid``: ``(T,)`` bool.  Fresh arrays: the caller may change them.
+
+    A trajectory keeps what was estimated from it, per estimator (its ``repr``) and ``within``: a run
+    builds its datasets, calibrates the band and weighs the neighbouring estimators on the same
+    estimates, computed once.
     """
+    key = (type(estimator), repr(estimator), None if within is None else hashlib.sha1(np.packbits(within).tobytes()).hexdigest())
+    memo = traj.__dict__.setdefault("_state_estimates", {})
+    if key not in memo:
+        memo[key] = _estimate_states(traj, estimator, within)
+    return tuple(a.copy() for a in memo[key])
+
+
+def _estimate_states(traj: Trajectory, estimator, within: np.ndarray | None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     rate = traj.meta.sample_rate_hz
     q = traj.q.copy()
     qd = np.zeros_like(q)
