@@ -53,6 +53,20 @@ _BACK_HINT = ("; if the file holds several runs one after another, cut them with
 
 
 
+
+def _long_gaps(n_steps: np.ndarray, steps: np.ndarray, t: np.ndarray, max_fill: int, on_gap: str, where) -> np.ndarray:
+    """Indices of the steps that leave more than ``max_fill`` grid samples missing (n − 1 for a step of n
+    nominal steps); an error naming the first when ``on_gap == "error"``."""
+    long_gaps = np.flatnonzero(n_steps - 1 > max_fill)
+    if len(long_gaps) and on_gap == "error":
+        i = int(long_gaps[0]) + 1
+        raise TrajectoryFormatError(
+            f"{where(i)}: {int(n_steps[i - 1]) - 1} missing samples before time {float(t[i])!r} s (a step of "
+            f"{steps[i - 1] * 1e3:g} ms; at most max_fill = {max_fill} are interpolated): raise time.max_fill to "
+            f"bridge it, or set time.on_gap: split to cut the trial there"
+        )
+    return long_gaps
+
 def _increasing_steps(t: np.ndarray, where) -> np.ndarray:
     """The time steps ``diff(t)`` (s, ``(N - 1,)``), after checking that ``t`` increases.
 
@@ -167,15 +181,7 @@ def place_on_grid(
             f"clock drifts, set time.resample: linear (every channel interpolated onto the grid); if this is stamp "
             f"jitter, raise time.max_jitter (below 0.5)"
         )
-    dk = np.diff(k)
-    long_gaps = np.flatnonzero(dk - 1 > max_fill)
-    if len(long_gaps) and on_gap == "error":
-        i = int(long_gaps[0]) + 1
-        raise TrajectoryFormatError(
-            f"{where(i)}: {int(dk[i - 1]) - 1} missing samples before time {float(t[i])!r} s (gap of "
-            f"{steps[i - 1] * 1e3:g} ms; at most max_fill = {max_fill} are interpolated): raise time.max_fill to "
-            f"bridge it, or set time.on_gap: split to cut the trial there"
-        )
+    long_gaps = _long_gaps(np.diff(k), steps, t, max_fill, on_gap, where)
     bounds = np.concatenate([[0], long_gaps + 1, [len(t)]])
     segments = []
     for first, stop in itertools.pairwise(bounds):
@@ -254,15 +260,7 @@ def resample_linear(
         return [], ResampleReport(0, 0, 0.0, tolerance)
     h = 1.0 / rate_hz
     steps = _increasing_steps(t, where)
-    n_steps = np.round(steps * rate_hz).astype(np.int64)
-    long_gaps = np.flatnonzero(n_steps - 1 > max_fill)
-    if len(long_gaps) and on_gap == "error":
-        i = int(long_gaps[0]) + 1
-        raise TrajectoryFormatError(
-            f"{where(i)}: {int(n_steps[i - 1]) - 1} missing samples before time {float(t[i])!r} s (a step of "
-            f"{steps[i - 1] * 1e3:g} ms; at most max_fill = {max_fill} are interpolated): raise time.max_fill to "
-            f"bridge it, or set time.on_gap: split to cut the trial there"
-        )
+    long_gaps = _long_gaps(np.round(steps * rate_hz).astype(np.int64), steps, t, max_fill, on_gap, where)
     bridged = np.ones(len(steps), dtype=bool)
     bridged[long_gaps] = False
     largest = float(steps[bridged].max()) if bridged.any() else 0.0
