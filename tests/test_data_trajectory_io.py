@@ -335,7 +335,7 @@ def test_csv_bad_preamble(tmp_path):
     with pytest.raises(TrajectoryFormatError, match=r"unknown metadata key\(s\) \['colour'\]"):
         read_trajectory(write_lines(path, [lines[0], "# meta: " + json.dumps(meta), *lines[2:]]))
     del meta["colour"], meta["sample_rate_hz"]
-    with pytest.raises(TrajectoryFormatError, match=r"missing key\(s\) \['sample_rate_hz'\]"):
+    with pytest.raises(TrajectoryFormatError, match=r"missing metadata key\(s\) \['sample_rate_hz'\]"):
         read_trajectory(write_lines(path, [lines[0], "# meta: " + json.dumps(meta), *lines[2:]]))
     meta["sample_rate_hz"], meta["unactuated"] = 400.0, "gamma"
     with pytest.raises(TrajectoryFormatError, match=r"meta\.unactuated: 'gamma' is not one of the joints"):

@@ -22,7 +22,7 @@ import dataclasses
 import itertools
 import json
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -36,6 +36,22 @@ __all__ = ["TrajectoryMeta", "Trajectory", "TrialSlice", "TrajectoryFormatError"
 
 #: Units assumed when none are given; ``q`` must be rad, ``t`` must be s.
 DEFAULT_UNITS: dict[str, str] = {"t": "s", "q": "rad", "u": "V"}
+
+
+def check_names(present: Iterable[str], required: Sequence[str], optional: Sequence[str] = (), *, where: str, what: str,
+                valid: str) -> None:
+    """Refuse missing and unknown names of a stored trajectory (metadata keys, NPZ arrays, CSV columns).
+
+    Raises:
+        TrajectoryFormatError: ``"{where}: missing {what}(s) [...]; {valid}"`` or ``"{where}: unknown {what}(s) [...]; {valid}"``.
+    """
+    names = list(present)
+    missing = [k for k in required if k not in names]
+    unknown = [k for k in names if k not in required and k not in optional]
+    if missing:
+        raise TrajectoryFormatError(f"{where}: missing {what}(s) {missing}; {valid}")
+    if unknown:
+        raise TrajectoryFormatError(f"{where}: unknown {what}(s) {sorted(unknown)}; {valid}")
 
 
 @dataclass(frozen=True)
@@ -203,14 +219,8 @@ class TrajectoryMeta:
             raise TrajectoryFormatError(f"{source}: metadata must be a JSON object, got {type(data).__name__}")
         required = ("robot", "joint_names", "unactuated", "actuator_names", "sample_rate_hz", "trial_failed")
         optional = ("units", "extra", "joint_kinds", "channel_names", "qu_upright", "torque_joints")
-        missing = [k for k in required if k not in data]
-        unknown = sorted(set(data) - set(required) - set(optional))
-        if missing:
-            raise TrajectoryFormatError(f"{source}: metadata is missing key(s) {missing}")
-        if unknown:
-            raise TrajectoryFormatError(
-                f"{source}: unknown metadata key(s) {unknown}; valid keys are {sorted(required + optional)}"
-            )
+        check_names(data, required, optional, where=source, what="metadata key",
+                    valid=f"valid keys are {sorted(required + optional)}")
         expect = {
             "robot": str, "joint_names": list, "unactuated": str, "actuator_names": list,
             "trial_failed": dict, "units": dict, "extra": dict, "joint_kinds": list, "channel_names": list,

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from bemlearn.data.text_extent import text_extent
-from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
+from bemlearn.data.trajectory import Trajectory, TrajectoryMeta, check_names
 from bemlearn.data.validation import JITTER_RTOL, MIN_TRIAL_SAMPLES, RATE_RTOL, RobotLike, column_names, validate
 from bemlearn.errors import MissingFileError, TrajectoryFormatError
 from bemlearn.files import atomic_path
@@ -206,14 +206,8 @@ def _read_npz(path: Path) -> Trajectory:
             arrays = {k: npz[k] for k in npz.files}
     except (zipfile.BadZipFile, OSError, ValueError, EOFError, zlib.error) as exc:
         raise TrajectoryFormatError(f"{path}: not a readable NPZ file ({exc})") from None
-    missing = [k for k in _NPZ_REQUIRED if k not in arrays]
-    unknown = sorted(set(arrays) - set(_NPZ_REQUIRED) - set(_NPZ_OPTIONAL))
-    if missing:
-        raise TrajectoryFormatError(f"{path}: missing array(s) {missing}; a trajectory NPZ holds {list(_NPZ_REQUIRED)}")
-    if unknown:
-        raise TrajectoryFormatError(
-            f"{path}: unknown array(s) {unknown}; allowed are {list(_NPZ_REQUIRED + _NPZ_OPTIONAL)}"
-        )
+    check_names(arrays, _NPZ_REQUIRED, _NPZ_OPTIONAL, where=str(path), what="array",
+                valid=f"a trajectory NPZ holds {list(_NPZ_REQUIRED)} and may hold {list(_NPZ_OPTIONAL)}")
     if ("qd" in arrays) != ("qdd" in arrays):
         raise TrajectoryFormatError(f"{path}: ground truth needs both arrays 'qd' and 'qdd', found only one")
     raw = arrays["meta"]
@@ -315,13 +309,8 @@ def _read_csv(path: Path) -> tuple[Trajectory, int]:
     header = [h.strip() for h in lines[2].split(",")]
     gt = any(h.startswith(("qd:", "qdd:")) for h in header)  # x:<channel> columns come from meta.channel_names
     expected = column_names(meta, ground_truth=gt)
-    missing = [c for c in expected if c not in header]
-    unknown = [c for c in header if c not in expected]
     want = ",".join(expected)
-    if missing:
-        raise TrajectoryFormatError(f"{path}: line 3: missing column(s) {missing}; expected header {want}")
-    if unknown:
-        raise TrajectoryFormatError(f"{path}: line 3: unknown column(s) {unknown}; expected header {want}")
+    check_names(header, expected, where=f"{path}: line 3", what="column", valid=f"expected header {want}")
     if header != expected:
         raise TrajectoryFormatError(
             f"{path}: line 3: columns out of order ({','.join(header)}); expected {','.join(expected)}"
