@@ -12,6 +12,7 @@ if TYPE_CHECKING:  # imported on first use: bemlearn._lazy
     from bemlearn.pipeline.lemma import LearnedLemma1, learned_lemma1
     from bemlearn.pipeline.reliability import reliability_figure, reliability_table
     from bemlearn.pipeline.resolve import ResolvedConfig, complete_section, load_pipeline_config, resolve_pipeline_config
+    from bemlearn.pipeline.results import CollectResult, DataSummary, LoopResult, RunResult, SimulateResult, TrainResult
     from bemlearn.pipeline.run import run_pipeline
     from bemlearn.pipeline.train import train_run
 
@@ -19,6 +20,12 @@ __all__ = [
     "reliability_table",
     "reliability_figure",
     "BEMEvaluation",
+    "CollectResult",
+    "DataSummary",
+    "LoopResult",
+    "RunResult",
+    "SimulateResult",
+    "TrainResult",
     "CheckpointProvenance",
     "EvaluationConfig",
     "GPStageResult",
