@@ -103,7 +103,7 @@ def variance_factor(state: PredictorState, *, exact_rtol: float = 1e-6, psd_rtol
         ValueError: K is not positive definite, or S disagrees with it beyond both
             ``exact_rtol`` and κ(K)·ε (exact).
     """
-    if state.kind == "exact":
+    if not state.sparse:
         K = state.gram()
         L, info = torch.linalg.cholesky_ex(K)
         if int(info) != 0:

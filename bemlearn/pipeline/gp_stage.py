@@ -207,7 +207,7 @@ def _checkpoint_metadata(provenance: CheckpointProvenance, state: PredictorState
         "input_names": list(names),
         "units": {n: units[n] for n in names},
         "n_train": n_train,
-        "n_inducing": None if config.kind == "exact" else int(state.n_support),
+        "n_inducing": int(state.n_support) if state.sparse else None,
         "hyperparameters": hyperparameters,
         "bemlearn_version": __version__,
         "data_sha256": provenance.data_sha256,
@@ -223,7 +223,7 @@ def _frozen_latent_check(state: PredictorState, model, lik, xn: torch.Tensor, dt
     ``None`` for an exact GP (its frozen variance is solved with the Cholesky factor, as exported)."""
     from bemlearn.models.predict import predict
 
-    if state.kind == "exact":
+    if not state.sparse:
         return None
     g = torch.Generator().manual_seed(0)
     q = xn[torch.randperm(xn.shape[0], generator=g)[:256]].clone()
