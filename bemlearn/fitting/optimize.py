@@ -25,6 +25,7 @@ from tqdm.auto import tqdm
 from bemlearn.errors import ArgumentError, NumericalError
 from bemlearn.fitting.result import Callback, FitResult
 from bemlearn.interrupts import check_interrupt, interruptible
+from bemlearn.warnings import FitWarning, warn
 
 __all__ = ["minimize", "KeptParameters", "checked_loss", "default_lr", "NumericalFailure"]
 
@@ -110,8 +111,8 @@ class KeptParameters:
             except NumericalFailure as exc:
                 self.restore()
                 self.failed = True
-                logger.warning("%s: numerical failure after %d %s (%s); keeping the %s parameters",
-                               self.desc, self.count, self.unit, exc, self.kept)
+                warn(FitWarning, logger, "%s: numerical failure after %d %s (%s); keeping the %s parameters",
+                                         self.desc, self.count, self.unit, exc, self.kept)
             except KeyboardInterrupt:
                 self.restore()
                 loss = f" (loss {self.best:.6g})" if math.isfinite(self.best) else ""

@@ -8,7 +8,7 @@ prediction (:func:`cholesky_policy`).
 
 A Cholesky that fails (K only positive semi-definite in floating point, e.g. duplicated
 inputs with tiny noise) is retried on K + j I with j = j₀, 10 j₀, 100 j₀, … ; each retry
-is logged as a warning, never printed and never turned into NaN.
+is issued as a :class:`bemlearn.warnings.NumericalWarning` and logged, never printed and never turned into NaN.
 """
 
 from __future__ import annotations
@@ -22,9 +22,10 @@ from contextvars import ContextVar
 import gpytorch
 import linear_operator
 import torch
-from linear_operator.utils.warnings import NumericalWarning
+from linear_operator.utils.warnings import NumericalWarning as GPyTorchNumericalWarning
 
 from bemlearn.errors import NumericalError
+from bemlearn.warnings import NumericalWarning, warn
 
 __all__ = ["cholesky_policy", "robust_cholesky", "DEFAULT_JITTER", "DEFAULT_MAX_TRIES"]
 
@@ -45,8 +46,9 @@ def cholesky_policy(*, jitter: float = DEFAULT_JITTER, max_tries: int = DEFAULT_
     """Run GPyTorch with dense Cholesky solves at every size and log jitter warnings.
 
     Sets ``max_cholesky_size(10**9)``, turns ``fast_computations`` (CG / Lanczos) off,
-    sets the float64 Cholesky jitter j₀ and the number of retries, and routes GPyTorch's
-    ``NumericalWarning`` (jitter added, variance clamped) to this module's logger.  Inside it,
+    sets the float64 Cholesky jitter j₀ and the number of retries, and re-issues GPyTorch's
+    ``NumericalWarning`` (jitter added, variance clamped) as a :class:`bemlearn.warnings.NumericalWarning`
+    logged on this module's logger.  Inside it,
     :func:`robust_cholesky` follows the same j₀ and retries unless given others.
 
     Args:
@@ -63,11 +65,12 @@ def cholesky_policy(*, jitter: float = DEFAULT_JITTER, max_tries: int = DEFAULT_
         token = _POLICY.set((jitter, max_tries))
         stack.callback(_POLICY.reset, token)
         stack.enter_context(warnings.catch_warnings())
-        warnings.filterwarnings("always", category=NumericalWarning)
+        warnings.filterwarnings("always", category=GPyTorchNumericalWarning)
         previous = warnings.showwarning
 
         def _show(message, category, filename, lineno, file=None, line=None):
-            if issubclass(category, NumericalWarning):
+            if issubclass(category, GPyTorchNumericalWarning):  # re-issued as bemlearn's, at GPyTorch's line
+                warnings.warn_explicit(NumericalWarning(str(message)), NumericalWarning, filename, lineno)
                 logger.warning("%s", message)
             else:
                 previous(message, category, filename, lineno, file, line)
@@ -107,7 +110,7 @@ def robust_cholesky(
     eye = torch.eye(A.shape[-1], dtype=A.dtype, device=A.device)
     for i in range(max_tries):
         j = jitter * 10**i
-        logger.warning("%s not positive definite; added jitter of %.1e to the diagonal", what, j)
+        warn(NumericalWarning, logger, "%s not positive definite; added jitter of %.1e to the diagonal", what, j)
         L, info = torch.linalg.cholesky_ex(A + j * eye)
         if not bool(info.any()):
             return L, j
