@@ -57,7 +57,7 @@ from typing import Any, Literal
 import torch
 
 from bemlearn.errors import CheckpointError
-from bemlearn.models.gp_kinds import GP_KINDS
+from bemlearn.models.gp_kinds import GP_KINDS, gp_class
 from bemlearn.models.kernels import se_gram, se_kernel
 
 __all__ = ["PredictorState", "GPKind"]
@@ -169,7 +169,7 @@ class PredictorState:
         """Whether the support Z are inducing inputs (sgpr, svgp: S may be factored) rather than the
         training inputs (exact: S = (K_ZZ + σ_0² I)⁻¹, solved with :meth:`gram_cholesky`); the kind's
         ``sparse`` (:mod:`bemlearn.models.gp_kinds`)."""
-        return GP_KINDS[self.kind].sparse
+        return gp_class(self.kind).sparse
 
     @property
     def n_support(self) -> int:
