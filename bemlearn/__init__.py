@@ -25,6 +25,16 @@ from bemlearn.errors import (
     SweepError,
     TrajectoryFormatError,
 )
+from bemlearn.warnings import (
+    BemlearnWarning,
+    DataWarning,
+    DesignWarning,
+    EnvironmentWarning,
+    FitWarning,
+    NumericalWarning,
+    RobotModelWarning,
+    UncertaintyWarning,
+)
 
 __all__ = [
     "__version__",
@@ -43,4 +53,12 @@ __all__ = [
     "StalePredictorError",
     "SweepError",
     "TrajectoryFormatError",
+    "BemlearnWarning",
+    "DataWarning",
+    "DesignWarning",
+    "EnvironmentWarning",
+    "FitWarning",
+    "NumericalWarning",
+    "RobotModelWarning",
+    "UncertaintyWarning",
 ]

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from bemlearn.errors import ArgumentError, ConfigError
+from bemlearn.warnings import EnvironmentWarning, warn
 
 __all__ = ["Application", "ENTRY_POINT_GROUP", "applications", "get_application", "register_application"]
 
@@ -84,10 +85,10 @@ def _discover() -> None:
         try:
             app = ep.load()
         except Exception as exc:  # noqa: BLE001 - a broken plugin must not break the core
-            log.warning("application %r (%s) failed to load: %s", ep.name, ep.value, exc)
+            warn(EnvironmentWarning, log, "application %r (%s) failed to load: %s", ep.name, ep.value, exc)
             continue
         if not isinstance(app, Application):
-            log.warning("entry point %r (%s) is not a bemlearn Application; ignored", ep.name, ep.value)
+            warn(EnvironmentWarning, log, "entry point %r (%s) is not a bemlearn Application; ignored", ep.name, ep.value)
             continue
         register_application(app)
 

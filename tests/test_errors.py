@@ -379,6 +379,7 @@ def test_minimize_propagates_a_shape_bug_in_the_loss(optimizer):
 @pytest.mark.parametrize("optimizer", ["lbfgs", "adam"])
 def test_minimize_keeps_the_best_parameters_on_a_numerical_failure(optimizer):
     p, loss = _quadratic("nan")
-    final, evals, stop, _ = minimize(loss, [p], optimizer=optimizer, max_iter=200, lr=1.0, tol=0.0, metrics_fn=dict)
+    result = minimize(loss, [p], optimizer=optimizer, max_iter=200, lr=1.0, tol=0.0, metrics_fn=dict)
+    final, evals, stop = result.loss, result.steps, result.stop_reason
     assert stop == "numerical failure" and evals >= 1
     assert float(p.detach()) >= 1.5 and final == pytest.approx((float(p.detach()) - 1.0) ** 2)

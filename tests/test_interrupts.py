@@ -102,7 +102,7 @@ def test_lbfgs_restarts_from_the_best_point_after_a_numerical_failure():
             return x.sum() * float("nan")
         return ((x - 1) ** 2).sum() + 0.1 * (x**4).sum()
 
-    _final, _evals, stop, _ = minimize(loss, [x], optimizer="lbfgs", max_iter=100, lr=1.0, tol=1e-12, metrics_fn=dict)
+    stop = minimize(loss, [x], optimizer="lbfgs", max_iter=100, lr=1.0, tol=1e-12, metrics_fn=dict).stop_reason
     root = next(r.real for r in np.roots([0.4, 0.0, 2.0, -2.0]) if abs(r.imag) < 1e-12)
     assert stop == "converged" and calls["n"] > 3
     assert abs(float(x.detach()) - root) < 1e-6

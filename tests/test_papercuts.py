@@ -143,9 +143,9 @@ def test_the_fit_progress_total_is_max_iter(optimizer, capsys):
 
     p = torch.nn.Parameter(torch.tensor([3.0, -2.0], dtype=torch.float64))
     target = torch.tensor([1.0, 0.5], dtype=torch.float64)
-    _, evals, _, _ = minimize(lambda: ((p - target) ** 2 * torch.tensor([1.0, 30.0], dtype=torch.float64)).sum() + (p**4).sum() * 1e-3,
-                              [p], optimizer=optimizer, max_iter=20, lr=1.0 if optimizer == "lbfgs" else 0.05, tol=0.0,
-                              metrics_fn=dict, progress=True, desc="fit")
+    evals = minimize(lambda: ((p - target) ** 2 * torch.tensor([1.0, 30.0], dtype=torch.float64)).sum() + (p**4).sum() * 1e-3,
+                     [p], optimizer=optimizer, max_iter=20, lr=1.0 if optimizer == "lbfgs" else 0.05, tol=0.0,
+                     metrics_fn=dict, progress=True, desc="fit").steps
     err = capsys.readouterr().err
     totals = set(re.findall(r"\d+/(\d+)", err))
     assert totals == {"20"}, err[-500:]

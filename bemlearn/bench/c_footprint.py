@@ -32,6 +32,7 @@ from bemlearn.bench.predict_bench import synthetic_posterior
 from bemlearn.errors import EnvironmentProblem
 from bemlearn.export.c_build import find_cc
 from bemlearn.export.c_source import c_sources
+from bemlearn.models.gp_kinds import gp_class
 from bemlearn.models.predictor_state import GPKind
 
 __all__ = ["Footprint", "measure_footprints", "format_footprints", "SIZES"]
@@ -99,7 +100,7 @@ def measure_footprints(sizes: dict[str, tuple[int, ...]] = SIZES, dtypes: tuple[
     with tempfile.TemporaryDirectory() as tmp:
         for kind, Ms in sizes.items():
             for M in Ms:
-                state, meta = synthetic_posterior(n_train=M, seed=0) if kind == "exact" else _sparse_state(cast(GPKind, kind), M)
+                state, meta = _sparse_state(cast(GPKind, kind), M) if gp_class(kind).sparse else synthetic_posterior(n_train=M, seed=0)
                 for dtype in dtypes:
                     files = c_sources(state, meta, dtype=dtype, f32_mean_tol=float("inf"), f32_std_rtol=float("inf"))
                     for name, text in files.items():

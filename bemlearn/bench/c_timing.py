@@ -186,7 +186,9 @@ def time_c_predictor(sources: dict[str, str], x: np.ndarray, *, kind: str, prefi
     n_est = re.search(rf"#define {prefix.upper()}_N_ESTIMATORS (\d+)", header)
     n_fma_band += (int(n_est.group(1)) if n_est else 0) * M       # the estimator term: K multiply-adds per support point
     factored = any(f"{prefix}_inner[" in t for t in sources.values())   # sparse S = L⁻ᵀ C L⁻¹: solve, then C's factor
-    n_fma_var = M * (M + 1) // 2 if kind == "exact" else M * M + (M * (M + 1) // 2 if factored else 0)
+    from bemlearn.models.gp_kinds import gp_class
+
+    n_fma_var = M * M + (M * (M + 1) // 2 if factored else 0) if gp_class(kind).sparse else M * (M + 1) // 2
     n_fma_forward = n_fma_mean + n_fma_var + n_fma_band
     out = []
     with tempfile.TemporaryDirectory() as tmp:

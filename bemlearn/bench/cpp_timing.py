@@ -103,7 +103,7 @@ def libtorch_command(source: Path, out: Path) -> list[str]:
         raise EnvironmentProblem("no C++ compiler (c++, g++ or clang++) on PATH")
     root = Path(torch.__file__).resolve().parent
     lib = root / "lib"
-    return [cxx, "-std=c++17", "-O2", f"-D_GLIBCXX_USE_CXX11_ABI={int(torch._C._GLIBCXX_USE_CXX11_ABI)}",
+    return [cxx, "-std=c++17", "-O2", f"-D_GLIBCXX_USE_CXX11_ABI={int(torch.compiled_with_cxx11_abi())}",
             "-isystem", str(root / "include"), "-isystem", str(root / "include" / "torch" / "csrc" / "api" / "include"),
             str(source), "-o", str(out), f"-L{lib}", f"-Wl,-rpath,{lib}",
             "-Wl,--no-as-needed", "-ltorch", "-ltorch_cpu", "-lc10", "-Wl,--as-needed"]

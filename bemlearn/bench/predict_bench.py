@@ -325,7 +325,7 @@ def run_predict_bench(
     x1 = (state.x_mean[:n_bem] + 0.5 * scale * torch.randn(1, n_bem, generator=g, dtype=torch.float64)).contiguous()
     xb = state.x_mean[:n_bem] + scale * torch.randn(batch, n_bem, generator=g, dtype=torch.float64)
     xp = state.x_mean[:n_bem] + 2 * scale * torch.randn(n_parity, n_bem, generator=g, dtype=torch.float64)
-    gp = _gpytorch_exact(state) if state.kind == "exact" else None
+    gp = None if state.sparse else _gpytorch_exact(state)
     lat: dict[str, Latency] = {}
     c_timings: list[CTiming] = []
     c_par: dict[str, float] = {}

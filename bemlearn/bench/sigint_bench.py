@@ -60,11 +60,12 @@ def measure_sigint(
     ``workdir`` keeps the config (``config.yaml``) and the run folder (``run/``) there instead
     of in a temporary folder (e.g. to ``train --resume`` from the interrupted checkpoint)."""
     from bemlearn.export.checkpoint import load_checkpoint
+    from bemlearn.models.gp_kinds import gp_class
 
     cfg = yaml.safe_load(Path(config).read_text())
     cfg.setdefault("dataset", {})["n_points"] = n_points
     cfg.setdefault("train", {}).update(kind=kind, max_iter=max_iter, tol=0.0)
-    if kind != "exact":  # the sparse fit of `bemlearn bench train`: M = 512 inducing points
+    if gp_class(kind).sparse:  # the sparse fit of `bemlearn bench train`: M = 512 inducing points
         cfg["train"]["n_inducing"] = 512
     with (contextlib.nullcontext(str(workdir)) if workdir is not None else tempfile.TemporaryDirectory(prefix="bemlearn-sigint-")) as tmp:
         cfg_path = Path(tmp) / "config.yaml"

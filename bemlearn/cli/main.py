@@ -5,8 +5,10 @@ Each subcommand lives in its own module of this package exposing
 taking the parsed namespace and returning an exit code).
 
 Errors: a :class:`~bemlearn.errors.BemlearnError` (a bad config, a missing file, data that
-cannot be used, ...) is one line ``bemlearn COMMAND: error: MESSAGE`` and exit status 2; any
-other exception is a bug and keeps its traceback (exit status 1).  A closed standard output
+cannot be used, ...) is one line ``bemlearn COMMAND: error: MESSAGE`` and exit status 2, as is a
+:class:`~bemlearn.warnings.BemlearnWarning` escalated to an error (``python -W error::bemlearn.warnings.FitWarning -m bemlearn ...``); any
+other exception is a bug and keeps its traceback (exit status 1).  A bemlearn warning is shown
+once, as its log line (:func:`~bemlearn.warnings.shown_by_log`).  A closed standard output
 (``bemlearn config show X | head -1``) ends the command quietly with status 141 (128 + SIGPIPE).  ``-v`` prints the traceback
 of every error.  Ctrl-C / SIGTERM exit with 130 / 143; a command's own status (e.g. 3 or 4
 for a verdict) is returned as it is.
@@ -27,6 +29,7 @@ from bemlearn._version import __version__
 from bemlearn.applications import applications
 from bemlearn.errors import BemlearnError
 from bemlearn.interrupts import exit_status, interrupt_signal, sigint_handling
+from bemlearn.warnings import BemlearnWarning, shown_by_log
 
 __all__ = ["main", "build_parser"]
 
@@ -110,14 +113,15 @@ def _main(argv: list[str] | None) -> int:
         return 0
     received = None
     try:
-        # Ctrl-C or SIGTERM: stop soon keeping the best state; a second signal: exit at once
-        with sigint_handling():
+        # Ctrl-C or SIGTERM: stop soon keeping the best state; a second signal: exit at once.  A bemlearn
+        # warning shows once, as its log line (bemlearn.warnings.shown_by_log)
+        with sigint_handling(), shown_by_log():
             try:
                 return int(args.func(args) or 0)
             except KeyboardInterrupt:
                 received = interrupt_signal()
                 raise
-    except BemlearnError as exc:  # a deliberate error: one line (the traceback with -v)
+    except (BemlearnError, BemlearnWarning) as exc:  # a deliberate error, or a warning escalated by -W error::…: one line
         if args.verbose:
             traceback.print_exc()
         print(f"bemlearn {args.command}: error: {exc}", file=sys.stderr)

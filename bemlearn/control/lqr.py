@@ -46,6 +46,7 @@ import mujoco
 import numpy as np
 
 from bemlearn.errors import ArgumentError, NumericalError
+from bemlearn.warnings import DesignWarning, warn
 
 if TYPE_CHECKING:
     from bemlearn.robots.mujoco_robot import MujocoRobot
@@ -362,7 +363,7 @@ def discrete_lqr(
         else:
             notes.append(f"neither design brings the robot back in MuJoCo ({why}; with force weights: {why2})")
     if peak > 1.0:
-        log.warning("discrete_lqr: %s needs %.2f× its actuator limits for a %.3g initial q_u error%s even with R × %g", robot.name,
-                    peak, qu0, f" (or {qa0:.3g} of an actuated coordinate)" if qa0 else "", scale)
+        warn(DesignWarning, log, "discrete_lqr: %s needs %.2f× its actuator limits for a %.3g initial q_u error%s even with R × %g", robot.name,
+                                 peak, qu0, f" (or {qa0:.3g} of an actuated coordinate)" if qa0 else "", scale)
     rho = float(np.max(np.abs(np.linalg.eigvals(A - B @ K))))
     return LQRResult(-K, A, B, Q, R, float(rate_hz), N, h, rho, peak, scale, tuple(notes))

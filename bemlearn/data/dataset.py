@@ -41,6 +41,7 @@ from bemlearn.data.trajectory import Trajectory
 from bemlearn.data.validation import validate
 from bemlearn.errors import ConfigError, DataError
 from bemlearn.units import q_unit_label
+from bemlearn.warnings import DataWarning, warn
 
 if TYPE_CHECKING:
     import torch
@@ -146,7 +147,7 @@ def _draw(pool: np.ndarray, n: int | None, rng: np.random.Generator, label: str,
     report[f"{label}_pool"] = int(len(pool))
     if n is None or len(pool) <= n:
         if n is not None and len(pool) < n:
-            logger.warning("%s pool has only %d points, fewer than the %d requested; using all", label, len(pool), n)
+            warn(DataWarning, logger, "%s pool has only %d points, fewer than the %d requested; using all", label, len(pool), n)
         return pool
     return np.sort(rng.choice(pool, size=n, replace=False))
 

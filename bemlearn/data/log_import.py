@@ -35,6 +35,7 @@ from bemlearn.data.trajectory import Trajectory, TrajectoryFormatError, Trajecto
 from bemlearn.data.validation import MIN_TRIAL_SAMPLES
 from bemlearn.errors import ArgumentError, ConfigError
 from bemlearn.units import q_unit_label
+from bemlearn.warnings import DataWarning, warn
 
 __all__ = ["import_logs"]
 
@@ -237,8 +238,8 @@ class _Pieces:
         """Keep ``seg`` (of the block starting at row ``a``) as the next trial, or drop it when shorter than ``min_samples``."""
         if len(seg.t) < min_samples:
             self.dropped += 1
-            logger.warning("%s: dropped a %d-sample piece at row %d (shorter than %d samples)",
-                           table.path, len(seg.t), a + seg.first_row, min_samples)
+            warn(DataWarning, logger, "%s: dropped a %d-sample piece at row %d (shorter than %d samples)",
+                                      table.path, len(seg.t), a + seg.first_row, min_samples)
             return
         tid = len(self.trials)
         self.t.append(seg.t)
@@ -322,8 +323,8 @@ def _resample_summary(reports: list[ResampleReport], rate: float, samples: int, 
                 info["largest_overrun_s"] * 1e3, largest * 1e3, stamp_rate)
     quantized = [f"{j.name} (step {_step_text(st)})" for j, st in zip(imap.joints, steps) if st is not None]
     if quantized and moved:
-        logger.warning("time.resample: linear: the interpolated angles of %s leave their encoder grid; the step detected "
-                       "before resampling is kept in meta.extra['import']['quantization_step']", ", ".join(quantized))
+        warn(DataWarning, logger, "time.resample: linear: the interpolated angles of %s leave their encoder grid; the step detected "
+                                  "before resampling is kept in meta.extra['import']['quantization_step']", ", ".join(quantized))
     return info
 
 
@@ -376,7 +377,7 @@ def _torque_summary(tau: np.ndarray, imap: ImportMap) -> dict[str, dict]:
         rms, mean, largest = float(np.sqrt(np.mean(x**2))), float(np.mean(x)), float(np.max(np.abs(x)))
         out[tq.joint] = {"unit": unit, "rms": rms, "mean": mean, "max_abs": largest, "unactuated": on_qu}
         if on_qu and largest > 0:
-            logger.warning("the unactuated joint %s carries a logged %s of %.4g %s rms (mean %.4g, largest %.4g): the BEM "
-                           "assumes it unactuated (Γ_u = 0, eq. 2), so the learned map mixes this torque in",
-                           tq.joint, "force" if unit == "N" else "torque", rms, unit, mean, largest)
+            warn(DataWarning, logger, "the unactuated joint %s carries a logged %s of %.4g %s rms (mean %.4g, largest %.4g): the BEM "
+                                      "assumes it unactuated (Γ_u = 0, eq. 2), so the learned map mixes this torque in",
+                                      tq.joint, "force" if unit == "N" else "torque", rms, unit, mean, largest)
     return out

@@ -40,6 +40,7 @@ from bemlearn.data.import_map import DELIMITERS, WHITESPACE, ImportMap, delimite
 from bemlearn.data.text_extent import text_extent
 from bemlearn.data.trajectory import TrajectoryFormatError
 from bemlearn.errors import MissingFileError
+from bemlearn.warnings import DataWarning, warn
 
 __all__ = ["LogTable", "check_finite", "detect_delimiter", "read_log_table"]
 
@@ -340,7 +341,7 @@ def read_log_table(path: str | Path, imap: ImportMap) -> LogTable:
         raise MissingFileError(f"{path}: log file not found")
     n_text, size = text_extent(path, what="a text log")   # binary files refused before anything is read
     if n_text < size:
-        logger.warning("%s: %d NUL bytes after byte %d (padding a logger left): not imported", path, size - n_text, n_text)
+        warn(DataWarning, logger, "%s: %d NUL bytes after byte %d (padding a logger left): not imported", path, size - n_text, n_text)
     with open(path, "rb") as fh:
         raw = fh.read(n_text)
     first = _first_lines(raw, imap.comment, 2)
@@ -397,8 +398,8 @@ def read_log_table(path: str | Path, imap: ImportMap) -> LogTable:
     cut_info = None
     if cut is not None:
         cut_info = cut[1]
-        logger.warning("%s: line %d, the last (no line end), looks cut mid-write (%s): not imported",
-                       path, cut_info["line"], cut_info["reason"])
+        warn(DataWarning, logger, "%s: line %d, the last (no line end), looks cut mid-write (%s): not imported",
+                                  path, cut_info["line"], cut_info["reason"])
     _check_field_counts(path, raw, data_start, stop, imap, delimiter, n_fields, header_line, first_data_line)
     names_used = list(index)
     usecols = [index[c] for c in names_used]

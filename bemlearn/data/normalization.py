@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 from bemlearn._lazy import lazy_module
 from bemlearn.errors import ArgumentError
+from bemlearn.warnings import DataWarning, warn
 
 if TYPE_CHECKING:
     import torch
@@ -68,10 +69,10 @@ class Normalization:
         flat = x_std <= 0
         if bool(flat.any()):
             cols = [names[i] if names else i for i in flat.nonzero().flatten().tolist()]
-            logger.warning("input column(s) %s are constant over the training points; using std 1 for them", cols)
+            warn(DataWarning, logger, "input column(s) %s are constant over the training points; using std 1 for them", cols)
             x_std = torch.where(flat, torch.ones_like(x_std), x_std)
         if float(y_std) <= 0:
-            logger.warning("the output is constant over the training points; using std 1")
+            warn(DataWarning, logger, "the output is constant over the training points; using std 1")
             y_std = torch.ones_like(y_std)
         return cls(x_mean=x_mean, x_std=x_std, y_mean=y_mean, y_std=y_std)
 

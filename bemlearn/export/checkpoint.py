@@ -19,7 +19,7 @@ import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, get_args
+from typing import Any
 
 import torch
 
@@ -27,6 +27,7 @@ from bemlearn.config import ConfigError
 from bemlearn.errors import CheckpointError, MissingFileError
 from bemlearn.export.metadata import PredictorMetadata, artifact_metadata
 from bemlearn.files import atomic_write_files
+from bemlearn.models.gp_kinds import GP_KINDS
 from bemlearn.models.learned_bem import LearnedBEM
 from bemlearn.models.predictor_state import GPKind, PredictorState
 
@@ -170,8 +171,8 @@ def load_checkpoint(run_dir_or_file: str | os.PathLike[str]) -> Checkpoint:
     if data["format"] != CHECKPOINT_FORMAT:
         raise CheckpointError(f"{path}: format is {data['format']!r}, expected {CHECKPOINT_FORMAT!r}")
     kind = data["kind"]
-    if kind not in get_args(GPKind):
-        raise CheckpointError(f"{path}: kind is {kind!r}, expected one of {list(get_args(GPKind))}")
+    if not isinstance(kind, str) or kind not in GP_KINDS:
+        raise CheckpointError(f"{path}: kind is {kind!r}, expected one of {list(GP_KINDS)}")
     if not isinstance(data["model_state"], dict):
         raise CheckpointError(f"{path}: model_state: expected a state dict, got {type(data['model_state']).__name__}")
     state = _parse_state(data["predictor_state"], kind, f"{path}: predictor_state")
@@ -185,7 +186,7 @@ def load_checkpoint(run_dir_or_file: str | os.PathLike[str]) -> Checkpoint:
     if recorded is not None and recorded != _content_sha256(data):
         raise CheckpointError(f"{path}: the tensors do not match the checkpoint's content_sha256: the file is corrupted; retrain or restore it")
     log.debug("loaded %s: %s GP, %d support points, d = %d", path, kind, state.n_support, state.dim)
-    return Checkpoint(path=path, kind=kind, model_state=data["model_state"], predictor_state=state, metadata=meta)
+    return Checkpoint(path=path, kind=state.kind, model_state=data["model_state"], predictor_state=state, metadata=meta)
 
 
 def write_checkpoint(

@@ -196,7 +196,7 @@ def artifact_metadata(meta: PredictorMetadata, state: PredictorState) -> dict[st
             f"PredictorState.input_names {list(state.input_names)} differ from metadata.input_names "
             f"{list(meta.input_names)}"
         )
-    if state.kind == "exact":
+    if not state.sparse:
         if meta.n_inducing is not None:
             raise CheckpointError(f"metadata.n_inducing: expected null for an exact GP, got {meta.n_inducing}")
     elif meta.n_inducing != state.n_support:

@@ -35,6 +35,7 @@ import torch
 from bemlearn.errors import ArgumentError, CheckpointError
 from bemlearn.models.kernels import se_gram
 from bemlearn.models.predictor_state import PredictorState
+from bemlearn.warnings import NumericalWarning, warn
 
 __all__ = ["VarianceFactor", "variance_factor", "condition_number", "GRAM_RTOL"]
 
@@ -103,7 +104,7 @@ def variance_factor(state: PredictorState, *, exact_rtol: float = 1e-6, psd_rtol
         ValueError: K is not positive definite, or S disagrees with it beyond both
             ``exact_rtol`` and κ(K)·ε (exact).
     """
-    if state.kind == "exact":
+    if not state.sparse:
         K = state.gram()
         L, info = torch.linalg.cholesky_ex(K)
         if int(info) != 0:
@@ -121,7 +122,7 @@ def variance_factor(state: PredictorState, *, exact_rtol: float = 1e-6, psd_rtol
                     f"outputscale and noise: relative difference {rel:.3g} > {exact_rtol:g}, and above the "
                     f"rounding bound κ(K)·ε = {rounding:.3g} (κ = {kappa:.3g})"
                 )
-            log.warning(
+            warn(NumericalWarning, log,
                 "exact posterior: K_ZZ + σ_0² I is ill-conditioned (κ = %.3g, noise σ_0² = %.3g); S agrees with "
                 "its rebuilt inverse to %.3g, within the rounding bound κ·ε = %.3g but above exact_rtol = %g. "
                 "Variances come from the Cholesky factor of the rebuilt K; at this κ, those close to the noise "

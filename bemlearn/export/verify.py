@@ -39,7 +39,7 @@ def reference_posterior(state: PredictorState, x: torch.Tensor) -> tuple[torch.T
     square; a float, or ``(B,)`` per input for the exact kind)."""
     if state.factored:
         return _factored_reference(state, x)
-    if state.kind != "exact":
+    if state.sparse:
         mean, std = state.predict_reference(x)
         s_norm = float(torch.linalg.matrix_norm(state.S, ord=2))
         bound = 64 * state.n_support * _EPS * s_norm * float(state.outputscale) ** 2 * float(state.y_std) ** 2

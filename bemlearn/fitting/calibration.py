@@ -38,6 +38,7 @@ import numpy as np
 import torch
 
 from bemlearn.errors import ArgumentError, DataError
+from bemlearn.warnings import UncertaintyWarning, warn
 
 if TYPE_CHECKING:  # bemlearn.models loads GPyTorch: not needed for gaussian_quantile
     from bemlearn.models.predictor_state import PredictorState
@@ -172,12 +173,12 @@ def calibrate_replicas(
         zs.append(((ma - mb)[ok] / s2[ok]).numpy())
     z = np.abs(np.concatenate(zs))
     if z.size < 0.5 * n_pairs * queries.shape[0]:
-        log.warning("band calibration: the latent std cancels to zero at %d of %d replica queries (a near-linear fit, "
-                    "ill-conditioned K); std_scale = 1 and the band is the input-noise term", dropped, n_pairs * queries.shape[0])
+        warn(UncertaintyWarning, log, "band calibration: the latent std cancels to zero at %d of %d replica queries (a near-linear fit, "
+                                      "ill-conditioned K); std_scale = 1 and the band is the input-noise term", dropped, n_pairs * queries.shape[0])
         z = np.zeros(1)
     elif dropped:
-        log.warning("band calibration: %d of %d replica queries have a latent std that cancels to zero; left out",
-                    dropped, n_pairs * queries.shape[0])
+        warn(UncertaintyWarning, log, "band calibration: %d of %d replica queries have a latent std that cancels to zero; left out",
+                                      dropped, n_pairs * queries.shape[0])
     raw = float(np.quantile(z, level)) / kappa
     cal = ReplicaCalibration(scale=max(1.0, raw), raw_scale=raw, level=level, z_std=float(np.sqrt(np.mean(z**2))),
                              n_pairs=n_pairs, n_points=int(k), n_queries=int(queries.shape[0]))

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import gpytorch
 import torch
 
@@ -61,11 +59,9 @@ def fit_exact(
         out = likelihood(model(X))
         return gaussian_nll(out.covariance_matrix, Y - out.mean)
 
-    start = time.perf_counter()
     with cholesky_policy(jitter=jitter, max_tries=max_tries):
-        loss, steps, stop, metrics = minimize(
+        return minimize(
             loss_fn, list(model.parameters()), optimizer=optimizer, max_iter=max_iter, lr=default_lr(optimizer, lr), tol=tol,
             metrics_fn=lambda: hyperparameter_metrics(model, likelihood), callback=callback,
-            progress=progress, desc="exact GP",
+            progress=progress, desc="exact GP", kind=model.kind,
         )
-    return FitResult("exact", loss, steps, time.perf_counter() - start, stop, metrics)

@@ -1,25 +1,17 @@
-"""Fit any GP kind from a :class:`GPConfig` (dispatch to ``fit_exact`` / ``fit_sgpr`` / ``fit_svgp``)."""
+"""Fit any GP kind from a :class:`GPConfig`, by the recipe of the model's class
+(:mod:`bemlearn.fitting.kinds`: ``fit_exact`` / ``fit_sgpr`` / ``fit_svgp``)."""
 
 from __future__ import annotations
-
-from typing import TYPE_CHECKING, Any, cast
 
 import gpytorch
 import torch
 
 from bemlearn.errors import ConfigError
 from bemlearn.fitting.build import build_gp
-from bemlearn.fitting.exact import fit_exact
 from bemlearn.fitting.gp_config import GPConfig
+from bemlearn.fitting.kinds import fit_recipe
 from bemlearn.fitting.result import Callback, FitResult
-from bemlearn.fitting.sgpr import fit_sgpr
-from bemlearn.fitting.svgp import fit_svgp
-from bemlearn.models.gp_kinds import gp_kind_of
-
-if TYPE_CHECKING:
-    from bemlearn.models.exact_gp import ExactBEMGP
-    from bemlearn.models.sgpr import SGPRBEMGP
-    from bemlearn.models.svgp import SVGPBEMGP
+from bemlearn.models.gp_kinds import as_gp, gp_class
 
 __all__ = ["fit_gp", "train_gp"]
 
@@ -41,25 +33,17 @@ def fit_gp(
         likelihood: from :func:`~bemlearn.fitting.build.build_gp`.
         train_x: ``(N, d)`` normalized inputs (used by svgp; exact/sgpr hold their data).
         train_y: ``(N,)`` normalized outputs.
-        config: optimizer, max_iter, lr, tol, fit_subset, batch_size, epochs, ngd_lr, seed, jitter.
+        config: optimizer, max_iter, lr, tol, fit_subset, batch_size, epochs, ngd_lr, seed, jitter
+            (``max_iter`` and ``lr`` default by kind: :class:`~bemlearn.fitting.kinds.FitRecipe`).
         callback: ``callback(step, metrics)``.
         progress: show a progress bar.
     """
-    kind = gp_kind_of(model)
-    if kind != config.kind:
-        raise ConfigError(f"config.kind: {config.kind!r} does not match the model kind {kind!r}")
-    common: dict[str, Any] = dict(jitter=config.jitter, callback=callback, progress=progress)
-    if kind == "exact":
-        return fit_exact(cast("ExactBEMGP", model), likelihood, optimizer=config.optimizer, max_iter=config.resolved_max_iter, lr=config.resolved_lr, tol=config.tol, **common)
-    if kind == "sgpr":
-        return fit_sgpr(
-            cast("SGPRBEMGP", model), likelihood, optimizer=config.optimizer, max_iter=config.resolved_max_iter, lr=config.resolved_lr, tol=config.tol,
-            subset=config.fit_subset, seed=config.seed, **common,
-        )
-    return fit_svgp(
-        cast("SVGPBEMGP", model), likelihood, train_x, train_y, batch_size=config.batch_size, epochs=config.epochs,
-        lr=config.resolved_lr, ngd_lr=config.ngd_lr, refresh_q=config.refresh_q, seed=config.seed, **common,
-    )
+    gp = as_gp(model)
+    if not isinstance(gp, gp_class(config.kind)):
+        raise ConfigError(f"config.kind: {config.kind!r} does not match the model kind {gp.kind!r}")
+    recipe = fit_recipe(type(gp))
+    return recipe.fit(model, likelihood, train_x, train_y, config, max_iter=recipe.resolved_max_iter(config),
+                      lr=recipe.resolved_lr(config), callback=callback, progress=progress)
 
 
 def train_gp(

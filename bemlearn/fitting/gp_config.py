@@ -93,22 +93,6 @@ class GPConfig:
             raise ConfigError(f"device: not a torch device string (cpu, cuda, cuda:1, mps, ...): {self.device!r}")
 
     @property
-    def resolved_max_iter(self) -> int:
-        """:attr:`max_iter`, or the kind's default when it is ``None``."""
-        if self.max_iter is not None:
-            return self.max_iter
-        return 30 if self.kind == "sgpr" else 300
-
-    @property
-    def resolved_lr(self) -> float:
-        """:attr:`lr`, or the optimizer's default when it is ``None``."""
-        if self.lr is not None:
-            return self.lr
-        if self.kind == "svgp":
-            return 0.003
-        return 1.0 if self.optimizer == "lbfgs" else 0.05
-
-    @property
     def torch_dtype(self) -> torch.dtype:
         """The torch dtype named by :attr:`dtype`."""
         return {"float64": torch.float64, "float32": torch.float32}[self.dtype]

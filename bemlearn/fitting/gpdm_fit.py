@@ -159,7 +159,7 @@ def fit_gpdm(
             if n_iter == 0:
                 continue
             with _train_only(model, params):
-                loss, evals, stop, _ = minimize(
+                result = minimize(
                     loss_fn,
                     params,
                     optimizer=config.optimizer,
@@ -170,8 +170,9 @@ def fit_gpdm(
                     callback=_shifted(callback, evaluations),
                     progress=progress,
                     desc=f"GPDM {phase}",
+                    kind="gpdm",
                 )
-            evaluations += evals
-            logger.info("GPDM %s: objective %.6g after %d evaluations (%s)", phase, loss, evals, stop)
+            evaluations += result.steps
+            logger.info("GPDM %s: objective %.6g after %d evaluations (%s)", phase, result.loss, result.steps, result.stop_reason)
     model.canonicalize_sign_()
     return model

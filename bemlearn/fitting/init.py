@@ -1,16 +1,23 @@
-"""Data-driven initialization: hyperparameters from data statistics, inducing points by k-means++."""
+"""Data-driven initialization: hyperparameters from data statistics (refined by a small exact GP),
+inducing points by k-means++."""
 
 from __future__ import annotations
 
 import logging
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 
 from bemlearn.errors import ArgumentError
+from bemlearn.fitting.exact import fit_exact
+from bemlearn.models.exact_gp import ExactBEMGP
+from bemlearn.models.kernels import gaussian_likelihood
 from bemlearn.models.validation import check_inputs, check_targets
 
-__all__ = ["data_hyperparameters", "set_hyperparameters", "select_inducing_points"]
+if TYPE_CHECKING:
+    from bemlearn.fitting.gp_config import GPConfig
+
+__all__ = ["data_hyperparameters", "initial_hyperparameters", "set_hyperparameters", "select_inducing_points"]
 
 logger = logging.getLogger(__name__)
 
@@ -39,6 +46,39 @@ def data_hyperparameters(
     var_y = var_y.clamp_min(1e-6)
     noise = torch.clamp_min(noise_fraction * var_y, 2.0 * min_noise)
     return {"lengthscale": lengthscale, "outputscale": var_y, "noise": noise}
+
+
+def initial_hyperparameters(train_x: torch.Tensor, train_y: torch.Tensor, *, config: GPConfig) -> dict[str, torch.Tensor]:
+    """θ₀ = (ℓ, σ_f², σ_0²): data statistics, refined by an exact GP on a random subset.
+
+    With ``config.init_subset > 0`` an exact GP (L-BFGS, ≤ 50 iterations, tol 1e-6) is fitted on
+    min(init_subset, N) random points, starting from the data statistics; its θ is returned.
+
+    Args:
+        train_x: ``(N, d)`` normalized inputs.
+        train_y: ``(N,)`` normalized outputs.
+        config: the GP configuration (``init_subset``, ``min_noise``, ``seed``, ``jitter``).
+
+    Returns:
+        ``{"lengthscale": (d,), "outputscale": (), "noise": ()}``.
+    """
+    theta = data_hyperparameters(train_x, train_y, min_noise=config.min_noise)
+    if config.init_subset == 0:
+        return theta
+    gen = torch.Generator(device="cpu").manual_seed(config.seed)
+    idx = torch.randperm(train_x.shape[0], generator=gen)[: config.init_subset].to(train_x.device)
+    xs, ys = train_x[idx], train_y[idx]
+    lik = gaussian_likelihood(min_noise=config.min_noise, dtype=train_x.dtype).to(train_x.device)
+    small = ExactBEMGP(xs, ys, lik).to(train_x.device)
+    set_hyperparameters(small, lik, **theta)
+    result = fit_exact(small, lik, max_iter=50, tol=1e-6, jitter=config.jitter)
+    logger.info("initial exact GP on %d points: loss %.5f after %d evaluations (%s)", xs.shape[0], result.loss, result.steps, result.stop_reason)
+    kernel = small.covar_module
+    return {
+        "lengthscale": kernel.base_kernel.lengthscale.detach().reshape(-1),
+        "outputscale": kernel.outputscale.detach().reshape(()),
+        "noise": lik.noise.detach().reshape(()),
+    }
 
 
 def set_hyperparameters(

@@ -14,17 +14,18 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import cast
 
 import torch
 from linear_operator.utils.errors import NanError, NotPSDError
 from tqdm.auto import tqdm
 
 from bemlearn.errors import ArgumentError, NumericalError
-from bemlearn.fitting.result import Callback
+from bemlearn.fitting.result import Callback, FitResult
 from bemlearn.interrupts import check_interrupt, interruptible
+from bemlearn.warnings import FitWarning, warn
 
 __all__ = ["minimize", "KeptParameters", "checked_loss", "default_lr", "NumericalFailure"]
 
@@ -110,8 +111,8 @@ class KeptParameters:
             except NumericalFailure as exc:
                 self.restore()
                 self.failed = True
-                logger.warning("%s: numerical failure after %d %s (%s); keeping the %s parameters",
-                               self.desc, self.count, self.unit, exc, self.kept)
+                warn(FitWarning, logger, "%s: numerical failure after %d %s (%s); keeping the %s parameters",
+                                         self.desc, self.count, self.unit, exc, self.kept)
             except KeyboardInterrupt:
                 self.restore()
                 loss = f" (loss {self.best:.6g})" if math.isfinite(self.best) else ""
@@ -139,7 +140,8 @@ def minimize(
     callback: Callback | None = None,
     progress: bool = False,
     desc: str = "fit",
-) -> tuple[float, int, str, dict[str, float]]:
+    kind: str = "fit",
+) -> FitResult:
     """Minimize ``loss_fn()`` over ``params`` with L-BFGS (strong Wolfe line search) or Adam.
 
     The callback is called after every loss evaluation (L-BFGS: every function evaluation,
@@ -159,10 +161,14 @@ def minimize(
         callback: ``callback(step, metrics)``.
         progress: show a tqdm progress bar.
         desc: progress-bar label.
+        kind: what is fitted, recorded as :attr:`FitResult.kind` (the GP kind, ``"gpdm"``, ...).
 
     Returns:
-        ``(final_loss, evaluations, stop_reason, final_metrics)``.
+        a :class:`FitResult`: the final loss (at the kept parameters), the loss evaluations, the
+        stop reason (``"converged"``, ``"max_iter"`` or ``"numerical failure"``), the seconds and
+        the final metrics.
     """
+    start = time.perf_counter()
     params = [p for p in params if p.requires_grad]
     if optimizer not in ("lbfgs", "adam"):
         raise ArgumentError(f"optimizer: unknown {optimizer!r}; valid are ['adam', 'lbfgs']")
@@ -228,9 +234,10 @@ def minimize(
     with torch.no_grad():
         final = float(checked_loss(loss_fn))
     metrics = {"loss": final, **metrics_fn(), "lr": float(opt.param_groups[0]["lr"])}
-    return final, kept.count, stop, metrics
+    return FitResult(kind, final, kept.count, time.perf_counter() - start, stop, metrics)
 
 
 def _lbfgs_iterations(opt: torch.optim.Optimizer) -> int:
-    """Iterations an L-BFGS optimizer has completed (its own count, kept in the first parameter's state)."""
-    return int(opt.state[cast(torch.optim.LBFGS, opt)._params[0]].get("n_iter", 0))
+    """Iterations an L-BFGS optimizer has completed (its own count, kept in the state of its one
+    parameter group's first parameter)."""
+    return int(opt.state[opt.param_groups[0]["params"][0]].get("n_iter", 0))

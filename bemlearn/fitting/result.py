@@ -20,7 +20,7 @@ class FitResult:
     """Summary of one fit.
 
     Attributes:
-        kind: GP kind that was fitted.
+        kind: what was fitted: the GP kind (``exact``, ``sgpr``, ``svgp``), or e.g. ``gpdm``.
         loss: final loss (negative log marginal likelihood or bound per training point, nats).
         steps: loss evaluations (L-BFGS, including line-search trials), Adam steps or minibatches.
         seconds: wall-clock time of the fit.

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import gpytorch
 import torch
 
@@ -73,14 +71,12 @@ def fit_sgpr(
     def loss_fn() -> torch.Tensor:
         return -model.collapsed_bound() / model.train_x.shape[0]
 
-    start = time.perf_counter()
     try:
         with cholesky_policy(jitter=jitter, max_tries=max_tries):
-            loss, steps, stop, metrics = minimize(
+            return minimize(
                 loss_fn, list(model.parameters()), optimizer=optimizer, max_iter=max_iter, lr=default_lr(optimizer, lr), tol=tol,
                 metrics_fn=lambda: hyperparameter_metrics(model, likelihood), callback=callback,
-                progress=progress, desc="SGPR",
+                progress=progress, desc="SGPR", kind=model.kind,
             )
     finally:
         model.train_x, model.train_y = full_x, full_y
-    return FitResult("sgpr", loss, steps, time.perf_counter() - start, stop, metrics)

@@ -117,7 +117,7 @@ def fit_svgp(
         model.train()
     metrics = {**metrics, "loss": epoch_loss, **hyperparameter_metrics(model, likelihood)}
     stop = "numerical failure" if kept.failed else "epochs"
-    return FitResult("svgp", epoch_loss, kept.count, time.perf_counter() - start, stop, metrics)
+    return FitResult(model.kind, epoch_loss, kept.count, time.perf_counter() - start, stop, metrics)
 
 
 class _MinibatchStep:

@@ -3,7 +3,7 @@
 from bemlearn.models.band import band_reference
 from bemlearn.models.exact_gp import ExactBEMGP
 from bemlearn.models.freeze import posterior_weights, predictor_state, variance_cholesky_factor
-from bemlearn.models.gp_kinds import GP_KINDS, gp_class, gp_kind_of
+from bemlearn.models.gp_kinds import BEMGP, GP_KINDS, as_gp, gp_class, gp_kind_of
 from bemlearn.models.gpdm import GPDM, GPDMObjective, LatentComparison, compare_latents, reconstruct_latent
 from bemlearn.models.input_noise import mean_gradient
 from bemlearn.models.kernels import ard_se_kernel, gaussian_likelihood, kernel_matrix, se_cross_covariance
@@ -28,6 +28,8 @@ __all__ = [
     "PredictorState",
     "GPKind",
     "GP_KINDS",
+    "BEMGP",
+    "as_gp",
     "gp_class",
     "gp_kind_of",
     "ExactBEMGP",

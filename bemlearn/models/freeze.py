@@ -9,14 +9,9 @@ from typing import Any, cast
 import gpytorch
 import torch
 
-from bemlearn.errors import ArgumentError
-from bemlearn.models.exact_gp import ExactBEMGP
-from bemlearn.models.gp_kinds import gp_kind_of
-from bemlearn.models.kernels import kernel_matrix, se_gram
+from bemlearn.models.gp_kinds import as_gp
 from bemlearn.models.predictor_state import GPKind, PredictorState
-from bemlearn.models.sgpr import SGPRBEMGP
-from bemlearn.models.solver import DEFAULT_JITTER, DEFAULT_MAX_TRIES, cholesky_policy, robust_cholesky
-from bemlearn.models.svgp import SVGPBEMGP
+from bemlearn.models.solver import DEFAULT_JITTER, DEFAULT_MAX_TRIES, cholesky_policy
 
 __all__ = ["predictor_state", "posterior_weights", "variance_cholesky_factor"]
 
@@ -31,40 +26,17 @@ def posterior_weights(
     """Support inputs Z, mean weights α and variance matrix S of eq. (12) in frozen form.
 
     exact: Z = X, α = K⁻¹Y, S = K⁻¹ (K = K_XX + σ_0² I);  sgpr: Titsias α, S;
-    svgp: α = L⁻ᵀ m, S = L⁻ᵀ (I − S_v) L⁻¹ (see the model modules).
+    svgp: α = L⁻ᵀ m, S = L⁻ᵀ (I − S_v) L⁻¹: each kind's ``posterior_weights`` (see the model
+    modules), in eval mode, without gradients, under ``cholesky_policy(jitter, max_tries)``.
 
     Returns:
         ``(M, d)`` Z, ``(M,)`` α, ``(M, M)`` S in normalized units.
     """
+    gp = as_gp(model)
     model.eval()
     likelihood.eval()
     with torch.no_grad(), cholesky_policy(jitter=jitter, max_tries=max_tries):
-        if isinstance(model, ExactBEMGP):
-            X, Y = model.train_inputs[0], model.train_targets
-            kern: Any = model.covar_module  # a gpytorch ScaleKernel: nn.Module attributes are untyped
-            # the Gram matrix exactly as the frozen state rebuilds it (PredictorState.gram): with κ(K) ~ 1e8
-            # (near-noise-free labels) GPyTorch's ‖a‖² + ‖b‖² − 2aᵀb distances would differ from it by far more than ε
-            K = se_gram(X, kern.base_kernel.lengthscale.reshape(-1), kern.outputscale.reshape(()))
-            K = K + likelihood.noise.squeeze() * torch.eye(X.shape[0], dtype=K.dtype, device=K.device)
-            L, _ = robust_cholesky(K, what="exact GP K_XX + σ_0² I", jitter=jitter, max_tries=max_tries)
-            alpha = torch.cholesky_solve(Y[:, None], L).squeeze(-1)
-            S = torch.cholesky_inverse(L)
-            return X, alpha, 0.5 * (S + S.mT)
-        if isinstance(model, SGPRBEMGP):
-            return model.posterior_weights()
-        if isinstance(model, SVGPBEMGP):
-            strategy = model.variational_strategy
-            Z = strategy.inducing_points
-            eye = torch.eye(Z.shape[0], dtype=Z.dtype, device=Z.device)
-            Kzz = kernel_matrix(model.covar_module, Z, Z) + model.jitter * eye
-            L, _ = robust_cholesky(Kzz, what="SVGP K_ZZ", jitter=jitter, max_tries=max_tries)
-            q = strategy.variational_distribution
-            m, Sv = q.mean, q.covariance_matrix
-            alpha = torch.linalg.solve_triangular(L.mT, m[:, None], upper=True).squeeze(-1)
-            Li = torch.linalg.solve_triangular(L, eye, upper=False)
-            S = Li.mT @ (eye - Sv) @ Li
-            return Z.detach().clone(), alpha, 0.5 * (S + S.mT)
-    raise ArgumentError(f"model: unsupported GP class {type(model).__name__}")
+        return gp.posterior_weights()
 
 
 def variance_cholesky_factor(
@@ -83,21 +55,11 @@ def variance_cholesky_factor(
     Returns:
         ``(M, M)`` lower-triangular L and ``(M, M)`` symmetric C, normalized units; ``None`` for an exact GP.
     """
+    gp = as_gp(model)
     model.eval()
     likelihood.eval()
     with torch.no_grad(), cholesky_policy(jitter=jitter, max_tries=max_tries):
-        if isinstance(model, ExactBEMGP):
-            return None
-        if isinstance(model, SGPRBEMGP):
-            return model.variance_factor()
-        if isinstance(model, SVGPBEMGP):
-            Z = model.variational_strategy.inducing_points
-            eye = torch.eye(Z.shape[0], dtype=Z.dtype, device=Z.device)
-            Kzz = kernel_matrix(model.covar_module, Z, Z) + model.jitter * eye
-            L, _ = robust_cholesky(Kzz, what="SVGP K_ZZ", jitter=jitter, max_tries=max_tries)
-            C = eye - model.variational_strategy.variational_distribution.covariance_matrix
-            return L.detach(), (0.5 * (C + C.mT)).detach()
-    raise ArgumentError(f"model: unsupported GP class {type(model).__name__}")
+        return gp.variance_factor()
 
 
 def predictor_state(
@@ -127,7 +89,7 @@ def predictor_state(
         a :class:`PredictorState` whose ``predict_reference`` equals :func:`~bemlearn.models.predict.predict`
         mapped to physical units.
     """
-    kind = gp_kind_of(model)
+    kind = as_gp(model).kind
     Z, alpha, S = posterior_weights(model, likelihood)
     factor = variance_cholesky_factor(model, likelihood)
     if factor is not None:   # S as the explicit product of the (authoritative) factor

@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-from typing import cast
-
 import gpytorch
 import torch
 
 from bemlearn.errors import ArgumentError
-from bemlearn.models.gp_kinds import gp_kind_of
+from bemlearn.models.gp_kinds import as_gp
 from bemlearn.models.solver import DEFAULT_JITTER, DEFAULT_MAX_TRIES, cholesky_policy
 from bemlearn.models.validation import check_inputs
 
@@ -29,8 +27,8 @@ def predict(
 
     Puts ``model`` and ``likelihood`` in eval mode (and leaves them there, so the
     posterior caches are reused by later calls) and evaluates in chunks of ``batch_size``
-    rows inside :func:`~bemlearn.models.solver.cholesky_policy`.  For SVGP the jitter
-    GPyTorch adds to the test variance is removed, so every kind returns exactly
+    rows inside :func:`~bemlearn.models.solver.cholesky_policy`, each by the kind's own
+    ``posterior`` (:mod:`bemlearn.models.gp_kinds`), so every kind returns exactly
     σ_f² − k_Zᵀ S k_Z of :class:`~bemlearn.models.predictor_state.PredictorState`.
 
     Args:
@@ -44,9 +42,9 @@ def predict(
     Returns:
         mean ``(B,)`` and variance ``(B,)``, normalized output units (squared for the variance).
     """
-    kind = gp_kind_of(model)
+    gp = as_gp(model)
     dtype = next(model.parameters()).dtype
-    check_inputs(x, name="x", dim=cast(int, model.dim), dtype=dtype)
+    check_inputs(x, name="x", dim=gp.dim, dtype=dtype)
     if batch_size < 1:
         raise ArgumentError(f"batch_size: expected a positive integer, got {batch_size}")
     model.eval()
@@ -54,10 +52,8 @@ def predict(
     means, variances = [], []
     with torch.no_grad(), cholesky_policy(jitter=jitter, max_tries=max_tries):
         for start in range(0, x.shape[0], batch_size):
-            out = model(x[start : start + batch_size])
+            out = gp.posterior(x[start : start + batch_size])
             var = out.lazy_covariance_matrix.diagonal(dim1=-1, dim2=-2)
-            if kind == "svgp":
-                var = var - model.jitter
             means.append(out.mean)
             variances.append(var.clamp_min(0.0))
         mean, var = torch.cat(means), torch.cat(variances)

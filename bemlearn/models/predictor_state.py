@@ -57,10 +57,12 @@ from typing import Any, Literal
 import torch
 
 from bemlearn.errors import CheckpointError
+from bemlearn.models.gp_kinds import GP_KINDS, gp_class
 from bemlearn.models.kernels import se_gram, se_kernel
 
 __all__ = ["PredictorState", "GPKind"]
 
+#: The registered GP kind names (:data:`~bemlearn.models.gp_kinds.GP_KINDS`), as a type.
 GPKind = Literal["exact", "sgpr", "svgp"]
 
 
@@ -69,7 +71,7 @@ class PredictorState:
     """A GP posterior frozen for prediction (see module docstring for the formulas).
 
     Attributes:
-        kind: ``"exact"``, ``"sgpr"`` or ``"svgp"``.
+        kind: ``"exact"``, ``"sgpr"`` or ``"svgp"``: a name of :data:`~bemlearn.models.gp_kinds.GP_KINDS`.
         Z: ``(M, d)`` normalized support inputs (training inputs for exact, inducing points otherwise).
         alpha: ``(M,)`` mean weights, normalized output units.
         S: ``(M, M)`` symmetric variance matrix, σ̃² = σ_f² − kᵀ S k.
@@ -110,6 +112,8 @@ class PredictorState:
     S_inner: torch.Tensor | None = None
 
     def __post_init__(self) -> None:
+        if self.kind not in GP_KINDS:
+            raise CheckpointError(f"PredictorState.kind: unknown {self.kind!r}; valid kinds are {sorted(GP_KINDS)}")
         M, d = self.Z.shape
         if self.std_scale is None:
             object.__setattr__(self, "std_scale", torch.ones((), dtype=self.Z.dtype, device=self.Z.device))
@@ -147,7 +151,7 @@ class PredictorState:
             return
         if self.S_chol is None or self.S_inner is None:
             raise CheckpointError("PredictorState.S_chol, S_inner: give both (S = L⁻ᵀ C L⁻¹) or neither")
-        if self.kind == "exact":
+        if not self.sparse:
             raise CheckpointError("PredictorState.S_chol, S_inner: only for the sparse kinds (sgpr, svgp); an exact "
                              "posterior solves with the Cholesky factor of K_ZZ + σ_0² I (gram_cholesky)")
         for name in ("S_chol", "S_inner"):
@@ -159,6 +163,13 @@ class PredictorState:
             raise CheckpointError("PredictorState.S_chol: expected a lower-triangular Cholesky factor with a positive diagonal")
         if not bool(torch.equal(C, C.mT)):
             raise CheckpointError("PredictorState.S_inner: expected a symmetric matrix (C = Cᵀ exactly)")
+
+    @property
+    def sparse(self) -> bool:
+        """Whether the support Z are inducing inputs (sgpr, svgp: S may be factored) rather than the
+        training inputs (exact: S = (K_ZZ + σ_0² I)⁻¹, solved with :meth:`gram_cholesky`); the kind's
+        ``sparse`` (:mod:`bemlearn.models.gp_kinds`)."""
+        return gp_class(self.kind).sparse
 
     @property
     def n_support(self) -> int:
@@ -220,7 +231,7 @@ class PredictorState:
     def gram_cholesky(self) -> torch.Tensor | None:
         """L with L Lᵀ = K_ZZ + σ_0² I (exact kind; computed once per state), or ``None`` for the
         sparse kinds or when K is not numerically positive definite."""
-        if self.kind != "exact":
+        if self.sparse:
             return None
         cached = self.__dict__.get("_gram_cholesky")
         if cached is None:

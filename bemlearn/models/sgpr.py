@@ -20,6 +20,7 @@ jitter, F equals the exact log marginal likelihood and μ, Σ equal eq. (12).
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import gpytorch
 import torch
@@ -36,8 +37,9 @@ __all__ = ["SGPRBEMGP"]
 class SGPRBEMGP(gpytorch.Module):
     """Inducing-point sparse GP (collapsed Titsias bound), zero prior mean, ARD kernel (eq. 11).
 
-    Train by maximizing :meth:`collapsed_bound`; predict with ``model.eval(); model(x)``
-    (the posterior factors are cached in eval mode and dropped by ``model.train()``).
+    Train by maximizing :meth:`collapsed_bound`; predict with :meth:`posterior` (the posterior
+    factors are cached in eval mode and dropped by ``model.train()``).  ``model(x)`` is the prior
+    N(0, K_xx), as on every kind (:mod:`bemlearn.models.gp_kinds`).
 
     Args:
         train_x: ``(N, d)`` normalized inputs.
@@ -49,6 +51,11 @@ class SGPRBEMGP(gpytorch.Module):
             is added, with a logged warning, only if the Cholesky still fails.
         chunk_size: training points per chunk when accumulating K_ZX K_XZ.
     """
+
+    #: The registered name of the kind (``train.kind``, a checkpoint's ``kind``).
+    kind: ClassVar[str] = "sgpr"
+    #: The posterior lives on the M inducing inputs Z (S factored as L⁻ᵀ C L⁻¹).
+    sparse: ClassVar[bool] = True
 
     def __init__(
         self,
@@ -186,11 +193,19 @@ class SGPRBEMGP(gpytorch.Module):
         return m, LBi.mT @ LBi
 
     def forward(self, x: torch.Tensor) -> gpytorch.distributions.MultivariateNormal:
+        """Prior N(0, K_xx) at ``x``: ``(B, d)`` normalized inputs."""
+        return gpytorch.distributions.MultivariateNormal(torch.zeros_like(x[:, 0]), self.covar_module(x))
+
+    def posterior(self, x: torch.Tensor) -> gpytorch.distributions.MultivariateNormal:
         """Posterior marginals of f at ``x``: ``(B, d)`` normalized inputs.
+
+        Puts the model in eval mode (the factors are then computed once and cached).
 
         Returns:
             MultivariateNormal with ``(B,)`` mean μ and diagonal covariance Σ (module docstring).
         """
+        if self.training:
+            self.eval()
         f = self._posterior()
         Kzs = kernel_matrix(self.covar_module, self.inducing_points, x)
         V = torch.linalg.solve_triangular(f["L"], Kzs, upper=False)

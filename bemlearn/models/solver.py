@@ -8,7 +8,7 @@ prediction (:func:`cholesky_policy`).
 
 A Cholesky that fails (K only positive semi-definite in floating point, e.g. duplicated
 inputs with tiny noise) is retried on K + j I with j = j₀, 10 j₀, 100 j₀, … ; each retry
-is logged as a warning, never printed and never turned into NaN.
+is issued as a :class:`bemlearn.warnings.NumericalWarning` and logged, never printed and never turned into NaN.
 """
 
 from __future__ import annotations
@@ -17,13 +17,15 @@ import logging
 import warnings
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
+from contextvars import ContextVar
 
 import gpytorch
 import linear_operator
 import torch
-from linear_operator.utils.warnings import NumericalWarning
+from linear_operator.utils.warnings import NumericalWarning as GPyTorchNumericalWarning
 
 from bemlearn.errors import NumericalError
+from bemlearn.warnings import NumericalWarning, warn
 
 __all__ = ["cholesky_policy", "robust_cholesky", "DEFAULT_JITTER", "DEFAULT_MAX_TRIES"]
 
@@ -34,14 +36,20 @@ DEFAULT_JITTER = 1e-8
 #: Number of retries: the last one adds j₀ · 10^(max_tries − 1) (1e-1 by default).
 DEFAULT_MAX_TRIES = 8
 
+#: (j₀, max_tries) of the innermost active :func:`cholesky_policy`; what :func:`robust_cholesky` uses when
+#: it is not given them.
+_POLICY: ContextVar[tuple[float, int]] = ContextVar("cholesky_policy", default=(DEFAULT_JITTER, DEFAULT_MAX_TRIES))
+
 
 @contextmanager
 def cholesky_policy(*, jitter: float = DEFAULT_JITTER, max_tries: int = DEFAULT_MAX_TRIES) -> Iterator[None]:
     """Run GPyTorch with dense Cholesky solves at every size and log jitter warnings.
 
     Sets ``max_cholesky_size(10**9)``, turns ``fast_computations`` (CG / Lanczos) off,
-    sets the float64 Cholesky jitter j₀ and the number of retries, and routes GPyTorch's
-    ``NumericalWarning`` (jitter added, variance clamped) to this module's logger.
+    sets the float64 Cholesky jitter j₀ and the number of retries, and re-issues GPyTorch's
+    ``NumericalWarning`` (jitter added, variance clamped) as a :class:`bemlearn.warnings.NumericalWarning`
+    logged on this module's logger.  Inside it,
+    :func:`robust_cholesky` follows the same j₀ and retries unless given others.
 
     Args:
         jitter: first jitter j₀ added to the diagonal when a Cholesky fails (float64).
@@ -54,12 +62,15 @@ def cholesky_policy(*, jitter: float = DEFAULT_JITTER, max_tries: int = DEFAULT_
         )
         stack.enter_context(linear_operator.settings.cholesky_jitter(float_value=jitter * 100, double_value=jitter))
         stack.enter_context(linear_operator.settings.cholesky_max_tries(max_tries))
+        token = _POLICY.set((jitter, max_tries))
+        stack.callback(_POLICY.reset, token)
         stack.enter_context(warnings.catch_warnings())
-        warnings.filterwarnings("always", category=NumericalWarning)
+        warnings.filterwarnings("always", category=GPyTorchNumericalWarning)
         previous = warnings.showwarning
 
         def _show(message, category, filename, lineno, file=None, line=None):
-            if issubclass(category, NumericalWarning):
+            if issubclass(category, GPyTorchNumericalWarning):  # re-issued as bemlearn's, at GPyTorch's line
+                warnings.warn_explicit(NumericalWarning(str(message)), NumericalWarning, filename, lineno)
                 logger.warning("%s", message)
             else:
                 previous(message, category, filename, lineno, file, line)
@@ -69,7 +80,7 @@ def cholesky_policy(*, jitter: float = DEFAULT_JITTER, max_tries: int = DEFAULT_
 
 
 def robust_cholesky(
-    A: torch.Tensor, *, what: str, jitter: float = DEFAULT_JITTER, max_tries: int = DEFAULT_MAX_TRIES
+    A: torch.Tensor, *, what: str, jitter: float | None = None, max_tries: int | None = None
 ) -> tuple[torch.Tensor, float]:
     """Lower Cholesky factor L of A (A = L Lᵀ), adding diagonal jitter if A is not numerically PD.
 
@@ -79,8 +90,8 @@ def robust_cholesky(
     Args:
         A: ``(M, M)`` symmetric matrix (e.g. K_ZZ), normalized output units squared.
         what: what A is, for the log and error messages, e.g. ``"K_ZZ"``.
-        jitter: first jitter j₀.
-        max_tries: number of jittered retries.
+        jitter: first jitter j₀ (``None``: that of the active :func:`cholesky_policy`, else :data:`DEFAULT_JITTER`).
+        max_tries: number of jittered retries (``None``: the active policy's, else :data:`DEFAULT_MAX_TRIES`).
 
     Returns:
         ``(L, j)``: the ``(M, M)`` lower factor of A + j I and the jitter j actually added (0.0 if none).
@@ -90,13 +101,16 @@ def robust_cholesky(
     """
     if not bool(torch.isfinite(A).all()):
         raise NumericalError(f"{what}: matrix contains NaN or inf; cannot factorize")
+    policy_jitter, policy_tries = _POLICY.get()
+    jitter = policy_jitter if jitter is None else jitter
+    max_tries = policy_tries if max_tries is None else max_tries
     L, info = torch.linalg.cholesky_ex(A)
     if not bool(info.any()):
         return L, 0.0
     eye = torch.eye(A.shape[-1], dtype=A.dtype, device=A.device)
     for i in range(max_tries):
         j = jitter * 10**i
-        logger.warning("%s not positive definite; added jitter of %.1e to the diagonal", what, j)
+        warn(NumericalWarning, logger, "%s not positive definite; added jitter of %.1e to the diagonal", what, j)
         L, info = torch.linalg.cholesky_ex(A + j * eye)
         if not bool(info.any()):
             return L, j

@@ -7,18 +7,21 @@ minibatch objective, so the data can be streamed.  The posterior replacing eq. (
 
     μ(x) = k_Z(x)ᵀ L⁻ᵀ m,    Σ(x) = σ_f² − k_Z(x)ᵀ L⁻ᵀ (I − S_v) L⁻¹ k_Z(x).
 
-GPyTorch adds the jitter j to the test-test variance too; :func:`bemlearn.models.predict.predict`
-removes it so that Σ(x) is exactly the formula above.
+GPyTorch adds the jitter j to the test-test variance too; :meth:`SVGPBEMGP.posterior` removes
+it so that Σ(x) is exactly the formula above.
 """
 
 from __future__ import annotations
+
+from typing import ClassVar
 
 import gpytorch
 import torch
 from gpytorch.variational import TrilNaturalVariationalDistribution, VariationalStrategy
 
 from bemlearn.errors import ArgumentError
-from bemlearn.models.kernels import ard_se_kernel
+from bemlearn.models.kernels import ard_se_kernel, kernel_matrix
+from bemlearn.models.solver import robust_cholesky
 from bemlearn.models.validation import check_inputs
 
 __all__ = ["SVGPBEMGP"]
@@ -27,11 +30,19 @@ __all__ = ["SVGPBEMGP"]
 class SVGPBEMGP(gpytorch.models.ApproximateGP):
     """SVGP with a full-rank natural-parameter q(v), zero prior mean and the ARD kernel of eq. (11).
 
+    ``forward`` is the prior N(0, K_xx), as on every kind (:mod:`bemlearn.models.gp_kinds`);
+    :meth:`posterior` is q(f(x)) (module docstring).
+
     Args:
         inducing_points: ``(M, d)`` initial inducing inputs Z, normalized units (float64).
         learn_inducing_locations: optimize Z with the other parameters.
         jitter: j added to the diagonal of K_ZZ (normalized output units squared).
     """
+
+    #: The registered name of the kind (``train.kind``, a checkpoint's ``kind``).
+    kind: ClassVar[str] = "svgp"
+    #: The posterior lives on the M inducing inputs Z (S factored as L⁻ᵀ C L⁻¹).
+    sparse: ClassVar[bool] = True
 
     def __init__(
         self,
@@ -72,7 +83,9 @@ class SVGPBEMGP(gpytorch.models.ApproximateGP):
         if bool(torch.linalg.cholesky_ex(covariance)[1].any()):
             raise ArgumentError("covariance: not positive definite")
         strategy = self.variational_strategy
-        q = strategy._variational_distribution
+        # the natural-parameter module of q(v) (the strategy's child module; its public property
+        # ``variational_distribution`` returns the distribution N(m, S_v), not the module)
+        q = next(m for m in strategy.children() if isinstance(m, TrilNaturalVariationalDistribution))
         std, q.mean_init_std = q.mean_init_std, 0.0
         with torch.no_grad():
             q.initialize_variational_distribution(gpytorch.distributions.MultivariateNormal(mean, covariance))
@@ -102,3 +115,48 @@ class SVGPBEMGP(gpytorch.models.ApproximateGP):
     def forward(self, x: torch.Tensor) -> gpytorch.distributions.MultivariateNormal:
         """Prior N(0, K_xx) at ``x``: ``(B, d)`` normalized inputs."""
         return gpytorch.distributions.MultivariateNormal(self.mean_module(x), self.covar_module(x))
+
+    def posterior(self, x: torch.Tensor) -> gpytorch.distributions.MultivariateNormal:
+        """q(f(x)) at ``x: (B, d)`` normalized inputs: μ(x) = k_Zᵀ L⁻ᵀ m, Σ(x) = K_xx − k_Zᵀ L⁻ᵀ (I − S_v) L⁻¹ k_Z.
+
+        GPyTorch's predictive covariance carries the jitter j on its diagonal; it is taken off, so
+        the variances are exactly the module docstring's.  Puts the model in eval mode.
+        """
+        if self.training:
+            self.eval()
+        out = self(x)
+        jitter = torch.full(out.mean.shape, -self.jitter, dtype=out.mean.dtype, device=out.mean.device)
+        return gpytorch.distributions.MultivariateNormal(out.mean, out.lazy_covariance_matrix.add_diagonal(jitter))
+
+    def _kzz_cholesky(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """Z ``(M, d)`` and L ``(M, M)`` with L Lᵀ = K_ZZ + j I (retry jitter from the active policy)."""
+        Z = self.variational_strategy.inducing_points
+        eye = torch.eye(Z.shape[0], dtype=Z.dtype, device=Z.device)
+        L, _ = robust_cholesky(kernel_matrix(self.covar_module, Z, Z) + self.jitter * eye, what="SVGP K_ZZ")
+        return Z, L
+
+    def posterior_weights(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Z, α = L⁻ᵀ m and S = L⁻ᵀ (I − S_v) L⁻¹ of the frozen form μ = k_Zᵀ α, Σ = σ_f² − k_Zᵀ S k_Z.
+
+        Returns:
+            ``(M, d)`` Z, ``(M,)`` α, ``(M, M)`` S, normalized units.
+        """
+        Z, L = self._kzz_cholesky()
+        eye = torch.eye(Z.shape[0], dtype=Z.dtype, device=Z.device)
+        q = self.variational_strategy.variational_distribution
+        m, Sv = q.mean, q.covariance_matrix
+        alpha = torch.linalg.solve_triangular(L.mT, m[:, None], upper=True).squeeze(-1)
+        Li = torch.linalg.solve_triangular(L, eye, upper=False)
+        S = Li.mT @ (eye - Sv) @ Li
+        return Z.detach().clone(), alpha, 0.5 * (S + S.mT)
+
+    def variance_factor(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """L and C = I − S_v of the factored S = L⁻ᵀ C L⁻¹ (L Lᵀ = K_ZZ + j I; C possibly indefinite).
+
+        Returns:
+            ``(M, M)`` lower-triangular L and ``(M, M)`` symmetric C, normalized units.
+        """
+        Z, L = self._kzz_cholesky()
+        eye = torch.eye(Z.shape[0], dtype=Z.dtype, device=Z.device)
+        C = eye - self.variational_strategy.variational_distribution.covariance_matrix
+        return L.detach(), (0.5 * (C + C.mT)).detach()

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from bemlearn.robots.scales import bem_gain, bem_slopes, instability_rate, qa_half_ranges, qu_half_range
+from bemlearn.warnings import DesignWarning, warn
 
 __all__ = [
     "Derived",
@@ -178,7 +179,7 @@ def excitation_signals(robot, rate: RateChoice, *, n_sines: tuple[int, int] = (2
     note = (f"f ∈ [{f_lo:.3g}, {f_hi:.3g}] Hz (f_hi = 1.4 λ/2π, λ = {lam:.3g} 1/s); A ≤ {a_hi:.3g} ({why}); "
             f"n_max components at f_hi reach |q_u^e| ≈ {reach:.3g}")
     if reach < d:
-        log.warning("%s: the excitation reaches |q_u^e| ≈ %.3g < %.3g within the joint ranges and actuator limits", robot.name, reach, d)
+        warn(DesignWarning, log, "%s: the excitation reaches |q_u^e| ≈ %.3g < %.3g within the joint ranges and actuator limits", robot.name, reach, d)
     return Derived({"n_sines": tuple(n_sines), "amplitude": (a_hi / 10, a_hi), "frequency_hz": (f_lo, f_hi)}, note)
 
 
@@ -339,7 +340,7 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None) -> Deri
         ab = eic_linear_abscissa(robot, g)
         note += f"; linearised EIC loop max Re λ = {ab:.3g} 1/s"
         if ab >= 0:
-            log.warning("%s: the EIC with the derived gains is unstable in its linearisation at upright (max Re λ = %.3g 1/s)", robot.name, ab)
+            warn(DesignWarning, log, "%s: the EIC with the derived gains is unstable in its linearisation at upright (max Re λ = %.3g 1/s)", robot.name, ab)
     return Derived(g, note)
 
 

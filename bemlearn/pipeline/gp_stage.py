@@ -28,6 +28,7 @@ from bemlearn.fitting import build_gp, fit_gp, hyperparameter_metrics
 from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.models import predictor_state
 from bemlearn.models.predictor_state import PredictorState
+from bemlearn.warnings import NumericalWarning, warn
 
 __all__ = ["CheckpointProvenance", "GPStageResult", "fit_bem_gp"]
 
@@ -207,7 +208,7 @@ def _checkpoint_metadata(provenance: CheckpointProvenance, state: PredictorState
         "input_names": list(names),
         "units": {n: units[n] for n in names},
         "n_train": n_train,
-        "n_inducing": None if config.kind == "exact" else int(state.n_support),
+        "n_inducing": int(state.n_support) if state.sparse else None,
         "hyperparameters": hyperparameters,
         "bemlearn_version": __version__,
         "data_sha256": provenance.data_sha256,
@@ -223,7 +224,7 @@ def _frozen_latent_check(state: PredictorState, model, lik, xn: torch.Tensor, dt
     ``None`` for an exact GP (its frozen variance is solved with the Cholesky factor, as exported)."""
     from bemlearn.models.predict import predict
 
-    if state.kind == "exact":
+    if not state.sparse:
         return None
     g = torch.Generator().manual_seed(0)
     q = xn[torch.randperm(xn.shape[0], generator=g)[:256]].clone()
@@ -236,8 +237,8 @@ def _frozen_latent_check(state: PredictorState, model, lik, xn: torch.Tensor, dt
     out = {"median_frozen_latent_std": float(frozen.median()), "median_model_latent_std": float(live.median()),
            "median_ratio": ratio, "n_queries": int(q.shape[0])}
     if not 0.5 <= ratio <= 2.0:
-        log.warning("the frozen %s posterior's latent std (median %.3g) differs from the fitted model's (median %.3g) by a "
-                    "factor %.3g at BEM queries: its explicit variance matrix S has lost its digits (ill-conditioned K_ZZ). "
-                    "The exported latent std is off by about that factor, and the band with it; an exact GP (kind: exact) "
-                    "solves with the Cholesky factor and does not lose them (docs/uncertainty.md).", state.kind, float(frozen.median()), float(live.median()), ratio)
+        warn(NumericalWarning, log, "the frozen %s posterior's latent std (median %.3g) differs from the fitted model's (median %.3g) by a "
+                                    "factor %.3g at BEM queries: its explicit variance matrix S has lost its digits (ill-conditioned K_ZZ). "
+                                    "The exported latent std is off by about that factor, and the band with it; an exact GP (kind: exact) "
+                                    "solves with the Cholesky factor and does not lose them (docs/uncertainty.md).", state.kind, float(frozen.median()), float(live.median()), ratio)
     return out

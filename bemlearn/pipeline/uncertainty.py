@@ -30,6 +30,7 @@ from bemlearn.fitting.calibration import calibrate_replicas
 from bemlearn.fitting.estimator_sensitivity import estimator_sensitivity
 from bemlearn.models.input_noise import quantization_input_std
 from bemlearn.models.predictor_state import PredictorState
+from bemlearn.warnings import UncertaintyWarning, warn
 
 __all__ = ["calibrate_band"]
 
@@ -74,7 +75,7 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, train_rows: t
         scale = cal.scale
         summary["replicas"] = cal.to_dict()
     except DataError as exc:  # a single training trial: nothing to split
-        log.warning("band calibration: no replica calibration (%s); std_scale = 1", exc)
+        warn(UncertaintyWarning, log, "band calibration: no replica calibration (%s); std_scale = 1", exc)
         scale = 1.0
         summary["replicas"] = None
     summary["std_scale"] = scale

@@ -40,6 +40,7 @@ from bemlearn.errors import MissingFileError, RobotModelError
 from bemlearn.robots._mujoco_compat import full_mass_matrix, make_mass_matrix
 from bemlearn.robots.robot import Robot, as_batch
 from bemlearn.robots.upright import UprightSearch, find_upright
+from bemlearn.warnings import RobotModelWarning, warn
 
 if TYPE_CHECKING:
     import torch
@@ -203,7 +204,7 @@ class MujocoRobot(Robot):
         else:
             self.qu_nominal = 0.0
             self.qu_nominal_note = "0: " + self.upright_search.describe(self._qu_unit())
-            log.warning("%s: %s; q_u = 0 is taken as nominal", where, self.upright_search.describe(self._qu_unit()))
+            warn(RobotModelWarning, log, "%s: %s; q_u = 0 is taken as nominal", where, self.upright_search.describe(self._qu_unit()))
         if rng is not None:
             self.qu_range = (float(rng[0]), float(rng[1]))
         elif self.identity_coordinates and model.jnt_limited[self.unactuated_index]:
@@ -219,7 +220,7 @@ class MujocoRobot(Robot):
         else:
             raise RobotModelError(f"{where}: 'bemlearn_coordinates' mixes hinge and slide joints; their units would not be defined")
         if model.neq:
-            log.warning("%s: equality constraints are ignored by the robot dynamics", where)
+            warn(RobotModelWarning, log, "%s: equality constraints are ignored by the robot dynamics", where)
 
     def _qu_unit(self) -> str:
         return "rad" if self.joint_kinds[self.unactuated_index] == "hinge" or not self.identity_coordinates else "m"

@@ -40,6 +40,7 @@ from bemlearn.data.sensors import SensorConfig
 from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
 from bemlearn.errors import ConfigError, DataError, RobotModelError
 from bemlearn.units import q_unit_label
+from bemlearn.warnings import DataWarning, warn
 
 if TYPE_CHECKING:
     from bemlearn.robots.mujoco_robot import MujocoRobot
@@ -246,7 +247,7 @@ def collect(robot_name: str, config: CollectConfig, *, progress: bool = True) ->
     kept = [r for r in results if r.t.size >= 10]
     dropped = [r.trial_id for r in results if r.t.size < 10]
     if dropped:
-        log.warning("collect: dropped %d trial(s) that fell within 10 samples: %s", len(dropped), dropped)
+        warn(DataWarning, log, "collect: dropped %d trial(s) that fell within 10 samples: %s", len(dropped), dropped)
     if not kept:
         raise DataError("collect: every trial fell immediately; check the gains and initial ranges")
     n_failed = sum(r.failed for r in kept)

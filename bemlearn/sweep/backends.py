@@ -30,6 +30,7 @@ from typing import Any
 from bemlearn.errors import ArgumentError, EnvironmentProblem, SweepError
 from bemlearn.sweep.cell_runner import CellJob, CellOutcome, failed_outcome, run_cell, warm_worker
 from bemlearn.sweep.config import SweepResources
+from bemlearn.warnings import EnvironmentWarning, warn
 
 __all__ = ["SerialBackend", "RayBackend", "make_backend", "ray_available", "probe_address", "CONNECT_TIMEOUT_S"]
 
@@ -234,8 +235,8 @@ def make_backend(kind: str, resources: SweepResources, *, address: str | None = 
     if kind == "ray" and not ray_available():
         if address is not None:
             raise EnvironmentProblem(f"--address {address}: Ray is not installed (pip install 'bemlearn[ray]')")
-        log.warning("Ray is not installed (pip install 'bemlearn[ray]'): running the cells one after another in this "
-                    "process (--backend serial)")
+        warn(EnvironmentWarning, log, "Ray is not installed (pip install 'bemlearn[ray]'): running the cells one after another in this "
+                                      "process (--backend serial)")
         kind = "serial"
     if kind == "serial":
         if max_parallel not in (None, 1):

@@ -20,6 +20,7 @@ from bemlearn.data.features import gp_inputs
 from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
 from bemlearn.data.validation import MIN_TRIAL_SAMPLES
 from bemlearn.errors import DataError, TrajectoryFormatError
+from bemlearn.warnings import DataWarning, warn
 
 if TYPE_CHECKING:
     from bemlearn.apps.biped.walk_result import WalkResult
@@ -45,7 +46,7 @@ def walk_trajectories(result: WalkResult) -> tuple[Trajectory, Trajectory]:
     ids, counts = np.unique(trial, return_counts=True)
     short = [int(i) for i, c in zip(ids, counts) if c < MIN_TRIAL_SAMPLES]
     if short:
-        log.warning("walk_trajectories: dropping step(s) %s shorter than %d samples", short, MIN_TRIAL_SAMPLES)
+        warn(DataWarning, log, "walk_trajectories: dropping step(s) %s shorter than %d samples", short, MIN_TRIAL_SAMPLES)
     keep = ~np.isin(trial, short)
     last = int(trial[-1]) if len(trial) else 0
     stance_of = {int(i): int(r.stance[np.flatnonzero(trial == i)[0]]) for i in ids if int(i) not in short}
