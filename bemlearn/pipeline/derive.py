@@ -240,9 +240,9 @@ def reference_effort(robot, amplitude: float, omega: float) -> float:
 
 
 def _limited_actuated(robot) -> np.ndarray:
-    if not robot.identity_coordinates:
-        return np.ones(robot.m, dtype=bool)
-    return np.array([bool(robot.model.jnt_limited[j]) for j in robot.actuated_index])
+    from bemlearn.robots.scales import qa_limited
+
+    return qa_limited(robot)
 
 
 def fall_window(robot) -> Derived:
