@@ -1,0 +1,180 @@
+"""Freedoms that move only by rolling (bemlearn.robots.rolling) on a wheeled inverted pendulum.
+
+Reference (independent of the code under test): tests/robots/wheel_pendulum.xml is a chassis on a
+slide x with a wheel (angle θ, hub h = 0.116 m above the plane, radius R = 0.12 m) and a pendulum
+(angle φ about the chassis, centre of mass (c_x, c_z) = (0.02, 0.25) m in its frame).  Without slip
+ẋ = r_eff θ̇ with MuJoCo's contact point midway through the penetration, r_eff = (h + R)/2.  The
+pendulum's row of the dynamics at φ̇ = φ̈ = 0 is (its centre at p = R_y(φ) c, the chassis translating)
+
+    Γ_0 = m ẍ ∂p_x/∂φ + m g ∂p_z/∂φ = m l [ẍ cos(φ + β) − g sin(φ + β)],   β = atan2(c_x, c_z),
+
+so the hard-no-slip BEM is φ_e = atan(r_eff θ̈ / g) − β, whatever the wheel's angle and rate.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from bemlearn.errors import RobotModelError
+from bemlearn.robots import load
+from bemlearn.robots.rolling import kkt_acceleration, wheel_geoms
+
+ROBOTS = Path(__file__).resolve().parent / "robots"
+WHEEL = ROBOTS / "wheel_pendulum.xml"
+HUB, RADIUS, CX, CZ, G = 0.116, 0.12, 0.02, 0.25, 9.81
+R_EFF = 0.5 * (HUB + RADIUS)
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load(WHEEL)
+
+
+def test_the_rolling_base_is_dependent_and_the_wheel_unlimited(robot):
+    assert robot.joint_names == ("spin", "pitch")
+    assert robot.unactuated_name == "pitch"
+    assert robot.coordinate_kinds == ("hinge", "hinge")
+    assert not robot.model.jnt_limited[robot.model.joint("spin").id]
+    assert robot.rolling is not None
+    assert [robot.model.joint(j).name for j in robot.rolling.dependent] == ["travel"]
+    (contact,) = robot.rolling.contacts
+    assert contact.radius == pytest.approx(R_EFF, abs=1e-12)
+    assert contact.geometric_radius == pytest.approx(RADIUS, abs=1e-12)
+    # x = r_eff θ: the map's row of the slide
+    np.testing.assert_allclose(robot.Tinv_np, [[R_EFF, 0.0], [1.0, 0.0], [0.0, 1.0]], atol=1e-12)
+    assert "travel = 0.118·spin" in robot.rolling.describe(robot.model)
+
+
+def test_the_slide_range_limits_the_wheel_through_the_radius(robot):
+    wheel, pitch = robot.coordinate_limits
+    assert wheel == pytest.approx((-3.0 / R_EFF, 3.0 / R_EFF), rel=1e-12)
+    assert pitch == pytest.approx((-1.4, 1.4))
+    assert robot.qu_range == pytest.approx((-1.4, 1.4))
+
+
+def test_the_upright_is_the_centre_of_mass_above_the_axle(robot):
+    assert robot.qu_nominal == pytest.approx(-math.atan2(CX, CZ), abs=1e-9)
+
+
+@pytest.mark.parametrize("wheel_angle, wheel_rate", [(0.0, 0.0), (3.0, -6.0), (-11.0, 15.0)])
+def test_the_model_bem_is_the_hard_no_slip_balance(robot, wheel_angle, wheel_rate):
+    alpha = np.linspace(-20.0, 20.0, 41)
+    B = alpha.size
+    res = robot.bem(np.full((B, 1), wheel_angle), np.full((B, 1), wheel_rate), alpha[:, None])
+    assert bool(res.valid.all())
+    reference = np.arctan(R_EFF * alpha / G) - math.atan2(CX, CZ)
+    err_deg = np.degrees(np.abs(res.qu.numpy() - reference))
+    assert err_deg.max() <= 0.01
+    assert err_deg.max() <= 1e-8   # the same equation: only the root finder's tolerance is left
+
+
+def test_the_reduced_dynamics_are_the_kkt_solution(robot):
+    """(R4) against the KKT system (R3) solved with MuJoCo's M, bias and contact Jacobians."""
+    model = robot.model
+    data = mujoco.MjData(model)
+    wheels = wheel_geoms(model, _at_rest(model, data))
+    S = robot.Tinv_np
+    spin_dof = model.joint("spin").dofadr[0]
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        q = np.array([rng.uniform(-5, 5), rng.uniform(-0.8, 0.8)])
+        qd = rng.uniform(-4, 4, 2)
+        u = rng.uniform(-4, 4)
+        D, h = robot.terms(q, qd)
+        qdd = np.linalg.solve(D, robot.input_matrix_np[:, 0] * u - h)
+        force = np.zeros(model.nv)
+        force[spin_dof] = u * model.actuator_gear[0, 0]
+        qdd_j, lam = kkt_acceleration(model, data, S @ q, S @ qd, force, wheels)
+        np.testing.assert_allclose(qdd_j, S @ qdd, rtol=1e-7, atol=1e-7)
+        assert qdd_j[model.joint("travel").dofadr[0]] == pytest.approx(R_EFF * qdd_j[spin_dof], rel=1e-9, abs=1e-9)
+        assert lam.shape == (1,)
+
+
+def _at_rest(model, data):
+    data.qpos[:] = model.qpos0
+    mujoco.mj_fwdPosition(model, data)
+    return data
+
+
+def test_mujoco_soft_contact_rolls_close_to_the_hard_constraint(robot):
+    """The plant is MuJoCo's soft contact: over 0.5 s of drive the chassis travels r_eff θ within 2 %."""
+    model = robot.model
+    data = mujoco.MjData(model)
+    data.qpos[:] = robot.Tinv_np @ np.array([0.0, robot.qu_nominal])
+    data.ctrl[:] = 1.0
+    for _ in range(500):
+        mujoco.mj_step(model, data)
+    x, theta = data.qpos[model.joint("travel").qposadr[0]], data.qpos[model.joint("spin").qposadr[0]]
+    assert abs(theta) > 0.5
+    assert x / theta == pytest.approx(R_EFF, rel=0.02)
+
+
+def _steerable(tmp_path: Path) -> Path:
+    """A chassis on x and y slides with a steered ball wheel (one contact point, so steering is free): rolling
+    whose direction depends on the steering angle."""
+    path = tmp_path / "steered.xml"
+    path.write_text("""
+<mujoco model="steered">
+  <compiler angle="radian" inertiafromgeom="false"/>
+  <worldbody>
+    <geom name="floor" type="plane" size="5 5 0.01"/>
+    <body name="chassis" pos="0 0 0.099">
+      <joint name="x" type="slide" axis="1 0 0"/>
+      <joint name="y" type="slide" axis="0 1 0"/>
+      <inertial pos="0 0 0" mass="1" diaginertia="0.01 0.01 0.01"/>
+      <body name="fork">
+        <joint name="steer" type="hinge" axis="0 0 1" range="-1 1"/>
+        <inertial pos="0 0 0" mass="0.1" diaginertia="0.001 0.001 0.001"/>
+        <body name="wheel">
+          <joint name="spin" type="hinge" axis="0 1 0"/>
+          <inertial pos="0 0 0" mass="0.3" diaginertia="0.002 0.002 0.002"/>
+          <geom name="tyre" type="sphere" size="0.1"/>
+        </body>
+      </body>
+      <body name="pole">
+        <joint name="pitch" type="hinge" axis="0 1 0" range="-1 1"/>
+        <inertial pos="0 0 0.3" mass="1" diaginertia="0.01 0.01 0.001"/>
+      </body>
+    </body>
+  </worldbody>
+  <actuator><motor joint="steer"/><motor joint="spin"/></actuator>
+</mujoco>""")
+    return path
+
+
+def test_rolling_that_depends_on_the_pose_is_refused(tmp_path):
+    with pytest.raises(RobotModelError, match=r"steered.xml: the rolling constraint's velocity map changes with the pose"):
+        load(_steerable(tmp_path))
+
+
+@pytest.mark.parametrize("value", ["-inf 2", "nan nan"])
+def test_a_joint_range_with_one_infinite_end_or_nan_is_refused(tmp_path, value):
+    bad = tmp_path / "half_open.xml"
+    bad.write_text(WHEEL.read_text().replace('range="-inf inf"', f'range="{value}"'))
+    with pytest.raises(RobotModelError, match=rf'half_open.xml: <joint name="spin" range="{value}">: range is not finite'):
+        load(bad)
+
+
+def test_an_unbounded_range_in_a_model_compiled_elsewhere_is_unlimited():
+    """The same rule for an MjModel handed over directly (no MJCF check): limited="true" with ±inf is no limit."""
+    from bemlearn.robots import MujocoRobot
+
+    model = mujoco.MjModel.from_xml_path(str(WHEEL))
+    j = model.joint("spin").id
+    assert model.jnt_limited[j] and math.isinf(model.jnt_range[j, 1])
+    robot = MujocoRobot(model, source="wheel")
+    assert not robot.model.jnt_limited[j]
+    assert robot.coordinate_limits[0] is not None   # the wheel is still limited by the slide it rolls
+
+
+def test_other_robots_keep_their_joints_as_coordinates():
+    for name in ("cartpole.xml", "reaction_wheel.xml", "acrobot.xml"):
+        robot = load(ROBOTS / name)
+        assert robot.rolling is None
+        assert robot.identity_coordinates
+        assert robot.joint_names == robot.mjcf_joint_names
