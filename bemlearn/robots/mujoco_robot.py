@@ -22,6 +22,13 @@ torso angle as its unactuated coordinate:
 
 With q_j = T⁻¹ q, the dynamics transform as D = T⁻ᵀ D_j T⁻¹, C q̇ + G = T⁻ᵀ (C q̇ + G)_j,
 τ_p = T⁻ᵀ τ_p,j and B = T⁻ᵀ B_j (T constant, so no extra velocity terms).
+
+Rolling.  When more than one joint has no actuator and a wheel's rolling contact determines all
+but one of them (a chassis slide that moves only because the wheel rolls), those joints are
+dependent (:mod:`bemlearn.robots.rolling`): the coordinates are the other joints, q_j = S q with a
+constant ``(n_j, n)`` map S (x = r_eff θ), and the dynamics transform with S in the place of T⁻¹:
+D = Sᵀ D_j S, h = Sᵀ h_j, B = Sᵀ B_j (eq. R4 there: the hard no-slip constraint's KKT system with
+the constraint force projected out).  T is then the ``(n, n_j)`` selection of the independent joints.
 """
 
 from __future__ import annotations
@@ -144,8 +151,12 @@ class MujocoRobot(Robot):
     Attributes:
         identity_coordinates: True when the coordinates are the MJCF joints themselves (T = I; see
             the module docstring), so joint ranges and kinds apply to the coordinates directly.
-        T_np: ``(n, n)`` the coordinate map T as a NumPy array (:attr:`T` is the same numbers as a torch tensor).
-        Tinv_np: ``(n, n)`` T⁻¹ as a NumPy array (:attr:`Tinv` in torch).
+        coordinate_joints: the MJCF joint index of each coordinate when every coordinate is one joint
+            (T = I, or the independent joints of a rolling robot), else ``None`` (a declared map).
+        rolling: the :class:`~bemlearn.robots.rolling.RollingMap` when freedoms roll with a wheel, else ``None``.
+        T_np: ``(n, n_j)`` the coordinate map q = T q_j as a NumPy array (:attr:`T` is the same numbers as a
+            torch tensor); square unless the robot rolls.
+        Tinv_np: ``(n_j, n)`` the map back, q_j = T⁻¹ q (the rolling map S when the robot rolls; :attr:`Tinv` in torch).
         input_matrix_np: ``(n, nu)`` B = T⁻ᵀ B_j as a NumPy array (:attr:`input_matrix` in torch).
     """
 
@@ -303,12 +314,12 @@ class MujocoRobot(Robot):
 
     @functools.cached_property
     def T(self) -> torch.Tensor:
-        """``(n, n)`` the coordinate map q = T q_j (the identity unless the model declares one), float64."""
+        """``(n, n_j)`` the coordinate map q = T q_j (the identity unless the model declares one or the robot rolls), float64."""
         return torch.from_numpy(self.T_np)
 
     @functools.cached_property
     def Tinv(self) -> torch.Tensor:
-        """``(n, n)`` T⁻¹, float64."""
+        """``(n_j, n)`` q_j = T⁻¹ q (the inverse of a square T, the rolling map S otherwise), float64."""
         return torch.from_numpy(self.Tinv_np)
 
     @functools.cached_property
