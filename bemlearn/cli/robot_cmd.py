@@ -63,9 +63,10 @@ def _info(args) -> int:
     note = getattr(r, "qu_nominal_note", None)
     if note:
         print(f"upright    {note}")
-    rolling = getattr(r, "rolling", None)
-    if rolling is not None:
-        print(f"rolling    {rolling.describe(r.model)}")
+    from bemlearn.robots import MujocoRobot
+
+    if isinstance(r, MujocoRobot) and r.rolling is not None:
+        print(f"rolling    {r.rolling.describe(r.model)}")
     from bemlearn.robots.scales import upright_stiffness
 
     stiffness = upright_stiffness(r)[0]
