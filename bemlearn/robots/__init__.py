@@ -10,6 +10,7 @@ if TYPE_CHECKING:  # imported on first use: bemlearn._lazy
     from bemlearn.robots.protocol import BalanceRobot, ControlRobot
     from bemlearn.robots.registry import ROBOTS, RobotRef, load, register_robot, registered_robots, resolve_robot
     from bemlearn.robots.robot import Robot
+    from bemlearn.robots.rolling import RollingContact, RollingMap, find_rolling, kkt_acceleration
 
 __all__ = [
     "BEMResult",
@@ -18,6 +19,10 @@ __all__ = [
     "MujocoRobot",
     "ROBOTS",
     "Robot",
+    "RollingContact",
+    "RollingMap",
+    "find_rolling",
+    "kkt_acceleration",
     "RobotModelError",
     "RobotRef",
     "load",
