@@ -183,6 +183,8 @@ class MujocoRobot(Robot):
         self.mjcf_joint_names = tuple(names)
         self._qadr = np.array(model.jnt_qposadr, dtype=np.int64)
         self._dadr = np.array(model.jnt_dofadr, dtype=np.int64)
+        # MuJoCo's RNE leaves out the rotor inertia (armature) that its mass matrix holds: added to every q̈ term
+        self._armature = np.array(model.dof_armature[self._dadr], dtype=np.float64)
         # input matrix in joint coordinates (nv x nu)
         Bj = np.zeros((n, model.nu))
         dof_to_joint = {int(a): j for j, a in enumerate(self._dadr)}
@@ -390,7 +392,7 @@ class MujocoRobot(Robot):
             if qddj is not None:
                 d.qacc[self._dadr] = qddj[b]
             mujoco.mj_rne(self.model, d, 0 if qddj is None else 1, self._vec)
-            out[b] = self._vec[self._dadr]
+            out[b] = self._vec[self._dadr] + (0.0 if qddj is None else self._armature * qddj[b])
         return out
 
     def bias(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
@@ -423,7 +425,7 @@ class MujocoRobot(Robot):
             mujoco.mj_passive(m, d)
             d.qacc[dadr] = qddj[b]
             mujoco.mj_rne(m, d, 1, vec)
-            out[b] = vec[dadr] - d.qfrc_passive[dadr]
+            out[b] = vec[dadr] + self._armature * qddj[b] - d.qfrc_passive[dadr]
         return self._from_joint_force(out)
 
     # ---- single-state numpy fast path (control loops) ------------------------------------
@@ -465,7 +467,7 @@ class MujocoRobot(Robot):
         mujoco.mj_passive(m, d)
         d.qacc[self._dadr] = Tinv @ qdd
         mujoco.mj_rne(m, d, 1, self._vec)
-        return float((Tinv.T @ (self._vec[self._dadr] - d.qfrc_passive[self._dadr]))[u])
+        return float((Tinv.T @ (self._vec[self._dadr] + self._armature * (Tinv @ qdd) - d.qfrc_passive[self._dadr]))[u])
 
     # ---- kinematics --------------------------------------------------------------------
     @property
