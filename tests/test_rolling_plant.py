@@ -75,3 +75,20 @@ def test_the_linearisation_of_mujoco_matches_the_reduced_model(robot):
     assert rate_mujoco == pytest.approx(rate_model, rel=1e-3)
     # the input's effect on the rates within one tick: Euler substeps and the soft contact (measured 1.3 %)
     np.testing.assert_allclose(B[n:, 0], E[n: 2 * n, 2 * n], rtol=0.02)
+
+
+def test_config_show_names_the_rolling_coordinates_zero_config():
+    """A config naming only the robot resolves (no 'two undriven joints' refusal) and says how the coordinates came about."""
+    from bemlearn.pipeline.resolve import format_resolved, resolve_pipeline_config
+
+    resolved = resolve_pipeline_config({"robot": str(WHEEL)})
+    text = format_resolved(resolved)
+    assert "# robot: coordinates spin (q_a), pitch (q_u); travel = 0.118·spin (rolling without slip: tyre r_eff 0.118 m" in text
+
+
+def test_the_wheel_half_range_comes_from_the_slide_it_rolls(robot):
+    """The excitation and evaluation amplitudes are capped by q_a's half range: ±3 m of slide → ±3 / r_eff rad of wheel."""
+    from bemlearn.robots.scales import qa_half_ranges, qa_limited
+
+    np.testing.assert_allclose(qa_half_ranges(robot), [3.0 / R_EFF], rtol=1e-12)
+    assert qa_limited(robot).tolist() == [True]
