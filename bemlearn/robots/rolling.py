@@ -290,7 +290,10 @@ def kkt_acceleration(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarra
     (reduced to a basis of their span: redundant contact points carry the same constraint).
 
     Args:
-        qpos, qvel: ``(n_j,)`` joint positions (rad / m) and velocities (rad/s, m/s), consistent with the constraint.
+        model: the MuJoCo model.
+        data: a scratch ``MjData`` of ``model`` (overwritten).
+        qpos: ``(n_j,)`` joint positions (rad / m), on the constraint.
+        qvel: ``(n_j,)`` joint velocities (rad/s, m/s), consistent with the constraint.
         force: ``(n_j,)`` applied generalized force f (e.g. B_j u), N·m / N.
         wheels: :func:`wheel_geoms` of the model.
         fd_step: ε, s.
