@@ -178,3 +178,81 @@ def test_other_robots_keep_their_joints_as_coordinates():
         assert robot.rolling is None
         assert robot.identity_coordinates
         assert robot.joint_names == robot.mjcf_joint_names
+
+
+# ---- the class, not the example: seeded wheeled pendulums of other conventions -------------------------------
+
+def _generated(rng: np.random.Generator, path: Path) -> dict:
+    """A random planar wheeled pendulum: travel along x or y, wheel and pendulum axes of either sign, cylinder or
+    ball wheel, 1–10 mm into the ground, an off-axis pendulum hinged at or above the axle, armature and damping."""
+    along_x = bool(rng.integers(2))
+    e = np.array([1.0, 0.0, 0.0]) if along_x else np.array([0.0, 1.0, 0.0])
+    side = np.array([0.0, 1.0, 0.0]) if along_x else np.array([1.0, 0.0, 0.0])
+    w = side * rng.choice([-1.0, 1.0])            # wheel axis
+    a = side * rng.choice([-1.0, 1.0])            # pendulum axis
+    radius = float(rng.uniform(0.05, 0.3))
+    depth = float(rng.uniform(0.001, 0.01))
+    hub = radius - depth
+    c_t, c_z = float(rng.uniform(-0.03, 0.03)), float(rng.uniform(0.1, 0.6))
+    lift = float(rng.choice([0.0, rng.uniform(0.01, 0.1)]))
+    ball = bool(rng.integers(2))
+    euler = "1.5707963267948966 0 0" if along_x else "0 1.5707963267948966 0"
+    tyre = (f'<geom name="tyre" type="sphere" size="{radius!r}" contype="1" conaffinity="1"/>' if ball else
+            f'<geom name="tyre" type="cylinder" size="{radius!r} 0.02" euler="{euler}" contype="1" conaffinity="1"/>')
+    fmt = lambda v: " ".join(repr(float(x)) for x in v)  # noqa: E731
+    com = c_t * e + np.array([0.0, 0.0, c_z - lift])
+    arm, damp = float(rng.uniform(0.0, 0.5)), float(rng.uniform(0.0, 0.5))
+    path.write_text(f"""
+<mujoco model="generated">
+  <compiler angle="radian" inertiafromgeom="false"/>
+  <default><joint armature="{arm!r}" damping="{damp!r}"/><geom contype="0" conaffinity="0"/></default>
+  <worldbody>
+    <geom name="ground" type="plane" size="10 10 0.1" contype="1" conaffinity="1"/>
+    <body name="base" pos="0 0 {hub!r}">
+      <joint name="travel" type="slide" axis="{fmt(e)}" range="-4 4" limited="true"/>
+      <inertial pos="0 0 0" mass="{rng.uniform(0.2, 3.0)!r}" diaginertia="0.01 0.01 0.01"/>
+      <body name="wheel"><joint name="wheel" type="hinge" axis="{fmt(w)}" range="-inf inf" limited="true"/>
+        <inertial pos="0 0 0" mass="{rng.uniform(0.1, 2.0)!r}" diaginertia="0.005 0.005 0.005"/>{tyre}</body>
+      <body name="arm" pos="0 0 {lift!r}"><joint name="lean" type="hinge" axis="{fmt(a)}" range="-1.3 1.3" limited="true"/>
+        <inertial pos="{fmt(com)}" mass="{rng.uniform(0.3, 5.0)!r}" diaginertia="0.02 0.02 0.003"/></body>
+    </body>
+  </worldbody>
+  <actuator><motor joint="wheel" gear="{rng.uniform(0.5, 50.0)!r}"/></actuator>
+</mujoco>""")
+    return {"e": e, "w": w, "a": a, "r_eff": 0.5 * (hub + radius), "com": com}
+
+
+def _oracle_pitch(p: dict, alpha: float) -> float:
+    """Independent of MuJoCo: x-acceleration from no slip at the contact point r_eff below the hub,
+    ẍ = r_eff α e·(w × ẑ); the pendulum's centre p(φ) = Rot(a, φ) com; balance (a × p)·(ẍ e + g ẑ) = 0."""
+    from scipy.optimize import brentq
+
+    z = np.array([0.0, 0.0, 1.0])
+    xdd = p["r_eff"] * alpha * float(p["e"] @ np.cross(p["w"], z))
+    a, c = p["a"], p["com"]
+
+    def rot(phi: float) -> np.ndarray:   # Rodrigues
+        return c * math.cos(phi) + np.cross(a, c) * math.sin(phi) + a * (a @ c) * (1 - math.cos(phi))
+
+    f = lambda phi: float(np.cross(a, rot(phi)) @ (xdd * p["e"] + G * z))  # noqa: E731
+    up = brentq(lambda phi: float(np.cross(a, rot(phi)) @ z), -0.5, 0.5)   # centre of mass straight above the hinge
+    return brentq(f, up - 1.2, up + 1.2) if f(up - 1.2) * f(up + 1.2) < 0 else math.nan
+
+
+def test_generated_wheeled_pendulums_match_the_independent_balance(tmp_path):
+    rng = np.random.default_rng(20261127)
+    alpha = np.linspace(-20.0, 20.0, 9)
+    for k in range(8):
+        path = tmp_path / f"generated_{k}.xml"
+        p = _generated(rng, path)
+        robot = load(path)
+        assert robot.joint_names == ("wheel", "lean"), path.read_text()
+        (contact,) = robot.rolling.contacts
+        assert contact.radius == pytest.approx(p["r_eff"], abs=1e-9)
+        res = robot.bem(np.zeros((alpha.size, 1)), np.full((alpha.size, 1), 3.0), alpha[:, None])
+        ref = np.array([_oracle_pitch(p, float(x)) for x in alpha])
+        ok = np.isfinite(ref)
+        assert ok.sum() >= 5
+        np.testing.assert_array_equal(res.valid.numpy()[ok], True)
+        err = np.degrees(np.abs(res.qu.numpy()[ok] - ref[ok]))
+        assert err.max() <= 0.01, (k, err.max())
