@@ -43,7 +43,8 @@ def _list(args) -> int:
     for app in applications().values():
         for name in app.robots:
             print(f"{name:<18} {app.name} application: {app.description}")
-    print("any MJCF file of this class by path (hinge/slide joints, exactly one not driven by an actuator)")
+    print("any MJCF file of this class by path (hinge/slide joints, exactly one not driven by an actuator "
+          "besides those that only roll with a wheel)")
     return 0
 
 
