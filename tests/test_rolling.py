@@ -256,3 +256,57 @@ def test_generated_wheeled_pendulums_match_the_independent_balance(tmp_path):
         np.testing.assert_array_equal(res.valid.numpy()[ok], True)
         err = np.degrees(np.abs(res.qu.numpy()[ok] - ref[ok]))
         assert err.max() <= 0.01, (k, err.max())
+
+
+# ---- the wheel hinged on the pendulum (its motor's stator in the body, as on most two-wheeled robots) ---------
+
+M_CHASSIS, M_BODY, M_WHEEL, I_WHEEL, L_BODY, B_SLIDE = 0.5, 2.0, 0.4, 0.003, 0.3, 0.4
+HUB2, RADIUS2 = 0.079, 0.08
+
+
+def _body_mounted(path: Path) -> Path:
+    path.write_text(f"""
+<mujoco model="body_mounted">
+  <compiler angle="radian" inertiafromgeom="false"/>
+  <default><geom contype="0" conaffinity="0"/></default>
+  <worldbody>
+    <geom name="ground" type="plane" size="10 10 0.1" contype="1" conaffinity="1"/>
+    <body name="chassis" pos="0 0 {HUB2}">
+      <joint name="x" type="slide" axis="1 0 0" damping="{B_SLIDE}"/>
+      <inertial pos="0 0 0" mass="{M_CHASSIS}" diaginertia="0.001 0.001 0.001"/>
+      <body name="body"><joint name="pitch" type="hinge" axis="0 1 0" range="-1.2 1.2"/>
+        <inertial pos="0 0 {L_BODY}" mass="{M_BODY}" diaginertia="0.05 0.05 0.004"/>
+        <body name="wheel"><joint name="wheel" type="hinge" axis="0 1 0"/>
+          <inertial pos="0 0 0" mass="{M_WHEEL}" diaginertia="0.002 {I_WHEEL} 0.002"/>
+          <geom name="tyre" type="cylinder" size="{RADIUS2} 0.015" euler="1.5707963267948966 0 0" contype="1" conaffinity="1"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+  <actuator><motor joint="wheel"/></actuator>
+</mujoco>""")
+    return path
+
+
+def test_a_wheel_hinged_on_the_pendulum_makes_the_slide_dependent(tmp_path):
+    """x = r(θ + φ): both the slide and the pendulum could be solved for; the slide is taken.
+
+    Reference: with θ the wheel's angle relative to the body and φ̇ = φ̈ = 0, the body's row in (θ, φ)
+    (the generalized force of turning the body with the wheel locked to it, which rolls the chassis) is
+    (I_w + M r² + m l r cos φ) θ̈ + b_x r² θ̇ − m g l sin φ = 0, M the mass that translates.
+    """
+    from scipy.optimize import brentq
+
+    robot = load(_body_mounted(tmp_path / "body_mounted.xml"))
+    assert robot.joint_names == ("pitch", "wheel") and robot.unactuated_name == "pitch"
+    assert [robot.model.joint(j).name for j in robot.rolling.dependent] == ["x"]
+    r = 0.5 * (HUB2 + RADIUS2)
+    np.testing.assert_allclose(robot.Tinv_np[0], [r, r], rtol=1e-12)   # x = r (φ + θ)
+    total = M_CHASSIS + M_BODY + M_WHEEL
+    for alpha, omega in ((-15.0, 0.0), (-4.0, 6.0), (0.0, 20.0), (7.0, -3.0), (18.0, 2.0)):
+        def balance(phi: float, alpha=alpha, omega=omega) -> float:
+            return ((I_WHEEL + total * r**2 + M_BODY * L_BODY * r * math.cos(phi)) * alpha + B_SLIDE * r**2 * omega
+                    - M_BODY * G * L_BODY * math.sin(phi))
+        ref = brentq(balance, -1.2, 1.2)
+        res = robot.bem(np.zeros((1, 1)), np.array([[omega]]), np.array([[alpha]]))
+        assert math.degrees(abs(float(res.qu[0]) - ref)) <= 1e-6

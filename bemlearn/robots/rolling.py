@@ -19,7 +19,9 @@ a planar wheel with base slide x and angle θ gives ẋ = r_eff θ̇.
 **Dependent freedoms.**  The rows of (R1) over all rolling contacts, reduced to an orthonormal
 basis of their span, form J (r × n_j).  The joints split into independent (i) and dependent (d)
 ones, where the dependent ones are r joints without an actuator whose block J_d is invertible and
-that leave exactly one joint without an actuator (the unactuated coordinate):
+that leave exactly one joint without an actuator (the unactuated coordinate); where several choices
+fit (a wheel hinged on the pendulum rolls with the chassis slide *and* the pendulum), the one made of
+slides alone is taken (the chassis translates because the wheel rolls), else the robot is refused:
 
     q̇_j = S q̇,   S_i = I,   S_d = −J_d⁻¹ J_i,   J S = 0.                                      (R2)
 
@@ -227,6 +229,9 @@ def find_rolling(model: mujoco.MjModel, undriven: Sequence[int], *, where: str) 
             choices.append(dep)
     if not choices:
         return None
+    if len(choices) > 1:   # a chassis that translates only by rolling: prefer the one choice made of slides alone
+        slides = [c for c in choices if all(int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_SLIDE) for j in c)]
+        choices = slides if len(slides) == 1 else choices
     if len(choices) > 1:
         options = " or ".join("(" + ", ".join(_joint_name(model, j) for j in c) + ")" for c in choices)
         raise RobotModelError(f"{where}: rolling contacts make {r} of the joints without an actuator dependent, but which "
