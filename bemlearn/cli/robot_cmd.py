@@ -68,6 +68,11 @@ def _info(args) -> int:
 
     if isinstance(r, MujocoRobot) and r.rolling is not None:
         print(f"rolling    {r.rolling.describe(r.model)}")
+    from bemlearn.robots.cyclic import cyclic_coordinates
+
+    cyclic = [name for name, c in zip(r.joint_names, cyclic_coordinates(r)) if c]
+    if cyclic:
+        print(f"cyclic     {', '.join(cyclic)}: the dynamics (D, h of eq. 1) do not depend on {'its' if len(cyclic) == 1 else 'their'} position")
     from bemlearn.robots.scales import upright_stiffness
 
     stiffness = upright_stiffness(r)[0]
