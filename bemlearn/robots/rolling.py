@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from bemlearn.errors import RobotModelError
+from bemlearn.errors import NumericalError, RobotModelError
 from bemlearn.robots._mujoco_compat import full_mass_matrix
 
 __all__ = ["RollingContact", "RollingMap", "find_rolling", "rolling_rows", "wheel_geoms", "kkt_acceleration"]
@@ -285,7 +285,7 @@ def _describe_contacts(model: mujoco.MjModel, data: mujoco.MjData, found: list[t
 
 
 def kkt_acceleration(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, qvel: np.ndarray, force: np.ndarray,
-                     wheels: dict[int, int], *, fd_step: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+                     wheels: dict[int, int], *, fd_step: float = 1e-6, drift: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """q̈_j and λ of the hard-constraint dynamics (R3) at one state, with MuJoCo's M, bias and contact Jacobians.
 
         [ M   −Jᵀ ] [ q̈_j ]   [ f − c ]
@@ -302,6 +302,7 @@ def kkt_acceleration(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarra
         force: ``(n_j,)`` applied generalized force f (e.g. B_j u), N·m / N.
         wheels: :func:`wheel_geoms` of the model.
         fd_step: ε, s.
+        drift: include J̇ q̇ (``False`` solves J q̈_j = 0 instead: what a constraint without its drift term gives).
 
     Returns:
         ``(q̈_j (n_j,), λ (r,))``.
@@ -314,8 +315,13 @@ def kkt_acceleration(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarra
     basis = _row_basis(J0)
     # J̇ q̇ in the same row combination: the rows at q ± ε q̇ projected on the basis at q
     coeff = np.linalg.lstsq(J0.T, basis.T, rcond=None)[0].T            # basis = coeff @ J0
-    Jp, Jm = rows_at(qpos + fd_step * qvel), rows_at(qpos - fd_step * qvel)
-    jdot_qd = coeff @ ((Jp - Jm) @ qvel) / (2 * fd_step) if Jp.shape == Jm.shape == J0.shape else np.zeros(basis.shape[0])
+    jdot_qd = np.zeros(basis.shape[0])
+    if drift:
+        Jp, Jm = rows_at(qpos + fd_step * qvel), rows_at(qpos - fd_step * qvel)
+        if not Jp.shape == Jm.shape == J0.shape:
+            raise NumericalError(f"kkt_acceleration: the rolling contacts change within ±{fd_step:g} s of the state; "
+                                 "J̇ q̇ cannot be differenced there")
+        jdot_qd = coeff @ ((Jp - Jm) @ qvel) / (2 * fd_step)
     data.qpos[:], data.qvel[:] = qpos, qvel
     mujoco.mj_forward(model, data)
     M = full_mass_matrix(model, data, np.zeros((model.nv, model.nv)))
