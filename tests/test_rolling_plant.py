@@ -92,3 +92,13 @@ def test_the_wheel_half_range_comes_from_the_slide_it_rolls(robot):
 
     np.testing.assert_allclose(qa_half_ranges(robot), [3.0 / R_EFF], rtol=1e-12)
     assert qa_limited(robot).tolist() == [True]
+
+
+def test_robot_info_shows_the_rolling_map_and_the_cyclic_wheel(capsys):
+    from bemlearn.cli.main import main
+
+    assert main(["robot", "info", str(WHEEL)]) == 0
+    out = capsys.readouterr().out
+    assert "joints     spin (hinge, rad), pitch (hinge, rad)" in out
+    assert "rolling    travel = 0.118·spin (rolling without slip: tyre r_eff 0.118 m (geometric 0.12 m, 2 contact points))" in out
+    assert "cyclic     spin: the dynamics (D, h of eq. 1) do not depend on its position" in out
