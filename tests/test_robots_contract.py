@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 import torch
 
@@ -27,14 +29,18 @@ CARTPOLE = """
 
 
 def _robot(name, tmp_path_factory):
-    if name == "cartpole":
-        path = tmp_path_factory.mktemp("mjcf") / "cartpole.xml"
-        path.write_text(CARTPOLE)
+    if name in ("cartpole", "cartpole-armature"):
+        path = tmp_path_factory.mktemp("mjcf") / f"{name}.xml"
+        # armature: rotor inertia MuJoCo's mass matrix holds and its RNE leaves out
+        path.write_text(CARTPOLE if name == "cartpole" else CARTPOLE.replace("<joint ", '<joint armature="0.05" '))
         return load(path)
+    if name == "wheel_pendulum":   # a chassis that rolls with its wheel: coordinates (wheel, pendulum)
+        return load(Path(__file__).resolve().parent / "robots" / "wheel_pendulum.xml")
     return load(name)
 
 
-@pytest.fixture(scope="module", params=["furuta", "furuta-analytic", "furuta-paper", "biped", "cartpole"])
+@pytest.fixture(scope="module", params=["furuta", "furuta-analytic", "furuta-paper", "biped", "cartpole", "cartpole-armature",
+                                        "wheel_pendulum"])
 def robot(request, tmp_path_factory):
     return _robot(request.param, tmp_path_factory)
 

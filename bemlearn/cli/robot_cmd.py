@@ -43,7 +43,8 @@ def _list(args) -> int:
     for app in applications().values():
         for name in app.robots:
             print(f"{name:<18} {app.name} application: {app.description}")
-    print("any MJCF file of this class by path (hinge/slide joints, exactly one not driven by an actuator)")
+    print("any MJCF file of this class by path (hinge/slide joints, exactly one not driven by an actuator "
+          "besides those that only roll with a wheel)")
     return 0
 
 
@@ -63,6 +64,15 @@ def _info(args) -> int:
     note = getattr(r, "qu_nominal_note", None)
     if note:
         print(f"upright    {note}")
+    from bemlearn.robots import MujocoRobot
+
+    if isinstance(r, MujocoRobot) and r.rolling is not None:
+        print(f"rolling    {r.rolling.describe(r.model)}")
+    from bemlearn.robots.cyclic import cyclic_coordinates
+
+    cyclic = [name for name, c in zip(r.joint_names, cyclic_coordinates(r)) if c]
+    if cyclic:
+        print(f"cyclic     {', '.join(cyclic)}: the dynamics (D, h of eq. 1) do not depend on {'its' if len(cyclic) == 1 else 'their'} position")
     from bemlearn.robots.scales import upright_stiffness
 
     stiffness = upright_stiffness(r)[0]
@@ -127,8 +137,8 @@ def _lemma1(args) -> int:
 def _units(robot) -> tuple[str, str, str]:
     """Units of q_a, of the unactuated row's generalized force, and of q_u (by joint kind)."""
 
-    kinds = getattr(robot, "joint_kinds", None)
-    if kinds is None or not robot.identity_coordinates:
+    kinds = robot.coordinate_kinds if getattr(robot, "coordinate_joints", None) is not None else None
+    if kinds is None:
         return "rad", "N·m", "rad"
     ka = {kinds[i] for i in robot.actuated_index}
     qa = "rad" if ka == {"hinge"} else "m" if ka == {"slide"} else "rad or m"
@@ -155,9 +165,8 @@ def _lqr(args) -> int:
     d = design_region(robot).value
     res = discrete_lqr(robot, rate_hz=hz, timestep=h, design_qu=d, qu0=0.25 * d, qa0=initial_ranges(robot).value["initial_qa"][1])
     unit = input_units(robot).value
-    kinds = getattr(robot, "joint_kinds", ("hinge",) * robot.n)
-    pos = ["rad" if k == "hinge" else "m" for k in kinds]
-    if not robot.identity_coordinates:
+    pos = ["rad" if k == "hinge" else "m" for k in robot.coordinate_kinds]
+    if robot.coordinate_joints is None:
         pos = ["rad"] * robot.n
     cols = [f"{nm} [{unit}/{u}]" for nm, u in zip(robot.joint_names, pos)] + [f"d{nm} [{unit}/({u}/s)]" for nm, u in zip(robot.joint_names, pos)]
     print(f"robot      {robot.name}: u = K e, e = [q − q_t, q̇ − q̇_t]; {hz:g} Hz, {res.substeps} × {res.timestep:g} s physics steps")

@@ -128,15 +128,17 @@ def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = No
     A1 = np.zeros((nx, nx))
     B1 = np.zeros((nx, model.nu))
     mujoco.mjd_transitionFD(model, data, eps, True, A1, B1, None, None)
-    A1, B1 = A1[: 2 * n, : 2 * n], B1[: 2 * n]
-    AN, BN = np.eye(2 * n), np.zeros_like(B1)
+    nv = model.nv
+    A1, B1 = A1[: 2 * nv, : 2 * nv], B1[: 2 * nv]
+    AN, BN = np.eye(2 * nv), np.zeros_like(B1)
     for _ in range(N):
         BN = A1 @ BN + B1
         AN = A1 @ AN
-    T = robot.T_np
-    S = np.block([[T, np.zeros((n, n))], [np.zeros((n, n)), T]])
-    Sinv = np.linalg.inv(S)
-    return S @ AN @ Sinv, S @ BN, N, h
+    # state in coordinates: x = P x_j, x_j = P⁺ x (P⁺ = P⁻¹ for a square map; the rolling map S otherwise)
+    T, Tinv = robot.T_np, robot.Tinv_np
+    P = np.block([[T, np.zeros_like(T)], [np.zeros_like(T), T]])
+    Pplus = np.block([[Tinv, np.zeros_like(Tinv)], [np.zeros_like(Tinv), Tinv]])
+    return P @ AN @ Pplus, P @ BN, N, h
 
 
 def _model_copy(model: mujoco.MjModel, timestep: float | None) -> mujoco.MjModel:
@@ -229,9 +231,9 @@ def actuator_limits(robot: MujocoRobot) -> ActuatorLimits:
 
 
 def _limited_actuated(robot: MujocoRobot) -> np.ndarray:
-    if not robot.identity_coordinates:
-        return np.ones(robot.m, dtype=bool)
-    return np.array([bool(robot.model.jnt_limited[j]) for j in robot.actuated_index])
+    from bemlearn.robots.scales import qa_limited
+
+    return qa_limited(robot)
 
 
 def _lqr_scaled(robot: MujocoRobot, A: np.ndarray, B: np.ndarray, Q0: np.ndarray, R0: np.ndarray, Qf: np.ndarray | None,

@@ -60,7 +60,8 @@ class PipelineConfig:
 
     Attributes:
         robot: the robot: a registry name (``bemlearn robot list``) or the path of an MJCF file of this
-            class (hinge/slide joints, exactly one no actuator drives). A path always means that file.
+            class (hinge/slide joints, exactly one no actuator drives besides those that only roll with a
+            wheel, docs/wheeled.md). A path always means that file.
         data: a trajectory file to train on instead of collecting. Without ``robot`` the run is model-free.
         model: model-free runs only: a registry name or MJCF path whose model-based BEM the learned one
             is compared with (nothing is compared without it). It derives the ``evaluate`` references

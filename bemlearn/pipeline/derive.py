@@ -241,9 +241,9 @@ def reference_effort(robot, amplitude: float, omega: float) -> float:
 
 
 def _limited_actuated(robot) -> np.ndarray:
-    if not robot.identity_coordinates:
-        return np.ones(robot.m, dtype=bool)
-    return np.array([bool(robot.model.jnt_limited[j]) for j in robot.actuated_index])
+    from bemlearn.robots.scales import qa_limited
+
+    return qa_limited(robot)
 
 
 def fall_window(robot) -> Derived:
@@ -270,7 +270,7 @@ def sensor(robot, rate: RateChoice) -> Derived:
     """
     lam = instability_rate(robot)
     wc = float(np.clip(10 * lam, 50.0, 0.2 * 2 * math.pi * rate.rate_hz))
-    slide = "slide" in getattr(robot, "joint_kinds", ())
+    slide = "slide" in getattr(robot, "coordinate_kinds", ())   # the measured coordinates (a rolling slide is not one)
     out = {"counts_per_rev": 4096, "noise_std": 0.0, "velocity_cutoff": wc, "m_per_count": 2.5e-5 if slide else 0.0}
     note = f"hinges 4096 counts/rev{', slides 2.5e-5 m/count' if slide else ''} (defaults, not from the model); velocity filter {wc:.3g} rad/s = clip(10 λ, 50, 0.2·2π·rate)"
     return Derived(out, note)

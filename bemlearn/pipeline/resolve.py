@@ -70,12 +70,15 @@ class ResolvedConfig:
             estimator's σ) or ``"default"``.
         notes: dotted key → one line on how a derived value was obtained.
         source: where the config came from (file path or ``"<dict>"``).
+        robot_notes: what the robot's model determines beyond config keys (its coordinates when they are
+            not its joints one to one: a freedom that rolls with a wheel), one line each.
     """
 
     config: PipelineConfig
     origins: dict[str, Origin]
     notes: dict[str, str]
     source: str
+    robot_notes: tuple[str, ...] = ()
 
     def to_json_dict(self) -> dict[str, Any]:
         """``{key: {"value", "origin", "note"}}`` for every leaf value (saved with each run)."""
@@ -125,6 +128,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
     given = set(flatten(raw))
     parsed = from_dict(PipelineConfig, raw, where=source)  # strict check of what was given
     notes: dict[str, str] = {}
+    robot_notes: tuple[str, ...] = ()
     if derive and parsed.robot is not None:
         from bemlearn.pipeline.derived_defaults import derive_pipeline_values
         from bemlearn.robots import load
@@ -149,6 +153,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
                 notes[key] = note
         parsed = from_dict(PipelineConfig, raw, where=source)
         _check_for_robot(parsed, robot, source)
+        robot_notes = _robot_notes(robot)
     elif derive and parsed.model is not None:   # model-free run compared with a model: its references from the model
         from bemlearn.pipeline.derived_defaults import derive_model_values
         from bemlearn.robots import load
@@ -181,7 +186,16 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
             origins[key] = "derived"
         else:
             origins[key] = "default"
-    return ResolvedConfig(parsed, origins, {k: v for k, v in notes.items()}, source)
+    return ResolvedConfig(parsed, origins, {k: v for k, v in notes.items()}, source, robot_notes)
+
+
+def _robot_notes(robot: Any) -> tuple[str, ...]:
+    """The coordinates of a robot whose freedoms roll with a wheel (``bemlearn.robots.rolling``), for ``config show``."""
+    rolling = getattr(robot, "rolling", None)
+    if rolling is None:
+        return ()
+    return (f"coordinates {', '.join(robot.actuated_names)} (q_a), {robot.unactuated_name} (q_u); "
+            f"{rolling.describe(robot.model)}",)
 
 
 def load_pipeline_config(path: str | Path) -> PipelineConfig:
@@ -218,6 +232,7 @@ def format_resolved(resolved: ResolvedConfig) -> str:
     width = max(len(k) for k in rows)
     lines = [f"# {resolved.source}: every value with its origin (given / derived from the model / data: chosen from the "
              "training data when training / default)"]
+    lines += [f"# robot: {note}" for note in resolved.robot_notes]
     for key, r in rows.items():
         value = json.dumps(_shown(r["value"]), ensure_ascii=False) if not isinstance(r["value"], str) else r["value"]
         if len(value) > 60:

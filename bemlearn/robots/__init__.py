@@ -6,10 +6,12 @@ from bemlearn._lazy import lazy_namespace
 
 if TYPE_CHECKING:  # imported on first use: bemlearn._lazy
     from bemlearn.robots.bem import BEMResult, find_roots, solve_bem
+    from bemlearn.robots.cyclic import cyclic_coordinates
     from bemlearn.robots.mujoco_robot import MujocoRobot, RobotModelError
     from bemlearn.robots.protocol import BalanceRobot, ControlRobot
     from bemlearn.robots.registry import ROBOTS, RobotRef, load, register_robot, registered_robots, resolve_robot
     from bemlearn.robots.robot import Robot
+    from bemlearn.robots.rolling import RollingContact, RollingMap, find_rolling, kkt_acceleration
 
 __all__ = [
     "BEMResult",
@@ -18,6 +20,10 @@ __all__ = [
     "MujocoRobot",
     "ROBOTS",
     "Robot",
+    "RollingContact",
+    "RollingMap",
+    "find_rolling",
+    "kkt_acceleration",
     "RobotModelError",
     "RobotRef",
     "load",
@@ -26,6 +32,7 @@ __all__ = [
     "resolve_robot",
     "solve_bem",
     "find_roots",
+    "cyclic_coordinates",
 ]
 
 __getattr__, __dir__ = lazy_namespace(__name__, __file__)

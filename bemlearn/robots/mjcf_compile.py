@@ -5,7 +5,9 @@
   compile as well.  :func:`check_finite_attributes` reads the file (and the files it
   ``<include>``\\ s) as XML, without compiling, and refuses any physical attribute
   (:data:`NUMERIC_ATTRIBUTES`: masses, inertias, sizes, positions, ranges, gains, damping, …)
-  holding NaN or ±inf, naming the file, the element and the attribute.
+  holding NaN or ±inf, naming the file, the element and the attribute.  One exception: a joint's
+  ``range`` may be ``"-inf inf"`` (a joint without limits, e.g. a wheel;
+  :class:`~bemlearn.robots.MujocoRobot` treats it as unlimited); NaN is refused there too.
 * **Signals.**  A Python signal handler runs only between bytecodes, so SIGINT / SIGTERM sent
   while MuJoCo's C compiler works on a model of 10⁴–10⁵ bodies waited for the compiler (55 s,
   or > 10 min).  :func:`compile_mjcf` compiles files larger than :data:`CHILD_COMPILE_BYTES`
@@ -78,9 +80,17 @@ def check_finite_attributes(path: str | os.PathLike[str]) -> None:
     for file, root in _files(Path(path)):
         for element in root.iter():
             for attr, value in element.attrib.items():
+                if attr == "range" and element.tag == "joint" and _unbounded_range(value):
+                    continue
                 if attr in NUMERIC_ATTRIBUTES and any(tok.lower() in _NON_FINITE for tok in value.split()):
                     raise RobotModelError(f"{file}: {_describe(element, attr)}: {attr} is not finite (NaN or inf); "
                                           "expected finite numbers")
+
+
+def _unbounded_range(value: str) -> bool:
+    """True for a joint range whose two ends are −∞ and +∞ (a joint without limits)."""
+    tokens = [tok.lower().lstrip("+") for tok in value.split()]
+    return len(tokens) == 2 and tokens[0] in ("-inf", "-infinity") and tokens[1] in ("inf", "infinity")
 
 
 def _size(path: Path) -> int:

@@ -22,6 +22,13 @@ torso angle as its unactuated coordinate:
 
 With q_j = T⁻¹ q, the dynamics transform as D = T⁻ᵀ D_j T⁻¹, C q̇ + G = T⁻ᵀ (C q̇ + G)_j,
 τ_p = T⁻ᵀ τ_p,j and B = T⁻ᵀ B_j (T constant, so no extra velocity terms).
+
+Rolling.  When more than one joint has no actuator and a wheel's rolling contact determines all
+but one of them (a chassis slide that moves only because the wheel rolls), those joints are
+dependent (:mod:`bemlearn.robots.rolling`): the coordinates are the other joints, q_j = S q with a
+constant ``(n_j, n)`` map S (x = r_eff θ), and the dynamics transform with S in the place of T⁻¹:
+D = Sᵀ D_j S, h = Sᵀ h_j, B = Sᵀ B_j (eq. R4 there: the hard no-slip constraint's KKT system with
+the constraint force projected out).  T is then the ``(n, n_j)`` selection of the independent joints.
 """
 
 from __future__ import annotations
@@ -39,6 +46,7 @@ from bemlearn._lazy import lazy_module
 from bemlearn.errors import MissingFileError, RobotModelError
 from bemlearn.robots._mujoco_compat import full_mass_matrix, make_mass_matrix
 from bemlearn.robots.robot import Robot, as_batch
+from bemlearn.robots.rolling import RollingMap, find_rolling
 from bemlearn.robots.upright import UprightSearch, find_upright
 from bemlearn.warnings import RobotModelWarning, warn
 
@@ -84,6 +92,27 @@ _FINITE_ARRAYS = (("body_mass", "body mass"), ("body_inertia", "body inertia"), 
                   ("actuator_biasprm", "actuator bias"), ("geom_size", "geom size"))
 
 
+def _unlimit_unbounded_joints(model: mujoco.MjModel, where: str) -> None:
+    """A joint whose range is (−∞, +∞) (MJCF ``range="-inf inf"``, e.g. a wheel) has no limits: it is made
+    unlimited in ``model`` (``jnt_limited = 0``, range 0 0; MuJoCo never activates an infinite limit, so the
+    physics is the same).  Every other range must be finite.
+
+    Raises:
+        RobotModelError: a range with NaN or with one infinite end, naming the joint.
+    """
+    for j in np.flatnonzero(np.asarray(model.jnt_limited).astype(bool)):
+        lo, hi = (float(v) for v in model.jnt_range[j])
+        if np.isfinite(lo) and np.isfinite(hi):
+            continue
+        name = model.joint(int(j)).name or f"joint{j}"
+        if lo == -math.inf and hi == math.inf:
+            model.jnt_limited[j] = 0
+            model.jnt_range[j] = 0.0
+            continue
+        raise RobotModelError(f"{where}: <joint name=\"{name}\" range=\"{lo:g} {hi:g}\">: expected a finite range, "
+                              "or \"-inf inf\" for a joint without limits")
+
+
 def _check_physics(model: mujoco.MjModel, where: str) -> None:
     """What the simulation divides by or integrates must make sense: a positive, finite physics step,
     finite gravity and parameters, non-negative masses and damping, ranges with lo < hi.
@@ -123,8 +152,12 @@ class MujocoRobot(Robot):
     Attributes:
         identity_coordinates: True when the coordinates are the MJCF joints themselves (T = I; see
             the module docstring), so joint ranges and kinds apply to the coordinates directly.
-        T_np: ``(n, n)`` the coordinate map T as a NumPy array (:attr:`T` is the same numbers as a torch tensor).
-        Tinv_np: ``(n, n)`` T⁻¹ as a NumPy array (:attr:`Tinv` in torch).
+        coordinate_joints: the MJCF joint index of each coordinate when every coordinate is one joint
+            (T = I, or the independent joints of a rolling robot), else ``None`` (a declared map).
+        rolling: the :class:`~bemlearn.robots.rolling.RollingMap` when freedoms roll with a wheel, else ``None``.
+        T_np: ``(n, n_j)`` the coordinate map q = T q_j as a NumPy array (:attr:`T` is the same numbers as a
+            torch tensor); square unless the robot rolls.
+        Tinv_np: ``(n_j, n)`` the map back, q_j = T⁻¹ q (the rolling map S when the robot rolls; :attr:`Tinv` in torch).
         input_matrix_np: ``(n, nu)`` B = T⁻ᵀ B_j as a NumPy array (:attr:`input_matrix` in torch).
     """
 
@@ -134,6 +167,7 @@ class MujocoRobot(Robot):
         self.source = source or "<MjModel>"
         self.name = name or model.names[: model.names.find(b"\0")].decode() or "robot"
         where = f"{self.source}"
+        _unlimit_unbounded_joints(model, where)
         _check_physics(model, where)
         if model.njnt == 0:
             raise RobotModelError(f"{where}: the model has no joints")
@@ -150,6 +184,8 @@ class MujocoRobot(Robot):
         self.mjcf_joint_names = tuple(names)
         self._qadr = np.array(model.jnt_qposadr, dtype=np.int64)
         self._dadr = np.array(model.jnt_dofadr, dtype=np.int64)
+        # MuJoCo's RNE leaves out the rotor inertia (armature) that its mass matrix holds: added to every q̈ term
+        self._armature = np.array(model.dof_armature[self._dadr], dtype=np.float64)
         # input matrix in joint coordinates (nv x nu)
         Bj = np.zeros((n, model.nu))
         dof_to_joint = {int(a): j for j, a in enumerate(self._dadr)}
@@ -164,23 +200,39 @@ class MujocoRobot(Robot):
             Bj[dof_to_joint[int(self._dadr[j])], i] = model.actuator_gear[i, 0]
         # coordinate map
         T = _custom_numeric(model, "bemlearn_coordinates")
+        self.rolling: RollingMap | None = None
         if T is None:
             T = np.eye(n)
+            undriven = [j for j in range(n) if bool((np.abs(Bj[j]) < 1e-12).all())]
+            if len(undriven) > 1:   # freedoms that only roll with a wheel are not coordinates (robots.rolling)
+                self.rolling = find_rolling(model, undriven, where=where)
         elif T.size != n * n:
             raise RobotModelError(f"{where}: custom numeric 'bemlearn_coordinates' must have {n * n} entries (n×n), got {T.size}")
-        T = T.reshape(n, n)
-        if abs(np.linalg.det(T)) < 1e-12:
-            raise RobotModelError(f"{where}: 'bemlearn_coordinates' matrix is singular")
-        coord_names = _custom_text(model, "bemlearn_coordinate_names")
-        self.joint_names = tuple(coord_names.split()) if coord_names else tuple(names)
-        if len(self.joint_names) != n:
-            raise RobotModelError(f"{where}: 'bemlearn_coordinate_names' lists {len(self.joint_names)} names, expected {n}")
+        else:
+            T = T.reshape(n, n)
+            if abs(np.linalg.det(T)) < 1e-12:
+                raise RobotModelError(f"{where}: 'bemlearn_coordinates' matrix is singular")
         # numpy here, torch tensors on first use (T, Tinv, input_matrix): loading a robot does not load torch
-        self.T_np = np.array(T, dtype=np.float64)
-        self.Tinv_np = np.linalg.inv(self.T_np)
+        if self.rolling is not None:
+            self.T_np, self.Tinv_np = self.rolling.T.copy(), self.rolling.S.copy()
+            self.coordinate_joints: tuple[int, ...] | None = self.rolling.independent
+        else:
+            self.T_np = np.array(T, dtype=np.float64)
+            self.Tinv_np = np.linalg.inv(self.T_np)
+            self.coordinate_joints = tuple(range(n)) if bool(np.allclose(self.T_np, np.eye(n))) else None
+        nc = self.T_np.shape[0]
+        coord_names = _custom_text(model, "bemlearn_coordinate_names")
+        if coord_names:
+            self.joint_names = tuple(coord_names.split())
+        elif self.coordinate_joints is not None:
+            self.joint_names = tuple(names[j] for j in self.coordinate_joints)
+        else:
+            self.joint_names = tuple(names)
+        if len(self.joint_names) != nc:
+            raise RobotModelError(f"{where}: 'bemlearn_coordinate_names' lists {len(self.joint_names)} names, expected {nc}")
         self.input_matrix_np = self.Tinv_np.T @ Bj  # (n, nu): generalized force = B @ actuator force
-        self.identity_coordinates = bool(np.allclose(self.T_np, np.eye(n)))
-        zero_rows = [i for i in range(n) if bool((np.abs(self.input_matrix_np[i]) < 1e-12).all())]
+        self.identity_coordinates = self.rolling is None and self.coordinate_joints is not None
+        zero_rows = [i for i in range(nc) if bool((np.abs(self.input_matrix_np[i]) < 1e-12).all())]
         if len(zero_rows) != 1:
             desc = "no" if not zero_rows else f"{len(zero_rows)} ({[self.joint_names[i] for i in zero_rows]})"
             raise RobotModelError(
@@ -188,6 +240,12 @@ class MujocoRobot(Robot):
                 f"drives), found {desc}; joints: {list(self.joint_names)}, actuators: {model.nu}"
             )
         self.unactuated_index = zero_rows[0]
+        if self.coordinate_joints is not None:
+            self._coordinate_kinds = tuple(self.joint_kinds[j] for j in self.coordinate_joints)
+        elif len(set(self.joint_kinds)) == 1:  # a linear map of like joints keeps their kind
+            self._coordinate_kinds = (self.joint_kinds[0],) * n
+        else:
+            raise RobotModelError(f"{where}: 'bemlearn_coordinates' mixes hinge and slide joints; their units would not be defined")
         # admissible range and nominal value of q_u
         rng = _custom_numeric(model, "bemlearn_qu_range")
         nom = _custom_numeric(model, "bemlearn_qu_nominal")
@@ -205,46 +263,66 @@ class MujocoRobot(Robot):
             self.qu_nominal = 0.0
             self.qu_nominal_note = "0: " + self.upright_search.describe(self._qu_unit())
             warn(RobotModelWarning, log, "%s: %s; q_u = 0 is taken as nominal", where, self.upright_search.describe(self._qu_unit()))
+        limits = self.coordinate_limits
         if rng is not None:
             self.qu_range = (float(rng[0]), float(rng[1]))
-        elif self.identity_coordinates and model.jnt_limited[self.unactuated_index]:
-            lo, hi = model.jnt_range[self.unactuated_index]
-            self.qu_range = (float(lo), float(hi))
+        elif (qu_limits := limits[self.unactuated_index]) is not None:
+            self.qu_range = qu_limits
         else:
-            half = math.pi / 2 if self.joint_kinds[self.unactuated_index] == "hinge" or not self.identity_coordinates else 1.0
+            half = math.pi / 2 if self._qu_unit() == "rad" else 1.0
             self.qu_range = (self.qu_nominal - half, self.qu_nominal + half)
-        if self.identity_coordinates:
-            self._coordinate_kinds = self.joint_kinds
-        elif len(set(self.joint_kinds)) == 1:  # a linear map of like joints keeps their kind
-            self._coordinate_kinds = (self.joint_kinds[0],) * n
-        else:
-            raise RobotModelError(f"{where}: 'bemlearn_coordinates' mixes hinge and slide joints; their units would not be defined")
         if model.neq:
             warn(RobotModelWarning, log, "%s: equality constraints are ignored by the robot dynamics", where)
 
     def _qu_unit(self) -> str:
-        return "rad" if self.joint_kinds[self.unactuated_index] == "hinge" or not self.identity_coordinates else "m"
+        if self.coordinate_joints is None:
+            return "rad"
+        return "rad" if self._coordinate_kinds[self.unactuated_index] == "hinge" else "m"
+
+    @functools.cached_property
+    def coordinate_limits(self) -> tuple[tuple[float, float] | None, ...]:
+        """Per coordinate, ``(lo, hi)`` in its unit, or ``None`` where it is unlimited (or not one joint).
+
+        A coordinate that is one MJCF joint takes the joint's range; a freedom that depends on it alone
+        by rolling (q_d = s·q_i, :mod:`bemlearn.robots.rolling`) adds its own range divided by s (a base
+        slide of ±2 m limits a wheel of r_eff = 0.1525 m to ±13.1 rad).  A model-declared map
+        (``bemlearn_coordinates``) gives ``None`` for every coordinate.
+        """
+        if self.coordinate_joints is None:
+            return (None,) * self.n
+        model = self.model
+        out: list[tuple[float, float] | None] = []
+        for k, j in enumerate(self.coordinate_joints):
+            lo, hi = (float(model.jnt_range[j, 0]), float(model.jnt_range[j, 1])) if model.jnt_limited[j] else (-math.inf, math.inf)
+            for d in (self.rolling.dependent if self.rolling is not None else ()):
+                row = self.rolling.S[d] if self.rolling is not None else np.zeros(0)
+                if not model.jnt_limited[d] or np.count_nonzero(row) != 1 or row[k] == 0:
+                    continue
+                a, b = sorted((float(model.jnt_range[d, 0] / row[k]), float(model.jnt_range[d, 1] / row[k])))
+                lo, hi = max(lo, a), min(hi, b)
+            out.append((lo, hi) if math.isfinite(lo) or math.isfinite(hi) else None)
+        return tuple(out)
 
     def _search_upright(self, declared_range: np.ndarray | None) -> UprightSearch:
         """Equilibria of q_u with the actuated coordinates at 0 (:func:`~bemlearn.robots.upright.find_upright`)."""
         iu = self.unactuated_index
-        kind = self.joint_kinds[iu] if self.identity_coordinates else "hinge"
+        kind = self._coordinate_kinds[iu] if self.coordinate_joints is not None else "hinge"
         limits = None
         if declared_range is not None:
             limits = (float(declared_range[0]), float(declared_range[1]))
-        elif self.identity_coordinates and self.model.jnt_limited[iu]:
-            limits = (float(self.model.jnt_range[iu, 0]), float(self.model.jnt_range[iu, 1]))
+        elif (own := self.coordinate_limits[iu]) is not None:
+            limits = own
         z = np.zeros(self.n - 1)
         return find_upright(lambda qu: self.gamma0_scalar(qu, z, z, z), kind=kind, limits=limits)
 
     @functools.cached_property
     def T(self) -> torch.Tensor:
-        """``(n, n)`` the coordinate map q = T q_j (the identity unless the model declares one), float64."""
+        """``(n, n_j)`` the coordinate map q = T q_j (the identity unless the model declares one or the robot rolls), float64."""
         return torch.from_numpy(self.T_np)
 
     @functools.cached_property
     def Tinv(self) -> torch.Tensor:
-        """``(n, n)`` T⁻¹, float64."""
+        """``(n_j, n)`` q_j = T⁻¹ q (the inverse of a square T, the rolling map S otherwise), float64."""
         return torch.from_numpy(self.Tinv_np)
 
     @functools.cached_property
@@ -295,7 +373,7 @@ class MujocoRobot(Robot):
         """D(q) (eq. 1) from MuJoCo's CRB algorithm. ``q: (B, n)`` → ``(B, n, n)``."""
         q = as_batch(q, self.n, "q", func="mass_matrix", units="rad")
         qj = self._to_joint(q)
-        out = np.empty((q.shape[0], self.n, self.n))
+        out = np.empty((q.shape[0], self._dadr.size, self._dadr.size))
         idx = np.ix_(self._dadr, self._dadr)
         for b in range(q.shape[0]):
             self._load_state(qj[b], None)
@@ -307,7 +385,7 @@ class MujocoRobot(Robot):
     def _rne(self, q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor | None) -> np.ndarray:
         qj, qdj = self._to_joint(q), self._to_joint(qd)
         qddj = None if qdd is None else self._to_joint(qdd)
-        out = np.empty((q.shape[0], self.n))
+        out = np.empty((q.shape[0], self._dadr.size))
         d = self.data
         for b in range(q.shape[0]):
             self._load_state(qj[b], qdj[b])
@@ -315,7 +393,7 @@ class MujocoRobot(Robot):
             if qddj is not None:
                 d.qacc[self._dadr] = qddj[b]
             mujoco.mj_rne(self.model, d, 0 if qddj is None else 1, self._vec)
-            out[b] = self._vec[self._dadr]
+            out[b] = self._vec[self._dadr] + (0.0 if qddj is None else self._armature * qddj[b])
         return out
 
     def bias(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
@@ -327,7 +405,7 @@ class MujocoRobot(Robot):
         """Passive forces τ_p (joint damping and stiffness, ``mj_passive``), ``(B, n)``."""
         q, qd = self._states(q, qd, func="passive")
         qj, qdj = self._to_joint(q), self._to_joint(qd)
-        out = np.empty((q.shape[0], self.n))
+        out = np.empty((q.shape[0], self._dadr.size))
         d = self.data
         for b in range(q.shape[0]):
             self._load_state(qj[b], qdj[b])
@@ -340,7 +418,7 @@ class MujocoRobot(Robot):
         """D q̈ + C q̇ + G − τ_p in one RNE pass per state (same value as the base class)."""
         q, qd, qdd = self._states(q, qd, qdd, func="inverse_dynamics")
         qj, qdj, qddj = self._to_joint(q), self._to_joint(qd), self._to_joint(qdd)
-        out = np.empty((q.shape[0], self.n))
+        out = np.empty((q.shape[0], self._dadr.size))
         m, d, dadr, vec = self.model, self.data, self._dadr, self._vec
         for b in range(q.shape[0]):  # one state load per row: RNE with q̈, minus the passive forces
             self._load_state(qj[b], qdj[b])
@@ -348,7 +426,7 @@ class MujocoRobot(Robot):
             mujoco.mj_passive(m, d)
             d.qacc[dadr] = qddj[b]
             mujoco.mj_rne(m, d, 1, vec)
-            out[b] = vec[dadr] - d.qfrc_passive[dadr]
+            out[b] = vec[dadr] + self._armature * qddj[b] - d.qfrc_passive[dadr]
         return self._from_joint_force(out)
 
     # ---- single-state numpy fast path (control loops) ------------------------------------
@@ -390,7 +468,7 @@ class MujocoRobot(Robot):
         mujoco.mj_passive(m, d)
         d.qacc[self._dadr] = Tinv @ qdd
         mujoco.mj_rne(m, d, 1, self._vec)
-        return float((Tinv.T @ (self._vec[self._dadr] - d.qfrc_passive[self._dadr]))[u])
+        return float((Tinv.T @ (self._vec[self._dadr] + self._armature * (Tinv @ qdd) - d.qfrc_passive[self._dadr]))[u])
 
     # ---- kinematics --------------------------------------------------------------------
     @property

@@ -22,7 +22,7 @@ from bemlearn.robots.bem import find_roots
 from bemlearn.robots.mujoco_robot import MujocoRobot
 from bemlearn.robots.protocol import BalanceRobot, ControlRobot
 
-__all__ = ["upright_stiffness", "instability_rate", "bem_slopes", "qu_half_range", "qa_half_ranges", "bem_gain", "UNLIMITED_HALF_RANGE"]
+__all__ = ["upright_stiffness", "instability_rate", "bem_slopes", "qu_half_range", "qa_half_ranges", "qa_limited", "bem_gain", "UNLIMITED_HALF_RANGE"]
 
 UNLIMITED_HALF_RANGE = 0.5
 """Half range assumed for an unlimited actuated coordinate, rad or m."""
@@ -95,15 +95,24 @@ def qu_half_range(robot: BalanceRobot) -> float:
 
 
 def qa_half_ranges(robot: BalanceRobot) -> np.ndarray:
-    """``(m,)`` half ranges of the actuated coordinates: min(|lo|, |hi|) of a limited joint of a
-    :class:`~bemlearn.robots.MujocoRobot`, else :data:`UNLIMITED_HALF_RANGE` (also when the model
-    declares a coordinate map, and for a robot without a MuJoCo model)."""
+    """``(m,)`` half ranges of the actuated coordinates: min(|lo|, |hi|) of a limited coordinate of a
+    :class:`~bemlearn.robots.MujocoRobot` (its joint's range, narrowed by a freedom that rolls with it:
+    :attr:`~bemlearn.robots.MujocoRobot.coordinate_limits`), else :data:`UNLIMITED_HALF_RANGE` (also when
+    the model declares a coordinate map, and for a robot without a MuJoCo model)."""
     out = np.full(robot.m, UNLIMITED_HALF_RANGE)
-    if not isinstance(robot, MujocoRobot) or not robot.identity_coordinates:
+    if not isinstance(robot, MujocoRobot):
         return out
-    model = robot.model
+    limits = robot.coordinate_limits
     for k, j in enumerate(robot.actuated_index):
-        if model.jnt_limited[j]:
-            lo, hi = model.jnt_range[j]
-            out[k] = float(min(abs(lo), abs(hi)))
+        if (lim := limits[j]) is not None:
+            out[k] = float(min(abs(lim[0]), abs(lim[1])))
     return out
+
+
+def qa_limited(robot: MujocoRobot) -> np.ndarray:
+    """``(m,)`` bool: which actuated coordinates have limits (all, when the model declares a coordinate map:
+    their ranges are unknown and treated as limited)."""
+    if robot.coordinate_joints is None:
+        return np.ones(robot.m, dtype=bool)
+    limits = robot.coordinate_limits
+    return np.array([limits[j] is not None for j in robot.actuated_index], dtype=bool)

@@ -87,8 +87,7 @@ class SensedPlant:
 
 
 def _coordinate_kinds(robot: MujocoRobot) -> tuple[str, ...] | None:
-    """Joint kinds per coordinate when coordinates are the joints (T = I), else None."""
-    kinds = getattr(robot, "joint_kinds", None)
-    if kinds is None or not robot.identity_coordinates:
+    """Joint kinds per coordinate when each coordinate is one joint (T = I, or joints a rolling freedom follows), else None."""
+    if getattr(robot, "coordinate_joints", None) is None:
         return None
-    return tuple(kinds)
+    return tuple(robot.coordinate_kinds)
