@@ -172,6 +172,26 @@ class Robot(abc.ABC):
 
         return float(self.gamma(joined(qa, qu), joined(qad, qud), joined(qadd, qudd))[0])
 
+    def gamma_rows(self, qu: np.ndarray, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray,
+                   qud: np.ndarray | None = None, qudd: np.ndarray | None = None) -> np.ndarray:
+        """Γ (eq. 5) for many states in NumPy; Γ_0 (eq. 7) with the default q̇_u = q̈_u = 0 (N·m, N for a slide q_u).
+
+        Row r is :meth:`gamma0_scalar` of row r; this version calls it row by row, implementations override it
+        with a faster loop.
+
+        Args:
+            qu: ``(R,)`` q_u in its joint's unit (rad or m).
+            qa, qad, qadd: ``(R, m)`` q_a, q̇_a, q̈_a (rad, rad/s, rad/s²; m, m/s, m/s² for slides).
+            qud, qudd: ``(R,)`` q̇_u, q̈_u (default 0).
+        """
+        qu = np.asarray(qu, dtype=np.float64).reshape(-1)
+        R = qu.shape[0]
+        qa, qad, qadd = (np.asarray(a, dtype=np.float64).reshape(R, self.m) for a in (qa, qad, qadd))
+        qud = np.zeros(R) if qud is None else np.asarray(qud, dtype=np.float64).reshape(R)
+        qudd = np.zeros(R) if qudd is None else np.asarray(qudd, dtype=np.float64).reshape(R)
+        return np.array([self.gamma0_scalar(float(qu[r]), qa[r], qad[r], qadd[r], float(qud[r]), float(qudd[r])) for r in range(R)],
+                        dtype=np.float64).reshape(R)
+
     def momentum_u(self, q: torch.Tensor, qd_u: torch.Tensor) -> torch.Tensor:
         """H_u = D_uu(q) q̇_u (Lemma 1, eq. 19–20). ``q: (B, n)``, ``qd_u: (B,)`` → ``(B,)``."""
         u = self.unactuated_index
