@@ -98,8 +98,11 @@ class ModelBEM:
     slope (step 1e-7), to |Γ| ≤ 1e-12 or a step ≤ 1e-14, at most 30 iterations, never leaving the admissible
     range; the rows of a call iterate together (their Γ evaluated by the robot's ``gamma_rows`` in one loop when
     it has one).  Starts: :meth:`__call__` from the previous call's roots when it had as many rows (the nominal
-    value otherwise), :meth:`full` — called once per control tick — from the previous tick's root.  A row that
-    does not converge falls back to the bracketed solver (:meth:`__call__`) or is NaN (:meth:`full`).
+    value otherwise), :meth:`full` from the first root of the last :meth:`__call__`.  A row that does not
+    converge falls back to the bracketed solver (:meth:`__call__`) or is NaN (:meth:`full`).
+
+    Starting :meth:`full` from the previous tick's root instead saves few evaluations and moves the closed
+    loop's numbers (measured in docs/timings.md), so it is not done.
     """
 
     name = "model"
@@ -109,7 +112,6 @@ class ModelBEM:
         self.m = robot.m
         self.lo, self.hi = robot.qu_range
         self._last: np.ndarray | None = None
-        self._last_full: np.ndarray | None = None
 
     def _gamma(self, x: np.ndarray, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray, qud: np.ndarray, qudd: np.ndarray) -> np.ndarray:
         """Γ of rows ``x (R,)`` (q_u) with ``qa, qad, qadd (R, m)``, ``qud, qudd (R,)``."""
@@ -166,13 +168,8 @@ class ModelBEM:
     def full(self, x: np.ndarray) -> np.ndarray:
         """Root of Γ(q_u; q_a, with q̈_u, q̇_u given) = 0 (eq. 5): ``x (B, 3m + 2)`` → (B,)."""
         m, B = self.m, x.shape[0]
-        if self._last_full is not None and self._last_full.shape[0] == B and bool(np.isfinite(self._last_full).all()):
-            start = self._last_full
-        else:
-            start = np.full(B, float(self._last[0]) if self._last is not None else self.robot.qu_nominal)
-        out = self._newton(start, x[:, 2 * m : 3 * m], x[:, m : 2 * m], x[:, :m], x[:, 3 * m + 1], x[:, 3 * m])
-        self._last_full = out.copy()
-        return out
+        start = np.full(B, float(self._last[0]) if self._last is not None else self.robot.qu_nominal)
+        return self._newton(start, x[:, 2 * m : 3 * m], x[:, m : 2 * m], x[:, :m], x[:, 3 * m + 1], x[:, 3 * m])
 
 
 class ZeroBEM:
