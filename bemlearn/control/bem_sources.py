@@ -17,6 +17,7 @@ and :func:`~bemlearn.pipeline.lemma.learned_lemma1` call.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
@@ -121,8 +122,30 @@ class ModelBEM:
         g = self.robot.gamma0_scalar
         return np.array([g(float(x[r]), qa[r], qad[r], qadd[r], float(qud[r]), float(qudd[r])) for r in range(x.shape[0])], dtype=np.float64)
 
+    def _newton_one(self, x0: float, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray, qud: float, qudd: float) -> float:
+        """:meth:`_newton` of one row through ``gamma0_scalar`` (the per-tick call: no array bookkeeping)."""
+        g = self.robot.gamma0_scalar
+        x = x0
+        h = 1e-7
+        for _ in range(30):
+            f = g(x, qa, qad, qadd, qud, qudd)
+            if abs(f) <= 1e-12:
+                return x
+            df = (g(x + h, qa, qad, qadd, qud, qudd) - g(x - h, qa, qad, qadd, qud, qudd)) / (2 * h)
+            if df == 0 or not math.isfinite(df):
+                return math.nan
+            x_new = x - f / df
+            if not (self.lo <= x_new <= self.hi):
+                return math.nan
+            if abs(x_new - x) <= 1e-14:
+                return x_new
+            x = x_new
+        return math.nan
+
     def _newton(self, x0: np.ndarray, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray, qud: np.ndarray, qudd: np.ndarray) -> np.ndarray:
         """Newton roots of Γ per row from ``x0 (R,)`` (class docstring); NaN where a row did not converge."""
+        if np.shape(x0)[0] == 1:
+            return np.array([self._newton_one(float(x0[0]), qa[0], qad[0], qadd[0], float(qud[0]), float(qudd[0]))])
         h = 1e-7
         x = np.array(x0, dtype=np.float64)
         out = np.full(x.shape[0], np.nan)

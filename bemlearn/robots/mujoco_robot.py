@@ -446,6 +446,18 @@ class MujocoRobot(Robot):
     def gamma0_scalar(self, qu: float, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray, qud: float = 0.0, qudd: float = 0.0) -> float:
         """Γ (eq. 5) for one state, numpy fast path (N·m); Γ_0 (eq. 7) with the default q̇_u = q̈_u = 0."""
         n, u, ia = self.n, self.unactuated_index, self._ia
+        if self._joint_order and self.identity_coordinates:  # the state written straight into MjData (_inverse_joint's steps)
+            m, d = self.model, self.data
+            qpos, qvel, qacc = d.qpos, d.qvel, d.qacc
+            qpos[ia], qpos[u] = qa, qu
+            qvel[ia], qvel[u] = qad, qud
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            mujoco.mj_comVel(m, d)
+            mujoco.mj_passive(m, d)
+            qacc[ia], qacc[u] = qadd, qudd
+            mujoco.mj_rne(m, d, 1, self._vec)
+            return float(self._vec[u] - d.qfrc_passive[u])
         q = np.empty((1, n))
         qd = np.zeros((1, n))
         qdd = np.zeros((1, n))
