@@ -427,20 +427,25 @@ class MujocoRobot(Robot):
             ``D (n, n)`` and ``h (n,)`` in coordinates (eq. 1: D q̈ + h = B u).
         """
         m, d = self.model, self.data
-        identity = self.identity_coordinates
+        if self._joint_order and self.identity_coordinates:  # T = I, model order: no maps, no re-indexing
+            d.qpos[:] = q
+            d.qvel[:] = qd
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            make_mass_matrix(m, d)
+            D = full_mass_matrix(m, d, self._M).copy()
+            mujoco.mj_comVel(m, d)
+            mujoco.mj_rne(m, d, 0, self._vec)
+            mujoco.mj_passive(m, d)
+            return D, self._vec - d.qfrc_passive
         Tinv = self.Tinv_np
-        if identity:  # T = I: the maps below would only multiply by ones and add zeros
-            self._load_state(np.asarray(q, dtype=np.float64), np.asarray(qd, dtype=np.float64))
-        else:
-            self._load_state(Tinv @ q, Tinv @ qd)
+        self._load_state(Tinv @ q, Tinv @ qd)
         make_mass_matrix(m, d)
         Dj = full_mass_matrix(m, d, self._M)[self._ix_dd]
         mujoco.mj_comVel(m, d)
         mujoco.mj_rne(m, d, 0, self._vec)
         mujoco.mj_passive(m, d)
         hj = self._vec[self._dadr] - d.qfrc_passive[self._dadr]
-        if identity:
-            return Dj, hj
         return Tinv.T @ Dj @ Tinv, Tinv.T @ hj
 
     def gamma0_scalar(self, qu: float, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray, qud: float = 0.0, qudd: float = 0.0) -> float:
