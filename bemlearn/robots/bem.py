@@ -148,6 +148,10 @@ def find_roots(
     return np.where(good, root, np.nan), good, np.where(good, residual, np.nan), it
 
 
+#: The window of :func:`_bracket` whose cells are taken when no farther than its edges (see there).
+_HALF = 4
+
+
 @dataclass(frozen=True, eq=False)
 class _Bracket:
     """Per problem ``(B,)``: the sign-change cell [a, b] nearest the nominal value with its residuals
@@ -166,11 +170,11 @@ def _bracket(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.nda
     """Scan the grid ``nodes`` for the sign-change cell nearest ``nominal`` (a node where the residual is
     exactly zero counts as a root).
 
-    First a window of nodes around the nominal value (BEMs lie near it), then windows twice as wide, up to
-    the whole grid, for the problems whose nearest root may lie outside the window; each window evaluates
-    only the nodes the narrower one did not.  A sign-change cell in the first window is taken when it is no
-    farther than the window's edges; in a wider one when it is nearer than its edges, so that it is the cell a
-    scan of the whole grid would choose (the nearest, the leftmost of equally near ones).
+    Windows of 1, 2, 4, 8, … nodes either side of the nominal value (BEMs lie near it), up to the whole grid,
+    each for the problems whose nearest root may lie outside the narrower one, each evaluating only the nodes
+    the narrower one did not.  The window of ``_HALF`` nodes either side takes a sign-change cell no farther
+    than its edges; every other window one nearer than its edges, which is the cell the scan of the whole grid
+    (and of the ``_HALF`` window) would choose: the nearest, the leftmost of equally near ones.
     """
     n_grid = nodes.size
     a = np.full(batch, np.nan)
@@ -181,10 +185,10 @@ def _bracket(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.nda
     pending = np.arange(batch)
     f_all = np.empty((batch, 0))   # residuals of the pending problems on nodes[p0 : p1 + 1]
     p0, p1 = k0, k0 - 1            # the nodes evaluated so far (none)
-    halves = [4]
+    halves = [1, 2, 4]
     while halves[-1] < n_grid:
         halves.append(min(2 * halves[-1], n_grid))
-    for first, half in zip((True,) + (False,) * (len(halves) - 1), halves):
+    for half in halves:
         i0, i1 = max(0, k0 - half), min(n_grid - 1, k0 + half)
         if i1 - i0 < 1 or pending.size == 0:
             continue
@@ -213,7 +217,7 @@ def _bracket(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.nda
         d = dist[r, k]
         whole = i0 == 0 and i1 == n_grid - 1
         edge = min(nominal - float(nodes[i0]) if i0 > 0 else float("inf"), float(nodes[i1]) - nominal if i1 < n_grid - 1 else float("inf"))
-        found = np.isfinite(d) & (((d <= edge) if first else (d < edge)) | whole)
+        found = np.isfinite(d) & (((d <= edge) if half == _HALF else (d < edge)) | whole)
         rows = pending[found]
         a[rows], b[rows], fa[rows], fb[rows] = xl[r, k][found], xr[r, k][found], fl[r, k][found], fr[r, k][found]
         valid[rows] = True
