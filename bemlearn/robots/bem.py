@@ -170,9 +170,9 @@ def _bracket(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.nda
     """Scan the grid ``nodes`` for the sign-change cell nearest ``nominal`` (a node where the residual is
     exactly zero counts as a root).
 
-    Windows of 1, 2, 3, … nodes either side of the nominal value (BEMs lie near it), up to the whole grid,
-    each for the problems whose nearest root may lie outside the narrower one, each evaluating only the nodes
-    the narrower one did not: a problem costs about two nodes per cell between nominal and its root.  The
+    Windows of 1, 2, 3, 4, 6, 9, … nodes either side of the nominal value (BEMs lie near it; each half again as
+    wide as the last), up to the whole grid, each for the problems whose nearest root may lie outside the
+    narrower one, each evaluating only the nodes the narrower one did not.  The
     window of ``_HALF`` nodes either side takes a sign-change cell no farther than its edges; every other
     window one nearer than its edges, which is the cell the scan of the whole grid (and of the ``_HALF``
     window) would choose: the nearest, the leftmost of equally near ones.
@@ -186,7 +186,9 @@ def _bracket(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.nda
     pending = np.arange(batch)
     f_all = np.empty((batch, 0))   # residuals of the pending problems on nodes[p0 : p1 + 1]
     p0, p1 = k0, k0 - 1            # the nodes evaluated so far (none)
-    for half in range(1, n_grid + 1):
+    half = 0
+    while half < n_grid:
+        half += max(1, half // 2)   # 1, 2, 3, 4, 6, 9, 13, …: few passes, at most half again the nodes needed
         i0, i1 = max(0, k0 - half), min(n_grid - 1, k0 + half)
         if i1 - i0 < 1 or pending.size == 0:
             continue

@@ -29,6 +29,7 @@ from __future__ import annotations
 import functools
 import logging
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -414,6 +415,19 @@ class MujocoRobot(Robot):
         to_joint = lambda x: np.array([Tinv @ row for row in x]).reshape(R, self.n)  # noqa: E731
         f = self._inverse_joint(to_joint(q), to_joint(qd), to_joint(qdd))
         return np.array([(Tinv.T @ row)[u] for row in f])
+
+    def _bem_residual(self, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
+        """Γ_0 through :meth:`gamma_rows` for :meth:`bem` when the coordinates are the joints (T = I: the same
+        numbers as :meth:`gamma0`, whose coordinate maps then only multiply by ones); None otherwise."""
+        if not self.identity_coordinates:
+            return None
+
+        def fun(x: np.ndarray, rows: np.ndarray) -> np.ndarray:  # (R, K) -> (R, K)
+            R, K = x.shape
+            rep = lambda a: np.repeat(a[rows], K, axis=0)  # noqa: E731
+            return self.gamma_rows(x.reshape(-1), rep(qa), rep(qad), rep(qadd)).reshape(R, K)
+
+        return fun
 
     # ---- single-state numpy fast path (control loops) ------------------------------------
     def terms(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

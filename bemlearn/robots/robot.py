@@ -20,14 +20,14 @@ a slide", "N·m" for "N·m, or N for a slide".
 from __future__ import annotations
 
 import abc
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from bemlearn._lazy import lazy_module
 from bemlearn.errors import ArgumentError
-from bemlearn.robots.bem import BEMResult, solve_bem
+from bemlearn.robots.bem import BEMResult, find_roots, solve_bem
 
 if TYPE_CHECKING:
     import torch
@@ -237,7 +237,12 @@ class Robot(abc.ABC):
             rep = lambda t: t[rows].repeat_interleave(K, dim=0)  # noqa: E731
             return self.gamma0(qu_grid.reshape(-1), rep(qa), rep(qad), rep(qadd)).reshape(R, K)
 
-        result = solve_bem(fun, B, lo=lo, hi=hi, nominal=self.qu_nominal, n_grid=n_grid)
+        residual = self._bem_residual(qa.numpy(), qad.numpy(), qadd.numpy())
+        if residual is None:
+            result = solve_bem(fun, B, lo=lo, hi=hi, nominal=self.qu_nominal, n_grid=n_grid)
+        else:
+            qu, valid, res, it = find_roots(residual, B, lo=lo, hi=hi, nominal=self.qu_nominal, n_grid=n_grid)
+            result = BEMResult(qu=torch.from_numpy(qu), valid=torch.from_numpy(valid), residual=torch.from_numpy(res), iterations=it)
         if on_missing == "raise" and not bool(result.valid.all()):
             i = int((~result.valid).nonzero()[0])
             raise ArgumentError(
@@ -247,6 +252,11 @@ class Robot(abc.ABC):
         if on_missing not in ("nan", "raise"):
             raise ArgumentError(f"bem: on_missing must be 'nan' or 'raise', got {on_missing!r}")
         return result
+
+    def _bem_residual(self, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
+        """Γ_0 in NumPy for :meth:`bem` (``fun(x (R, K), rows (R,)) -> (R, K)``, :func:`~bemlearn.robots.bem.find_roots`)
+        when an implementation evaluates it with the numbers of :meth:`gamma0`; None: :meth:`bem` calls :meth:`gamma0`."""
+        return None
 
     # ---- helpers ---------------------------------------------------------------------
     def _states(
