@@ -181,8 +181,11 @@ class Robot(abc.ABC):
 
         Args:
             qu: ``(R,)`` q_u in its joint's unit (rad or m).
-            qa, qad, qadd: ``(R, m)`` q_a, q̇_a, q̈_a (rad, rad/s, rad/s²; m, m/s, m/s² for slides).
-            qud, qudd: ``(R,)`` q̇_u, q̈_u (default 0).
+            qa: ``(R, m)`` q_a (rad; m for slides).
+            qad: ``(R, m)`` q̇_a (rad/s; m/s for slides).
+            qadd: ``(R, m)`` q̈_a (rad/s²; m/s² for slides).
+            qud: ``(R,)`` q̇_u (default 0).
+            qudd: ``(R,)`` q̈_u (default 0).
         """
         qu = np.asarray(qu, dtype=np.float64).reshape(-1)
         R = qu.shape[0]
