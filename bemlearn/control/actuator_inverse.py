@@ -53,6 +53,7 @@ class MujocoActuatorInverse:
             if int(model.actuator_gaintype[i]) not in _GAIN_OK or int(model.actuator_biastype[i]) not in _BIAS_OK:
                 raise RobotModelError(f"{robot.source}: actuator {name!r} needs gaintype fixed/affine and biastype none/affine")
         self.Tinv = robot.Tinv_np
+        self.identity = bool(robot.identity_coordinates)   # T = I: the map would only multiply by ones
         self.B_pinv = np.linalg.pinv(robot.input_matrix_np[list(robot.actuated_index)])  # (nu, m)
         self.gear = model.actuator_gear[:, 0].copy()
         self.joint_dof = np.array([int(model.jnt_dofadr[model.actuator_trnid[i, 0]]) for i in range(model.nu)], dtype=np.int64)
@@ -68,7 +69,7 @@ class MujocoActuatorInverse:
     def command(self, tau_a: np.ndarray, q: np.ndarray, qd: np.ndarray, *, clip: bool = True) -> np.ndarray:
         """``tau_a (m,)`` generalized forces (N·m or N), ``q, qd (n,)`` → ``ctrl (nu,)``, clipped to the
         ``ctrlrange`` unless ``clip=False``."""
-        qj, qdj = self.Tinv @ q, self.Tinv @ qd
+        qj, qdj = (q, qd) if self.identity else (self.Tinv @ q, self.Tinv @ qd)
         length = self.gear * qj[self.cols]
         velocity = self.gear * qdj[self.cols]
         f = self.B_pinv @ tau_a

@@ -93,7 +93,18 @@ class PredictorBEM:
 
 
 class ModelBEM:
-    """Model-based BEM of a nominal robot with a ``gamma0_scalar`` fast path (eq. 6–9)."""
+    """Model-based BEM of a nominal robot with a ``gamma0_scalar`` fast path (eq. 6–9).
+
+    Each row is solved by Newton's iteration on Γ_0 (Γ for :meth:`full`) in q_u with a central-difference
+    slope (step 1e-7), to |Γ| ≤ 1e-12 or a step ≤ 1e-14, at most 30 iterations, never leaving the admissible
+    range; the rows of a call iterate together (their Γ evaluated by the robot's ``gamma_rows`` in one loop when
+    it has one).  Starts: :meth:`__call__` from the previous call's roots when it had as many rows (the nominal
+    value otherwise), :meth:`full` from the first root of the last :meth:`__call__`.  A row that does not
+    converge falls back to the bracketed solver (:meth:`__call__`) or is NaN (:meth:`full`).
+
+    Starting :meth:`full` from the previous tick's root instead saves few evaluations and moves the closed
+    loop's numbers (measured in docs/timings.md), so it is not done.
+    """
 
     name = "model"
 
@@ -103,7 +114,16 @@ class ModelBEM:
         self.lo, self.hi = robot.qu_range
         self._last: np.ndarray | None = None
 
-    def _newton(self, x0: float, qa, qad, qadd, qud: float = 0.0, qudd: float = 0.0) -> float | None:
+    def _gamma(self, x: np.ndarray, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray, qud: np.ndarray, qudd: np.ndarray) -> np.ndarray:
+        """Γ of rows ``x (R,)`` (q_u) with ``qa, qad, qadd (R, m)``, ``qud, qudd (R,)``."""
+        rows = getattr(self.robot, "gamma_rows", None)
+        if rows is not None:
+            return np.asarray(rows(x, qa, qad, qadd, qud, qudd), dtype=np.float64)
+        g = self.robot.gamma0_scalar
+        return np.array([g(float(x[r]), qa[r], qad[r], qadd[r], float(qud[r]), float(qudd[r])) for r in range(x.shape[0])], dtype=np.float64)
+
+    def _newton_one(self, x0: float, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray, qud: float, qudd: float) -> float:
+        """:meth:`_newton` of one row through ``gamma0_scalar`` (the per-tick call: no array bookkeeping)."""
         g = self.robot.gamma0_scalar
         x = x0
         h = 1e-7
@@ -113,39 +133,66 @@ class ModelBEM:
                 return x
             df = (g(x + h, qa, qad, qadd, qud, qudd) - g(x - h, qa, qad, qadd, qud, qudd)) / (2 * h)
             if df == 0 or not math.isfinite(df):
-                return None
+                return math.nan
             x_new = x - f / df
             if not (self.lo <= x_new <= self.hi):
-                return None
+                return math.nan
             if abs(x_new - x) <= 1e-14:
                 return x_new
             x = x_new
-        return None
+        return math.nan
+
+    def _newton(self, x0: np.ndarray, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray, qud: np.ndarray, qudd: np.ndarray) -> np.ndarray:
+        """Newton roots of Γ per row from ``x0 (R,)`` (class docstring); NaN where a row did not converge."""
+        if np.shape(x0)[0] == 1:
+            return np.array([self._newton_one(float(x0[0]), qa[0], qad[0], qadd[0], float(qud[0]), float(qudd[0]))])
+        h = 1e-7
+        x = np.array(x0, dtype=np.float64)
+        out = np.full(x.shape[0], np.nan)
+        act = np.arange(x.shape[0])
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            for _ in range(30):
+                if act.size == 0:
+                    break
+                xa = x[act]
+                f = self._gamma(xa, qa[act], qad[act], qadd[act], qud[act], qudd[act])
+                done = np.abs(f) <= 1e-12
+                out[act[done]] = xa[done]
+                act, xa, f = act[~done], xa[~done], f[~done]
+                if act.size == 0:
+                    break
+                k = act.size
+                two = np.concatenate([act, act])
+                fpm = self._gamma(np.concatenate([xa + h, xa - h]), qa[two], qad[two], qadd[two], qud[two], qudd[two])
+                df = (fpm[:k] - fpm[k:]) / (2 * h)
+                x_new = xa - f / df
+                fail = (df == 0) | ~np.isfinite(df) | ~((self.lo <= x_new) & (x_new <= self.hi))
+                small = ~fail & (np.abs(x_new - xa) <= 1e-14)
+                out[act[small]] = x_new[small]
+                keep = ~fail & ~small
+                x[act[keep]] = x_new[keep]
+                act = act[keep]
+        return out
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
-        m = self.m
-        out = np.empty(x.shape[0])
-        start = self._last if self._last is not None and self._last.shape[0] == x.shape[0] else np.full(x.shape[0], self.robot.qu_nominal)
-        for i in range(x.shape[0]):
-            qadd, qad, qa = x[i, :m], x[i, m : 2 * m], x[i, 2 * m :]
-            r = self._newton(float(start[i]), qa, qad, qadd)
-            if r is None:  # no convergence from the warm start: bracket from scratch
-                res = self.robot.bem(torch.from_numpy(qa[None]), torch.from_numpy(qad[None]), torch.from_numpy(qadd[None]))
-                r = float(res.qu[0])
-            out[i] = r
+        m, B = self.m, x.shape[0]
+        start = self._last if self._last is not None and self._last.shape[0] == B else np.full(B, self.robot.qu_nominal)
+        zeros = np.zeros(B)
+        qadd, qad, qa = x[:, :m], x[:, m : 2 * m], x[:, 2 * m : 3 * m]
+        out = self._newton(start, qa, qad, qadd, zeros, zeros)
+        miss = np.flatnonzero(np.isnan(out))
+        if miss.size:  # no convergence from the warm start: bracket from scratch
+            res = self.robot.bem(torch.from_numpy(np.ascontiguousarray(qa[miss])), torch.from_numpy(np.ascontiguousarray(qad[miss])),
+                                 torch.from_numpy(np.ascontiguousarray(qadd[miss])))
+            out[miss] = res.qu.numpy()
         self._last = out.copy()
         return out
 
     def full(self, x: np.ndarray) -> np.ndarray:
         """Root of Γ(q_u; q_a, with q̈_u, q̇_u given) = 0 (eq. 5): ``x (B, 3m + 2)`` → (B,)."""
-        m = self.m
-        out = np.empty(x.shape[0])
-        for i in range(x.shape[0]):
-            qadd, qad, qa = x[i, :m], x[i, m : 2 * m], x[i, 2 * m : 3 * m]
-            start = float(self._last[0]) if self._last is not None else self.robot.qu_nominal
-            r = self._newton(start, qa, qad, qadd, float(x[i, 3 * m + 1]), float(x[i, 3 * m]))
-            out[i] = np.nan if r is None else r
-        return out
+        m, B = self.m, x.shape[0]
+        start = np.full(B, float(self._last[0]) if self._last is not None else self.robot.qu_nominal)
+        return self._newton(start, x[:, 2 * m : 3 * m], x[:, m : 2 * m], x[:, :m], x[:, 3 * m + 1], x[:, 3 * m])
 
 
 class ZeroBEM:

@@ -37,6 +37,7 @@ the last finite one (zero at the start) and counted in :attr:`EICController.comm
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -130,8 +131,10 @@ class EICController:
         self._u_last: np.ndarray | None = None
 
     def _valid(self, v) -> bool:
+        """Every value of ``v`` (a float or an array) finite and inside :attr:`qu_limits`."""
         lo, hi = self.qu_limits
-        return bool(np.all(np.isfinite(v)) and np.all(v >= lo) and np.all(v <= hi))
+        values = (v,) if isinstance(v, float) else np.asarray(v, dtype=np.float64).ravel().tolist()
+        return all(math.isfinite(x) and lo <= x <= hi for x in values)
 
     def _reference_terms(self, t: float):
         """q_a^d, q̇_a^d, q̈_a^d at t and the BEM along the reference at (t − h, t, t + h)."""

@@ -26,7 +26,7 @@ from bemlearn.export.checkpoint import load_checkpoint
 from bemlearn.export.pt2 import load_pt2_predictor, pt2_bytes
 from bemlearn.export.staleness import file_sha256
 from bemlearn.export.torchscript import load_torchscript, torchscript_bytes
-from bemlearn.export.verify import verify_predictor
+from bemlearn.export.verify import verification_cases, verify_predictor
 from bemlearn.files import atomic_write_files, check_outputs, check_writable
 
 __all__ = ["export_run", "export_targets", "ExportFormat", "DEFAULT_NAME", "AOTI_NAME"]
@@ -99,10 +99,11 @@ def export_run(
     for folder in {p.parent for p in paths}:
         check_writable(folder, what="export")
     files: dict[str | os.PathLike[str], bytes] = {}
+    cases = verification_cases(state) if verify else ()   # the dense references, computed once for every file
     for path, serialize, load in targets:   # serialized and checked in memory: nothing is written unless all pass
         data = serialize(predictor)
         if verify:
-            dm, ds = verify_predictor(load(data, where=path), state, where=str(path))
+            dm, ds = verify_predictor(load(data, where=path), state, where=str(path), cases=cases)
             log.info("%s: max |Δmean| %.2g rad, max rel |Δvar| %.2g vs the dense posterior", path, dm, ds)
         files[path] = data
     written = atomic_write_files(files)   # room checked first; all files or none

@@ -21,6 +21,7 @@ exponent the exported predictor uses, and
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import torch
@@ -29,7 +30,7 @@ from bemlearn.errors import CheckpointError
 from bemlearn.models.band import band_extra_variance
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["reference_posterior", "verify_predictor"]
+__all__ = ["VerificationCase", "reference_posterior", "verification_cases", "verify_predictor"]
 
 _EPS = float(torch.finfo(torch.float64).eps)
 
@@ -102,6 +103,42 @@ def _estimator_rounding(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
     return (2 * shift.abs() * err + err**2).mean(-1)
 
 
+@dataclass(frozen=True, eq=False)
+class VerificationCase:
+    """One method's reference in :func:`verify_predictor`: inputs ``x (n, n_in)`` (physical units) and the
+    dense mean, std (q_u's unit) and variance rounding bound (q_u's unit squared; a float or ``(n,)``)."""
+
+    name: str
+    x: torch.Tensor
+    mean: torch.Tensor
+    std: torch.Tensor
+    bound: float | torch.Tensor
+
+
+def verification_cases(state: PredictorState, *, n: int = 256, seed: int = 0, latent: bool = True) -> tuple[VerificationCase, ...]:
+    """The references :func:`verify_predictor` compares a predictor with (its docstring): ``forward`` and
+    ``predict_full`` with the calibrated band, and with ``latent`` also ``forward_latent`` and
+    ``predict_full_latent`` with the latent std.  Computed once, they serve every file exported from ``state``
+    (the dense posterior of each input set is evaluated once)."""
+    g = torch.Generator().manual_seed(seed)
+    d = state.dim
+    x_full = state.x_mean + 2.0 * state.x_std * torch.randn(n, d, generator=g, dtype=torch.float64)
+    x_bem = x_full[:, : d - 2].contiguous()
+    x0 = torch.cat([x_bem, torch.zeros(n, 2, dtype=torch.float64)], 1)
+    cases = []
+    for name, x, ref_x, n_in in (("forward", x_bem, x0, d - 2), ("predict_full", x_full, x_full, d)):
+        ref_mean, ref_std, bound = reference_posterior(state, ref_x)
+        if latent:
+            cases.append(VerificationCase(f"{name}_latent", x, ref_mean, ref_std, bound))
+        # eq. (B1): c² σ² + max(Σ_{i < n_in} (s_i ∂μ/∂x_i)², the estimator term)
+        assert state.std_scale is not None  # filled by PredictorState.__post_init__
+        band_std = (state.std_scale**2 * ref_std.square() + band_extra_variance(state, ref_x, n_inputs=n_in)).sqrt()
+        band_bound = bound * float(state.std_scale) ** 2 + _estimator_rounding(state, ref_x)
+        cases.append(VerificationCase(name, x, ref_mean, band_std, band_bound))
+    order = ("forward", "predict_full", "forward_latent", "predict_full_latent")
+    return tuple(sorted(cases, key=lambda c: order.index(c.name)))
+
+
 def verify_predictor(
     predictor: Any,
     state: PredictorState,
@@ -111,6 +148,7 @@ def verify_predictor(
     mean_atol: float = 1e-9,
     var_rtol: float = 1e-6,
     where: str = "predictor",
+    cases: tuple[VerificationCase, ...] | None = None,
 ) -> tuple[float, float]:
     """Compare a predictor with :func:`reference_posterior` on ``n`` random inputs.
 
@@ -126,6 +164,8 @@ def verify_predictor(
         state: the posterior it was built from.
         mean_atol: accepted |Δμ| in q_u's unit, plus the rounding allowance 10⁻¹² y_std σ_f² ‖α‖₁.
         var_rtol: accepted |Δσ²| / σ²_ref, plus the reference's rounding bound.
+        cases: the references, :func:`verification_cases` of ``state`` (with ``n``, ``seed``), when the
+            caller checks several predictors of one state; default: computed here.
 
     Returns:
         (max |Δμ| in q_u's unit, max |Δσ²| / (σ²_ref + bound)) over forward and predict_full.
@@ -133,25 +173,17 @@ def verify_predictor(
     Raises:
         ValueError: a difference is above tolerance; the message names ``where``.
     """
-    g = torch.Generator().manual_seed(seed)
-    d = state.dim
-    x_full = state.x_mean + 2.0 * state.x_std * torch.randn(n, d, generator=g, dtype=torch.float64)
-    x_bem = x_full[:, : d - 2].contiguous()
-    x0 = torch.cat([x_bem, torch.zeros(n, 2, dtype=torch.float64)], 1)
+    if cases is None:
+        cases = verification_cases(state, n=n, seed=seed, latent=hasattr(predictor, "forward_latent"))
+    elif not hasattr(predictor, "forward_latent"):
+        cases = tuple(c for c in cases if not c.name.endswith("_latent"))
     mean_tol = mean_atol + 1e-12 * float(state.y_std * state.outputscale) * float(state.alpha.abs().sum())
     worst_mean, worst_var = 0.0, 0.0
-    cases = [("forward", x_bem, x0, d - 2, True), ("predict_full", x_full, x_full, d, True)]
-    if hasattr(predictor, "forward_latent"):
-        cases += [("forward_latent", x_bem, x0, d - 2, False), ("predict_full_latent", x_full, x_full, d, False)]
-    for name, x, ref_x, n_in, band in cases:
+    for case in cases:
+        name, x = case.name, case.x
         mean, std = getattr(predictor, name)(x)
-        ref_mean, ref_std, bound = reference_posterior(state, ref_x)
-        if band:  # eq. (B1): c² σ² + max(Σ_{i < n_in} (s_i ∂μ/∂x_i)², the estimator term)
-            assert state.std_scale is not None  # filled by PredictorState.__post_init__
-            ref_std = (state.std_scale**2 * ref_std.square() + band_extra_variance(state, ref_x, n_inputs=n_in)).sqrt()
-            bound = bound * float(state.std_scale) ** 2 + _estimator_rounding(state, ref_x)
-        dm = float((mean - ref_mean).abs().max())
-        dv = float(((std.square() - ref_std.square()).abs() / (ref_std.square() + bound / var_rtol)).max())
+        dm = float((mean - case.mean).abs().max())
+        dv = float(((std.square() - case.std.square()).abs() / (case.std.square() + case.bound / var_rtol)).max())
         worst_mean, worst_var = max(worst_mean, dm), max(worst_var, dv)
         if not (dm <= mean_tol and dv <= var_rtol):
             raise CheckpointError(

@@ -148,6 +148,10 @@ def find_roots(
     return np.where(good, root, np.nan), good, np.where(good, residual, np.nan), it
 
 
+#: The window of :func:`_bracket` whose cells are taken when no farther than its edges (see there).
+_HALF = 4
+
+
 @dataclass(frozen=True, eq=False)
 class _Bracket:
     """Per problem ``(B,)``: the sign-change cell [a, b] nearest the nominal value with its residuals
@@ -166,9 +170,12 @@ def _bracket(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.nda
     """Scan the grid ``nodes`` for the sign-change cell nearest ``nominal`` (a node where the residual is
     exactly zero counts as a root).
 
-    First a window of nodes around the nominal value (BEMs lie near it), then the whole grid for the
-    problems whose nearest root may lie outside the window.  A sign-change cell in a window is the
-    nearest one of the whole grid when it is no farther than the window's edges.
+    Windows of 1, 2, 3, 4, 6, 9, … nodes either side of the nominal value (BEMs lie near it; each half again as
+    wide as the last), up to the whole grid, each for the problems whose nearest root may lie outside the
+    narrower one, each evaluating only the nodes the narrower one did not.  The
+    window of ``_HALF`` nodes either side takes a sign-change cell no farther than its edges; every other
+    window one nearer than its edges, which is the cell the scan of the whole grid (and of the ``_HALF``
+    window) would choose: the nearest, the leftmost of equally near ones.
     """
     n_grid = nodes.size
     a = np.full(batch, np.nan)
@@ -177,12 +184,29 @@ def _bracket(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.nda
     last_zero = np.zeros(batch, dtype=bool)
     k0 = int(np.clip(np.searchsorted(nodes, nominal), 0, n_grid - 1))
     pending = np.arange(batch)
-    for half in (4, n_grid):
+    f_all = np.empty((batch, 0))   # residuals of the pending problems on nodes[p0 : p1 + 1]
+    p0, p1 = k0, k0 - 1            # the nodes evaluated so far (none)
+    half = 0
+    while half < n_grid:
+        half += max(1, half // 2)   # 1, 2, 3, 4, 6, 9, 13, …: few passes, at most half again the nodes needed
         i0, i1 = max(0, k0 - half), min(n_grid - 1, k0 + half)
         if i1 - i0 < 1 or pending.size == 0:
             continue
-        grid = np.broadcast_to(nodes[i0 : i1 + 1], (pending.size, i1 - i0 + 1)).copy()
-        f = np.asarray(call(grid, pending), dtype=np.float64)
+        parts = []
+        if p1 < p0:  # nothing evaluated yet
+            grid = np.broadcast_to(nodes[i0 : i1 + 1], (pending.size, i1 - i0 + 1)).copy()
+            f = np.asarray(call(grid, pending), dtype=np.float64)
+        else:
+            if i0 < p0:
+                left = np.broadcast_to(nodes[i0:p0], (pending.size, p0 - i0)).copy()
+                parts.append(np.asarray(call(left, pending), dtype=np.float64))
+            parts.append(f_all)
+            if i1 > p1:
+                right = np.broadcast_to(nodes[p1 + 1 : i1 + 1], (pending.size, i1 - p1)).copy()
+                parts.append(np.asarray(call(right, pending), dtype=np.float64))
+            f = np.concatenate(parts, axis=1) if len(parts) > 1 else f_all
+            grid = np.broadcast_to(nodes[i0 : i1 + 1], (pending.size, i1 - i0 + 1))
+        p0, p1 = i0, i1
         fl, fr = f[:, :-1], f[:, 1:]
         change = (np.sign(fl) * np.sign(fr) < 0) | (fl == 0)
         xl, xr = grid[:, :-1], grid[:, 1:]
@@ -193,13 +217,14 @@ def _bracket(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.nda
         d = dist[r, k]
         whole = i0 == 0 and i1 == n_grid - 1
         edge = min(nominal - float(nodes[i0]) if i0 > 0 else float("inf"), float(nodes[i1]) - nominal if i1 < n_grid - 1 else float("inf"))
-        found = np.isfinite(d) & ((d <= edge) | whole)
+        found = np.isfinite(d) & (((d <= edge) if half == _HALF else (d < edge)) | whole)
         rows = pending[found]
         a[rows], b[rows], fa[rows], fb[rows] = xl[r, k][found], xr[r, k][found], fl[r, k][found], fr[r, k][found]
         valid[rows] = True
         if whole:  # exact zero on the last node is not covered by the cells above
             last_zero[pending] = f[:, -1] == 0
-        pending = pending[~found]
+            break
+        pending, f_all = pending[~found], f[~found]
     return _Bracket(a, b, fa, fb, valid, last_zero)
 
 

@@ -36,6 +36,7 @@ from __future__ import annotations
 import functools
 import logging
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -251,6 +252,10 @@ class MujocoRobot(Robot):
         nom = _custom_numeric(model, "bemlearn_qu_nominal")
         self._M = np.zeros((model.nv, model.nv))
         self._vec = np.zeros(model.nv)
+        # hinge/slide joints only: nq = nv = n; in model order (the usual case) a row loads as a slice
+        self._joint_order = bool(np.array_equal(self._qadr, np.arange(n)) and np.array_equal(self._dadr, np.arange(n)))
+        self._ix_dd = np.ix_(self._dadr, self._dadr)
+        self._ia = np.array([i for i in range(self.n) if i != self.unactuated_index], dtype=np.int64)   # coordinates
         self._chain = None
         self.upright_search = self._search_upright(rng)
         if nom is not None:
@@ -374,7 +379,7 @@ class MujocoRobot(Robot):
         q = as_batch(q, self.n, "q", func="mass_matrix", units="rad")
         qj = self._to_joint(q)
         out = np.empty((q.shape[0], self._dadr.size, self._dadr.size))
-        idx = np.ix_(self._dadr, self._dadr)
+        idx = self._ix_dd
         for b in range(q.shape[0]):
             self._load_state(qj[b], None)
             make_mass_matrix(self.model, self.data)
@@ -414,20 +419,97 @@ class MujocoRobot(Robot):
             out[b] = d.qfrc_passive[self._dadr]
         return self._from_joint_force(out)
 
+    def _inverse_joint(self, qj: np.ndarray, qdj: np.ndarray, qddj: np.ndarray) -> np.ndarray:
+        """τ_j = D_j q̈_j + C_j q̇_j + G_j − τ_p,j per row, in joint coordinates, one RNE pass per row.
+
+        ``qj, qdj, qddj (R, n)`` joint positions, rates, accelerations (rad, rad/s, rad/s²; m, m/s, m/s² for
+        slides) → ``(R, n)`` N·m (N).  The MuJoCo calls of :meth:`_load_state` and the RNE written out in one
+        loop (per row: kinematics, com positions, com velocities, passive forces, RNE with q̈), the same
+        numbers as row-by-row calls.
+        """
+        m, d, vec = self.model, self.data, self._vec
+        kinematics, com_pos, com_vel, passive, rne = (mujoco.mj_kinematics, mujoco.mj_comPos, mujoco.mj_comVel,
+                                                       mujoco.mj_passive, mujoco.mj_rne)
+        R = qj.shape[0]
+        out = np.empty((R, self._dadr.size))
+        if self._joint_order:  # coordinates in model order: whole-vector writes and reads
+            qpos, qvel, qacc, qfrc_passive = d.qpos, d.qvel, d.qacc, d.qfrc_passive
+            subtract = np.subtract
+            for b in range(R):
+                qpos[:] = qj[b]
+                qvel[:] = qdj[b]
+                kinematics(m, d)
+                com_pos(m, d)
+                com_vel(m, d)
+                passive(m, d)
+                qacc[:] = qddj[b]
+                rne(m, d, 1, vec)
+                subtract(vec, qfrc_passive, out=out[b])
+            return out + self._armature * qddj   # MuJoCo's RNE leaves out the armature its mass matrix holds
+        qadr, dadr = self._qadr, self._dadr
+        for b in range(R):
+            d.qpos[qadr] = qj[b]
+            d.qvel[dadr] = qdj[b]
+            kinematics(m, d)
+            com_pos(m, d)
+            com_vel(m, d)
+            passive(m, d)
+            d.qacc[dadr] = qddj[b]
+            rne(m, d, 1, vec)
+            out[b] = vec[dadr] - d.qfrc_passive[dadr]
+        return out + self._armature * qddj
+
     def inverse_dynamics(self, q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor) -> torch.Tensor:
         """D q̈ + C q̇ + G − τ_p in one RNE pass per state (same value as the base class)."""
         q, qd, qdd = self._states(q, qd, qdd, func="inverse_dynamics")
-        qj, qdj, qddj = self._to_joint(q), self._to_joint(qd), self._to_joint(qdd)
-        out = np.empty((q.shape[0], self._dadr.size))
-        m, d, dadr, vec = self.model, self.data, self._dadr, self._vec
-        for b in range(q.shape[0]):  # one state load per row: RNE with q̈, minus the passive forces
-            self._load_state(qj[b], qdj[b])
-            mujoco.mj_comVel(m, d)
-            mujoco.mj_passive(m, d)
-            d.qacc[dadr] = qddj[b]
-            mujoco.mj_rne(m, d, 1, vec)
-            out[b] = vec[dadr] + self._armature * qddj[b] - d.qfrc_passive[dadr]
+        out = self._inverse_joint(self._to_joint(q), self._to_joint(qd), self._to_joint(qdd))
         return self._from_joint_force(out)
+
+    def gamma_rows(self, qu: np.ndarray, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray,
+                   qud: np.ndarray | None = None, qudd: np.ndarray | None = None) -> np.ndarray:
+        """Γ (eq. 5) for many states in NumPy (N·m, N for a slide q_u); Γ_0 (eq. 7) with q̇_u = q̈_u = 0 (the default).
+
+        Row r is :meth:`gamma0_scalar` of row r, the same numbers.
+
+        Args:
+            qu: ``(R,)`` q_u in its joint's unit (rad or m).
+            qa: ``(R, m)`` q_a (rad; m for slides).
+            qad: ``(R, m)`` q̇_a (rad/s; m/s for slides).
+            qadd: ``(R, m)`` q̈_a (rad/s²; m/s² for slides).
+            qud: ``(R,)`` q̇_u (default 0).
+            qudd: ``(R,)`` q̈_u (default 0).
+
+        Returns:
+            ``(R,)`` Γ.
+        """
+        qu = np.asarray(qu, dtype=np.float64).reshape(-1)
+        R, u, ia = qu.shape[0], self.unactuated_index, self._ia
+        q, qd, qdd = np.empty((R, self.n)), np.zeros((R, self.n)), np.zeros((R, self.n))
+        q[:, ia], q[:, u] = np.asarray(qa, dtype=np.float64).reshape(R, -1), qu
+        qd[:, ia], qdd[:, ia] = np.asarray(qad, dtype=np.float64).reshape(R, -1), np.asarray(qadd, dtype=np.float64).reshape(R, -1)
+        if qud is not None:
+            qd[:, u] = qud
+        if qudd is not None:
+            qdd[:, u] = qudd
+        if self.identity_coordinates:
+            return self._inverse_joint(q, qd, qdd)[:, u]
+        Tinv = self.Tinv_np  # row by row, as gamma0_scalar maps one state (a matrix product may round differently)
+        to_joint = lambda x: np.array([Tinv @ row for row in x]).reshape(R, self.n)  # noqa: E731
+        f = self._inverse_joint(to_joint(q), to_joint(qd), to_joint(qdd))
+        return np.array([(Tinv.T @ row)[u] for row in f])
+
+    def _bem_residual(self, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
+        """Γ_0 through :meth:`gamma_rows` for :meth:`bem` when the coordinates are the joints (T = I: the same
+        numbers as :meth:`gamma0`, whose coordinate maps then only multiply by ones); None otherwise."""
+        if not self.identity_coordinates:
+            return None
+
+        def fun(x: np.ndarray, rows: np.ndarray) -> np.ndarray:  # (R, K) -> (R, K)
+            R, K = x.shape
+            rep = lambda a: np.repeat(a[rows], K, axis=0)  # noqa: E731
+            return self.gamma_rows(x.reshape(-1), rep(qa), rep(qad), rep(qadd)).reshape(R, K)
+
+        return fun
 
     # ---- single-state numpy fast path (control loops) ------------------------------------
     def terms(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -440,11 +522,22 @@ class MujocoRobot(Robot):
         Returns:
             ``D (n, n)`` and ``h (n,)`` in coordinates (eq. 1: D q̈ + h = B u).
         """
+        m, d = self.model, self.data
+        if self._joint_order and self.identity_coordinates:  # T = I, model order: no maps, no re-indexing
+            d.qpos[:] = q
+            d.qvel[:] = qd
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            make_mass_matrix(m, d)
+            D = full_mass_matrix(m, d, self._M).copy()
+            mujoco.mj_comVel(m, d)
+            mujoco.mj_rne(m, d, 0, self._vec)
+            mujoco.mj_passive(m, d)
+            return D, self._vec - d.qfrc_passive
         Tinv = self.Tinv_np
         self._load_state(Tinv @ q, Tinv @ qd)
-        m, d = self.model, self.data
         make_mass_matrix(m, d)
-        Dj = full_mass_matrix(m, d, self._M)[np.ix_(self._dadr, self._dadr)]
+        Dj = full_mass_matrix(m, d, self._M)[self._ix_dd]
         mujoco.mj_comVel(m, d)
         mujoco.mj_rne(m, d, 0, self._vec)
         mujoco.mj_passive(m, d)
@@ -453,22 +546,30 @@ class MujocoRobot(Robot):
 
     def gamma0_scalar(self, qu: float, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray, qud: float = 0.0, qudd: float = 0.0) -> float:
         """Γ (eq. 5) for one state, numpy fast path (N·m); Γ_0 (eq. 7) with the default q̇_u = q̈_u = 0."""
-        n, u = self.n, self.unactuated_index
-        ia = list(self.actuated_index)
-        q = np.empty(n)
-        qd = np.zeros(n)
-        qdd = np.zeros(n)
-        q[ia], q[u] = qa, qu
-        qd[ia], qd[u] = qad, qud
-        qdd[ia], qdd[u] = qadd, qudd
+        n, u, ia = self.n, self.unactuated_index, self._ia
+        if self._joint_order and self.identity_coordinates:  # the state written straight into MjData (_inverse_joint's steps)
+            m, d = self.model, self.data
+            qpos, qvel, qacc = d.qpos, d.qvel, d.qacc
+            qpos[ia], qpos[u] = qa, qu
+            qvel[ia], qvel[u] = qad, qud
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            mujoco.mj_comVel(m, d)
+            mujoco.mj_passive(m, d)
+            qacc[ia], qacc[u] = qadd, qudd
+            mujoco.mj_rne(m, d, 1, self._vec)
+            return float(self._vec[u] + self._armature[u] * qudd - d.qfrc_passive[u])
+        q = np.empty((1, n))
+        qd = np.zeros((1, n))
+        qdd = np.zeros((1, n))
+        q[0, ia], q[0, u] = qa, qu
+        qd[0, ia], qd[0, u] = qad, qud
+        qdd[0, ia], qdd[0, u] = qadd, qudd
+        if self.identity_coordinates:  # T = I: the maps would only multiply by ones and add zeros
+            return float(self._inverse_joint(q, qd, qdd)[0, u])
         Tinv = self.Tinv_np
-        m, d = self.model, self.data
-        self._load_state(Tinv @ q, Tinv @ qd)
-        mujoco.mj_comVel(m, d)
-        mujoco.mj_passive(m, d)
-        d.qacc[self._dadr] = Tinv @ qdd
-        mujoco.mj_rne(m, d, 1, self._vec)
-        return float((Tinv.T @ (self._vec[self._dadr] + self._armature * (Tinv @ qdd) - d.qfrc_passive[self._dadr]))[u])
+        f = self._inverse_joint((Tinv @ q[0])[None], (Tinv @ qd[0])[None], (Tinv @ qdd[0])[None])[0]
+        return float((Tinv.T @ f)[u])
 
     # ---- kinematics --------------------------------------------------------------------
     @property

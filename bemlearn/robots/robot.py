@@ -20,14 +20,14 @@ a slide", "N·m" for "N·m, or N for a slide".
 from __future__ import annotations
 
 import abc
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from bemlearn._lazy import lazy_module
 from bemlearn.errors import ArgumentError
-from bemlearn.robots.bem import BEMResult, solve_bem
+from bemlearn.robots.bem import BEMResult, find_roots, solve_bem
 
 if TYPE_CHECKING:
     import torch
@@ -172,6 +172,29 @@ class Robot(abc.ABC):
 
         return float(self.gamma(joined(qa, qu), joined(qad, qud), joined(qadd, qudd))[0])
 
+    def gamma_rows(self, qu: np.ndarray, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray,
+                   qud: np.ndarray | None = None, qudd: np.ndarray | None = None) -> np.ndarray:
+        """Γ (eq. 5) for many states in NumPy; Γ_0 (eq. 7) with the default q̇_u = q̈_u = 0 (N·m, N for a slide q_u).
+
+        Row r is :meth:`gamma0_scalar` of row r; this version calls it row by row, implementations override it
+        with a faster loop.
+
+        Args:
+            qu: ``(R,)`` q_u in its joint's unit (rad or m).
+            qa: ``(R, m)`` q_a (rad; m for slides).
+            qad: ``(R, m)`` q̇_a (rad/s; m/s for slides).
+            qadd: ``(R, m)`` q̈_a (rad/s²; m/s² for slides).
+            qud: ``(R,)`` q̇_u (default 0).
+            qudd: ``(R,)`` q̈_u (default 0).
+        """
+        qu = np.asarray(qu, dtype=np.float64).reshape(-1)
+        R = qu.shape[0]
+        qa, qad, qadd = (np.asarray(a, dtype=np.float64).reshape(R, self.m) for a in (qa, qad, qadd))
+        qud = np.zeros(R) if qud is None else np.asarray(qud, dtype=np.float64).reshape(R)
+        qudd = np.zeros(R) if qudd is None else np.asarray(qudd, dtype=np.float64).reshape(R)
+        return np.array([self.gamma0_scalar(float(qu[r]), qa[r], qad[r], qadd[r], float(qud[r]), float(qudd[r])) for r in range(R)],
+                        dtype=np.float64).reshape(R)
+
     def momentum_u(self, q: torch.Tensor, qd_u: torch.Tensor) -> torch.Tensor:
         """H_u = D_uu(q) q̇_u (Lemma 1, eq. 19–20). ``q: (B, n)``, ``qd_u: (B,)`` → ``(B,)``."""
         u = self.unactuated_index
@@ -217,7 +240,12 @@ class Robot(abc.ABC):
             rep = lambda t: t[rows].repeat_interleave(K, dim=0)  # noqa: E731
             return self.gamma0(qu_grid.reshape(-1), rep(qa), rep(qad), rep(qadd)).reshape(R, K)
 
-        result = solve_bem(fun, B, lo=lo, hi=hi, nominal=self.qu_nominal, n_grid=n_grid)
+        residual = self._bem_residual(qa.numpy(), qad.numpy(), qadd.numpy())
+        if residual is None:
+            result = solve_bem(fun, B, lo=lo, hi=hi, nominal=self.qu_nominal, n_grid=n_grid)
+        else:
+            qu, valid, res, it = find_roots(residual, B, lo=lo, hi=hi, nominal=self.qu_nominal, n_grid=n_grid)
+            result = BEMResult(qu=torch.from_numpy(qu), valid=torch.from_numpy(valid), residual=torch.from_numpy(res), iterations=it)
         if on_missing == "raise" and not bool(result.valid.all()):
             i = int((~result.valid).nonzero()[0])
             raise ArgumentError(
@@ -227,6 +255,11 @@ class Robot(abc.ABC):
         if on_missing not in ("nan", "raise"):
             raise ArgumentError(f"bem: on_missing must be 'nan' or 'raise', got {on_missing!r}")
         return result
+
+    def _bem_residual(self, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
+        """Γ_0 in NumPy for :meth:`bem` (``fun(x (R, K), rows (R,)) -> (R, K)``, :func:`~bemlearn.robots.bem.find_roots`)
+        when an implementation evaluates it with the numbers of :meth:`gamma0`; None: :meth:`bem` calls :meth:`gamma0`."""
+        return None
 
     # ---- helpers ---------------------------------------------------------------------
     def _states(
