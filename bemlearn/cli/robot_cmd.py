@@ -68,6 +68,8 @@ def _info(args) -> int:
 
     if isinstance(r, MujocoRobot) and r.rolling is not None:
         print(f"rolling    {r.rolling.describe(r.model)}")
+    if isinstance(r, MujocoRobot) and r.floating is not None:
+        print(f"rolling    {r.floating.describe(r.model)}")
     from bemlearn.robots.cyclic import cyclic_coordinates
 
     cyclic = [name for name, c in zip(r.joint_names, cyclic_coordinates(r)) if c]

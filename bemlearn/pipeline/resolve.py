@@ -191,7 +191,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
 
 def _robot_notes(robot: Any) -> tuple[str, ...]:
     """The coordinates of a robot whose freedoms roll with a wheel (``bemlearn.robots.rolling``), for ``config show``."""
-    rolling = getattr(robot, "rolling", None)
+    rolling = getattr(robot, "rolling", None) or getattr(robot, "floating", None)
     if rolling is None:
         return ()
     return (f"coordinates {', '.join(robot.actuated_names)} (q_a), {robot.unactuated_name} (q_u); "
