@@ -1,0 +1,182 @@
+"""A free-floating body on two driven wheels (bemlearn.robots.floating) against references computed without the reduction.
+
+tests/robots/two_wheeler.xml: a body of mass m_b whose centre of mass is l above the axle, on two wheels
+(radius R, mass m_w, inertia I_w about the axle each), both driven.  Planar closed form, derived here:
+with the body not rotating (φ̇ = φ̈ = 0) the whole robot translates with a = r θ̈ and the wheels turn at
+θ̈ (θ the wheel angle relative to the body, r the rolling radius).  Pitching by δφ with the wheels held to
+the body rotates the whole robot about the contact line (the wheel rolls), so the motor does no work and
+d'Alembert's principle for that virtual displacement (point displacement (d_z, −d_x) δφ at offset d from
+the contact line, d_x along travel) reads
+
+    m_b g l sin φ − m_b a (r + l cos φ) − 2 m_w a r − 2 I_w a / r = 0,                             (P)
+
+independent of θ̇ (wheel damping acts on the relative joint, which does not move).  MuJoCo's contact point
+lies midway through the penetration: r = r_eff = (h + R) / 2 with h the hub's height above the floor on the
+pose of rest, where the contacts carry the weight.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from bemlearn.errors import RobotModelError
+from bemlearn.robots import MujocoRobot, load
+from bemlearn.robots.rolling import kkt_acceleration, wheel_geoms
+
+ROBOTS = Path(__file__).resolve().parent / "robots"
+TWO = ROBOTS / "two_wheeler.xml"
+M_B, L, M_W, I_W, R, G = 1.2, 0.08, 0.1, 1.5e-4, 0.05, 9.81
+
+
+@pytest.fixture(scope="module")
+def robot() -> MujocoRobot:
+    r = load(TWO)
+    assert isinstance(r, MujocoRobot)
+    return r
+
+
+def _hub_height(robot: MujocoRobot) -> float:
+    d = mujoco.MjData(robot.model)
+    d.qpos[:] = robot.state_to_mujoco(np.zeros(2))[0]
+    mujoco.mj_kinematics(robot.model, d)
+    return float(d.xanchor[robot.model.joint("left_spin").id][2])
+
+
+def _closed_form(alpha: float, r: float) -> float:
+    a = r * alpha
+    return brentq(lambda p: M_B * G * L * math.sin(p) - M_B * a * (r + L * math.cos(p)) - 2 * M_W * a * r - 2 * I_W * a / r,
+                  -1.2, 1.2, xtol=1e-15)
+
+
+def test_pitch_is_unactuated_and_the_wheels_roll_together(robot):
+    assert robot.joint_names == ("left_spin", "chassis_pitch")
+    assert robot.unactuated_name == "chassis_pitch"
+    assert robot.coordinate_kinds == ("hinge", "hinge")
+    fl = robot.floating
+    assert fl is not None and [robot.model.joint(j).name for j in fl.wheels] == ["left_spin", "right_spin"]
+    np.testing.assert_array_equal(fl.signs, [1.0, -1.0])
+    np.testing.assert_allclose(fl.T @ fl.S, np.eye(2), atol=1e-15)
+    r = 0.5 * (_hub_height(robot) + R)
+    # travel along x = r (θ + φ) (the wheel's world angle), both wheels alike: B's wheel row = (1, −1)
+    np.testing.assert_allclose(fl.S[:3].T, [[r, 0, 0], [r, 0, 0]], atol=1e-9)
+    np.testing.assert_allclose(robot.input_matrix_np, [[1.0, -1.0], [0.0, 0.0]], atol=1e-15)
+    assert [c.radius for c in fl.contacts] == pytest.approx([r, r], abs=1e-9)
+
+
+def test_the_pose_of_rest_carries_the_weight(robot):
+    m, d = robot.model, mujoco.MjData(robot.model)
+    d.qpos[:] = robot.state_to_mujoco(np.zeros(2))[0]
+    mujoco.mj_forward(m, d)
+    force = np.zeros(6)
+    normal = 0.0
+    for i in range(d.ncon):
+        mujoco.mj_contactForce(m, d, i, force)
+        normal += force[0]
+    weight = (M_B + 2 * M_W) * G
+    assert normal == pytest.approx(weight, rel=1e-6)
+    assert 0 < R - _hub_height(robot) < 1e-3   # pressed in, not far
+
+
+def test_positions_round_trip_and_the_axle_stays_level(robot):
+    rng = np.random.default_rng(3)
+    d = mujoco.MjData(robot.model)
+    h = _hub_height(robot)
+    r = 0.5 * (h + R)
+    x0 = robot.floating.qpos_ground[0]
+    for _ in range(5):
+        q = np.array([rng.uniform(-20, 20), rng.uniform(-1.0, 1.0)])
+        qpos, _ = robot.state_to_mujoco(q)
+        np.testing.assert_allclose(robot.coordinates_of(qpos), q, atol=1e-12)
+        d.qpos[:] = qpos
+        mujoco.mj_kinematics(robot.model, d)
+        axle = d.xanchor[robot.model.joint("left_spin").id]
+        assert axle[2] == pytest.approx(h, abs=1e-12)
+        assert axle[0] - x0 == pytest.approx(r * (q[0] + q[1]), abs=1e-9)
+        # the body's up axis leans by the pitch about +y
+        up = d.xmat[robot.model.body("chassis").id].reshape(3, 3)[:, 2]
+        np.testing.assert_allclose(up, [math.sin(q[1]), 0.0, math.cos(q[1])], atol=1e-12)
+
+
+@pytest.mark.parametrize("rate", [0.0, 10.0])
+def test_model_bem_matches_the_planar_closed_form(robot, rate):
+    r = 0.5 * (_hub_height(robot) + R)
+    alpha = np.linspace(-20.0, 20.0, 21)
+    res = robot.bem(np.zeros((21, 1)), np.full((21, 1), rate), alpha[:, None])
+    assert bool(res.valid.all())
+    ref = np.array([_closed_form(a, r) for a in alpha])
+    np.testing.assert_allclose(res.qu.numpy(), ref, atol=1e-10)
+    assert abs(ref[-1]) > 0.15   # the range is not trivial
+
+
+def _kkt_pitch_accel(robot: MujocoRobot, q: np.ndarray, qd: np.ndarray, alpha: float) -> float:
+    """φ̈ of the full model's hard-constraint dynamics (all dofs, no-slip and normal rows) when equal
+    and opposite motor torques give the wheel the acceleration ``alpha``."""
+    m = robot.model
+    d = mujoco.MjData(m)
+    wheels = wheel_geoms(m, _kin(robot, q))
+    qpos, qvel = robot.state_to_mujoco(q, qd)
+    dofs = [int(m.jnt_dofadr[m.actuator_trnid[i, 0]]) for i in range(m.nu)]
+    acc = []
+    for tau in (0.0, 1.0):
+        f = np.zeros(m.nv)
+        f[dofs] = tau * robot.floating.signs
+        acc.append(robot.T_np @ kkt_acceleration(m, d, qpos, qvel, f, wheels, normal=True)[0])
+    tau = (alpha - acc[0][0]) / (acc[1][0] - acc[0][0])
+    return float(acc[0][1] + tau * (acc[1][1] - acc[0][1]))
+
+
+def _kin(robot: MujocoRobot, q: np.ndarray) -> mujoco.MjData:
+    d = mujoco.MjData(robot.model)
+    d.qpos[:] = robot.state_to_mujoco(q)[0]
+    mujoco.mj_kinematics(robot.model, d)
+    return d
+
+
+@pytest.mark.parametrize(("theta", "rate", "alpha"), [(0.0, 0.0, 20.0), (1.3, 10.0, -15.0), (-4.0, -6.0, 7.5)])
+def test_model_bem_matches_the_hard_no_slip_kkt_reference(robot, theta, rate, alpha):
+    res = robot.bem(np.array([[theta]]), np.array([[rate]]), np.array([[alpha]]))
+    ref = brentq(lambda p: _kkt_pitch_accel(robot, np.array([theta, p]), np.array([rate, 0.0]), alpha), -1.0, 1.0, xtol=1e-14)
+    assert float(res.qu[0]) == pytest.approx(ref, abs=1e-8)
+
+
+def test_reduced_dynamics_match_the_kkt_system_while_pitching(robot):
+    """With φ̇ ≠ 0 the reference needs J̇ q̇; the reduced D q̈ + h = B u has it through the constant map."""
+    rng = np.random.default_rng(7)
+    m = robot.model
+    for _ in range(4):
+        q = np.array([rng.uniform(-3, 3), rng.uniform(-0.6, 0.6)])
+        qd = np.array([rng.uniform(-8, 8), rng.uniform(-3, 3)])
+        u = rng.uniform(-1.5, 1.5, size=2)
+        D, h = robot.terms(q, qd)
+        qdd = np.linalg.solve(D, robot.input_matrix_np @ u - h)
+        qpos, qvel = robot.state_to_mujoco(q, qd)
+        f = np.zeros(m.nv)
+        f[[int(m.jnt_dofadr[m.actuator_trnid[i, 0]]) for i in range(m.nu)]] = u
+        d = mujoco.MjData(m)
+        full, _ = kkt_acceleration(m, d, qpos, qvel, f, wheel_geoms(m, _kin(robot, q)), normal=True)
+        # the yaw mode (unequal torques) is left out of the reduction: compare the planar part
+        np.testing.assert_allclose(robot.T_np @ full, qdd, rtol=1e-6, atol=1e-6)
+
+
+def _variant(old: str, new: str) -> str:
+    xml = TWO.read_text()
+    assert old in xml
+    return xml.replace(old, new)
+
+
+def test_refusals_name_the_problem():
+    with pytest.raises(RobotModelError, match="wheels alone"):
+        MujocoRobot.from_xml_string(_variant('<geom name="box"', '<body name="arm"><joint name="arm" type="hinge" axis="1 0 0"/>'
+                                             '<inertial pos="0 0 0.1" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/></body><geom name="box"'))
+    with pytest.raises(RobotModelError, match="no actuator"):
+        MujocoRobot.from_xml_string(_variant('<motor name="right_motor" joint="right_spin" gear="1" ctrllimited="true" ctrlrange="-1.5 1.5"/>', ""))
+    with pytest.raises(RobotModelError, match="touch it together"):
+        MujocoRobot.from_xml_string(_variant('<body name="right" pos="0 -0.11 -0.1">', '<body name="right" pos="0 -0.11 -0.09">'))
+    with pytest.raises(RobotModelError, match="one horizontal axle"):
+        MujocoRobot.from_xml_string(_variant('<body name="right" pos="0 -0.11 -0.1">', '<body name="right" pos="0 -0.11 -0.1" euler="0.1 0 0">'))
