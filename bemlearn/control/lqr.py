@@ -281,7 +281,7 @@ def holds_in_mujoco(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, timest
     N = max(1, int(round(1.0 / (rate_hz * float(model.opt.timestep)))))
     lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
     limited = model.actuator_ctrllimited.astype(bool)
-    T, Tinv = robot.T_np, robot.Tinv_np
+    T = robot.T_np
     nominal = np.zeros(n)
     nominal[iu] = robot.qu_nominal
     ticks = int(math.ceil(check_s * rate_hz))

@@ -123,10 +123,11 @@ def find_floating(model: mujoco.MjModel, *, where: str) -> FloatingRolling | Non
     free = [j for j in range(model.njnt) if int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_FREE)]
     if not free:
         return None
+    where = f"{where}: a ball/free joint is supported only as one free body on coaxial driven wheels, but"
     if len(free) > 1 or int(model.body_parentid[int(model.jnt_bodyid[free[0]])]) != 0:
-        raise RobotModelError(f"{where}: {len(free)} free joints; one free body (a child of the world) on wheels is supported")
+        raise RobotModelError(f"{where} there are {len(free)} free joints, or the free body is not a child of the world")
     if np.linalg.norm(model.opt.gravity) == 0:
-        raise RobotModelError(f"{where}: a free body on wheels needs gravity; <option gravity> is zero")
+        raise RobotModelError(f"{where} <option gravity> is zero")
     fj = free[0]
     body = int(model.jnt_bodyid[fj])
     data = mujoco.MjData(model)
@@ -138,15 +139,15 @@ def find_floating(model: mujoco.MjModel, *, where: str) -> FloatingRolling | Non
     names = [model.joint(j).name or f"joint{j}" for j in range(model.njnt)]
     not_wheels = [names[j] for j in hinges if j not in set(wheels.values())]
     if not_wheels or not hinges:
-        raise RobotModelError(f"{where}: a free body is supported on wheels alone; joints {not_wheels or 'none'} do not turn a "
-                              "wheel (a cylinder coaxial with its hinge or a sphere on its axis)")
+        raise RobotModelError(f"{where} joints {not_wheels} do not turn a wheel (a cylinder coaxial with its hinge or a "
+                              "sphere on its axis)" if not_wheels else f"{where} the free body has no wheels")
     if undriven := [names[j] for j in hinges if j not in driven]:
-        raise RobotModelError(f"{where}: wheels {undriven} of the free body have no actuator; each wheel must be driven")
+        raise RobotModelError(f"{where} wheels {undriven} have no actuator")
     axes = [data.xaxis[j] / np.linalg.norm(data.xaxis[j]) for j in hinges]
     axle, up = axes[0], _up(model)
     if any(np.linalg.norm(np.cross(a, axle)) > 1e-6 for a in axes) or abs(axle @ up) > 1e-6:
-        raise RobotModelError(f"{where}: the wheels {[names[j] for j in hinges]} are not on one horizontal axle; "
-                              "steered or cambered wheels are not supported yet")
+        raise RobotModelError(f"{where} the wheels {[names[j] for j in hinges]} are not on one horizontal axle "
+                              "(steered or cambered wheels are not supported yet)")
     signs = np.array([float(np.sign(a @ axle)) for a in axes])
     _origin_on_axle(model, data, body, fj, hinges)
     data.qpos[:] = model.qpos0
@@ -156,7 +157,7 @@ def find_floating(model: mujoco.MjModel, *, where: str) -> FloatingRolling | Non
     mujoco.mj_fwdPosition(model, data)
     tangential, normal, found = rolling_rows(model, data, wheels)
     if {w for w, _, _ in found} != set(wheels):
-        raise RobotModelError(f"{where}: not every wheel touches the ground on the pose of rest")
+        raise RobotModelError(f"{where} not every wheel touches the ground on the pose of rest")
     J = np.vstack([tangential, normal])
     nv, a = model.nv, int(model.jnt_dofadr[fj])
     Rb = data.xmat[body].reshape(3, 3)
@@ -170,7 +171,7 @@ def find_floating(model: mujoco.MjModel, *, where: str) -> FloatingRolling | Non
     S = np.column_stack([v_theta + c[0] * v_f, v_phi + c[1] * v_f])
     scale = float(np.abs(J).max())
     if float(np.abs(J @ S).max()) > _TOL * scale:
-        raise RobotModelError(f"{where}: the wheels cannot roll together without slipping on the pose of rest "
+        raise RobotModelError(f"{where} the wheels cannot roll together without slipping on the pose of rest "
                               f"(residual {float(np.abs(J @ S).max()):.3g}); not a two-wheeled robot on a plane")
     T = np.zeros((2, nv))
     T[0, int(model.jnt_dofadr[hinges[0]])] = 1.0
@@ -214,10 +215,10 @@ def _settle(model: mujoco.MjModel, data: mujoco.MjData, fj: int, wheels: dict[in
     for w in wheels:
         d = [mujoco.mj_geomDistance(model, data, w, g, 10.0, None) for g in static if _collides(model, w, g)]
         if not d:
-            raise RobotModelError(f"{where}: wheel geom {model.geom(w).name or w} collides with no static geom (no ground)")
+            raise RobotModelError(f"{where} wheel geom {model.geom(w).name or w} collides with no static geom (no ground)")
         gaps.append(min(d))
     if max(gaps) - min(gaps) > 1e-6:
-        raise RobotModelError(f"{where}: the wheels are {min(gaps):.6g} and {max(gaps):.6g} m above the ground; they must "
+        raise RobotModelError(f"{where} the wheels are {min(gaps):.6g} and {max(gaps):.6g} m above the ground, they must "
                               "touch it together (a level axle)")
     qa = int(model.jnt_qposadr[fj])
     base = np.array(model.qpos0, dtype=np.float64)
@@ -234,7 +235,7 @@ def _settle(model: mujoco.MjModel, data: mujoco.MjData, fj: int, wheels: dict[in
 
     lo, hi = 0.0, 0.5 * radius
     if not lift(hi) > 0:
-        raise RobotModelError(f"{where}: the ground does not carry the robot's weight within half a wheel radius of penetration")
+        raise RobotModelError(f"{where} the ground does not carry the robot's weight within half a wheel radius of penetration")
     for _ in range(60):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if lift(mid) < 0 else (lo, mid)
@@ -254,5 +255,5 @@ def _check_constant(model: mujoco.MjModel, data: mujoco.MjData, wheels: dict[int
             continue
         J = np.vstack([tangential, normal])
         if float(np.abs(J @ fr.S).max()) > 1e-6 * float(np.abs(J).max()):
-            raise RobotModelError(f"{where}: the rolling map of the free body changes with the pose; not supported")
+            raise RobotModelError(f"{where} the rolling map of the free body changes with the pose; not supported")
     data.qpos[:] = fr.qpos_ground

@@ -252,7 +252,7 @@ class MujocoRobot(Robot):
             )
         self.unactuated_index = zero_rows[0]
         if self.floating is not None:
-            self._coordinate_kinds = ("hinge", "hinge")   # a wheel angle and the body's pitch
+            self._coordinate_kinds: tuple[str, ...] = ("hinge", "hinge")   # a wheel angle and the body's pitch
         elif self.coordinate_joints is not None:
             self._coordinate_kinds = tuple(self.joint_kinds[j] for j in self.coordinate_joints)
         elif len(set(self.joint_kinds)) == 1:  # a linear map of like joints keeps their kind
