@@ -32,6 +32,7 @@ from bemlearn.robots.rolling import kkt_acceleration, wheel_geoms
 ROBOTS = Path(__file__).resolve().parent / "robots"
 TWO = ROBOTS / "two_wheeler.xml"
 M_B, L, M_W, I_W, R, G = 1.2, 0.08, 0.1, 1.5e-4, 0.05, 9.81
+I_B = 0.010   # the body's inertia about its centre of mass, about the axle
 
 
 @pytest.fixture(scope="module")
@@ -112,6 +113,17 @@ def test_model_bem_matches_the_planar_closed_form(robot, rate):
     ref = np.array([_closed_form(a, r) for a in alpha])
     np.testing.assert_allclose(res.qu.numpy(), ref, atol=1e-10)
     assert abs(ref[-1]) > 0.15   # the range is not trivial
+
+
+def test_pitch_inertia_is_the_whole_robot_about_the_contact_line(robot):
+    """Pitching with the wheels held to the body turns the whole robot about the contact line:
+    D_φφ = I_b + m_b (r² + l² + 2 r l cos φ) + 2 (m_w r² + I_w), which depends on φ (Lemma 1's premise
+    ∂D_uu/∂q_u = 0 does not hold for this robot)."""
+    r = 0.5 * (_hub_height(robot) + R)
+    for phi in (-0.7, 0.0, 0.4):
+        D, _ = robot.terms(np.array([2.0, phi]), np.zeros(2))
+        ref = I_B + M_B * (r * r + L * L + 2 * r * L * math.cos(phi)) + 2 * (M_W * r * r + I_W)
+        assert D[1, 1] == pytest.approx(ref, rel=1e-12)
 
 
 def _kkt_pitch_accel(robot: MujocoRobot, q: np.ndarray, qd: np.ndarray, alpha: float) -> float:
