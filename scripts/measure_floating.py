@@ -100,7 +100,8 @@ def main() -> None:
         qu = res.qu.numpy()
         top = max(top, float(np.abs(qu).max()))
         for a, phi in zip(alpha, qu):
-            ref = brentq(lambda f: kkt_pitch_accel(robot, np.array([0.0, f]), np.array([rate, 0.0]), a), -1.2, 1.2, xtol=1e-14)
+            ref = brentq(lambda f, a=a, rate=rate: kkt_pitch_accel(robot, np.array([0.0, f]), np.array([rate, 0.0]), a),
+                         -1.2, 1.2, xtol=1e-14)
             worst_kkt = max(worst_kkt, abs(phi - ref))
             worst_p = max(worst_p, abs(phi - closed(a, r_eff)))
             worst_geo = max(worst_geo, abs(phi - closed(a, r_geo)))
@@ -109,7 +110,7 @@ def main() -> None:
           f"with the geometric radius {r_geo:g} m max {math.degrees(worst_geo):.3g}°")
     d = mujoco.MjData(model)
     d.qpos[:] = robot.state_to_mujoco(np.zeros(2))[0]
-    lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
+    hi = model.actuator_ctrlrange[:, 1]
     u = np.where(model.actuator_ctrllimited.astype(bool), hi / 20.0, 1.0) * fl.signs
     d.ctrl[:] = u
     steps = int(round(0.3 / model.opt.timestep))

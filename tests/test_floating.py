@@ -192,3 +192,24 @@ def test_refusals_name_the_problem():
         MujocoRobot.from_xml_string(_variant('<body name="right" pos="0 -0.11 -0.1">', '<body name="right" pos="0 -0.11 -0.09">'))
     with pytest.raises(RobotModelError, match="one horizontal axle"):
         MujocoRobot.from_xml_string(_variant('<body name="right" pos="0 -0.11 -0.1">', '<body name="right" pos="0 -0.11 -0.1" euler="0.1 0 0">'))
+
+
+def test_the_plant_reads_and_writes_the_coordinates(robot):
+    from bemlearn.data.sensors import SensorConfig
+    from bemlearn.sim.plant import SensedPlant
+
+    plant = SensedPlant(robot, rate_hz=100.0, sensor=SensorConfig(), rng=np.random.default_rng(0), where="test")
+    q0, qd0 = np.array([0.7, 0.05]), np.array([1.5, -0.2])
+    plant.reset(q0, qd0)
+    np.testing.assert_allclose(plant.true_q(), q0, atol=1e-12)
+    np.testing.assert_allclose(robot.T_np @ plant.data.qvel, qd0, atol=1e-12)
+
+
+def test_the_pipeline_refuses_two_motors_on_one_coordinate(tmp_path):
+    from bemlearn.errors import ConfigError
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
+
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(f"robot: {TWO}\n")
+    with pytest.raises(ConfigError, match=r"2 actuators \['left_motor', 'right_motor'\] drive 1 actuated coordinate"):
+        resolve_pipeline_config(cfg)

@@ -139,6 +139,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
             robot = memo[robot_key] if memo is not None and robot_key in memo else load(parsed.robot)
         except (BemlearnError, OSError) as exc:
             raise ConfigError(f"{source}: robot: {str(exc).removeprefix('robot: ')}") from exc
+        _check_actuators(robot, source)
         derived_key = ("derived", robot_key, frozenset(given), parsed.collect.rate_hz, parsed.simulate.rate_hz,
                        parsed.collect.physics_timestep, parsed.simulate.physics_timestep)
         if memo is not None and derived_key in memo:
@@ -202,6 +203,23 @@ def load_pipeline_config(path: str | Path) -> PipelineConfig:
     """Parse a pipeline YAML file strictly (unknown keys and bad types are errors naming the key) and
     fill in the values derived from the robot's model (:func:`resolve_pipeline_config`)."""
     return resolve_pipeline_config(path).config
+
+
+def _check_actuators(robot: Any, source: str) -> None:
+    """The excitation, the EIC and the logs command one actuator per actuated coordinate (u has m entries).
+
+    Raises:
+        ConfigError: a robot whose actuators outnumber its actuated coordinates (two wheel motors driving one
+            wheel coordinate, :mod:`bemlearn.robots.floating`), naming both.
+    """
+    model = getattr(robot, "model", None)
+    if model is None or int(model.nu) == robot.m:
+        return
+    acts = [model.actuator(i).name or f"#{i}" for i in range(model.nu)]
+    raise ConfigError(f"{source}: robot: {robot.source}: {model.nu} actuators {acts} drive {robot.m} actuated coordinate(s) "
+                      f"{list(robot.actuated_names)}; the pipeline (excitation, EIC, logs) needs one actuator per actuated "
+                      "coordinate, which this robot does not have (not supported yet; `bemlearn robot info` and "
+                      "`bemlearn robot bem` work on it)")
 
 
 def _check_for_robot(cfg: PipelineConfig, robot, source: str) -> None:
