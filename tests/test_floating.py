@@ -213,3 +213,61 @@ def test_the_pipeline_refuses_two_motors_on_one_coordinate(tmp_path):
     cfg.write_text(f"robot: {TWO}\n")
     with pytest.raises(ConfigError, match=r"2 actuators \['left_motor', 'right_motor'\] drive 1 actuated coordinate"):
         resolve_pipeline_config(cfg)
+
+
+def _generated(rng: np.random.Generator) -> tuple[str, dict[str, float]]:
+    """A two-wheeled robot with seeded parameters: axle along the body's x or y, hinge axes of either sign,
+    the body's frame origin above or below the axle, the robot turned about the vertical and placed
+    above (or into) the floor, a cylinder or ball wheels."""
+    p = {"R": rng.uniform(0.03, 0.12), "l": rng.uniform(0.03, 0.3), "mb": rng.uniform(0.3, 3.0), "mw": rng.uniform(0.02, 0.4),
+         "Ib": rng.uniform(0.002, 0.05), "hoff": rng.uniform(-0.05, 0.15), "gap": rng.uniform(-0.0005, 0.05),
+         "w": rng.uniform(0.06, 0.2), "yaw": rng.uniform(-math.pi, math.pi)}
+    p["Iw"] = 0.5 * p["mw"] * p["R"] ** 2
+    ball = bool(rng.integers(2))
+    if ball:
+        p["Iw"] = 0.4 * p["mw"] * p["R"] ** 2
+    along_y = bool(rng.integers(2))
+    a = np.array([0.0, 1.0, 0.0]) if along_y else np.array([1.0, 0.0, 0.0])
+    inertia = lambda on_axle, other: " ".join(f"{on_axle if k else other:.17g}" for k in a)  # noqa: E731
+    euler = "1.5707963267948966 0 0" if along_y else "0 1.5707963267948966 0"
+    tyre = f'type="sphere" size="{p["R"]:.17g}"' if ball else f'type="cylinder" size="{p["R"]:.17g} 0.01" euler="{euler}"'
+    wheels = ""
+    for side, s in (("left", 1.0), ("right", -1.0)):
+        sign = rng.choice([-1.0, 1.0])
+        pos = " ".join(f"{v:.17g}" for v in s * p["w"] * a + np.array([0.0, 0.0, -p["hoff"]]))
+        wheels += (f'<body name="{side}" pos="{pos}"><joint name="{side}_spin" type="hinge" axis="{" ".join(f"{sign * v:.17g}" for v in a)}"/>'
+                   f'<inertial pos="0 0 0" mass="{p["mw"]:.17g}" diaginertia="{inertia(p["Iw"], p["Iw"])}"/>'
+                   f'<geom name="{side}_tyre" {tyre} contype="1" conaffinity="1"/></body>')
+    z0 = p["R"] + p["gap"] + p["hoff"]
+    xml = f"""<mujoco model="gen"><compiler angle="radian" inertiafromgeom="false"/><option timestep="0.001"/>
+      <worldbody><geom name="floor" type="plane" size="10 10 0.01" friction="1 0.01 0.001"/>
+      <body name="base" pos="0.1 0.2 {z0:.17g}" euler="0 0 {p["yaw"]:.17g}"><freejoint/>
+      <inertial pos="0 0 {p["l"] - p["hoff"]:.17g}" mass="{p["mb"]:.17g}" diaginertia="{inertia(p["Ib"], 2 * p["Ib"])}"/>
+      {wheels}</body></worldbody>
+      <actuator><motor joint="left_spin"/><motor joint="right_spin"/></actuator></mujoco>"""
+    return xml, p
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_generated_two_wheelers_match_the_closed_form(seed):
+    xml, p = _generated(np.random.default_rng(seed))
+    robot = MujocoRobot.from_xml_string(xml, name="gen")
+    assert robot.unactuated_name == "base_pitch"
+    d = mujoco.MjData(robot.model)
+    d.qpos[:] = robot.state_to_mujoco(np.zeros(2))[0]
+    mujoco.mj_kinematics(robot.model, d)
+    h = float(d.xanchor[robot.model.joint("left_spin").id][2])
+    r = 0.5 * (h + p["R"])
+    alpha = np.array([-20.0, -5.0, 10.0, 20.0])
+    res = robot.bem(np.zeros((4, 1)), np.full((4, 1), 3.0), alpha[:, None])
+    g, mb, mw, iw, l = 9.81, p["mb"], p["mw"], p["Iw"], p["l"]
+
+    def closed(al: float) -> float:
+        acc = r * al
+        return brentq(lambda f: mb * g * l * math.sin(f) - acc * (mb * (r + l * math.cos(f)) + 2 * mw * r + 2 * iw / r),
+                      -1.5, 1.5, xtol=1e-15)
+
+    ref = np.array([closed(a) for a in alpha])
+    np.testing.assert_allclose(res.qu.numpy(), ref, atol=1e-9)
+    D, _ = robot.terms(np.array([0.0, 0.3]), np.zeros(2))
+    assert D[1, 1] == pytest.approx(p["Ib"] + mb * (r * r + l * l + 2 * r * l * math.cos(0.3)) + 2 * (mw * r * r + iw), rel=1e-9)
