@@ -205,7 +205,8 @@ def test_the_plant_reads_and_writes_the_coordinates(robot):
     np.testing.assert_allclose(robot.T_np @ plant.data.qvel, qd0, atol=1e-12)
 
 
-def test_the_pipeline_refuses_two_motors_on_one_coordinate(tmp_path):
+def test_the_pipeline_refuses_two_motors_on_one_coordinate(tmp_path, capsys):
+    from bemlearn.cli import main
     from bemlearn.errors import ConfigError
     from bemlearn.pipeline.resolve import resolve_pipeline_config
 
@@ -213,6 +214,8 @@ def test_the_pipeline_refuses_two_motors_on_one_coordinate(tmp_path):
     cfg.write_text(f"robot: {TWO}\n")
     with pytest.raises(ConfigError, match=r"2 actuators \['left_motor', 'right_motor'\] drive 1 actuated coordinate"):
         resolve_pipeline_config(cfg)
+    assert main(["robot", "lqr", str(TWO)]) == 2
+    assert "one actuator per actuated coordinate" in capsys.readouterr().err
 
 
 def _generated(rng: np.random.Generator) -> tuple[str, dict[str, float]]:

@@ -158,6 +158,8 @@ def _lqr(args) -> int:
     robot = load(args.robot)
     if not isinstance(robot, MujocoRobot):
         raise RobotModelError(f"robot lqr: {args.robot!r} has no MuJoCo model to linearize; give an MJCF robot")
+    if (why := robot.actuator_mismatch()) is not None:
+        raise RobotModelError(f"robot lqr: {why}")
     rate = control_rate(robot)
     if args.rate is None:
         hz, h = rate.value.rate_hz, rate.value.timestep

@@ -206,20 +206,14 @@ def load_pipeline_config(path: str | Path) -> PipelineConfig:
 
 
 def _check_actuators(robot: Any, source: str) -> None:
-    """The excitation, the EIC and the logs command one actuator per actuated coordinate (u has m entries).
+    """One actuator per actuated coordinate (``MujocoRobot.actuator_mismatch``).
 
     Raises:
-        ConfigError: a robot whose actuators outnumber its actuated coordinates (two wheel motors driving one
-            wheel coordinate, :mod:`bemlearn.robots.floating`), naming both.
+        ConfigError: naming the actuators and the coordinates.
     """
-    model = getattr(robot, "model", None)
-    if model is None or int(model.nu) == robot.m:
-        return
-    acts = [model.actuator(i).name or f"#{i}" for i in range(model.nu)]
-    raise ConfigError(f"{source}: robot: {robot.source}: {model.nu} actuators {acts} drive {robot.m} actuated coordinate(s) "
-                      f"{list(robot.actuated_names)}; the pipeline (excitation, EIC, logs) needs one actuator per actuated "
-                      "coordinate, which this robot does not have (not supported yet; `bemlearn robot info` and "
-                      "`bemlearn robot bem` work on it)")
+    why = robot.actuator_mismatch() if hasattr(robot, "actuator_mismatch") else None
+    if why is not None:
+        raise ConfigError(f"{source}: robot: {why}")
 
 
 def _check_for_robot(cfg: PipelineConfig, robot, source: str) -> None:

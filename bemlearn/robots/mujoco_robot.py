@@ -287,6 +287,17 @@ class MujocoRobot(Robot):
         if model.neq:
             warn(RobotModelWarning, log, "%s: equality constraints are ignored by the robot dynamics", where)
 
+    def actuator_mismatch(self) -> str | None:
+        """Why the excitation, the EIC and their LQR cannot command this robot, or ``None``: they give one
+        actuator per actuated coordinate (u has m entries), which a robot whose actuators outnumber its
+        actuated coordinates (two wheel motors driving one wheel coordinate) does not have."""
+        if self.model.nu == self.m:
+            return None
+        acts = [self.model.actuator(i).name or f"#{i}" for i in range(self.model.nu)]
+        return (f"{self.source}: {self.model.nu} actuators {acts} drive {self.m} actuated coordinate(s) {list(self.actuated_names)}; "
+                "the excitation, the EIC and their LQR need one actuator per actuated coordinate (not supported yet; "
+                "`bemlearn robot info` and `bemlearn robot bem` work on it)")
+
     def _qu_unit(self) -> str:
         if self.coordinate_joints is None:
             return "rad"
