@@ -68,6 +68,8 @@ def _info(args) -> int:
 
     if isinstance(r, MujocoRobot) and r.rolling is not None:
         print(f"rolling    {r.rolling.describe(r.model)}")
+    if isinstance(r, MujocoRobot) and r.floating is not None:
+        print(f"rolling    {r.floating.describe(r.model)}")
     from bemlearn.robots.cyclic import cyclic_coordinates
 
     cyclic = [name for name, c in zip(r.joint_names, cyclic_coordinates(r)) if c]
@@ -156,6 +158,8 @@ def _lqr(args) -> int:
     robot = load(args.robot)
     if not isinstance(robot, MujocoRobot):
         raise RobotModelError(f"robot lqr: {args.robot!r} has no MuJoCo model to linearize; give an MJCF robot")
+    if (why := robot.actuator_mismatch()) is not None:
+        raise RobotModelError(f"robot lqr: {why}")
     rate = control_rate(robot)
     if args.rate is None:
         hz, h = rate.value.rate_hz, rate.value.timestep

@@ -122,7 +122,7 @@ def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = No
     n = robot.n
     q0 = np.zeros(n)
     q0[robot.unactuated_index] = robot.qu_nominal
-    data.qpos[robot._qadr] = robot.Tinv_np @ q0
+    data.qpos[:] = robot.state_to_mujoco(q0)[0]
     mujoco.mj_forward(model, data)
     nx = 2 * model.nv + model.na
     A1 = np.zeros((nx, nx))
@@ -281,16 +281,15 @@ def holds_in_mujoco(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, timest
     N = max(1, int(round(1.0 / (rate_hz * float(model.opt.timestep)))))
     lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
     limited = model.actuator_ctrllimited.astype(bool)
-    T, Tinv = robot.T_np, robot.Tinv_np
+    T = robot.T_np
     nominal = np.zeros(n)
     nominal[iu] = robot.qu_nominal
     ticks = int(math.ceil(check_s * rate_hz))
     for k, x0 in enumerate(starts):
         mujoco.mj_resetData(model, data)
-        data.qpos[robot._qadr] = Tinv @ (nominal + x0[:n])
-        data.qvel[robot._dadr] = Tinv @ x0[n:]
+        data.qpos[:], data.qvel[:] = robot.state_to_mujoco(nominal + x0[:n], x0[n:])
         for _ in range(ticks):
-            q = T @ data.qpos[robot._qadr]
+            q = robot.coordinates_of(data.qpos)
             qd = T @ data.qvel[robot._dadr]
             if not abs(q[iu] - robot.qu_nominal) <= 4 * qu0:
                 return False, f"it leaves |q_u − nominal| ≤ {4 * qu0:.3g} from start {k} in MuJoCo"
@@ -298,7 +297,7 @@ def holds_in_mujoco(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, timest
             data.ctrl[:] = np.where(limited, np.clip(u, lo, hi), u)
             for _ in range(N):
                 mujoco.mj_step(model, data)
-        q = T @ data.qpos[robot._qadr]
+        q = robot.coordinates_of(data.qpos)
         if not abs(q[iu] - robot.qu_nominal) <= qu0 / 2:
             return False, f"q_u is still {abs(q[iu] - robot.qu_nominal):.3g} from nominal after {check_s:g} s from start {k} in MuJoCo"
     return True, ""

@@ -139,6 +139,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
             robot = memo[robot_key] if memo is not None and robot_key in memo else load(parsed.robot)
         except (BemlearnError, OSError) as exc:
             raise ConfigError(f"{source}: robot: {str(exc).removeprefix('robot: ')}") from exc
+        _check_actuators(robot, source)
         derived_key = ("derived", robot_key, frozenset(given), parsed.collect.rate_hz, parsed.simulate.rate_hz,
                        parsed.collect.physics_timestep, parsed.simulate.physics_timestep)
         if memo is not None and derived_key in memo:
@@ -191,7 +192,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
 
 def _robot_notes(robot: Any) -> tuple[str, ...]:
     """The coordinates of a robot whose freedoms roll with a wheel (``bemlearn.robots.rolling``), for ``config show``."""
-    rolling = getattr(robot, "rolling", None)
+    rolling = getattr(robot, "rolling", None) or getattr(robot, "floating", None)
     if rolling is None:
         return ()
     return (f"coordinates {', '.join(robot.actuated_names)} (q_a), {robot.unactuated_name} (q_u); "
@@ -202,6 +203,17 @@ def load_pipeline_config(path: str | Path) -> PipelineConfig:
     """Parse a pipeline YAML file strictly (unknown keys and bad types are errors naming the key) and
     fill in the values derived from the robot's model (:func:`resolve_pipeline_config`)."""
     return resolve_pipeline_config(path).config
+
+
+def _check_actuators(robot: Any, source: str) -> None:
+    """One actuator per actuated coordinate (``MujocoRobot.actuator_mismatch``).
+
+    Raises:
+        ConfigError: naming the actuators and the coordinates.
+    """
+    why = robot.actuator_mismatch() if hasattr(robot, "actuator_mismatch") else None
+    if why is not None:
+        raise ConfigError(f"{source}: robot: {why}")
 
 
 def _check_for_robot(cfg: PipelineConfig, robot, source: str) -> None:

@@ -46,6 +46,7 @@ import numpy as np
 from bemlearn._lazy import lazy_module
 from bemlearn.errors import MissingFileError, RobotModelError
 from bemlearn.robots._mujoco_compat import full_mass_matrix, make_mass_matrix
+from bemlearn.robots.floating import FloatingRolling, find_floating
 from bemlearn.robots.robot import Robot, as_batch
 from bemlearn.robots.rolling import RollingMap, find_rolling
 from bemlearn.robots.upright import UprightSearch, find_upright
@@ -174,22 +175,25 @@ class MujocoRobot(Robot):
             raise RobotModelError(f"{where}: the model has no joints")
         kinds = [_JOINT_KIND.get(int(t), str(t)) for t in model.jnt_type]
         names = [model.joint(i).name or f"joint{i}" for i in range(model.njnt)]
+        # a free body on wheels (robots.floating): the coordinates are a wheel angle and the body's pitch
+        self.floating: FloatingRolling | None = find_floating(model, where=where) if "free" in kinds else None
         bad = [(n, k) for n, k in zip(names, kinds) if k not in ("hinge", "slide")]
-        if bad:
+        if bad and self.floating is None:
             raise RobotModelError(
                 f"{where}: joints {bad} are ball/free joints; bemlearn robots need hinge or slide joints "
                 "only (one unactuated, the rest actuated)"
             )
-        n = model.njnt
+        n = model.njnt if self.floating is None else model.nv
         self.joint_kinds = tuple(kinds)
         self.mjcf_joint_names = tuple(names)
         self._qadr = np.array(model.jnt_qposadr, dtype=np.int64)
-        self._dadr = np.array(model.jnt_dofadr, dtype=np.int64)
+        # "joint space": one entry per joint; MuJoCo's tangent space (qvel) for a free body on wheels
+        self._dadr = np.array(model.jnt_dofadr, dtype=np.int64) if self.floating is None else np.arange(model.nv, dtype=np.int64)
         # MuJoCo's RNE leaves out the rotor inertia (armature) that its mass matrix holds: added to every q̈ term
         self._armature = np.array(model.dof_armature[self._dadr], dtype=np.float64)
         # input matrix in joint coordinates (nv x nu)
         Bj = np.zeros((n, model.nu))
-        dof_to_joint = {int(a): j for j, a in enumerate(self._dadr)}
+        dof_to_joint = {int(a): k for k, a in enumerate(self._dadr)}   # dof address -> row of the joint space
         for i in range(model.nu):
             act = model.actuator(i)
             if int(model.actuator_trntype[i]) != int(mujoco.mjtTrn.mjTRN_JOINT):
@@ -198,11 +202,13 @@ class MujocoRobot(Robot):
                     "(bemlearn supports joint transmissions only)"
                 )
             j = int(model.actuator_trnid[i, 0])
-            Bj[dof_to_joint[int(self._dadr[j])], i] = model.actuator_gear[i, 0]
+            Bj[dof_to_joint[int(model.jnt_dofadr[j])], i] = model.actuator_gear[i, 0]
         # coordinate map
         T = _custom_numeric(model, "bemlearn_coordinates")
         self.rolling: RollingMap | None = None
-        if T is None:
+        if self.floating is not None:
+            T = self.floating.T
+        elif T is None:
             T = np.eye(n)
             undriven = [j for j in range(n) if bool((np.abs(Bj[j]) < 1e-12).all())]
             if len(undriven) > 1:   # freedoms that only roll with a wheel are not coordinates (robots.rolling)
@@ -214,16 +220,21 @@ class MujocoRobot(Robot):
             if abs(np.linalg.det(T)) < 1e-12:
                 raise RobotModelError(f"{where}: 'bemlearn_coordinates' matrix is singular")
         # numpy here, torch tensors on first use (T, Tinv, input_matrix): loading a robot does not load torch
-        if self.rolling is not None:
+        if self.floating is not None:
+            self.T_np, self.Tinv_np = self.floating.T.copy(), self.floating.S.copy()
+            self.coordinate_joints: tuple[int, ...] | None = None
+        elif self.rolling is not None:
             self.T_np, self.Tinv_np = self.rolling.T.copy(), self.rolling.S.copy()
-            self.coordinate_joints: tuple[int, ...] | None = self.rolling.independent
+            self.coordinate_joints = self.rolling.independent
         else:
             self.T_np = np.array(T, dtype=np.float64)
             self.Tinv_np = np.linalg.inv(self.T_np)
             self.coordinate_joints = tuple(range(n)) if bool(np.allclose(self.T_np, np.eye(n))) else None
         nc = self.T_np.shape[0]
         coord_names = _custom_text(model, "bemlearn_coordinate_names")
-        if coord_names:
+        if self.floating is not None:
+            self.joint_names = (names[self.floating.wheels[0]], f"{self.floating.body}_pitch")
+        elif coord_names:
             self.joint_names = tuple(coord_names.split())
         elif self.coordinate_joints is not None:
             self.joint_names = tuple(names[j] for j in self.coordinate_joints)
@@ -241,7 +252,9 @@ class MujocoRobot(Robot):
                 f"drives), found {desc}; joints: {list(self.joint_names)}, actuators: {model.nu}"
             )
         self.unactuated_index = zero_rows[0]
-        if self.coordinate_joints is not None:
+        if self.floating is not None:
+            self._coordinate_kinds: tuple[str, ...] = ("hinge", "hinge")   # a wheel angle and the body's pitch
+        elif self.coordinate_joints is not None:
             self._coordinate_kinds = tuple(self.joint_kinds[j] for j in self.coordinate_joints)
         elif len(set(self.joint_kinds)) == 1:  # a linear map of like joints keeps their kind
             self._coordinate_kinds = (self.joint_kinds[0],) * n
@@ -278,6 +291,17 @@ class MujocoRobot(Robot):
             self.qu_range = (self.qu_nominal - half, self.qu_nominal + half)
         if model.neq:
             warn(RobotModelWarning, log, "%s: equality constraints are ignored by the robot dynamics", where)
+
+    def actuator_mismatch(self) -> str | None:
+        """Why the excitation, the EIC and their LQR cannot command this robot, or ``None``: they give one
+        actuator per actuated coordinate (u has m entries), which a robot whose actuators outnumber its
+        actuated coordinates (two wheel motors driving one wheel coordinate) does not have."""
+        if self.model.nu == self.m:
+            return None
+        acts = [self.model.actuator(i).name or f"#{i}" for i in range(self.model.nu)]
+        return (f"{self.source}: {self.model.nu} actuators {acts} drive {self.m} actuated coordinate(s) {list(self.actuated_names)}; "
+                "the excitation, the EIC and their LQR need one actuator per actuated coordinate (not supported yet; "
+                "`bemlearn robot info` and `bemlearn robot bem` work on it)")
 
     def _qu_unit(self) -> str:
         if self.coordinate_joints is None:
@@ -359,9 +383,34 @@ class MujocoRobot(Robot):
         return cls(model, name=name, source=name or "<xml string>")
 
     # ---- per-state MuJoCo evaluation ---------------------------------------------------
+    def mj_qpos(self, qj: np.ndarray) -> np.ndarray:
+        """``(nq,)`` MuJoCo's positions of the joint-space vector ``qj = T⁻¹ q`` (``(n_j,)``; for a free body
+        on wheels the tangent displacement from the pose on the ground, :mod:`bemlearn.robots.floating`)."""
+        if self.floating is not None:
+            return self.floating.qpos(self.model, qj)
+        out = np.array(self.model.qpos0, dtype=np.float64)
+        out[self._qadr] = qj
+        return out
+
+    def state_to_mujoco(self, q: np.ndarray, qd: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(qpos (nq,), qvel (nv,))`` of coordinates ``q`` and rates ``qd`` ``(n,)`` (rad / m, rad/s / m/s)."""
+        qvel = np.zeros(self.model.nv)
+        if qd is not None:
+            qvel[self._dadr] = self.Tinv_np @ qd
+        return self.mj_qpos(self.Tinv_np @ q), qvel
+
+    def coordinates_of(self, qpos: np.ndarray) -> np.ndarray:
+        """``(n,)`` the coordinates q of MuJoCo's positions ``qpos (nq,)`` (the inverse of :meth:`state_to_mujoco`)."""
+        if self.floating is not None:
+            return self.T_np @ self.floating.displacement(self.model, qpos)
+        return self.T_np @ np.asarray(qpos)[self._qadr]
+
     def _load_state(self, qj: np.ndarray, qdj: np.ndarray | None) -> None:
         d = self.data
-        d.qpos[self._qadr] = qj
+        if self.floating is not None:
+            d.qpos[:] = self.floating.qpos(self.model, qj)
+        else:
+            d.qpos[self._qadr] = qj
         if qdj is not None:
             d.qvel[self._dadr] = qdj
         mujoco.mj_kinematics(self.model, d)

@@ -245,7 +245,7 @@ def find_rolling(model: mujoco.MjModel, undriven: Sequence[int], *, where: str) 
     T = np.zeros((len(indep), model.nv))
     T[np.arange(len(indep)), list(indep)] = 1.0
     _check_constant(model, data, wheels, qpos0, S, indep, where=where)
-    contacts = _describe_contacts(model, data, found)
+    contacts = describe_contacts(model, data, found)
     return RollingMap(independent=indep, dependent=tuple(dep), S=S, T=T, contacts=contacts)
 
 
@@ -270,7 +270,7 @@ def _check_constant(model: mujoco.MjModel, data: mujoco.MjData, wheels: dict[int
     _positions(model, data, qpos0)
 
 
-def _describe_contacts(model: mujoco.MjModel, data: mujoco.MjData, found: list[tuple[int, int, np.ndarray]]) -> tuple[RollingContact, ...]:
+def describe_contacts(model: mujoco.MjModel, data: mujoco.MjData, found: list[tuple[int, int, np.ndarray]]) -> tuple[RollingContact, ...]:
     by_geom: dict[int, list[float]] = {}
     for g, j, p in found:
         anchor, axis = data.xanchor[j], data.xaxis[j] / np.linalg.norm(data.xaxis[j])
@@ -285,31 +285,42 @@ def _describe_contacts(model: mujoco.MjModel, data: mujoco.MjData, found: list[t
 
 
 def kkt_acceleration(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, qvel: np.ndarray, force: np.ndarray,
-                     wheels: dict[int, int], *, fd_step: float = 1e-6, drift: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                     wheels: dict[int, int], *, fd_step: float = 1e-6, drift: bool = True,
+                     normal: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """q̈_j and λ of the hard-constraint dynamics (R3) at one state, with MuJoCo's M, bias and contact Jacobians.
 
         [ M   −Jᵀ ] [ q̈_j ]   [ f − c ]
         [ J    0  ] [  λ  ] = [ −J̇ q̇_j ],    J̇ q̇_j ≈ (J(q + ε q̇) − J(q − ε q̇)) q̇ / (2ε)
 
     with c = ``qfrc_bias`` − ``qfrc_passive`` and J the no-slip rows (R1) at the state's contacts
-    (reduced to a basis of their span: redundant contact points carry the same constraint).
+    (reduced to a basis of their span: redundant contact points carry the same constraint), with
+    ``normal`` also the contacts' normal rows (a wheel that can leave the ground held on it: a free
+    body on wheels).  Positions q ± ε q̇ are MuJoCo's (``mj_integratePos``: quaternions of free and
+    ball joints stay unit), so qpos ``(n_q,)`` and qvel ``(n_v,)`` may differ in size.
 
     Args:
         model: the MuJoCo model.
         data: a scratch ``MjData`` of ``model`` (overwritten).
-        qpos: ``(n_j,)`` joint positions (rad / m), on the constraint.
-        qvel: ``(n_j,)`` joint velocities (rad/s, m/s), consistent with the constraint.
-        force: ``(n_j,)`` applied generalized force f (e.g. B_j u), N·m / N.
+        qpos: ``(n_q,)`` MuJoCo's positions (rad / m, quaternions), on the constraint.
+        qvel: ``(n_v,)`` velocities (rad/s, m/s), consistent with the constraint.
+        force: ``(n_v,)`` applied generalized force f (e.g. B_j u), N·m / N.
         wheels: :func:`wheel_geoms` of the model.
         fd_step: ε, s.
         drift: include J̇ q̇ (``False`` solves J q̈_j = 0 instead: what a constraint without its drift term gives).
+        normal: include the contacts' normal rows.
 
     Returns:
-        ``(q̈_j (n_j,), λ (r,))``.
+        ``(q̈_j (n_v,), λ (r,))``.
     """
     def rows_at(q: np.ndarray) -> np.ndarray:
         _positions(model, data, q)
-        return rolling_rows(model, data, wheels)[0]
+        tangential, normals, _ = rolling_rows(model, data, wheels)
+        return np.vstack([tangential, normals]) if normal else tangential
+
+    def moved(step: float) -> np.ndarray:
+        out = np.array(qpos, dtype=np.float64)
+        mujoco.mj_integratePos(model, out, np.asarray(qvel, dtype=np.float64), step)
+        return out
 
     J0 = rows_at(qpos)
     basis = _row_basis(J0)
@@ -317,7 +328,7 @@ def kkt_acceleration(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarra
     coeff = np.linalg.lstsq(J0.T, basis.T, rcond=None)[0].T            # basis = coeff @ J0
     jdot_qd = np.zeros(basis.shape[0])
     if drift:
-        Jp, Jm = rows_at(qpos + fd_step * qvel), rows_at(qpos - fd_step * qvel)
+        Jp, Jm = rows_at(moved(fd_step)), rows_at(moved(-fd_step))
         if not Jp.shape == Jm.shape == J0.shape:
             raise NumericalError(f"kkt_acceleration: the rolling contacts change within ±{fd_step:g} s of the state; "
                                  "J̇ q̇ cannot be differenced there")

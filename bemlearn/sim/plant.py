@@ -60,13 +60,14 @@ class SensedPlant:
 
     def reset(self, q0: np.ndarray, qd0: np.ndarray | None = None) -> None:
         """Set the true state: ``q0``, ``qd0`` ``(n,)`` coordinates (rad / m) and rates (rad/s / m/s), by joint kind."""
-        self.data.qpos[:] = self.Tinv @ q0
+        qpos, qvel = self.robot.state_to_mujoco(q0, qd0)
+        self.data.qpos[:] = qpos
         if qd0 is not None:
-            self.data.qvel[:] = self.Tinv @ qd0
+            self.data.qvel[:] = qvel
 
     def true_q(self) -> np.ndarray:
         """The true coordinates now, ``(n,)`` rad / m by joint kind."""
-        return self.T @ self.data.qpos
+        return self.robot.coordinates_of(self.data.qpos)
 
     def measure(self, q_true: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """What the rig sees of ``q_true``: quantized angles and the filtered rate, each ``(n,)``."""

@@ -119,14 +119,13 @@ def render_gif(robot: MujocoRobot, q: np.ndarray, path: str | Path, *, rate_hz: 
     cam = mujoco.MjvCamera()
     cam.type = mujoco.mjtCamera.mjCAMERA_FREE
     cam.distance, cam.elevation, cam.azimuth = distance, elevation, azimuth
-    Tinv = robot.Tinv_np
     head = (model.vis.headlight.ambient.copy(), model.vis.headlight.diffuse.copy())
     model.vis.headlight.ambient[:] = 0.45  # brighter than MuJoCo's default for small GIFs;
     model.vis.headlight.diffuse[:] = 0.7  # restored below
     frames = []
     try:
         for k in range(0, last, step):
-            data.qpos[:] = Tinv @ q[k]
+            data.qpos[:] = robot.state_to_mujoco(q[k])[0]
             mujoco.mj_kinematics(model, data)
             cam.lookat[:] = data.geom_xpos.mean(axis=0)  # centre of the robot's geoms
             renderer.update_scene(data, camera=cam)
