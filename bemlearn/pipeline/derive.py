@@ -46,6 +46,8 @@ __all__ = [
     "input_units",
     "evaluation",
     "eic_gains",
+    "eic_recovery",
+    "closed_loop_sensor",
     "closed_loop_reference",
 ]
 
@@ -307,7 +309,31 @@ def evaluation(robot, signals: dict, *, n_references: int = 5) -> Derived:
     return Derived(out, note)
 
 
-def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None) -> Derived:
+def closed_loop_sensor(robot, rate: RateChoice) -> Derived:
+    """The closed loop's encoder and velocity filter: :func:`sensor` with the filter cutoff doubled (the
+    balance loop needs less lag than the excitation's logging).
+
+    Returns:
+        ``Derived(dict of SensorConfig fields, note)``.
+    """
+    sen = sensor(robot, rate)
+    return Derived({**sen.value, "velocity_cutoff": 2 * sen.value["velocity_cutoff"]}, sen.note + "; × 2 in the closed loop")
+
+
+EIC_GRID_OMEGA_U = (1.2, 1.6, 2.2, 3.0, 4.0, 5.0, 6.0, 8.0)
+"""ω_u / λ of the EIC gain search (:func:`eic_gains`)."""
+EIC_GRID_RATIO = (3.0, 5.0, 7.0, 10.0, 15.0, 20.0, 25.0, 30.0, 40.0, 60.0)
+"""ω_u / ω_a of the EIC gain search (:func:`eic_gains`)."""
+
+
+def _critical(w_u: float, ratio: float):
+    from bemlearn.control.eic import EICGains
+
+    w_a = w_u / ratio
+    return EICGains(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u)
+
+
+def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocity_cutoff: float | None = None) -> Derived:
     """EIC gains from the model (eq. 3, 8): critically damped loops
 
         internal: ω_u = min(2.2 λ, 2π·rate/20),  k_p,u = ω_u², k_d,u = 2 ω_u
@@ -316,10 +342,21 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None) -> Deri
     (λ = √(Γ_q/D_uu)).  ω_u is lowered (down to 1.2 λ) while the linearised command for a
     q_u error of ``qu_error`` (default d/4) would exceed the ``ctrlrange``.
 
+    These gains are kept when the loop *as it runs* — sampled at the control rate, the command held over the
+    tick, the rates from the closed loop's velocity filter (cutoff ``velocity_cutoff``, default
+    :func:`closed_loop_sensor`'s) — is stable at upright (:func:`~bemlearn.control.eic_linear.eic_tick_loop`).
+    Otherwise critically damped gains are searched on the grid ω_u ∈ {1.2 … 8} λ (≤ 2π·rate/10),
+    ω_u/ω_a ∈ {3 … 60}: the sampled loops that are stable, fastest decay first, and the first of them (at most
+    four tried) whose loop in MuJoCo — the model BEM, the sensors, every actuator limit — brings the robot
+    back from a ``qu_error`` start (:func:`eic_recovery`) is kept; if none does, the fastest-decaying one (the
+    model check ``eic_recovery`` then says the robot cannot be balanced by the EIC).
+
     Returns:
         ``Derived(EICGains, note)``.
     """
-    from bemlearn.control.eic import EICGains
+    from bemlearn.control.eic_linear import eic_tick_loop
+    from bemlearn.control.lqr import linearize
+    from bemlearn.errors import ArgumentError, NumericalError, RobotModelError
 
     lam = instability_rate(robot)
     d = design_region(robot).value
@@ -329,18 +366,76 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None) -> Deri
     while peak > 1.0 and w_u > 1.2 * lam:
         w_u = max(1.2 * lam, 0.9 * w_u)
         peak = _eic_peak(robot, w_u, e0)
-    w_a = w_u / 7
-    g = EICGains(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u)
+    g = _critical(w_u, 7.0)
     note = (f"ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/7, critically damped; "
             f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange)")
-    if robot.m == 1:
-        from bemlearn.control.eic_linear import eic_linear_abscissa
+    wc = closed_loop_sensor(robot, rate).value["velocity_cutoff"] if velocity_cutoff is None else velocity_cutoff
+    try:
+        plant = linearize(robot, rate_hz=rate.rate_hz, timestep=rate.timestep)[:2]
+        loop = eic_tick_loop(robot, g, rate_hz=rate.rate_hz, velocity_cutoff=wc, plant=plant)
+    except (RobotModelError, NumericalError, ArgumentError) as exc:  # an actuator model the linearisation does not cover
+        return Derived(g, note + f"; the sampled loop was not checked ({exc})")
+    if loop.spectral_radius < 1.0:
+        return Derived(g, note + f"; the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) "
+                                 f"decays at {loop.decay_rate:.3g} 1/s at upright")
+    why = (f"the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) grows at "
+           f"{-loop.decay_rate:.3g} 1/s with them")
+    stable = []
+    for wl in EIC_GRID_OMEGA_U:
+        wu = wl * lam
+        if wu > 2 * math.pi * rate.rate_hz / 10:
+            continue
+        for ratio in EIC_GRID_RATIO:
+            gg = _critical(wu, ratio)
+            lp = eic_tick_loop(robot, gg, rate_hz=rate.rate_hz, velocity_cutoff=wc, plant=plant)
+            if lp.spectral_radius < 1.0:
+                stable.append((lp.decay_rate, wl, ratio, gg))
+    if not stable:
+        log.warning("%s: no EIC gains of the grid make the sampled loop stable at upright", robot.name)
+        return Derived(g, note + f"; {why}, and so it does with every gain of the grid (ω_u = 1.2–8 λ, ω_u/ω_a = 3–60)")
+    stable.sort(key=lambda c: -c[0])
+    tried = []
+    for decay, wl, ratio, gg in stable[:4]:
+        ok, how = eic_recovery(robot, gg, rate, qu0=e0, velocity_cutoff=wc)
+        tried.append(f"{wl:g} λ, ω_u/ω_a = {ratio:g}: {how}")
+        if ok:
+            return Derived(gg, f"ω_u = {wl:g} λ (λ = {lam:.3g} 1/s), ω_a = ω_u/{ratio:g}, critically damped: the rule's gains "
+                               f"(ω_u = {w_u / lam:.2g} λ, ω_a = ω_u/7) fail, {why}; of the grid's sampled-stable gains the fastest "
+                               f"decaying ({decay:.3g} 1/s) that brings the robot back in MuJoCo ({how})")
+    decay, wl, ratio, gg = stable[0]
+    log.warning("%s: no sampled-stable EIC gains bring the robot back from a %.3g q_u error in MuJoCo", robot.name, e0)
+    return Derived(gg, f"ω_u = {wl:g} λ (λ = {lam:.3g} 1/s), ω_a = ω_u/{ratio:g}, critically damped, the fastest decaying "
+                       f"({decay:.3g} 1/s) of the grid's sampled-stable gains ({why} with the rule's); none brings the robot "
+                       f"back in MuJoCo: " + "; ".join(tried))
 
-        ab = eic_linear_abscissa(robot, g)
-        note += f"; linearised EIC loop max Re λ = {ab:.3g} 1/s"
-        if ab >= 0:
-            log.warning("%s: the EIC with the derived gains is unstable in its linearisation at upright (max Re λ = %.3g 1/s)", robot.name, ab)
-    return Derived(g, note)
+
+def eic_recovery(robot, gains, rate: RateChoice, *, qu0: float, velocity_cutoff: float, duration_s: float = 3.0) -> tuple[bool, str]:
+    """Whether the EIC loop with the model BEM brings ``robot`` back in MuJoCo from a q_u error ``qu0`` at rest.
+
+    The closed-loop simulation itself (:func:`~bemlearn.sim.closed_loop.simulate`: the model BEM, the encoder
+    and the velocity filter of cutoff ``velocity_cutoff``, the command clipped to the ``ctrlrange`` and MuJoCo
+    clipping the ``forcerange``), the reference at rest, for ``duration_s``: it recovers when q_u never leaves the
+    fall window (:func:`fall_window`) and ends within ``qu0`` of nominal.  Returns ``(recovers, what happened)``.
+    """
+    from bemlearn.data.sensors import SensorConfig
+    from bemlearn.sim.closed_loop import ReferenceConfig, SimulateConfig, simulate
+
+    fw = fall_window(robot).value
+    cfg = SimulateConfig(duration_s=duration_s, rate_hz=rate.rate_hz, bem_source="model", reference=ReferenceConfig((0.0,), (0.0,), (0.0,), 0.0),
+                         gains=gains, sensor=SensorConfig(**{**sensor(robot, rate).value, "velocity_cutoff": velocity_cutoff}),
+                         initial_qu=qu0, fall_window=fw, warmup_s=0.0, physics_timestep=rate.timestep if rate.timestep_changed else None)
+    res = simulate(robot, cfg, progress=False)
+    iu, ia = robot.unactuated_index, list(robot.actuated_index)
+    if res.fell:
+        span = np.max(np.abs(res.q[:, ia]), axis=0) if len(res.t) else np.zeros(len(ia))
+        j = int(np.argmax(span))
+        unit = "rad" if robot.coordinate_kinds[ia[j]] == "hinge" else "m"
+        return False, (f"falls at {res.metrics['duration_s']:.2f} s from a {qu0:.3g} error ({robot.actuated_names[j]} "
+                       f"swings to {span[j]:.3g} {unit})")
+    end = float(abs(res.q[-1, iu] - robot.qu_nominal))
+    if end > qu0:
+        return False, f"q_u is {end:.3g} from nominal after {duration_s:g} s from a {qu0:.3g} error"
+    return True, f"from a {qu0:.3g} error q_u ends {end:.3g} from nominal after {duration_s:g} s, peak command {res.metrics['u_max']:.3g} ctrl"
 
 
 def _eic_peak(robot, w_u: float, e0: float) -> float:

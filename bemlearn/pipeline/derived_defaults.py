@@ -146,16 +146,16 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
     _leaves("simulate.rate_hz", rs.rate_hz, srate.note + ("" if _given(given, "simulate.rate_hz") else " (the collection's rate)"), out)
     _leaves("simulate.physics_timestep", rs.timestep if rs.timestep_changed else None, srate.note, out)
     if wanted("simulate.gains", _EIC_GAINS):
-        eic = derive.eic_gains(robot, rs)
+        wc = config.simulate.sensor.velocity_cutoff if _given(given, "simulate.sensor.velocity_cutoff") else None
+        eic = derive.eic_gains(robot, rs, velocity_cutoff=wc)
         _leaves("simulate.gains", {k: v for k, v in to_dict(eic.value).items() if k in _EIC_GAINS}, eic.note, out)
     if wanted("simulate.reference", _REFERENCE):
         ref = derive.closed_loop_reference(robot, excitation())
         _leaves("simulate.reference", ref.value, ref.note, out)
     _leaves("simulate.fall_window", fw.value, fw.note, out)
     if wanted("simulate.sensor", _SENSOR):
-        sen_sim = derive.sensor(robot, rs)
-        _leaves("simulate.sensor", {**sen_sim.value, "velocity_cutoff": 2 * sen_sim.value["velocity_cutoff"]},
-                sen_sim.note + "; × 2 in the closed loop", out)
+        sen_sim = derive.closed_loop_sensor(robot, rs)
+        _leaves("simulate.sensor", sen_sim.value, sen_sim.note, out)
     return out
 
 
