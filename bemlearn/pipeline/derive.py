@@ -40,6 +40,7 @@ __all__ = [
     "control_rate",
     "excitation_gains",
     "excitation_signals",
+    "excitation_amplitude_check",
     "fall_window",
     "initial_ranges",
     "sensor",
@@ -161,7 +162,8 @@ def excitation_signals(robot, rate: RateChoice, *, n_sines: tuple[int, int] = (2
     the other half left to the balance; the bottom amplitude is A_hi / 10.
 
     Returns:
-        ``Derived({"n_sines", "amplitude", "frequency_hz"}, note)`` (amplitudes in rad or m).
+        ``Derived({"n_sines", "amplitude", "frequency_hz", "effort_capped"}, note)`` (amplitudes in rad or m;
+        ``effort_capped``: the actuator limits set A_hi, then :func:`excitation_amplitude_check` applies).
     """
     d = design_region(robot).value
     f_lo, f_hi, lam = _frequency_band(robot, rate)
@@ -174,14 +176,49 @@ def excitation_signals(robot, rate: RateChoice, *, n_sines: tuple[int, int] = (2
     a_hi = min(a_bem, cap)
     why = "1.5 × design bound / (m × BEM gain at f_hi)" if a_hi == a_bem else "joint range / n_max"
     a_eff = _effort_cap(robot, a_hi, 1, 2 * math.pi * f_hi)
-    if a_eff < a_hi:
+    capped = a_eff < a_hi
+    if capped:
         a_hi, why = a_eff, "half the actuator limits at f_hi"
     reach = a_hi * g_hi * n_sines[1]
     note = (f"f ∈ [{f_lo:.3g}, {f_hi:.3g}] Hz (f_hi = 1.4 λ/2π, λ = {lam:.3g} 1/s); A ≤ {a_hi:.3g} ({why}); "
             f"n_max components at f_hi reach |q_u^e| ≈ {reach:.3g}")
     if reach < d:
         log.warning("%s: the excitation reaches |q_u^e| ≈ %.3g < %.3g within the joint ranges and actuator limits", robot.name, reach, d)
-    return Derived({"n_sines": tuple(n_sines), "amplitude": (a_hi / 10, a_hi), "frequency_hz": (f_lo, f_hi)}, note)
+    return Derived({"n_sines": tuple(n_sines), "amplitude": (a_hi / 10, a_hi), "frequency_hz": (f_lo, f_hi), "effort_capped": capped}, note)
+
+
+def excitation_amplitude_check(robot, collect, *, trials: int = 8, duration_s: float = 10.0, halvings: int = 3) -> Derived:
+    """The factor s ∈ {1, 1/2, …, 2^−``halvings``} on ``collect.amplitude`` (both ends): the largest at which at most
+    a quarter of ``trials`` excitation trials fall in MuJoCo (more than half fallen makes a run degraded:
+    the check keeps a margin for the trials it did not run).
+
+    Where the actuator limits set the top amplitude (:func:`excitation_signals`), the reference takes half of
+    them and the balance the rest; whether that is enough depends on the balance loop: its feedback on a
+    tracking error (the reference starts away from the robot's rest state and with a velocity the robot does
+    not have) saturates an actuator long before the linear design says (a servo whose ``forcerange`` binds far
+    inside its ``ctrlrange``).  So the trials themselves decide: :func:`~bemlearn.sim.collect.simulate_trial`,
+    the collection's loop with every limit, the encoder and the velocity filter, ``duration_s`` each, seeds
+    apart from the collection's (``SeedSequence([seed, 1])``).  ``collect`` is a complete
+    :class:`~bemlearn.sim.collect.CollectConfig`.
+
+    Returns:
+        ``Derived(s, note)``.
+    """
+    import dataclasses
+
+    from bemlearn.sim.collect import simulate_trial
+
+    seqs = np.random.SeedSequence([collect.seed, 1]).spawn(trials)
+    lo, hi = collect.amplitude
+    tried = []
+    for k in range(halvings + 1):
+        s = 0.5**k
+        cfg = dataclasses.replace(collect, amplitude=(lo * s, hi * s), duration_s=min(duration_s, collect.duration_s))
+        fell = sum(simulate_trial(robot, cfg, i, sq).failed for i, sq in enumerate(seqs))
+        tried.append(f"{fell}/{trials} fall at A × {s:g}")
+        if fell <= trials / 4:
+            break
+    return Derived(s, f"excitation trials in MuJoCo ({min(duration_s, collect.duration_s):g} s each): " + ", ".join(tried))
 
 
 def _effort_cap(robot, a_hi: float, n_max: int, omega: float, *, budget: float = 0.5) -> float:
