@@ -187,6 +187,10 @@ def excitation_signals(robot, rate: RateChoice, *, n_sines: tuple[int, int] = (2
     return Derived({"n_sines": tuple(n_sines), "amplitude": (a_hi / 10, a_hi), "frequency_hz": (f_lo, f_hi), "effort_capped": capped}, note)
 
 
+EXCITATION_CHECK_SEED = 20261127
+"""Entropy of the seeds of :func:`excitation_amplitude_check`'s trials (fixed: a derivation is a function of the robot)."""
+
+
 def excitation_amplitude_check(robot, collect, *, trials: int = 8, duration_s: float = 10.0, halvings: int = 3) -> Derived:
     """The factor s ∈ {1, 1/2, …, 2^−``halvings``} on ``collect.amplitude`` (both ends): the largest at which at most
     a quarter of ``trials`` excitation trials fall in MuJoCo (more than half fallen makes a run degraded:
@@ -197,8 +201,9 @@ def excitation_amplitude_check(robot, collect, *, trials: int = 8, duration_s: f
     tracking error (the reference starts away from the robot's rest state and with a velocity the robot does
     not have) saturates an actuator long before the linear design says (a servo whose ``forcerange`` binds far
     inside its ``ctrlrange``).  So the trials themselves decide: :func:`~bemlearn.sim.collect.simulate_trial`,
-    the collection's loop with every limit, the encoder and the velocity filter, ``duration_s`` each, seeds
-    apart from the collection's (``SeedSequence([seed, 1])``).  ``collect`` is a complete
+    the collection's loop with every limit, the encoder and the velocity filter, ``duration_s`` each, with seeds of
+    their own (:data:`EXCITATION_CHECK_SEED`: the derived amplitude is a property of the robot, not of
+    ``collect.seed``).  ``collect`` is a complete
     :class:`~bemlearn.sim.collect.CollectConfig`.
 
     Returns:
@@ -208,7 +213,7 @@ def excitation_amplitude_check(robot, collect, *, trials: int = 8, duration_s: f
 
     from bemlearn.sim.collect import simulate_trial
 
-    seqs = np.random.SeedSequence([collect.seed, 1]).spawn(trials)
+    seqs = np.random.SeedSequence(EXCITATION_CHECK_SEED).spawn(trials)
     lo, hi = collect.amplitude
     tried = []
     for k in range(halvings + 1):
