@@ -299,10 +299,20 @@ def fall_window(robot) -> Derived:
 
 
 def initial_ranges(robot) -> Derived:
-    """Initial-state ranges of the excitation trials: q_u ± d/4, q_a ± min(0.1, 0.1 × half range)."""
+    """Initial-state ranges of the excitation trials: q_u ± d/4, q_a ± min(0.1, 0.1 × half range, (d/4)/max_j |s_p,j|).
+
+    The last bound keeps the BEM offset an actuated start error makes (q_u^e ≈ s_p q_a, eq. 9 linearised) within
+    the q_u start range: a pendubot's BEM moves with its shoulder (s_p = −1), and from a 0.1 rad shoulder error
+    (half the design region) its force-limited LQR falls in a quarter of a second, whatever the excitation.
+    """
     d = design_region(robot).value
     qa = float(min(0.1, 0.1 * np.min(qa_half_ranges(robot))))
-    return Derived({"initial_qa": (-qa, qa), "initial_qu": (-d / 4, d / 4)}, f"q_u ± {d / 4:.3g} (design bound / 4), q_a ± {qa:.3g}")
+    sp = float(np.max(np.abs(bem_slopes(robot)[0])))
+    by_bem = (d / 4) / sp if sp > 1e-9 else math.inf
+    why = ""
+    if by_bem < qa:
+        qa, why = by_bem, f" (its BEM offset |s_p| q_a ≤ d/4, |s_p| = {sp:.3g})"
+    return Derived({"initial_qa": (-qa, qa), "initial_qu": (-d / 4, d / 4)}, f"q_u ± {d / 4:.3g} (design bound / 4), q_a ± {qa:.3g}{why}")
 
 
 def sensor(robot, rate: RateChoice) -> Derived:
