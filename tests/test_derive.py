@@ -376,3 +376,18 @@ def test_a_group_the_config_gives_in_full_is_not_derived(skipped, monkeypatch):
     assert {k: v["value"] for k, v in partial.items()} == {k: v["value"] for k, v in values.items()}
     given = {f"{prefix}.{k}" for prefix, keys in _GIVEN_GROUPS[skipped].items() for k in keys}
     assert {k for k, v in partial.items() if v["origin"] == "given"} == given | {"robot"}
+
+
+def test_initial_actuated_range_keeps_the_bem_offset_within_the_qu_start_range():
+    """A serial arm's static BEM keeps the pole vertical, q_u^e = q_u* − q_a (s_p = −1 in closed form), so the
+    pendubot's shoulder starts within (d/4)/|s_p| = 0.05 rad; a cart-pole's BEM does not move with the cart
+    (s_p = 0) and keeps min(0.1, 0.1 × half range)."""
+    from bemlearn.robots.scales import bem_slopes, qa_half_ranges
+
+    pendubot = _robot("pendubot")
+    assert bem_slopes(pendubot)[0, 0] == pytest.approx(-1.0, abs=1e-6)
+    d = derive.design_region(pendubot).value
+    assert derive.initial_ranges(pendubot).value["initial_qa"] == pytest.approx((-d / 4, d / 4), rel=1e-6)
+    cart = _robot("cartpole")
+    qa = min(0.1, 0.1 * float(np.min(qa_half_ranges(cart))))
+    assert derive.initial_ranges(cart).value["initial_qa"] == pytest.approx((-qa, qa), rel=1e-12)
