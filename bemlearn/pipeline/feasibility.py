@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
-from bemlearn.errors import NumericalError, RobotModelError
+from bemlearn.errors import ArgumentError, NumericalError, RobotModelError
 
 if TYPE_CHECKING:
     from bemlearn.pipeline.config import PipelineConfig
@@ -163,7 +163,7 @@ def _eic_checks(robot: MujocoRobot, config: PipelineConfig, d: float, qu_unit: s
     rate = RateChoice(sim.rate_hz, max(1, int(round(1.0 / (sim.rate_hz * step)))), step, sim.physics_timestep is not None)
     try:
         loop = eic_tick_loop(robot, sim.gains, rate_hz=sim.rate_hz, velocity_cutoff=wc, timestep=sim.physics_timestep)
-    except (RobotModelError, NumericalError) as exc:
+    except (RobotModelError, NumericalError, ArgumentError) as exc:   # an actuator model or rate the linearisation does not take
         log.info("feasibility: eic check skipped (%s)", exc)
         return []
     grow = -loop.decay_rate
