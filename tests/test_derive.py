@@ -239,16 +239,30 @@ def test_bem_slopes_cartpole_closed_form():
     assert abs(s[2, 0] - 1 / 9.81) < 1e-6 and abs(s[0, 0]) < 1e-9
 
 
+def _rule_gains(robot) -> EICGains:
+    """The EIC rule's gains (ω_u = min(2.2 λ, 2π·rate/20), ω_a = ω_u/7, critically damped), written out here."""
+    from bemlearn.robots.scales import instability_rate
+
+    w_u = min(2.2 * instability_rate(robot), 2 * math.pi * derive.control_rate(robot).value.rate_hz / 20)
+    w_a = w_u / 7
+    return EICGains(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u)
+
+
 def test_eic_linearisation_explains_which_robots_balance():
-    """Derived EIC gains: the linearised loop is stable for the Furuta, cart-poles and reaction wheel,
-    unstable for the acrobot (its BEM moves with the elbow angle, s_p = −0.26)."""
+    """The rule's EIC gains: the continuous linearised loop is stable for the Furuta, cart-poles and reaction wheel,
+    unstable for the acrobot (its BEM moves with the elbow angle, s_p = −0.26); the derived gains of the first
+    four are the rule's (their loop sampled with its velocity filter is stable), the acrobot's come from the search
+    (tests/test_eic_sampled.py)."""
     from bemlearn.control.eic_linear import eic_linear_abscissa, eic_linear_matrix
 
     for name in ("furuta", "cartpole", "cartpole_coarse", "reaction_wheel", "acrobot"):
         robot = _robot(name)
-        g = derive.eic_gains(robot, derive.control_rate(robot).value).value
-        ab = eic_linear_abscissa(robot, g)
+        rule = _rule_gains(robot)
+        ab = eic_linear_abscissa(robot, rule)
         assert (ab > 0) == (name == "acrobot"), (name, ab)
+        g = derive.eic_gains(robot, derive.control_rate(robot).value).value
+        same = all(getattr(g, k) == pytest.approx(getattr(rule, k), rel=1e-12) for k in ("kp_a", "kd_a", "kp_u", "kd_u"))
+        assert same == (name != "acrobot"), name
     # the matrix reproduces the closed-form loop of a cart-pole-like robot with s_p = 0:
     # q_u dynamics alone are q̈_u = −k_d,u q̇_u − k_p,u (q_u − s_a v_ext)
     robot = _robot("cartpole")
@@ -362,3 +376,18 @@ def test_a_group_the_config_gives_in_full_is_not_derived(skipped, monkeypatch):
     assert {k: v["value"] for k, v in partial.items()} == {k: v["value"] for k, v in values.items()}
     given = {f"{prefix}.{k}" for prefix, keys in _GIVEN_GROUPS[skipped].items() for k in keys}
     assert {k for k, v in partial.items() if v["origin"] == "given"} == given | {"robot"}
+
+
+def test_initial_actuated_range_keeps_the_bem_offset_within_the_qu_start_range():
+    """A serial arm's static BEM keeps the pole vertical, q_u^e = q_u* − q_a (s_p = −1 in closed form), so the
+    pendubot's shoulder starts within (d/4)/|s_p| = 0.05 rad; a cart-pole's BEM does not move with the cart
+    (s_p = 0) and keeps min(0.1, 0.1 × half range)."""
+    from bemlearn.robots.scales import bem_slopes, qa_half_ranges
+
+    pendubot = _robot("pendubot")
+    assert bem_slopes(pendubot)[0, 0] == pytest.approx(-1.0, abs=1e-6)
+    d = derive.design_region(pendubot).value
+    assert derive.initial_ranges(pendubot).value["initial_qa"] == pytest.approx((-d / 4, d / 4), rel=1e-6)
+    cart = _robot("cartpole")
+    qa = min(0.1, 0.1 * float(np.min(qa_half_ranges(cart))))
+    assert derive.initial_ranges(cart).value["initial_qa"] == pytest.approx((-qa, qa), rel=1e-12)

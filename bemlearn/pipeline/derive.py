@@ -41,12 +41,15 @@ __all__ = [
     "control_rate",
     "excitation_gains",
     "excitation_signals",
+    "excitation_amplitude_check",
     "fall_window",
     "initial_ranges",
     "sensor",
     "input_units",
     "evaluation",
     "eic_gains",
+    "eic_recovery",
+    "closed_loop_sensor",
     "closed_loop_reference",
 ]
 
@@ -160,7 +163,8 @@ def excitation_signals(robot, rate: RateChoice, *, n_sines: tuple[int, int] = (2
     the other half left to the balance; the bottom amplitude is A_hi / 10.
 
     Returns:
-        ``Derived({"n_sines", "amplitude", "frequency_hz"}, note)`` (amplitudes in rad or m).
+        ``Derived({"n_sines", "amplitude", "frequency_hz", "effort_capped"}, note)`` (amplitudes in rad or m;
+        ``effort_capped``: the actuator limits set A_hi, then :func:`excitation_amplitude_check` applies).
     """
     d = design_region(robot).value
     f_lo, f_hi, lam = _frequency_band(robot, rate)
@@ -173,14 +177,56 @@ def excitation_signals(robot, rate: RateChoice, *, n_sines: tuple[int, int] = (2
     a_hi = min(a_bem, cap)
     why = "1.5 × design bound / (m × BEM gain at f_hi)" if a_hi == a_bem else "joint range / n_max"
     a_eff = _effort_cap(robot, a_hi, 1, 2 * math.pi * f_hi)
-    if a_eff < a_hi:
+    capped = a_eff < a_hi
+    if capped:
         a_hi, why = a_eff, "half the actuator limits at f_hi"
     reach = a_hi * g_hi * n_sines[1]
     note = (f"f ∈ [{f_lo:.3g}, {f_hi:.3g}] Hz (f_hi = 1.4 λ/2π, λ = {lam:.3g} 1/s); A ≤ {a_hi:.3g} ({why}); "
             f"n_max components at f_hi reach |q_u^e| ≈ {reach:.3g}")
     if reach < d:
         warn(DesignWarning, log, "%s: the excitation reaches |q_u^e| ≈ %.3g < %.3g within the joint ranges and actuator limits", robot.name, reach, d)
-    return Derived({"n_sines": tuple(n_sines), "amplitude": (a_hi / 10, a_hi), "frequency_hz": (f_lo, f_hi)}, note)
+    return Derived({"n_sines": tuple(n_sines), "amplitude": (a_hi / 10, a_hi), "frequency_hz": (f_lo, f_hi), "effort_capped": capped}, note)
+
+
+EXCITATION_CHECK_SEED = 20261127
+"""Entropy of the seeds of :func:`excitation_amplitude_check`'s trials (fixed: a derivation is a function of the robot)."""
+
+
+def excitation_amplitude_check(robot, collect, *, trials: int = 24, duration_s: float = 5.0, halvings: int = 3) -> Derived:
+    """The factor s ∈ {1, 1/2, …, 2^−``halvings``} on ``collect.amplitude`` (both ends): the largest at which at most
+    a quarter of ``trials`` excitation trials fall in MuJoCo (more than half fallen makes a run degraded:
+    the check keeps a margin for the trials it did not run; a fall rate of one half passes it with probability
+    1 % with 24 trials, 7 % with 12, 14 % with 8).  Most falls come in the first seconds (the tracking error
+    the reference starts with), so 5 s trials.
+
+    Where the actuator limits set the top amplitude (:func:`excitation_signals`), the reference takes half of
+    them and the balance the rest; whether that is enough depends on the balance loop: its feedback on a
+    tracking error (the reference starts away from the robot's rest state and with a velocity the robot does
+    not have) saturates an actuator long before the linear design says (a servo whose ``forcerange`` binds far
+    inside its ``ctrlrange``).  So the trials themselves decide: :func:`~bemlearn.sim.collect.simulate_trial`,
+    the collection's loop with every limit, the encoder and the velocity filter, ``duration_s`` each, with seeds of
+    their own (:data:`EXCITATION_CHECK_SEED`: the derived amplitude is a property of the robot, not of
+    ``collect.seed``).  ``collect`` is a complete
+    :class:`~bemlearn.sim.collect.CollectConfig`.
+
+    Returns:
+        ``Derived(s, note)``.
+    """
+    import dataclasses
+
+    from bemlearn.sim.collect import simulate_trial
+
+    seqs = np.random.SeedSequence(EXCITATION_CHECK_SEED).spawn(trials)
+    lo, hi = collect.amplitude
+    tried = []
+    for k in range(halvings + 1):
+        s = 0.5**k
+        cfg = dataclasses.replace(collect, amplitude=(lo * s, hi * s), duration_s=min(duration_s, collect.duration_s))
+        fell = sum(simulate_trial(robot, cfg, i, sq).failed for i, sq in enumerate(seqs))
+        tried.append(f"{fell}/{trials} fall at A × {s:g}")
+        if fell <= trials / 4:
+            break
+    return Derived(s, f"excitation trials in MuJoCo ({min(duration_s, collect.duration_s):g} s each): " + ", ".join(tried))
 
 
 def _effort_cap(robot, a_hi: float, n_max: int, omega: float, *, budget: float = 0.5) -> float:
@@ -254,10 +300,20 @@ def fall_window(robot) -> Derived:
 
 
 def initial_ranges(robot) -> Derived:
-    """Initial-state ranges of the excitation trials: q_u ± d/4, q_a ± min(0.1, 0.1 × half range)."""
+    """Initial-state ranges of the excitation trials: q_u ± d/4, q_a ± min(0.1, 0.1 × half range, (d/4)/max_j |s_p,j|).
+
+    The last bound keeps the BEM offset an actuated start error makes (q_u^e ≈ s_p q_a, eq. 9 linearised) within
+    the q_u start range: a pendubot's BEM moves with its shoulder (s_p = −1), and from a 0.1 rad shoulder error
+    (half the design region) its force-limited LQR falls in a quarter of a second, whatever the excitation.
+    """
     d = design_region(robot).value
     qa = float(min(0.1, 0.1 * np.min(qa_half_ranges(robot))))
-    return Derived({"initial_qa": (-qa, qa), "initial_qu": (-d / 4, d / 4)}, f"q_u ± {d / 4:.3g} (design bound / 4), q_a ± {qa:.3g}")
+    sp = float(np.max(np.abs(bem_slopes(robot)[0])))
+    by_bem = (d / 4) / sp if sp > 1e-9 else math.inf
+    why = ""
+    if by_bem < qa:
+        qa, why = by_bem, f" (its BEM offset |s_p| q_a ≤ d/4, |s_p| = {sp:.3g})"
+    return Derived({"initial_qa": (-qa, qa), "initial_qu": (-d / 4, d / 4)}, f"q_u ± {d / 4:.3g} (design bound / 4), q_a ± {qa:.3g}{why}")
 
 
 def sensor(robot, rate: RateChoice) -> Derived:
@@ -308,7 +364,31 @@ def evaluation(robot, signals: dict, *, n_references: int = 5) -> Derived:
     return Derived(out, note)
 
 
-def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None) -> Derived:
+def closed_loop_sensor(robot, rate: RateChoice) -> Derived:
+    """The closed loop's encoder and velocity filter: :func:`sensor` with the filter cutoff doubled (the
+    balance loop needs less lag than the excitation's logging).
+
+    Returns:
+        ``Derived(dict of SensorConfig fields, note)``.
+    """
+    sen = sensor(robot, rate)
+    return Derived({**sen.value, "velocity_cutoff": 2 * sen.value["velocity_cutoff"]}, sen.note + "; × 2 in the closed loop")
+
+
+EIC_GRID_OMEGA_U = (1.2, 1.6, 2.2, 3.0, 4.0, 5.0, 6.0, 8.0)
+"""ω_u / λ of the EIC gain search (:func:`eic_gains`)."""
+EIC_GRID_RATIO = (3.0, 5.0, 7.0, 10.0, 15.0, 20.0, 25.0, 30.0, 40.0, 60.0)
+"""ω_u / ω_a of the EIC gain search (:func:`eic_gains`)."""
+
+
+def _critical(w_u: float, ratio: float):
+    from bemlearn.control.eic import EICGains
+
+    w_a = w_u / ratio
+    return EICGains(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u)
+
+
+def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocity_cutoff: float | None = None) -> Derived:
     """EIC gains from the model (eq. 3, 8): critically damped loops
 
         internal: ω_u = min(2.2 λ, 2π·rate/20),  k_p,u = ω_u², k_d,u = 2 ω_u
@@ -317,10 +397,21 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None) -> Deri
     (λ = √(Γ_q/D_uu)).  ω_u is lowered (down to 1.2 λ) while the linearised command for a
     q_u error of ``qu_error`` (default d/4) would exceed the ``ctrlrange``.
 
+    These gains are kept when the loop *as it runs* — sampled at the control rate, the command held over the
+    tick, the rates from the closed loop's velocity filter (cutoff ``velocity_cutoff``, default
+    :func:`closed_loop_sensor`'s) — is stable at upright (:func:`~bemlearn.control.eic_linear.eic_tick_loop`).
+    Otherwise critically damped gains are searched on the grid ω_u ∈ {1.2 … 8} λ (≤ 2π·rate/10),
+    ω_u/ω_a ∈ {3 … 60}: the sampled loops that are stable, fastest decay first, and the first of them (at most
+    four tried) whose loop in MuJoCo — the model BEM, the sensors, every actuator limit — brings the robot
+    back from a ``qu_error`` start (:func:`eic_recovery`) is kept; if none does, the fastest-decaying one (the
+    model check ``eic_recovery`` then says the robot cannot be balanced by the EIC).
+
     Returns:
         ``Derived(EICGains, note)``.
     """
-    from bemlearn.control.eic import EICGains
+    from bemlearn.control.eic_linear import eic_tick_loop
+    from bemlearn.control.lqr import linearize
+    from bemlearn.errors import ArgumentError, NumericalError, RobotModelError
 
     lam = instability_rate(robot)
     d = design_region(robot).value
@@ -330,18 +421,76 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None) -> Deri
     while peak > 1.0 and w_u > 1.2 * lam:
         w_u = max(1.2 * lam, 0.9 * w_u)
         peak = _eic_peak(robot, w_u, e0)
-    w_a = w_u / 7
-    g = EICGains(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u)
+    g = _critical(w_u, 7.0)
     note = (f"ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/7, critically damped; "
             f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange)")
-    if robot.m == 1:
-        from bemlearn.control.eic_linear import eic_linear_abscissa
+    wc = closed_loop_sensor(robot, rate).value["velocity_cutoff"] if velocity_cutoff is None else velocity_cutoff
+    try:
+        plant = linearize(robot, rate_hz=rate.rate_hz, timestep=rate.timestep)[:2]
+        loop = eic_tick_loop(robot, g, rate_hz=rate.rate_hz, velocity_cutoff=wc, plant=plant)
+    except (RobotModelError, NumericalError, ArgumentError) as exc:  # an actuator model the linearisation does not cover
+        return Derived(g, note + f"; the sampled loop was not checked ({exc})")
+    if loop.spectral_radius < 1.0:
+        return Derived(g, note + f"; the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) "
+                                 f"decays at {loop.decay_rate:.3g} 1/s at upright")
+    why = (f"the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) grows at "
+           f"{-loop.decay_rate:.3g} 1/s with them")
+    stable = []
+    for wl in EIC_GRID_OMEGA_U:
+        wu = wl * lam
+        if wu > 2 * math.pi * rate.rate_hz / 10:
+            continue
+        for ratio in EIC_GRID_RATIO:
+            gg = _critical(wu, ratio)
+            lp = eic_tick_loop(robot, gg, rate_hz=rate.rate_hz, velocity_cutoff=wc, plant=plant)
+            if lp.spectral_radius < 1.0:
+                stable.append((lp.decay_rate, wl, ratio, gg))
+    if not stable:
+        warn(DesignWarning, log, "%s: no EIC gains of the grid make the sampled loop stable at upright", robot.name)
+        return Derived(g, note + f"; {why}, and so it does with every gain of the grid (ω_u = 1.2–8 λ, ω_u/ω_a = 3–60)")
+    stable.sort(key=lambda c: -c[0])
+    tried = []
+    for decay, wl, ratio, gg in stable[:4]:
+        ok, how = eic_recovery(robot, gg, rate, qu0=e0, velocity_cutoff=wc)
+        tried.append(f"{wl:g} λ, ω_u/ω_a = {ratio:g}: {how}")
+        if ok:
+            return Derived(gg, f"ω_u = {wl:g} λ (λ = {lam:.3g} 1/s), ω_a = ω_u/{ratio:g}, critically damped: the rule's gains "
+                               f"(ω_u = {w_u / lam:.2g} λ, ω_a = ω_u/7) fail, {why}; of the grid's sampled-stable gains the fastest "
+                               f"decaying ({decay:.3g} 1/s) that brings the robot back in MuJoCo ({how})")
+    decay, wl, ratio, gg = stable[0]
+    warn(DesignWarning, log, "%s: no sampled-stable EIC gains bring the robot back from a %.3g q_u error in MuJoCo", robot.name, e0)
+    return Derived(gg, f"ω_u = {wl:g} λ (λ = {lam:.3g} 1/s), ω_a = ω_u/{ratio:g}, critically damped, the fastest decaying "
+                       f"({decay:.3g} 1/s) of the grid's sampled-stable gains ({why} with the rule's); none brings the robot "
+                       f"back in MuJoCo: " + "; ".join(tried))
 
-        ab = eic_linear_abscissa(robot, g)
-        note += f"; linearised EIC loop max Re λ = {ab:.3g} 1/s"
-        if ab >= 0:
-            warn(DesignWarning, log, "%s: the EIC with the derived gains is unstable in its linearisation at upright (max Re λ = %.3g 1/s)", robot.name, ab)
-    return Derived(g, note)
+
+def eic_recovery(robot, gains, rate: RateChoice, *, qu0: float, velocity_cutoff: float, duration_s: float = 3.0) -> tuple[bool, str]:
+    """Whether the EIC loop with the model BEM brings ``robot`` back in MuJoCo from a q_u error ``qu0`` at rest.
+
+    The closed-loop simulation itself (:func:`~bemlearn.sim.closed_loop.simulate`: the model BEM, the encoder
+    and the velocity filter of cutoff ``velocity_cutoff``, the command clipped to the ``ctrlrange`` and MuJoCo
+    clipping the ``forcerange``), the reference at rest, for ``duration_s``: it recovers when q_u never leaves the
+    fall window (:func:`fall_window`) and ends within ``qu0`` of nominal.  Returns ``(recovers, what happened)``.
+    """
+    from bemlearn.data.sensors import SensorConfig
+    from bemlearn.sim.closed_loop import ReferenceConfig, SimulateConfig, simulate
+
+    fw = fall_window(robot).value
+    cfg = SimulateConfig(duration_s=duration_s, rate_hz=rate.rate_hz, bem_source="model", reference=ReferenceConfig((0.0,), (0.0,), (0.0,), 0.0),
+                         gains=gains, sensor=SensorConfig(**{**sensor(robot, rate).value, "velocity_cutoff": velocity_cutoff}),
+                         initial_qu=qu0, fall_window=fw, warmup_s=0.0, physics_timestep=rate.timestep if rate.timestep_changed else None)
+    res = simulate(robot, cfg, progress=False)
+    iu, ia = robot.unactuated_index, list(robot.actuated_index)
+    if res.fell:
+        span = np.max(np.abs(res.q[:, ia]), axis=0) if len(res.t) else np.zeros(len(ia))
+        j = int(np.argmax(span))
+        unit = "rad" if robot.coordinate_kinds[ia[j]] == "hinge" else "m"
+        return False, (f"falls at {res.metrics['duration_s']:.2f} s from a {qu0:.3g} error ({robot.actuated_names[j]} "
+                       f"swings to {span[j]:.3g} {unit})")
+    end = float(abs(res.q[-1, iu] - robot.qu_nominal))
+    if end > qu0:
+        return False, f"q_u is {end:.3g} from nominal after {duration_s:g} s from a {qu0:.3g} error"
+    return True, f"from a {qu0:.3g} error q_u ends {end:.3g} from nominal after {duration_s:g} s, peak command {res.metrics['u_max']:.3g} ctrl"
 
 
 def _eic_peak(robot, w_u: float, e0: float) -> float:

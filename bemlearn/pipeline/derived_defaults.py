@@ -116,13 +116,21 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
     def wanted(prefix: str, keys: tuple[str, ...]) -> bool:  # derive a group only when the config leaves one of its keys out
         return any(not _given(given, f"{prefix}.{k}") for k in keys)
 
+    fw = derive.fall_window(robot)
+
     @functools.cache
     def excitation() -> dict:  # collect's sines, also the base of evaluate's references and of the closed loop's
         sig = derive.excitation_signals(robot, rc)
-        _leaves("collect", {k: sig.value[k] for k in _SIGNALS}, sig.note, out)
-        return sig.value
+        value, note = dict(sig.value), sig.note
+        if value.get("effort_capped") and not _given(given, "collect.amplitude"):
+            check = derive.excitation_amplitude_check(robot, _collect_for_check(robot, config, given, out, value, rc, fw.value))
+            note += f"; {check.note}"
+            if check.value < 1:
+                value["amplitude"] = tuple(check.value * a for a in value["amplitude"])
+                note += f": A × {check.value:g}"
+        _leaves("collect", {k: value[k] for k in _SIGNALS}, note, out)
+        return value
 
-    fw = derive.fall_window(robot)
     _leaves("collect.rate_hz", rc.rate_hz, crate.note, out)
     _leaves("collect.physics_timestep", rc.timestep if rc.timestep_changed else None, crate.note, out)
     if wanted("collect", ("gains", "gain_scale")):
@@ -146,17 +154,37 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
     _leaves("simulate.rate_hz", rs.rate_hz, srate.note + ("" if _given(given, "simulate.rate_hz") else " (the collection's rate)"), out)
     _leaves("simulate.physics_timestep", rs.timestep if rs.timestep_changed else None, srate.note, out)
     if wanted("simulate.gains", _EIC_GAINS):
-        eic = derive.eic_gains(robot, rs)
+        wc = config.simulate.sensor.velocity_cutoff if _given(given, "simulate.sensor.velocity_cutoff") else None
+        eic = derive.eic_gains(robot, rs, velocity_cutoff=wc)
         _leaves("simulate.gains", {k: v for k, v in to_dict(eic.value).items() if k in _EIC_GAINS}, eic.note, out)
     if wanted("simulate.reference", _REFERENCE):
         ref = derive.closed_loop_reference(robot, excitation())
         _leaves("simulate.reference", ref.value, ref.note, out)
     _leaves("simulate.fall_window", fw.value, fw.note, out)
     if wanted("simulate.sensor", _SENSOR):
-        sen_sim = derive.sensor(robot, rs)
-        _leaves("simulate.sensor", {**sen_sim.value, "velocity_cutoff": 2 * sen_sim.value["velocity_cutoff"]},
-                sen_sim.note + "; × 2 in the closed loop", out)
+        sen_sim = derive.closed_loop_sensor(robot, rs)
+        _leaves("simulate.sensor", sen_sim.value, sen_sim.note, out)
     return out
+
+
+def _collect_for_check(robot, config: PipelineConfig, given, out: dict, signals: dict, rate: RateChoice, fall_window: float):
+    """The collection's config as it will run (given keys, else the derived ones), with ``signals``' sines."""
+    import dataclasses
+
+    from bemlearn.data.sensors import SensorConfig
+
+    c = config.collect
+    gains = c.gains if _given(given, "collect.gains") else out["collect.gains"][0]
+    scale = c.gain_scale if _given(given, "collect.gain_scale") else out["collect.gain_scale"][0]
+    init = derive.initial_ranges(robot).value
+    sen = derive.sensor(robot, rate).value
+    sensor = SensorConfig(**{k: getattr(c.sensor, k) if _given(given, f"collect.sensor.{k}") else sen[k] for k in _SENSOR})
+    return dataclasses.replace(
+        c, rate_hz=rate.rate_hz, physics_timestep=rate.timestep if rate.timestep_changed else None, gains=gains, gain_scale=scale,
+        fall_window=c.fall_window if _given(given, "collect.fall_window") else fall_window,
+        initial_qa=c.initial_qa if _given(given, "collect.initial_qa") else init["initial_qa"],
+        initial_qu=c.initial_qu if _given(given, "collect.initial_qu") else init["initial_qu"],
+        n_sines=signals["n_sines"], amplitude=signals["amplitude"], frequency_hz=signals["frequency_hz"], sensor=sensor)
 
 
 def derive_model_values(model, config: PipelineConfig, given: set[str] | frozenset[str] = frozenset()) -> dict[str, tuple[Any, str]]:

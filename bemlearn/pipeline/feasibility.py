@@ -1,6 +1,6 @@
 """Can the robot be balanced over the design region at all?  Checked from the model, before collecting.
 
-Three checks, each a number with a limit, from the robot's model and the resolved config:
+Four checks, each a number with a limit, from the robot's model and the resolved config:
 
 * **hold** — the effort to hold the BEM at the edge of the design region, |q_u^e − nominal| = d.
   The linearised BEM q_u^e ≈ s_p q_a + s_a q̈_a (:func:`~bemlearn.robots.scales.bem_slopes`) offers
@@ -10,14 +10,21 @@ Three checks, each a number with a limit, from the robot's model and the resolve
   gives the ``ctrl`` (and force) it takes (:class:`~bemlearn.control.actuator_inverse.MujocoActuatorInverse`),
   and the effort is max_i |ctrl_i| / ctrl limit_i (and |f_i| / force limit_i).  The robot can hold
   the design region when for each sign some way needs an effort ≤ 1.
-* **eic** (one actuated coordinate) — the spectral abscissa of the EIC loop linearised at upright
-  with the config's gains (:func:`~bemlearn.control.eic_linear.eic_linear_abscissa`); ≥ 0 means the
-  closed loop of eq. (3), (8) cannot balance the robot near upright.
+* **eic** — the growth rate ln(ρ)·rate (1/s) of the EIC loop as it runs, linearised at upright with the
+  config's gains: sampled at the closed loop's rate, the command held over the tick, the rates from its
+  velocity filter (:func:`~bemlearn.control.eic_linear.eic_tick_loop`); ≥ 0 means the closed loop of
+  eq. (3), (8) cannot balance the robot near upright.  (The continuous loop with exact rates,
+  :func:`~bemlearn.control.eic_linear.eic_linear_abscissa`, misses the filter's lag, which destabilises a
+  stiff internal loop: a pendubot it calls stable falls in MuJoCo, docs/family.md.)
+* **eic_recovery** (when ``eic`` passes) — the closed loop itself in MuJoCo with the model BEM, the sensors
+  and every actuator limit, from a d/4 error of q_u at rest (:func:`~bemlearn.pipeline.derive.eic_recovery`):
+  failing means the basin of the EIC at upright is smaller than the errors the robot starts from (an
+  acrobot's elbow swings to its stop from a 0.05 rad error).
 * **excitation** — the peak ``ctrl`` and actuator force of the excitation LQR (``collect.gains``, when derived)
   for a d/4 error of q_u, as a multiple of the ctrlrange and forcerange (:func:`~bemlearn.control.lqr.discrete_lqr`):
   above 1 the excitation saturates and trials fall.
 
-``hold`` or ``eic`` failing makes the run *unusable*: ``bemlearn run`` stops after its preflight
+``hold``, ``eic`` or ``eic_recovery`` failing makes the run *unusable*: ``bemlearn run`` stops after its preflight
 and writes the verdict; ``excitation`` failing makes it *degraded*.
 """
 
@@ -31,7 +38,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
-from bemlearn.errors import NumericalError, RobotModelError
+from bemlearn.errors import ArgumentError, NumericalError, RobotModelError
 
 if TYPE_CHECKING:
     from bemlearn.pipeline.config import PipelineConfig
@@ -126,15 +133,9 @@ def model_feasibility(robot: MujocoRobot, config: PipelineConfig) -> list[Feasib
             f"no pose or acceleration of the actuated joints holds {robot.unactuated_name} {d:g} {qu_unit} from its nominal value"))
     except (RobotModelError, NumericalError) as exc:   # an actuator model the inverse does not cover: no verdict from it
         log.info("feasibility: hold check skipped (%s)", exc)
-    if robot.m == 1 and config.simulate.gains is not None:
-        from bemlearn.control.eic_linear import eic_linear_abscissa
-
-        ab = eic_linear_abscissa(robot, config.simulate.gains)
-        out.append(FeasibilityCheck(
-            "eic", ab, 0.0, "unusable",
-            f"the EIC loop (eq. 3, 8) with the gains {_gains(config.simulate.gains)} is unstable in its linearisation at "
-            f"upright (max Re λ = {ab:+.3g} 1/s)" if ab >= 0 else
-            f"the EIC loop linearised at upright is stable (max Re λ = {ab:+.3g} 1/s)", strict=True))
+    gains = config.simulate.gains
+    if config.simulate.rate_hz is not None and all(getattr(gains, k) is not None for k in ("kp_a", "kd_a", "kp_u", "kd_u")):
+        out.extend(_eic_checks(robot, config, d, qu_unit))
     if config.collect.gains is not None and config.collect.rate_hz is not None:
         from bemlearn.control.lqr import discrete_lqr
 
@@ -146,6 +147,38 @@ def model_feasibility(robot: MujocoRobot, config: PipelineConfig) -> list[Feasib
                 "excitation", res.u_peak, 1.0, "degraded",
                 f"the excitation LQR needs {res.u_peak:.2f}× the actuator limits (ctrlrange, forcerange) for a {d / 4:g} {qu_unit} error of "
                 f"{robot.unactuated_name}" + (" (its trials will saturate and fall)" if res.u_peak > 1 else "")))
+    return out
+
+
+def _eic_checks(robot: MujocoRobot, config: PipelineConfig, d: float, qu_unit: str) -> list[FeasibilityCheck]:
+    """``eic`` (the sampled loop's growth rate at upright) and, when it decays, ``eic_recovery`` (the loop in MuJoCo
+    from a d/4 error of q_u; module docstring)."""
+    from bemlearn.control.eic_linear import eic_tick_loop
+    from bemlearn.pipeline.derive import RateChoice, eic_recovery
+
+    sim = config.simulate
+    assert sim.rate_hz is not None
+    wc = sim.sensor.velocity_cutoff
+    step = sim.physics_timestep if sim.physics_timestep is not None else float(robot.model.opt.timestep)
+    rate = RateChoice(sim.rate_hz, max(1, int(round(1.0 / (sim.rate_hz * step)))), step, sim.physics_timestep is not None)
+    try:
+        loop = eic_tick_loop(robot, sim.gains, rate_hz=sim.rate_hz, velocity_cutoff=wc, timestep=sim.physics_timestep)
+    except (RobotModelError, NumericalError, ArgumentError) as exc:   # an actuator model or rate the linearisation does not take
+        log.info("feasibility: eic check skipped (%s)", exc)
+        return []
+    grow = -loop.decay_rate
+    where = f"sampled at {sim.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s)"
+    out = [FeasibilityCheck(
+        "eic", grow, 0.0, "unusable",
+        f"the EIC loop (eq. 3, 8) with the gains {_gains(sim.gains)}, {where}, is unstable at upright (it grows at "
+        f"{grow:.3g} 1/s)" if grow >= 0 else f"the EIC loop {where} is stable at upright (it decays at {-grow:.3g} 1/s)", strict=True)]
+    if grow < 0:
+        ok, how = eic_recovery(robot, sim.gains, rate, qu0=d / 4, velocity_cutoff=wc)
+        out.append(FeasibilityCheck(
+            "eic_recovery", 0.0 if ok else 1.0, 0.0, "unusable",
+            "the EIC loop with the model BEM in MuJoCo (sensors, actuator limits) " + (
+                f"brings {robot.unactuated_name} back: {how}" if ok else
+                f"cannot bring {robot.unactuated_name} back from {d / 4:g} {qu_unit} with the gains {_gains(sim.gains)}: it {how}")))
     return out
 
 

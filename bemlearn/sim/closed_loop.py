@@ -13,6 +13,7 @@ non-finite command (``command_rejected``).
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, overload
@@ -200,8 +201,12 @@ def simulate(robot: BalanceRobot, config: SimulateConfig, *, progress: bool = Tr
 
     The loop runs torch on one thread, as a controller would (intra-op threads only add
     synchronization to these tiny per-tick calls and thrash under load); the previous
-    setting is restored afterwards.
+    setting is restored afterwards.  The model and zero BEMs do not import torch for that
+    (when it is not loaded yet).
     """
+    if config.bem_source != "predictor" and "torch" not in sys.modules:
+        # the model and zero BEMs run on NumPy: a model check stays torch-free (importing torch takes seconds)
+        return _simulate(robot, config, progress=progress, reference=reference)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
@@ -232,9 +237,10 @@ def _simulate(plant: BalanceRobot, config: SimulateConfig, *, progress: bool, re
     dt = sensed.dt
     n, m, iu, ia = plant.n, plant.m, plant.unactuated_index, list(plant.actuated_index)
     q0, qd0 = np.zeros(n), np.zeros(n)
-    q0[ia] = ref.derivative(np.array([0.0]), 0).numpy()[0]
+    qa_start, qad_start, _ = ref.evaluate(np.array([0.0]))   # NumPy (derivative() goes through torch)
+    q0[ia] = np.asarray(qa_start)[0]
     q0[iu] = plant.qu_nominal + config.initial_qu
-    qd0[ia] = ref.derivative(np.array([0.0]), 1).numpy()[0]
+    qd0[ia] = np.asarray(qad_start)[0]
     sensed.reset(q0, qd0)
     steps = int(round(config.duration_s * config.rate_hz))
     log = {k: np.empty((steps, w)) for k, w in (("q", n), ("qd", n), ("qdd", n), ("q_meas", n), ("qd_est", n), ("u", model.nu), ("bem_x", 3 * m))}
