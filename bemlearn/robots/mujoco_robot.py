@@ -495,12 +495,9 @@ class MujocoRobot(Robot):
                 rne(m, d, 1, vec)
                 subtract(vec, qfrc_passive, out=out[b])
             return out + self._armature * qddj   # MuJoCo's RNE leaves out the armature its mass matrix holds
-        qadr, dadr = self._qadr, self._dadr
+        dadr = self._dadr
         for b in range(R):
-            d.qpos[qadr] = qj[b]
-            d.qvel[dadr] = qdj[b]
-            kinematics(m, d)
-            com_pos(m, d)
+            self._load_state(qj[b], qdj[b])   # a free body's position goes through its quaternion
             com_vel(m, d)
             passive(m, d)
             d.qacc[dadr] = qddj[b]
