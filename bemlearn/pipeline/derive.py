@@ -40,6 +40,7 @@ __all__ = [
     "control_rate",
     "excitation_gains",
     "excitation_signals",
+    "excitation_directions",
     "fall_window",
     "initial_ranges",
     "sensor",
@@ -180,6 +181,78 @@ def excitation_signals(robot, rate: RateChoice, *, n_sines: tuple[int, int] = (2
     if reach < d:
         log.warning("%s: the excitation reaches |q_u^e| ≈ %.3g < %.3g within the joint ranges and actuator limits", robot.name, reach, d)
     return Derived({"n_sines": tuple(n_sines), "amplitude": (a_hi / 10, a_hi), "frequency_hz": (f_lo, f_hi)}, note)
+
+
+def excitation_directions(robot, rate: RateChoice, signals: dict) -> Derived:
+    """How the excitation moves more than one actuated coordinate (collect's ``reference_bem``, ``excursion``, ``amplitude``).
+
+    With m = 1 the paper's excitation is kept (q_u target at nominal, amplitudes from :func:`excitation_signals`).
+    With m ≥ 2 the LQR tracking [q_a,t, q_u,nominal] has a redundant actuated direction and uses it: it cancels one
+    joint's reference with another's to keep q_u at nominal, and the actuated accelerations move in lockstep (a
+    two-link arm: corr(q̈₁, q̈₂) ≈ −0.99), so the data cannot resolve the BEM's dependence on each.  Instead each
+    actuated coordinate j follows its own sines, the q_u target is the periodic motion they drive through the
+    linearised BEM (s_p, s_v, s_a at upright, λ; :func:`~bemlearn.sim.collect._trajectory_reference`), and the
+    command carries the model's feedforward along it.  Each direction gets its own extents, its units:
+
+        P_j = min(d/|s_p,j|, 0.8 × half range_j)   (0.8 × half range where s_p,j = 0)
+        a_j = 1.3 d/|s_a,j|                         (P_j ω_hi² where s_a,j = 0)
+
+    both scaled down together until (q_a,j = ±P_j, q̈_a,j = ∓a_j) alone takes at most half the actuator limits
+    (:func:`actuator_effort`); a component at ω on j has amplitude U(0.2, 1)/√n_max · min(P_j, a_j/ω²) (random
+    phases: n components add up as √n).
+
+    Returns:
+        ``Derived({"reference_bem", "excursion", "amplitude"}, note)``.
+    """
+    if robot.m < 2:
+        return Derived({"reference_bem": (), "excursion": (), "amplitude": signals["amplitude"]},
+                       "m = 1: the paper's excitation (q_u target at nominal, amplitudes in the joint's unit)")
+    from bemlearn.control.actuator_inverse import MujocoActuatorInverse
+    from bemlearn.errors import NumericalError, RobotModelError
+
+    d = design_region(robot).value
+    f_hi = signals["frequency_hz"][1]
+    w_hi = 2 * math.pi * f_hi
+    sp, sv, sa = bem_slopes(robot)
+    lam = instability_rate(robot)
+    half = qa_half_ranges(robot)
+    limited = _limited_actuated(robot)
+    P = np.where(limited, 0.8 * half, half)
+    P = np.where(np.abs(sp) > 1e-9, np.minimum(P, d / np.maximum(np.abs(sp), 1e-300)), P)
+    a = np.where(np.abs(sa) > 1e-9, 1.3 * d / np.maximum(np.abs(sa), 1e-300), P * w_hi**2)
+    scaled = []
+    try:
+        inv = MujocoActuatorInverse(robot)
+        for j in range(robot.m):
+            def effort(c: float, j: int = j) -> float:
+                worst = 0.0
+                for sign in (1.0, -1.0):
+                    q = np.zeros(robot.n)
+                    q[robot.unactuated_index] = robot.qu_nominal
+                    qdd = np.zeros(robot.n)
+                    q[robot.actuated_index[j]] = sign * c * P[j]
+                    qdd[robot.actuated_index[j]] = -sign * c * a[j]
+                    worst = max(worst, actuator_effort(robot, inv, q, qdd))
+                return worst
+            if effort(0.0) <= 0.5 < effort(1.0):
+                lo, hi = 0.0, 1.0
+                for _ in range(30):
+                    mid = 0.5 * (lo + hi)
+                    lo, hi = (mid, hi) if effort(mid) <= 0.5 else (lo, mid)
+                P[j], a[j] = lo * P[j], lo * a[j]
+                scaled.append(robot.joint_names[robot.actuated_index[j]])
+    except (RobotModelError, NumericalError):
+        pass
+    n_max = signals["n_sines"][1]
+    frac = (0.2 / math.sqrt(n_max), 1.0 / math.sqrt(n_max))
+    ref = tuple(float(f"{x:.6g}") for x in (*sp, *sv, *sa, lam))
+    ext = tuple(float(f"{x:.6g}") for x in (*P, *a))
+    note = (f"m = {robot.m}: each actuated coordinate its own sines, q_u target on their periodic BEM motion (λ = {lam:.3g} 1/s) "
+            f"with the model's feedforward; extents P = {tuple(round(float(x), 4) for x in P)}, "
+            f"a = {tuple(round(float(x), 4) for x in a)} (d/|s_p|, 1.3 d/|s_a|, 0.8 × half range"
+            f"{'; scaled to half the actuator limits on ' + ', '.join(scaled) if scaled else ''}); "
+            f"component amplitude U{tuple(round(x, 3) for x in frac)} × min(P_j, a_j/ω²)")
+    return Derived({"reference_bem": ref, "excursion": ext, "amplitude": frac}, note)
 
 
 def _effort_cap(robot, a_hi: float, n_max: int, omega: float, *, budget: float = 0.5) -> float:
