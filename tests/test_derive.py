@@ -316,6 +316,7 @@ _SENSOR_KEYS = ("counts_per_rev", "noise_std", "velocity_cutoff", "m_per_count")
 #: (derivation skipped, {config prefix: the keys of that group the config gives})
 _GIVEN_GROUPS = {
     "excitation_gains": {"collect": ("gains", "gain_scale")},
+    "excitation_directions": {"collect": ("reference_bem", "excursion")},
     "eic_gains": {"simulate.gains": ("kp_a", "kd_a", "kp_u", "kd_u")},
     "sensor": {"collect.sensor": _SENSOR_KEYS, "simulate.sensor": _SENSOR_KEYS},
     "closed_loop_reference": {"simulate.reference": ("amplitudes", "frequencies_hz", "phases", "offset")},
@@ -362,3 +363,42 @@ def test_a_group_the_config_gives_in_full_is_not_derived(skipped, monkeypatch):
     assert {k: v["value"] for k, v in partial.items()} == {k: v["value"] for k, v in values.items()}
     given = {f"{prefix}.{k}" for prefix, keys in _GIVEN_GROUPS[skipped].items() for k in keys}
     assert {k for k, v in partial.items() if v["origin"] == "given"} == given | {"robot"}
+
+
+def test_excitation_directions_one_actuated_keeps_the_papers_excitation_two_get_their_own_extents():
+    """m = 1: no reference_bem, no excursion, the amplitudes of excitation_signals (joint units).  m = 2 (a two-link
+    arm with a pole, whose BEM depends on both joints): the linearised BEM and λ for the q_u target, per-joint extents
+    P_j ≤ min(d/|s_p,j|, 0.8 × half range), a_j ≤ 1.3 d/|s_a,j|, within half the actuator limits (independent check
+    with MuJoCo's mj_inverse), and dimensionless amplitude fractions."""
+    from bemlearn.robots.scales import bem_slopes, instability_rate, qa_half_ranges
+
+    cart = _robot("cartpole")
+    rate = derive.control_rate(cart).value
+    sig = derive.excitation_signals(cart, rate).value
+    one = derive.excitation_directions(cart, rate, sig).value
+    assert one == {"reference_bem": (), "excursion": (), "amplitude": sig["amplitude"]}
+
+    arm = load(str(ROBOTS / "arm2_pole.xml"))
+    rate = derive.control_rate(arm).value
+    sig = derive.excitation_signals(arm, rate).value
+    out = derive.excitation_directions(arm, rate, sig).value
+    sp, sv, sa = bem_slopes(arm)
+    np.testing.assert_allclose(out["reference_bem"], [*sp, *sv, *sa, instability_rate(arm)], rtol=1e-5, atol=1e-9)
+    P, a = np.array(out["excursion"][:2]), np.array(out["excursion"][2:])
+    d = derive.design_region(arm).value
+    assert np.all(P > 0) and np.all(P <= np.minimum(d / np.abs(sp), 0.8 * qa_half_ranges(arm)) + 1e-6)
+    assert np.all(a > 0) and np.all(a <= 1.3 * d / np.abs(sa) + 1e-6)
+    n_max = sig["n_sines"][1]
+    np.testing.assert_allclose(out["amplitude"], (0.2 / np.sqrt(n_max), 1 / np.sqrt(n_max)))
+    model = arm.model
+    data = mujoco.MjData(model)
+    for j in range(2):
+        for sign in (1.0, -1.0):
+            data.qpos[:] = 0.0
+            data.qvel[:] = 0.0
+            data.qacc[:] = 0.0
+            data.qpos[arm.actuated_index[j]] = sign * P[j]
+            data.qacc[arm.actuated_index[j]] = -sign * a[j]
+            mujoco.mj_inverse(model, data)
+            tau = data.qfrc_inverse[list(arm.actuated_index)]
+            assert np.all(np.abs(tau) <= 0.5 * model.actuator_ctrlrange[:, 1] + 1e-6), (j, sign, tau)
