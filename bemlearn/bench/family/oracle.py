@@ -21,7 +21,7 @@ drives.
   velocity a_i / ω_u (ω_u = √(|∂²V/∂q_u²| / M_uu) the upright's divergence rate), and the position span
   (the joint range, or the offset that moves q_u^e by ``bound``).  A joint whose acceleration alone never
   moves q_u^e at rest (an x-y cart's y slide under a pole that tilts in x-z, a turntable's yaw) has no such
-  a_i: it gets the balance's own scale, a_i = ω_u² × its position half span (a sine at ω_u across its range),
+  a_i (q_u^e within 10⁻⁶ × the bound up to the search's bracket): it gets the balance's own scale, a_i = ω_u² × its position half span (a sine at ω_u across its range),
   not the search's bracket (10³ per s², which asked the learned BEM about 1300 m/s² and 200 m/s).
 * **Holdable**: (1) *static* — along the design region, the actuated generalized forces ``mj_inverse`` demands,
   widened by each joint's ``frictionloss``, lie inside what each actuator delivers at that state:
@@ -266,13 +266,22 @@ class Oracle:
                 lo_j, hi_j = max(lo_j, lo + margin), min(hi_j, hi - margin)
             pos.append((float(lo_j), float(hi_j)))
             a = self._reach(lambda s, e=e: (self.qa0, z, s * e), ACC_CAP)
-            if a >= ACC_CAP:  # the BEM does not depend on this acceleration at rest: the balance's own scale (docstring)
-                a = omega**2 * 0.5 * (hi_j - lo_j)
+            if a >= ACC_CAP and self._flat(lambda s, e=e: (self.qa0, z, s * e), ACC_CAP):
+                a = omega**2 * 0.5 * (hi_j - lo_j)  # the BEM does not depend on this acceleration at rest (docstring)
             acc.append(a)
             v = self._reach(lambda s, e=e: (self.qa0, s * e, z), a / omega)
             vel.append(min(v, a / omega))
         self._scales = {"omega_u": omega, "acc": acc, "vel": vel, "pos": pos}
         return self._scales
+
+    def _flat(self, query, cap: float) -> bool:
+        """Whether q_u^e stays within 10⁻⁶ × the bound of q_u* all the way to ±``cap`` (the BEM does not depend on it)."""
+        for sign in (1.0, -1.0):
+            qa, qd, qdd = query(sign * cap)
+            q = self.bem(qa[None], qd[None], qdd[None])[0]
+            if not (np.isfinite(q) and abs(q - self.qu_star) <= 1e-6 * DESIGN_BOUND):
+                return False
+        return True
 
     def _reach(self, query, cap: float) -> float:
         """Smallest s ≤ cap with |q_u^e(query(s)) − q_u*| ≥ bound (bisection on a doubling bracket); cap if none."""
