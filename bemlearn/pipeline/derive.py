@@ -389,6 +389,12 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None) -> Deri
     (λ = √(Γ_q/D_uu)).  ω_u is lowered (down to 1.2 λ) while the linearised command for a
     q_u error of ``qu_error`` (default d/4) would exceed the ``ctrlrange``.
 
+    With m ≥ 2 the linearised loop's stable gains can lie on a narrow ridge (a two-link arm whose BEM moves with
+    both joint angles: stable only near ω_u/ω_a ∝ (ω_u/λ)²), and the fixed ratio 7 misses it (measured: the model
+    BEM's own closed loop fell); there the critically damped pair whose linearised loop
+    (:func:`~bemlearn.control.eic_linear.eic_linear_matrix`) decays fastest is taken
+    (:func:`~bemlearn.control.eic_linear.eic_fastest_gains`), if its command stays within the limits, else the rule above.
+
     Returns:
         ``Derived(EICGains, note)``.
     """
@@ -397,7 +403,19 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None) -> Deri
     lam = instability_rate(robot)
     d = design_region(robot).value
     e0 = d / 4 if qu_error is None else qu_error
-    w_u = min(2.2 * lam, 2 * math.pi * rate.rate_hz / 20)
+    w_max = 2 * math.pi * rate.rate_hz / 20
+    if robot.m >= 2:
+        from bemlearn.control.eic_linear import eic_fastest_gains
+
+        w_u, w_a, ab = eic_fastest_gains(robot, lam, w_max)
+        peak = _eic_peak(robot, w_u, e0)
+        if peak <= 1.0 and ab < 0:
+            g = EICGains(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u)
+            return Derived(g, f"m = {robot.m}: ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/{w_u / w_a:.3g}: "
+                           f"the critically damped gains whose linearised EIC loop (eq. 8 with the null-space projector) decays "
+                           f"fastest, max Re λ = {ab:.3g} 1/s (ω_u ∈ [1.2 λ, min(6 λ, 2π·rate/20)], ω_u/ω_a ∈ [2, 60]); "
+                           f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange)")
+    w_u = min(2.2 * lam, w_max)
     peak = _eic_peak(robot, w_u, e0)
     while peak > 1.0 and w_u > 1.2 * lam:
         w_u = max(1.2 * lam, 0.9 * w_u)
