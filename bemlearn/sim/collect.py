@@ -235,8 +235,8 @@ def _reference_state(t: float, comps: list, traj: list | None, ia: list[int], iu
     out = np.zeros((3, n))
     out[0, iu] = qu_nominal
     for j, (A, w, ph) in zip(ia, comps):
-        e = A * np.exp(1j * (w * t + ph))
-        out[:, j] = (np.sum(e.imag), np.sum((1j * w * e).imag), np.sum((-(w**2) * e).imag))
+        s_ = np.sin(w * t + ph)
+        out[:, j] = (np.sum(A * s_), np.sum(A * w * np.cos(w * t + ph)), -np.sum(A * w**2 * s_))
     if traj is not None:
         for (A, w, ph), G in zip(comps, traj):
             e = G * A * np.exp(1j * (w * t + ph))
