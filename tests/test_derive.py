@@ -402,3 +402,29 @@ def test_excitation_directions_one_actuated_keeps_the_papers_excitation_two_get_
             mujoco.mj_inverse(model, data)
             tau = data.qfrc_inverse[list(arm.actuated_index)]
             assert np.all(np.abs(tau) <= 0.5 * model.actuator_ctrlrange[:, 1] + 1e-6), (j, sign, tau)
+
+
+def test_eic_linearisation_with_two_actuated_joints():
+    """m = 2: the x-y cart-pole's y slide does not enter the pole's row (D_u,y = 0, the pole swings in x-z), so the
+    null-space projector hands it the external loop alone: q̈_y = −k_p,a q_y − k_d,a q̇_y exactly.  On the two-link arm
+    with a pole the fastest-decaying critically damped pair is stable and at least as fast as the fixed ratio 7 rule."""
+    from types import SimpleNamespace
+
+    from bemlearn.control.eic_linear import eic_fastest_gains, eic_linear_matrix
+    from bemlearn.robots.scales import instability_rate
+
+    robot = load(str(ROBOTS / "xy_cartpole.xml"))
+    g = SimpleNamespace(kp_a=4.0, kd_a=4.0, kp_u=150.0, kd_u=24.0)
+    A = eic_linear_matrix(robot, g)
+    n = robot.n
+    y = 1 + list(robot.actuated_index).index(robot.joint_names.index("y"))  # x = [q_u, q_a..., q̇_u, q̇_a...]
+    expect = np.zeros(2 * n)
+    expect[y], expect[n + y] = -g.kp_a, -g.kd_a
+    np.testing.assert_allclose(A[n + y], expect, atol=1e-6)
+    arm = load(str(ROBOTS / "arm2_pole.xml"))
+    lam = instability_rate(arm)
+    w_u, w_a, ab = eic_fastest_gains(arm, lam, 1e3)
+    fixed = SimpleNamespace(kp_a=(2.2 * lam / 7) ** 2, kd_a=2 * 2.2 * lam / 7, kp_u=(2.2 * lam) ** 2, kd_u=4.4 * lam)
+    assert ab < 0 and ab <= float(np.max(np.linalg.eigvals(eic_linear_matrix(arm, fixed)).real)) + 1e-12
+    g2 = SimpleNamespace(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u)
+    assert abs(float(np.max(np.linalg.eigvals(eic_linear_matrix(arm, g2)).real)) - ab) < 1e-9

@@ -102,7 +102,7 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
             stage = "simulate"
             log.info("[4/%d] closed-loop simulation", stages)
             sim = simulate_stage(cfg, out, predictor=out / "bem_predictor.pt", progress=progress)
-            train["closed_loop"] = {src: {k: m[k] for k in ("fell", "diverged", "tracking_rmse", "tracking_max", "qu_max", "u_max",
+            train["closed_loop"] = {src: {k: m[k] for k in ("fell", "diverged", "tracking_rmse", "tracking_max", "qu_max", "qu_dev_max", "u_max",
                                                              "duration_s", "lemma1") if k in m}
                                     for src, m in sim.items()}
         stage = "verdict"
