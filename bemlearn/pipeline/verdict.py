@@ -319,9 +319,11 @@ def _check_closed_loop(metrics: dict[str, Any], notes: _Notes) -> None:
                   + (" (so did the model BEM's: the EIC with these gains does not track this reference on this robot)"
                      if mdl.get("diverged") else ""))
     else:
-        bound = (metrics.get("bem_design_region") or {}).get("bound")
-        dev = p.get("qu_dev_max")
-        if _finite(bound) and _finite(dev) and dev > 1.5 * bound:
+        raw_bound: Any = (metrics.get("bem_design_region") or {}).get("bound")
+        raw_dev: Any = p.get("qu_dev_max")
+        bound = float(raw_bound) if _finite(raw_bound) else math.nan
+        dev = float(raw_dev) if _finite(raw_dev) else math.nan
+        if dev > 1.5 * bound:   # False when either is NaN
             unit = metrics.get("output_unit", "rad")
             mdev = mdl.get("qu_dev_max")
             notes.add("degraded", "closed_loop", f"the closed loop with the learned BEM stayed up, but q_u strayed {dev:.3g} {unit} from "
