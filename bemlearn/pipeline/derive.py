@@ -459,6 +459,9 @@ def _eic_peak(robot, w_u: float, e0: float) -> float:
 def closed_loop_reference(robot, signals: dict) -> Derived:
     """The closed-loop reference: two components at 0.2 and 0.4 × λ/2π (clipped to the
     excitation band) with amplitudes 3 : 2 scaled so that the linearised BEM peaks at d/2.
+    With m > 1 the same sines drive every actuated joint, so the BEM gain of a component is
+    |Σ_j (s_p,j + iω s_v,j − s_a,j ω²)| (before: the largest joint's alone, which let a two-link
+    arm's BEM peak at about d).
 
     Returns:
         ``Derived(dict of ReferenceConfig fields, note)``.
@@ -467,7 +470,10 @@ def closed_loop_reference(robot, signals: dict) -> Derived:
     lam = instability_rate(robot)
     f_lo, f_hi = signals["frequency_hz"]
     f = np.clip(np.array([0.2, 0.4]) * lam / (2 * math.pi), f_lo, f_hi)
-    g = np.max(bem_gain(bem_slopes(robot), 2 * math.pi * f), axis=0)
+    sp, sv, sa = bem_slopes(robot)
+    w_ = 2 * math.pi * f
+    # the same sines drive every actuated joint (ReferenceConfig.build): their BEM contributions add, with their signs
+    g = np.abs(np.sum(sp[:, None] + 1j * w_[None, :] * sv[:, None] - sa[:, None] * w_[None, :] ** 2, axis=0))
     w = np.array([0.6, 0.4])
     s = 0.5 * d / max(float(w @ g), 1e-12)
     limited = _limited_actuated(robot)
