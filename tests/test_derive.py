@@ -428,3 +428,22 @@ def test_eic_linearisation_with_two_actuated_joints():
     assert ab < 0 and ab <= float(np.max(np.linalg.eigvals(eic_linear_matrix(arm, fixed)).real)) + 1e-12
     g2 = SimpleNamespace(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u)
     assert abs(float(np.max(np.linalg.eigvals(eic_linear_matrix(arm, g2)).real)) - ab) < 1e-9
+
+
+def test_closed_loop_reference_peaks_at_half_the_design_bound_with_two_actuated_joints():
+    """The reference drives every actuated joint with the same sines; the linearised BEM of that motion, summed over the
+    joints and evaluated on a time grid (independent of the derivation's complex gains), peaks near d/2, not d."""
+    from bemlearn.robots.scales import bem_slopes
+
+    arm = load(str(ROBOTS / "arm2_pole.xml"))
+    rate = derive.control_rate(arm).value
+    ref = derive.closed_loop_reference(arm, derive.excitation_signals(arm, rate).value).value
+    sp, sv, sa = bem_slopes(arm)
+    t = np.linspace(0.0, 60.0, 60001)
+    A, f = np.array(ref["amplitudes"]), 2 * np.pi * np.array(ref["frequencies_hz"])
+    q = (A[:, None] * np.sin(f[:, None] * t)).sum(0)
+    qd = (A[:, None] * f[:, None] * np.cos(f[:, None] * t)).sum(0)
+    qdd = -(A[:, None] * f[:, None] ** 2 * np.sin(f[:, None] * t)).sum(0)
+    bem = sp.sum() * q + sv.sum() * qd + sa.sum() * qdd
+    d = derive.design_region(arm).value
+    assert 0.35 * d <= np.abs(bem).max() <= 0.55 * d, (np.abs(bem).max(), d)
