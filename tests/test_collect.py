@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from bemlearn.data.sensors import Encoder, FilteredDifferentiator, SensorConfig
 from bemlearn.data.trajectory_io import ground_truth_path, read_ground_truth, read_trajectory, write_trajectory
 from bemlearn.sim.collect import CollectConfig, collect
 
+ROBOTS = Path(__file__).resolve().parent / "robots"
 SMALL = furuta_section("collect", n_trials=4, duration_s=2.0, workers=1, seed=3)
 
 
@@ -79,3 +81,41 @@ def test_bad_collect_config():
         CollectConfig(amplitude=(0.3, 0.1))
     with pytest.raises(ValueError, match="no MuJoCo model"):
         collect("furuta-analytic", SMALL, progress=False)
+
+
+def test_trajectory_reference_solves_the_linearised_unactuated_row():
+    """With ``reference_bem`` (m ≥ 2) the q_u target is the periodic motion the actuated sines drive:
+    G = (s_p + iω s_v − s_a ω²)/(1 + ω²/λ²).  At small amplitude the unactuated row of the robot's own
+    dynamics, (D q̈ + h)_u at the reference state, vanishes to second order (closed form vs the model's terms)."""
+    from bemlearn.robots import load
+    from bemlearn.robots.scales import bem_slopes, instability_rate
+    from bemlearn.sim.collect import _reference_state, _trajectory_reference
+
+    robot = load(str(ROBOTS / "arm2_pole.xml"))
+    ia, iu, n = list(robot.actuated_index), robot.unactuated_index, robot.n
+    S = (*bem_slopes(robot).ravel(), instability_rate(robot))
+    A = 1e-3
+    comps = [(np.array([A, 0.5 * A]), np.array([2.0, 7.0]), np.array([0.3, 1.1])),
+             (np.array([0.7 * A]), np.array([4.5]), np.array([2.0]))]
+    traj = _trajectory_reference(S, comps, robot.m)
+    for t in np.linspace(0.0, 3.0, 13):
+        q, qd, qdd = _reference_state(float(t), comps, traj, ia, iu, n, robot.qu_nominal)
+        D, h = robot.terms(q, qd)
+        row = D[iu] @ qdd + h[iu]
+        scale = abs(D[iu, iu] * qdd[iu]) + np.abs(D[iu, ia] * qdd[ia]).sum() + 1e-12
+        assert abs(row) <= 2e-3 * scale, (t, row, scale)
+    # without the periodic target (the paper's q_u at nominal) the same row is far from zero
+    q, qd, qdd = _reference_state(0.4, comps, None, ia, iu, n, robot.qu_nominal)
+    D, h = robot.terms(q, qd)
+    assert abs(D[iu] @ qdd + h[iu]) > 0.1 * (np.abs(D[iu, ia] * qdd[ia]).sum())
+    assert _trajectory_reference((), comps, robot.m) is None
+
+
+def test_reference_bem_and_excursion_are_checked():
+    from bemlearn.errors import ConfigError
+    from bemlearn.sim.collect import _trajectory_reference
+
+    with pytest.raises(ConfigError, match="reference_bem"):
+        _trajectory_reference((1.0, 2.0), [(np.ones(1), np.ones(1), np.zeros(1))] * 2, 2)
+    with pytest.raises(ConfigError, match="reference_bem"):
+        _trajectory_reference((0.0,) * 6 + (-1.0,), [(np.ones(1), np.ones(1), np.zeros(1))] * 2, 2)

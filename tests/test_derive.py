@@ -330,6 +330,7 @@ _SENSOR_KEYS = ("counts_per_rev", "noise_std", "velocity_cutoff", "m_per_count")
 #: (derivation skipped, {config prefix: the keys of that group the config gives})
 _GIVEN_GROUPS = {
     "excitation_gains": {"collect": ("gains", "gain_scale")},
+    "excitation_directions": {"collect": ("reference_bem", "excursion")},
     "eic_gains": {"simulate.gains": ("kp_a", "kd_a", "kp_u", "kd_u")},
     "sensor": {"collect.sensor": _SENSOR_KEYS, "simulate.sensor": _SENSOR_KEYS},
     "closed_loop_reference": {"simulate.reference": ("amplitudes", "frequencies_hz", "phases", "offset")},
@@ -391,3 +392,87 @@ def test_initial_actuated_range_keeps_the_bem_offset_within_the_qu_start_range()
     cart = _robot("cartpole")
     qa = min(0.1, 0.1 * float(np.min(qa_half_ranges(cart))))
     assert derive.initial_ranges(cart).value["initial_qa"] == pytest.approx((-qa, qa), rel=1e-12)
+
+
+def test_excitation_directions_one_actuated_keeps_the_papers_excitation_two_get_their_own_extents():
+    """m = 1: no reference_bem, no excursion, the amplitudes of excitation_signals (joint units).  m = 2 (a two-link
+    arm with a pole, whose BEM depends on both joints): the linearised BEM and λ for the q_u target, per-joint extents
+    P_j ≤ min(d/|s_p,j|, 0.8 × half range), a_j ≤ 1.3 d/|s_a,j|, within half the actuator limits (independent check
+    with MuJoCo's mj_inverse), and dimensionless amplitude fractions."""
+    from bemlearn.robots.scales import bem_slopes, instability_rate, qa_half_ranges
+
+    cart = _robot("cartpole")
+    rate = derive.control_rate(cart).value
+    sig = derive.excitation_signals(cart, rate).value
+    one = derive.excitation_directions(cart, rate, sig).value
+    assert one == {"reference_bem": (), "excursion": (), "amplitude": sig["amplitude"]}
+
+    arm = load(str(ROBOTS / "arm2_pole.xml"))
+    rate = derive.control_rate(arm).value
+    sig = derive.excitation_signals(arm, rate).value
+    out = derive.excitation_directions(arm, rate, sig).value
+    sp, sv, sa = bem_slopes(arm)
+    np.testing.assert_allclose(out["reference_bem"], [*sp, *sv, *sa, instability_rate(arm)], rtol=1e-5, atol=1e-9)
+    P, a = np.array(out["excursion"][:2]), np.array(out["excursion"][2:])
+    d = derive.design_region(arm).value
+    assert np.all(P > 0) and np.all(np.minimum(d / np.abs(sp), 0.8 * qa_half_ranges(arm)) + 1e-6 >= P)
+    assert np.all(a > 0) and np.all(a <= 1.3 * d / np.abs(sa) + 1e-6)
+    n_max = sig["n_sines"][1]
+    np.testing.assert_allclose(out["amplitude"], (0.2 / np.sqrt(n_max), 1 / np.sqrt(n_max)))
+    model = arm.model
+    data = mujoco.MjData(model)
+    for j in range(2):
+        for sign in (1.0, -1.0):
+            data.qpos[:] = 0.0
+            data.qvel[:] = 0.0
+            data.qacc[:] = 0.0
+            data.qpos[arm.actuated_index[j]] = sign * P[j]
+            data.qacc[arm.actuated_index[j]] = -sign * a[j]
+            mujoco.mj_inverse(model, data)
+            tau = data.qfrc_inverse[list(arm.actuated_index)]
+            assert np.all(np.abs(tau) <= 0.5 * model.actuator_ctrlrange[:, 1] + 1e-6), (j, sign, tau)
+
+
+def test_eic_linearisation_with_two_actuated_joints():
+    """m = 2: the x-y cart-pole's y slide does not enter the pole's row (D_u,y = 0, the pole swings in x-z), so the
+    null-space projector hands it the external loop alone: q̈_y = −k_p,a q_y − k_d,a q̇_y exactly.  On the two-link arm
+    with a pole the fastest-decaying critically damped pair is stable and at least as fast as the fixed ratio 7 rule."""
+    from types import SimpleNamespace
+
+    from bemlearn.control.eic_linear import eic_fastest_gains, eic_linear_matrix
+    from bemlearn.robots.scales import instability_rate
+
+    robot = load(str(ROBOTS / "xy_cartpole.xml"))
+    g = SimpleNamespace(kp_a=4.0, kd_a=4.0, kp_u=150.0, kd_u=24.0)
+    A = eic_linear_matrix(robot, g)
+    n = robot.n
+    y = 1 + list(robot.actuated_index).index(robot.joint_names.index("y"))  # x = [q_u, q_a..., q̇_u, q̇_a...]
+    expect = np.zeros(2 * n)
+    expect[y], expect[n + y] = -g.kp_a, -g.kd_a
+    np.testing.assert_allclose(A[n + y], expect, atol=1e-6)
+    arm = load(str(ROBOTS / "arm2_pole.xml"))
+    lam = instability_rate(arm)
+    w_u, w_a, ab = eic_fastest_gains(arm, lam, 1e3)
+    fixed = SimpleNamespace(kp_a=(2.2 * lam / 7) ** 2, kd_a=2 * 2.2 * lam / 7, kp_u=(2.2 * lam) ** 2, kd_u=4.4 * lam)
+    assert ab < 0 and ab <= float(np.max(np.linalg.eigvals(eic_linear_matrix(arm, fixed)).real)) + 1e-12
+    g2 = SimpleNamespace(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u)
+    assert abs(float(np.max(np.linalg.eigvals(eic_linear_matrix(arm, g2)).real)) - ab) < 1e-9
+
+
+def test_closed_loop_reference_peaks_at_half_the_design_bound_with_two_actuated_joints():
+    """The reference drives every actuated joint with the same sines; the linearised BEM of that motion, summed over the
+    joints and evaluated on a time grid (independent of the derivation's complex gains), peaks near d/2, not d."""
+    from bemlearn.robots.scales import bem_slopes
+
+    arm = load(str(ROBOTS / "arm2_pole.xml"))
+    rate = derive.control_rate(arm).value
+    ref = derive.closed_loop_reference(arm, derive.excitation_signals(arm, rate).value).value
+    sp, sv, sa = bem_slopes(arm)
+    t = np.linspace(0.0, 60.0, 60001)
+    A, f = np.array(ref["amplitudes"]), 2 * np.pi * np.array(ref["frequencies_hz"])
+    q = (A[:, None] * np.sin(f[:, None] * t)).sum(0)
+    qd = (A[:, None] * f[:, None] * np.cos(f[:, None] * t)).sum(0)
+    qdd = -(A[:, None] * f[:, None] ** 2 * np.sin(f[:, None] * t)).sum(0)
+    bem = sp.sum() * q + sv.sum() * qd + sa.sum() * qdd
+    d = derive.design_region(arm).value
+    assert 0.35 * d <= np.abs(bem).max() <= 0.55 * d, (np.abs(bem).max(), d)

@@ -42,6 +42,7 @@ __all__ = [
     "excitation_gains",
     "excitation_signals",
     "excitation_amplitude_check",
+    "excitation_directions",
     "fall_window",
     "initial_ranges",
     "sensor",
@@ -229,6 +230,78 @@ def excitation_amplitude_check(robot, collect, *, trials: int = 24, duration_s: 
     return Derived(s, f"excitation trials in MuJoCo ({min(duration_s, collect.duration_s):g} s each): " + ", ".join(tried))
 
 
+def excitation_directions(robot, rate: RateChoice, signals: dict) -> Derived:
+    """How the excitation moves more than one actuated coordinate (collect's ``reference_bem``, ``excursion``, ``amplitude``).
+
+    With m = 1 the paper's excitation is kept (q_u target at nominal, amplitudes from :func:`excitation_signals`).
+    With m ≥ 2 the LQR tracking [q_a,t, q_u,nominal] has a redundant actuated direction and uses it: it cancels one
+    joint's reference with another's to keep q_u at nominal, and the actuated accelerations move in lockstep (a
+    two-link arm: corr(q̈₁, q̈₂) ≈ −0.99), so the data cannot resolve the BEM's dependence on each.  Instead each
+    actuated coordinate j follows its own sines, the q_u target is the periodic motion they drive through the
+    linearised BEM (s_p, s_v, s_a at upright, λ; :func:`~bemlearn.sim.collect._trajectory_reference`), and the
+    command carries the model's feedforward along it.  Each direction gets its own extents, its units:
+
+        P_j = min(d/|s_p,j|, 0.8 × half range_j)   (0.8 × half range where s_p,j = 0)
+        a_j = 1.3 d/|s_a,j|                         (P_j ω_hi² where s_a,j = 0)
+
+    both scaled down together until (q_a,j = ±P_j, q̈_a,j = ∓a_j) alone takes at most half the actuator limits
+    (:func:`actuator_effort`); a component at ω on j has amplitude U(0.2, 1)/√n_max · min(P_j, a_j/ω²) (random
+    phases: n components add up as √n).
+
+    Returns:
+        ``Derived({"reference_bem", "excursion", "amplitude"}, note)``.
+    """
+    if robot.m < 2:
+        return Derived({"reference_bem": (), "excursion": (), "amplitude": signals["amplitude"]},
+                       "m = 1: the paper's excitation (q_u target at nominal, amplitudes in the joint's unit)")
+    from bemlearn.control.actuator_inverse import MujocoActuatorInverse
+    from bemlearn.errors import NumericalError, RobotModelError
+
+    d = design_region(robot).value
+    f_hi = signals["frequency_hz"][1]
+    w_hi = 2 * math.pi * f_hi
+    sp, sv, sa = bem_slopes(robot)
+    lam = instability_rate(robot)
+    half = qa_half_ranges(robot)
+    limited = _limited_actuated(robot)
+    P = np.where(limited, 0.8 * half, half)
+    P = np.where(np.abs(sp) > 1e-9, np.minimum(P, d / np.maximum(np.abs(sp), 1e-300)), P)
+    a = np.where(np.abs(sa) > 1e-9, 1.3 * d / np.maximum(np.abs(sa), 1e-300), P * w_hi**2)
+    scaled = []
+    try:
+        inv = MujocoActuatorInverse(robot)
+        for j in range(robot.m):
+            def effort(c: float, j: int = j) -> float:
+                worst = 0.0
+                for sign in (1.0, -1.0):
+                    q = np.zeros(robot.n)
+                    q[robot.unactuated_index] = robot.qu_nominal
+                    qdd = np.zeros(robot.n)
+                    q[robot.actuated_index[j]] = sign * c * P[j]
+                    qdd[robot.actuated_index[j]] = -sign * c * a[j]
+                    worst = max(worst, actuator_effort(robot, inv, q, qdd))
+                return worst
+            if effort(0.0) <= 0.5 < effort(1.0):
+                lo, hi = 0.0, 1.0
+                for _ in range(30):
+                    mid = 0.5 * (lo + hi)
+                    lo, hi = (mid, hi) if effort(mid) <= 0.5 else (lo, mid)
+                P[j], a[j] = lo * P[j], lo * a[j]
+                scaled.append(robot.joint_names[robot.actuated_index[j]])
+    except (RobotModelError, NumericalError):
+        pass
+    n_max = signals["n_sines"][1]
+    frac = (0.2 / math.sqrt(n_max), 1.0 / math.sqrt(n_max))
+    ref = tuple(float(f"{x:.6g}") for x in (*sp, *sv, *sa, lam))
+    ext = tuple(float(f"{x:.6g}") for x in (*P, *a))
+    note = (f"m = {robot.m}: each actuated coordinate its own sines, q_u target on their periodic BEM motion (λ = {lam:.3g} 1/s) "
+            f"with the model's feedforward; extents P = {tuple(round(float(x), 4) for x in P)}, "
+            f"a = {tuple(round(float(x), 4) for x in a)} (d/|s_p|, 1.3 d/|s_a|, 0.8 × half range"
+            f"{'; scaled to half the actuator limits on ' + ', '.join(scaled) if scaled else ''}); "
+            f"component amplitude U{tuple(round(x, 3) for x in frac)} × min(P_j, a_j/ω²)")
+    return Derived({"reference_bem": ref, "excursion": ext, "amplitude": frac}, note)
+
+
 def _effort_cap(robot, a_hi: float, n_max: int, omega: float, *, budget: float = 0.5) -> float:
     """The largest A ≤ ``a_hi`` whose reference (n_max components in phase at ω on one actuated coordinate)
     takes at most ``budget`` × the actuator limits; ``a_hi`` when the actuator model is not covered or the
@@ -405,6 +478,11 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     four tried) whose loop in MuJoCo — the model BEM, the sensors, every actuator limit — brings the robot
     back from a ``qu_error`` start (:func:`eic_recovery`) is kept; if none does, the fastest-decaying one (the
     model check ``eic_recovery`` then says the robot cannot be balanced by the EIC).
+    With m ≥ 2 the linearised loop's stable gains can lie on a narrow ridge (a two-link arm whose BEM moves with
+    both joint angles: stable only near ω_u/ω_a ∝ (ω_u/λ)²), and the fixed ratio 7 misses it (measured: the model
+    BEM's own closed loop fell); there the critically damped pair whose linearised loop
+    (:func:`~bemlearn.control.eic_linear.eic_linear_matrix`) decays fastest is taken
+    (:func:`~bemlearn.control.eic_linear.eic_fastest_gains`), if its command stays within the limits, else the rule above.
 
     Returns:
         ``Derived(EICGains, note)``.
@@ -416,7 +494,19 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     lam = instability_rate(robot)
     d = design_region(robot).value
     e0 = d / 4 if qu_error is None else qu_error
-    w_u = min(2.2 * lam, 2 * math.pi * rate.rate_hz / 20)
+    w_max = 2 * math.pi * rate.rate_hz / 20
+    if robot.m >= 2:
+        from bemlearn.control.eic_linear import eic_fastest_gains
+
+        w_u, w_a, ab = eic_fastest_gains(robot, lam, w_max)
+        peak = _eic_peak(robot, w_u, e0)
+        if peak <= 1.0 and ab < 0:
+            g = _critical(w_u, w_u / w_a)
+            return Derived(g, f"m = {robot.m}: ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/{w_u / w_a:.3g}: "
+                           f"the critically damped gains whose linearised EIC loop (eq. 8 with the null-space projector) decays "
+                           f"fastest, max Re λ = {ab:.3g} 1/s (ω_u ∈ [1.2 λ, min(6 λ, 2π·rate/20)], ω_u/ω_a ∈ [2, 60]); "
+                           f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange)")
+    w_u = min(2.2 * lam, w_max)
     peak = _eic_peak(robot, w_u, e0)
     while peak > 1.0 and w_u > 1.2 * lam:
         w_u = max(1.2 * lam, 0.9 * w_u)
@@ -518,6 +608,9 @@ def _eic_peak(robot, w_u: float, e0: float) -> float:
 def closed_loop_reference(robot, signals: dict) -> Derived:
     """The closed-loop reference: two components at 0.2 and 0.4 × λ/2π (clipped to the
     excitation band) with amplitudes 3 : 2 scaled so that the linearised BEM peaks at d/2.
+    With m > 1 the same sines drive every actuated joint, so the BEM gain of a component is
+    |Σ_j (s_p,j + iω s_v,j − s_a,j ω²)| (before: the largest joint's alone, which let a two-link
+    arm's BEM peak at about d).
 
     Returns:
         ``Derived(dict of ReferenceConfig fields, note)``.
@@ -526,7 +619,10 @@ def closed_loop_reference(robot, signals: dict) -> Derived:
     lam = instability_rate(robot)
     f_lo, f_hi = signals["frequency_hz"]
     f = np.clip(np.array([0.2, 0.4]) * lam / (2 * math.pi), f_lo, f_hi)
-    g = np.max(bem_gain(bem_slopes(robot), 2 * math.pi * f), axis=0)
+    sp, sv, sa = bem_slopes(robot)
+    w_ = 2 * math.pi * f
+    # the same sines drive every actuated joint (ReferenceConfig.build): their BEM contributions add, with their signs
+    g = np.abs(np.sum(sp[:, None] + 1j * w_[None, :] * sv[:, None] - sa[:, None] * w_[None, :] ** 2, axis=0))
     w = np.array([0.6, 0.4])
     s = 0.5 * d / max(float(w @ g), 1e-12)
     limited = _limited_actuated(robot)

@@ -28,10 +28,11 @@ if TYPE_CHECKING:
 __all__ = ["DERIVED_KEYS", "MODEL_DERIVED_KEYS", "derive_model_values", "derive_pipeline_values"]
 
 _COLLECT = ("rate_hz", "physics_timestep", "gains", "gain_scale", "fall_window", "input_units", "sensor", "n_sines",
-            "amplitude", "frequency_hz", "initial_qa", "initial_qu")
+            "amplitude", "frequency_hz", "initial_qa", "initial_qu", "reference_bem", "excursion")
 _SIMULATE = ("rate_hz", "physics_timestep", "gains", "reference", "fall_window", "sensor")
 _SENSOR = ("counts_per_rev", "noise_std", "velocity_cutoff", "m_per_count")  # the leaves of derive.sensor
 _SIGNALS = ("n_sines", "amplitude", "frequency_hz")
+_DIRECTIONS = ("reference_bem", "excursion")  # with m ≥ 2 also collect.amplitude (derive.excitation_directions)
 _EVALUATE = ("n_sines", "amplitude_max", "amplitude_min", "frequency_hz")
 _EIC_GAINS = ("kp_a", "kd_a", "kp_u", "kd_u")
 _REFERENCE = ("amplitudes", "frequencies_hz", "phases", "offset")
@@ -145,6 +146,14 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
         _leaves("collect.sensor", sen.value, sen.note, out)
     if wanted("collect", _SIGNALS):
         excitation()
+    if wanted("collect", _DIRECTIONS):
+        if _given(given, "collect.amplitude"):  # amplitudes given in the joints' units: the paper's excitation
+            _leaves("collect.reference_bem", (), "collect.amplitude is given (joint units): the paper's excitation", out)
+            _leaves("collect.excursion", (), "collect.amplitude is given (joint units): the paper's excitation", out)
+        else:
+            dirs = derive.excitation_directions(robot, rc, excitation())
+            for k in ("reference_bem", "excursion", "amplitude"):
+                _leaves(f"collect.{k}", dirs.value[k], dirs.note, out)
     init = derive.initial_ranges(robot)
     for k in ("initial_qa", "initial_qu"):
         _leaves(f"collect.{k}", init.value[k], init.note, out)

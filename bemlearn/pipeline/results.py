@@ -117,7 +117,7 @@ class Lemma1Check:
 
 
 #: The entries of a loop that a run's ``metrics.json`` keeps under ``closed_loop.<source>``.
-_SUMMARY = ("fell", "diverged", "tracking_rmse", "tracking_max", "qu_max", "u_max", "duration_s")
+_SUMMARY = ("fell", "diverged", "tracking_rmse", "tracking_max", "qu_max", "qu_dev_max", "u_max", "duration_s")
 
 
 @dataclass(frozen=True)
@@ -132,6 +132,7 @@ class LoopResult:
         tracking_rmse: RMSE of q_a against its reference after the warm-up (q_a's unit).
         tracking_max: the largest |q_a − reference| after the warm-up.
         qu_max: the largest |q_u| (q_u's unit).
+        qu_dev_max: the largest |q_u − upright| (q_u's unit).
         u_max: the largest |u| (actuator units).
         real_time_factor: simulated over wall time.
         metrics: every figure of the loop as ``simulate/metrics.json`` stores it (the fields above, the
@@ -148,6 +149,7 @@ class LoopResult:
     tracking_rmse: float
     tracking_max: float
     qu_max: float
+    qu_dev_max: float
     u_max: float
     real_time_factor: float
     metrics: Mapping[str, Any] = field(repr=False)

@@ -94,7 +94,8 @@ def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: st
 
             render_gif(cast(MujocoRobot, robot), res.q, out / f"{src}.gif", rate_hz=scfg.rate_hz)
         loop = LoopResult(src, bool(res.fell), diverged, float(m["duration_s"]), float(m["tracking_rmse"]), float(m["tracking_max"]),
-                          float(m["qu_max"]), float(m["u_max"]), float(m["real_time_factor"]), m, vs_model, inside, check)
+                          float(m["qu_max"]), float(m["qu_dev_max"]), float(m["u_max"]), float(m["real_time_factor"]), m, vs_model,
+                          inside, check)
         for k in ("tracking_rmse", "tracking_max", "qu_max", "u_max", "real_time_factor"):
             writer.add_scalar(f"simulate/{src}/{k}", getattr(loop, k), 0)
         loops[src] = loop

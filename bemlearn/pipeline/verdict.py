@@ -25,7 +25,9 @@ data resolve the BEM      its spread over the data < 4 × the larger    < 2 × t
                           of band σ and the held-out trials' median
                           q_u error
 held-out trials           < 80 % inside the predictive ±2σ            —
-closed loop               learned BEM's loop diverged                 learned BEM's loop fell
+closed loop               learned BEM's loop diverged, or stayed up   learned BEM's loop fell
+                          with |q_u − nominal| > 1.5 d (its reference
+                          asks for d/2)
 failed stage              —                                           a stage after training
                                                                       raised (``failed``)
 torque logged on q_u      its rms moves the model's equilibrium by    —
@@ -319,7 +321,21 @@ def _check_closed_loop(metrics: dict[str, Any], notes: _Notes) -> None:
     elif p.get("diverged"):
         stable = bool((metrics.get("equilibrium") or {}).get("stable_without_control"))
         notes.add("degraded", "closed_loop", "the closed loop with the learned BEM " + ("kept q_u near its stable equilibrium"
-                  if stable else "stayed up") + " but its actuated joints left the reference")
+                  if stable else "stayed up") + " but its actuated joints left the reference"
+                  + (" (so did the model BEM's: the EIC with these gains does not track this reference on this robot)"
+                     if mdl.get("diverged") else ""))
+    else:
+        raw_bound: Any = (metrics.get("bem_design_region") or {}).get("bound")
+        raw_dev: Any = p.get("qu_dev_max")
+        bound = float(raw_bound) if _finite(raw_bound) else math.nan
+        dev = float(raw_dev) if _finite(raw_dev) else math.nan
+        if dev > 1.5 * bound:   # False when either is NaN
+            unit = metrics.get("output_unit", "rad")
+            mdev = mdl.get("qu_dev_max")
+            notes.add("degraded", "closed_loop", f"the closed loop with the learned BEM stayed up, but q_u strayed {dev:.3g} {unit} from "
+                      f"the upright, {dev / bound:.1f}× the design bound {bound:g} {unit} (its reference asks for about half the bound): "
+                      "it barely holds" + (f" (so did the model BEM's, {mdev:.3g} {unit}: the EIC with these gains barely holds this robot)"
+                                           if _finite(mdev) and mdev > 1.5 * bound else ""))
     lem = p.get("lemma1")
     if lem and _finite(lem.get("r_learned_vs_model_delta_gamma")):
         notes.checked.append("lemma1")

@@ -283,6 +283,7 @@ def _simulate(plant: BalanceRobot, config: SimulateConfig, *, progress: bool, re
         "tracking_rmse": float(np.sqrt(np.mean(err**2))) if mask.any() else float("nan"),
         "tracking_max": float(np.abs(err).max()) if mask.any() else float("nan"),
         "qu_max": float(np.abs(logs["q"][:, iu]).max()) if K else float("nan"),
+        "qu_dev_max": float(np.abs(logs["q"][:, iu] - plant.qu_nominal).max()) if K else float("nan"),
         "u_max": float(np.abs(logs["u"]).max()) if K else float("nan"),
         "bem_rejected": int(ctrl.bem_rejected),
         "command_rejected": int(ctrl.command_rejected),

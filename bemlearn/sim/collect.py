@@ -67,6 +67,16 @@ class CollectConfig:
         frequency_hz: (min, max) frequency of each component, Hz (``null``: derived from the model, see ``bemlearn config show``).
         initial_qa, initial_qu: (min, max) initial actuated / unactuated coordinates, in their units (``null``: derived from the model, see ``bemlearn config show``).
         input_units: unit of the logged inputs, e.g. ``V`` for a motor driven in volts (``null``: derived from the model, see ``bemlearn config show``).
+        reference_bem: ``[]``: the paper's excitation (q_u target at nominal).  Else the linearised BEM (eq. 9) at upright,
+            s_p, s_v, s_a per actuated coordinate, then λ (1/s): the q_u target is the periodic motion of q_u the actuated
+            sines drive (:func:`_trajectory_reference`), and the command carries the model's inverse dynamics along that
+            reference, u = u_ff(q_t, q̇_t, q̈_t) + kᵀe, so that each actuated direction follows its own sines instead of
+            the LQR cancelling one joint's reference with another's (``null``: derived from the model, see ``bemlearn config show``).
+        excursion: ``[]``: every component's amplitude is drawn from ``amplitude`` (rad or m, shared by the actuated
+            coordinates).  Else per actuated coordinate j its position extent P_j, then its acceleration extent a_j
+            (2m values, its units): a component at ω on coordinate j has amplitude U(amplitude) · min(P_j, a_j/ω²),
+            ``amplitude`` then a dimensionless fraction, so that each direction moves within its own scales whatever
+            the frequency (``null``: derived from the model, see ``bemlearn config show``).
         seed: master seed.
         workers: processes (0 = one per core, 1 = in-process).
         sensor: the encoder and velocity-filter model.
@@ -86,6 +96,8 @@ class CollectConfig:
     initial_qa: tuple[float, float] | None = None
     initial_qu: tuple[float, float] | None = None
     input_units: str | None = None
+    reference_bem: tuple[float, ...] | None = None
+    excursion: tuple[float, ...] | None = None
     seed: int = 0
     workers: int = 0
     sensor: SensorConfig = field(default_factory=SensorConfig)
@@ -151,11 +163,27 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
         (rng.uniform(*config.amplitude, size=k), 2 * math.pi * rng.uniform(*config.frequency_hz, size=k), rng.uniform(0, 2 * math.pi, size=k))
         for k in n_sines
     ]
+    if config.excursion:
+        ext = np.asarray(config.excursion, dtype=np.float64)
+        if ext.size != 2 * m or not np.all(ext > 0):
+            raise ConfigError(f"collect.excursion: expected 2·m = {2 * m} positive extents (positions, then accelerations) or [], got {list(ext)}")
+        comps = [(A * np.minimum(ext[j], ext[m + j] / w**2), w, ph) for j, (A, w, ph) in enumerate(comps)]
     ia, iu = list(robot.actuated_index), robot.unactuated_index
+    traj = _trajectory_reference(config.reference_bem, comps, m)
+    inverse = None
+    if traj is not None:
+        from bemlearn.control.actuator_inverse import MujocoActuatorInverse  # the model's feedforward along the reference
+
+        inverse = MujocoActuatorInverse(robot)
     q0 = np.zeros(n)
     q0[ia] = rng.uniform(*config.initial_qa, size=m)
     q0[iu] = robot.qu_nominal + rng.uniform(*config.initial_qu)
-    plant.reset(q0)
+    qd0 = None
+    if traj is not None:  # start on the reference (its initial state plus the drawn offsets)
+        r0 = _reference_state(0.0, comps, traj, ia, iu, n, robot.qu_nominal)
+        q0 += r0[0] - np.where(np.arange(n) == iu, robot.qu_nominal, 0.0)
+        qd0 = r0[1]
+    plant.reset(q0, qd0)
     lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
     limited = model.actuator_ctrllimited.astype(bool)
     n_ticks = int(round(config.duration_s * config.rate_hz))
@@ -169,13 +197,11 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
             failed, k = True, tick
             break
         y, v = plant.measure(q_true)
-        q_ref = np.zeros(n)
-        qd_ref = np.zeros(n)
-        q_ref[iu] = robot.qu_nominal
-        for j, (A, w, ph) in zip(ia, comps):
-            q_ref[j] = np.sum(A * np.sin(w * t + ph))
-            qd_ref[j] = np.sum(A * w * np.cos(w * t + ph))
+        q_ref, qd_ref, qdd_ref = _reference_state(t, comps, traj, ia, iu, n, robot.qu_nominal)
         u = K @ np.concatenate([y - q_ref, v - qd_ref])
+        if inverse is not None:
+            D, h = robot.terms(q_ref, qd_ref)
+            u = u + inverse.command((D @ qdd_ref + h)[ia], q_ref, qd_ref, clip=False)
         u = np.where(limited, np.clip(u, lo, hi), u)
         if not np.all(np.isfinite(u)):  # diverged state: never hand MuJoCo a non-finite ctrl
             failed, k = True, tick
@@ -184,6 +210,39 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
         rec["q_meas"][tick], rec["u"][tick], rec["q"][tick], rec["qd"][tick], rec["qdd"][tick] = y, u, q_true, qd, qdd
     times = np.arange(k) * dt
     return TrialResult(trial_id, failed, times, *(rec[name][:k] for name in ("q_meas", "u", "q", "qd", "qdd")))
+
+
+def _trajectory_reference(reference_bem: tuple[float, ...] | None, comps: list, m: int) -> list | None:
+    """Per actuated coordinate j and sine component k the complex gain of the q_u target (``collect.reference_bem``):
+
+        G_jk = (s_p,j + i ω_k s_v,j − s_a,j ω_k²) / (1 + ω_k²/λ²)
+
+    the periodic solution of the unactuated row linearised at upright (D_uu q̈_u − Γ_q δq_u = −Γ_q × the BEM's
+    linear part, λ² = Γ_q/D_uu) driven by q_a,j = A sin(ω_k t + φ): the reference is then a motion the robot
+    can follow, and the feedforward (:func:`simulate_trial`) realises it.  ``None``: the paper's excitation."""
+    if not reference_bem:
+        return None
+    S = np.asarray(reference_bem, dtype=np.float64)
+    if S.size != 3 * m + 1 or not np.all(np.isfinite(S)) or not S[-1] > 0:
+        raise ConfigError(f"collect.reference_bem: expected 3·m + 1 = {3 * m + 1} finite values (s_p, s_v, s_a per actuated "
+                          f"coordinate, then λ > 0 in 1/s) or [], got {list(S)}")
+    sp, sv, sa, lam = S[:m], S[m:2 * m], S[2 * m:3 * m], float(S[-1])
+    return [(sp[j] + 1j * w * sv[j] - sa[j] * w**2) / (1 + (w / lam) ** 2) for j, (_, w, _) in enumerate(comps)]
+
+
+def _reference_state(t: float, comps: list, traj: list | None, ia: list[int], iu: int, n: int,
+                     qu_nominal: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(q_t, q̇_t, q̈_t)`` (n,) each: the actuated sines and the q_u target (nominal, or on the periodic BEM motion)."""
+    out = np.zeros((3, n))
+    out[0, iu] = qu_nominal
+    for j, (A, w, ph) in zip(ia, comps):
+        s_ = np.sin(w * t + ph)
+        out[:, j] = (np.sum(A * s_), np.sum(A * w * np.cos(w * t + ph)), -np.sum(A * w**2 * s_))
+    if traj is not None:
+        for (A, w, ph), G in zip(comps, traj):
+            e = G * A * np.exp(1j * (w * t + ph))
+            out[:, iu] += (np.sum(e.imag), np.sum((1j * w * e).imag), np.sum((-(w**2) * e).imag))
+    return out[0], out[1], out[2]
 
 
 _WORKER_ROBOT = None

@@ -19,7 +19,10 @@ drives.
 * **Design region**: the actuated motions with |q_u^e − q_u*| ≤ ``bound`` (0.2 rad).  Its scales are the
   oracle's own: per actuated joint the acceleration a_i (others at rest) that moves q_u^e by ``bound``, the
   velocity a_i / ω_u (ω_u = √(|∂²V/∂q_u²| / M_uu) the upright's divergence rate), and the position span
-  (the joint range, or the offset that moves q_u^e by ``bound``).
+  (the joint range, or the offset that moves q_u^e by ``bound``).  A joint whose acceleration alone never
+  moves q_u^e at rest (an x-y cart's y slide under a pole that tilts in x-z, a turntable's yaw) has no such
+  a_i (q_u^e within 10⁻⁶ × the bound up to the search's bracket): it gets the balance's own scale, a_i = ω_u² × its position half span (a sine at ω_u across its range),
+  not the search's bracket (10³ per s², which asked the learned BEM about 1300 m/s² and 200 m/s).
 * **Holdable**: (1) *static* — along the design region, the actuated generalized forces ``mj_inverse`` demands,
   widened by each joint's ``frictionloss``, lie inside what each actuator delivers at that state:
   gear · ([gain · ctrl + bias(L, L̇)] over ``ctrlrange``, ∩ ``forcerange``) for the affine actuators of MuJoCo
@@ -45,6 +48,8 @@ __all__ = ["Oracle", "HoldCheck", "mass_matrix", "wrap_angle"]
 
 #: half-width of the design region (rad for a hinge q_u), issue 28
 DESIGN_BOUND = 0.2
+#: bracket of the acceleration search, per s² of the joint's unit; a direction that reaches it never moves the BEM
+ACC_CAP = 1e3
 
 
 def mass_matrix(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
@@ -251,10 +256,6 @@ class Oracle:
         for j in range(self.m):
             e = np.zeros(self.m)
             e[j] = 1.0
-            a = self._reach(lambda s, e=e: (self.qa0, z, s * e), 1e3)
-            acc.append(a)
-            v = self._reach(lambda s, e=e: (self.qa0, s * e, z), a / omega)
-            vel.append(min(v, a / omega))
             jid = self.smooth.dof_jntid[self.act_dofs[j]]
             lo, hi = (self.smooth.jnt_range[jid] if self.smooth.jnt_limited[jid] else (-np.inf, np.inf))
             p = self._reach(lambda s, e=e: (self.qa0 + s * e, z, z), np.pi if self.smooth.jnt_type[jid] == int(mujoco.mjtJoint.mjJNT_HINGE) else 10.0)
@@ -264,8 +265,23 @@ class Oracle:
                 margin = 0.1 * (hi - lo)
                 lo_j, hi_j = max(lo_j, lo + margin), min(hi_j, hi - margin)
             pos.append((float(lo_j), float(hi_j)))
+            a = self._reach(lambda s, e=e: (self.qa0, z, s * e), ACC_CAP)
+            if a >= ACC_CAP and self._flat(lambda s, e=e: (self.qa0, z, s * e), ACC_CAP):
+                a = omega**2 * 0.5 * (hi_j - lo_j)  # the BEM does not depend on this acceleration at rest (docstring)
+            acc.append(a)
+            v = self._reach(lambda s, e=e: (self.qa0, s * e, z), a / omega)
+            vel.append(min(v, a / omega))
         self._scales = {"omega_u": omega, "acc": acc, "vel": vel, "pos": pos}
         return self._scales
+
+    def _flat(self, query, cap: float) -> bool:
+        """Whether q_u^e stays within 10⁻⁶ × the bound of q_u* all the way to ±``cap`` (the BEM does not depend on it)."""
+        for sign in (1.0, -1.0):
+            qa, qd, qdd = query(sign * cap)
+            q = self.bem(qa[None], qd[None], qdd[None])[0]
+            if not (np.isfinite(q) and abs(q - self.qu_star) <= 1e-6 * DESIGN_BOUND):
+                return False
+        return True
 
     def _reach(self, query, cap: float) -> float:
         """Smallest s ≤ cap with |q_u^e(query(s)) − q_u*| ≥ bound (bisection on a doubling bracket); cap if none."""
