@@ -540,7 +540,7 @@ class MujocoRobot(Robot):
         if self.identity_coordinates:
             return self._inverse_joint(q, qd, qdd)[:, u]
         Tinv = self.Tinv_np  # row by row, as gamma0_scalar maps one state (a matrix product may round differently)
-        to_joint = lambda x: np.array([Tinv @ row for row in x]).reshape(R, self.n)  # noqa: E731
+        to_joint = lambda x: np.array([Tinv @ row for row in x]).reshape(R, Tinv.shape[0])  # noqa: E731  (joint space: wider than the coordinates of a rolling robot)
         f = self._inverse_joint(to_joint(q), to_joint(qd), to_joint(qdd))
         return np.array([(Tinv.T @ row)[u] for row in f])
 
