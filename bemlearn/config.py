@@ -35,7 +35,7 @@ import re
 import reprlib
 import types
 import typing
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
@@ -261,16 +261,27 @@ def _from_dict(cls: type[T], data: dict[str, Any] | None, *, where: str = "confi
             f"{where}: unknown key(s) {show_value(unknown)}; valid keys are {sorted(fields)}"
         )
     kwargs = {}
-    limits = LIMITS.get(cls, {})
     for name, field in fields.items():
         if name in data:
-            kwargs[name] = _coerce(data[name], hints[name], f"{where}.{name}")
-            if name in limits:
-                limits[name].check(kwargs[name], f"{where}.{name}")
+            kwargs[name] = _checked_field(cls, name, hints[name], data[name], where)
         elif field.default is dataclasses.MISSING and field.default_factory is dataclasses.MISSING:
             raise ConfigError(f"{where}: missing required key {name!r}")
+    return _built(lambda: cls(**kwargs), where)
+
+
+def _checked_field(cls: type, name: str, tp: Any, value: Any, where: str) -> Any:
+    """``value`` coerced to field ``name``'s type ``tp`` and checked against its declared :class:`Limit`."""
+    coerced = _coerce(value, tp, f"{where}.{name}")
+    limit = LIMITS.get(cls, {}).get(name)
+    if limit is not None:
+        limit.check(coerced, f"{where}.{name}")
+    return coerced
+
+
+def _built(make: Callable[[], T], where: str) -> T:
+    """``make()`` (a config dataclass's construction), its ``TypeError``/``ValueError`` as a ConfigError naming ``where``."""
     try:
-        return cls(**kwargs)
+        return make()
     except (TypeError, ValueError) as exc:
         msg = str(exc)[:500]
         if isinstance(exc, ConfigError) and msg.startswith(where.split(".")[0]):
@@ -474,11 +485,7 @@ def replace_checked(obj: T, dotted: str, value: Any, *, where: str = "config") -
         return None if new_child is None else _rebuild(obj, head, new_child, where)
     if _dataclass_of(tp) is not None or _is_mapping_type(tp) or isinstance(value, dict):
         return None
-    coerced = _coerce(value, tp, f"{where}.{head}")
-    limit = LIMITS.get(cls, {}).get(head)
-    if limit is not None:
-        limit.check(coerced, f"{where}.{head}")
-    return _rebuild(obj, head, coerced, where)
+    return _rebuild(obj, head, _checked_field(cls, head, tp, value, where), where)
 
 
 @functools.cache
@@ -487,13 +494,7 @@ def _init_fields(cls: type) -> frozenset[str]:
 
 
 def _rebuild(obj: T, name: str, value: Any, where: str) -> T:
-    try:
-        return dataclasses.replace(obj, **{name: value})
-    except (TypeError, ValueError) as exc:
-        msg = str(exc)[:500]
-        if isinstance(exc, ConfigError) and msg.startswith(where.split(".")[0]):
-            raise
-        raise ConfigError(f"{where}: {msg}") from exc
+    return _built(lambda: dataclasses.replace(obj, **{name: value}), where)
 
 
 def set_dotted(raw: dict[str, Any], dotted: str, value: Any) -> None:

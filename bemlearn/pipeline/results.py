@@ -97,11 +97,6 @@ class TrainResult:
     trajectory: Trajectory
     robot: BalanceRobot | None = None
 
-    @property
-    def output_unit(self) -> str:
-        """q_u's unit (``rad`` or ``m``)."""
-        return str(self.metrics["output_unit"])
-
 
 @dataclass(frozen=True)
 class Lemma1Check:

@@ -162,7 +162,7 @@ def _expand_with(sweep: LoadedSweep, stage: SweepStage, application: str | None,
         if resolved is not None:
             plain = template[1]  # type: ignore[index]
             for key in patchable:
-                plain = _with_dotted(plain, key, to_dict(dotted_attr(stage.config_of(resolved), key)))
+                plain = _with_dotted(plain, key, to_dict(_dotted_attr(stage.config_of(resolved), key)))
         else:
             raw = copy.deepcopy(sweep.base)
             for key, value in grid.items():
@@ -198,7 +198,7 @@ def _value_key(value: Any) -> tuple[str, Any]:
     return ("json", json.dumps(value, sort_keys=True, default=str))
 
 
-def dotted_attr(obj: Any, dotted: str) -> Any:
+def _dotted_attr(obj: Any, dotted: str) -> Any:
     """``obj.a.b`` for ``dotted = "a.b"``."""
     for part in dotted.split("."):
         obj = getattr(obj, part)
