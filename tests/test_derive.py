@@ -476,3 +476,30 @@ def test_closed_loop_reference_peaks_at_half_the_design_bound_with_two_actuated_
     bem = sp.sum() * q + sv.sum() * qd + sa.sum() * qdd
     d = derive.design_region(arm).value
     assert 0.35 * d <= np.abs(bem).max() <= 0.55 * d, (np.abs(bem).max(), d)
+
+
+def test_eic_gains_are_searched_in_mujoco_when_joint_friction_leaves_a_limit_cycle():
+    """Dry friction on the arm's joints (frictionloss 0.1 / 0.02 N·m on tests/robots/arm2_pole.xml): the fastest-decaying
+    pair of the friction-free linearisation circles in MuJoCo — over the last second of the recovery q_u swings far beyond
+    the d/4 start error although its end sample lies within it (what the check read before) — so the derivation runs the
+    grid's sampled-stable gains in MuJoCo and keeps one that settles: its own recovery stays within d/4 over the last
+    second and its residual motion is a fraction of the first choice's."""
+    from bemlearn.control.eic_linear import eic_fastest_gains
+    from bemlearn.robots.scales import instability_rate
+
+    xml = (ROBOTS / "arm2_pole.xml").read_text()
+    xml = xml.replace('damping="0.5"/>', 'damping="0.5" frictionloss="0.1"/>').replace('damping="0.3"/>', 'damping="0.3" frictionloss="0.02"/>')
+    assert xml.count("frictionloss") == 2
+    arm = MujocoRobot.from_xml_string(xml, name="arm2_pole_friction")
+    rate = derive.control_rate(arm).value
+    e0 = derive.design_region(arm).value / 4
+    wc = derive.closed_loop_sensor(arm, rate).value["velocity_cutoff"]
+    lam = instability_rate(arm)
+    w_u, w_a, _ = eic_fastest_gains(arm, lam, 2 * math.pi * rate.rate_hz / 20)
+    ok, how, tail = derive._recovery_run(arm, derive._critical(w_u, w_u / w_a), rate, qu0=e0, velocity_cutoff=wc)
+    end = float(how.split("(ends ")[1].split(")")[0])
+    assert not ok and end <= e0 < 2 * e0 < tail, how
+    chosen = derive.eic_gains(arm, rate)
+    assert "the first choice" in chosen.note and "bring the robot back in MuJoCo" in chosen.note, chosen.note
+    ok2, how2, tail2 = derive._recovery_run(arm, chosen.value, rate, qu0=e0, velocity_cutoff=wc)
+    assert ok2 and tail2 < 0.25 * tail, (how2, tail)

@@ -247,6 +247,10 @@ def test_balance_and_reason_judgements_and_the_table():
     hanging = {"closed_loop": {"predictor": {"fell": False, "diverged": False, "qu_max": 0.07}}}
     assert balanced_at_upright(hanging, math.pi)[0] is False and balanced_at_upright(hanging, 0.0)[0] is True
     assert balanced_at_upright({"closed_loop": {"predictor": {"fell": True}}}, 0.0)[0] is False
+    # stayed up near the upright while the arm left its reference: balanced there (the note says the arm drifted)
+    drifted = balanced_at_upright({"closed_loop": {"predictor": {"fell": False, "diverged": True, "qu_max": 0.48}}}, 0.385)
+    assert drifted[0] is True and "left the reference" in drifted[1]
+    assert balanced_at_upright({"closed_loop": {"predictor": {"fell": False, "diverged": True, "qu_max": 0.9}}}, 0.385)[0] is False
     assert balanced_at_upright({}, 0.0)[0] is None
     assert judge_reason("the model says it cannot be balanced over the design region", holdable=True, bem_right=None)[0] is False
     assert judge_reason("the model says it cannot be balanced over the design region", holdable=False, bem_right=None)[0] is True

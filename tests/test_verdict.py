@@ -48,6 +48,13 @@ def _design(gain=1.0, rmse=0.001, mx=0.004, cov=1.0, bound=0.2):
     ({"resolution": {"ratio": 40.0, "spread": 0.03, "band_std": 0.0007, "inputs": []}}, "ok", None),
     ({"closed_loop": {"predictor": {"fell": True, "duration_s": 0.9}, "model": {"fell": True}}}, "unusable", "closed_loop"),
     ({"closed_loop": {"predictor": {"fell": False, "diverged": True}}}, "degraded", "closed_loop"),
+    # both loops stay up and leave the reference alike (a friction limit cycle): a note on the controller, not on the BEM
+    ({"closed_loop": {"predictor": {"fell": False, "diverged": True, "tracking_rmse": 0.0354, "tracking_max": 0.080},
+                      "model": {"fell": False, "diverged": True, "tracking_rmse": 0.0357, "tracking_max": 0.076}}}, "ok", "closed_loop"),
+    ({"closed_loop": {"predictor": {"fell": False, "diverged": True, "tracking_rmse": 0.0430, "tracking_max": 0.09},
+                      "model": {"fell": False, "diverged": True, "tracking_rmse": 0.0357, "tracking_max": 0.076}}}, "degraded", "closed_loop"),
+    ({"closed_loop": {"predictor": {"fell": False, "diverged": True, "tracking_rmse": 0.0354, "tracking_max": 0.080},
+                      "model": {"fell": False, "diverged": False, "tracking_rmse": 0.0357, "tracking_max": 0.076}}}, "degraded", "closed_loop"),
     # a loop that stays up but takes q_u 1.5 × the design bound from the upright (its reference asks for d/2) barely holds
     ({**_design(), "closed_loop": {"predictor": {"fell": False, "diverged": False, "qu_dev_max": 0.31}}}, "degraded", "closed_loop"),
     ({**_design(), "closed_loop": {"predictor": {"fell": False, "diverged": False, "qu_dev_max": 0.29}}}, "ok", None),

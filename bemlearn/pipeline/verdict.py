@@ -308,6 +308,20 @@ def _check_heldout(metrics: dict[str, Any], notes: _Notes) -> None:
                       "±2σ: the GP is overconfident away from its training trials")
 
 
+#: A learned-BEM loop whose tracking RMSE is within this factor of the model BEM's loop tracks "like the model".
+TRACKS_LIKE_MODEL = 1.2
+
+
+def _tracks_like_the_model(p: dict[str, Any], mdl: dict[str, Any]) -> bool:
+    """Both loops stayed up and left the reference, and the learned BEM's tracks within :data:`TRACKS_LIKE_MODEL` × the
+    model BEM's RMSE: the EIC's tracking, not the learned BEM, is what falls short (measured: a two-link arm with joint
+    friction circles at twice its reference's peak with either BEM, RMSE 0.0354 learned vs 0.0357 model)."""
+    if not (mdl and mdl.get("diverged") and not mdl.get("fell")):
+        return False
+    a, b = p.get("tracking_rmse"), mdl.get("tracking_rmse")
+    return _finite(a) and _finite(b) and a <= TRACKS_LIKE_MODEL * b
+
+
 def _check_closed_loop(metrics: dict[str, Any], notes: _Notes) -> None:
     loops = metrics.get("closed_loop") or {}
     if "predictor" not in loops:
@@ -318,13 +332,17 @@ def _check_closed_loop(metrics: dict[str, Any], notes: _Notes) -> None:
         both = mdl.get("fell")
         notes.add("unusable", "closed_loop", f"the closed loop with the learned BEM fell at {p.get('duration_s', math.nan):.2f} s"
                   + (" (so did the model BEM's: the EIC cannot balance this robot with these gains)" if both else ""))
-    elif p.get("diverged"):
+    elif p.get("diverged") and not _tracks_like_the_model(p, mdl):
         stable = bool((metrics.get("equilibrium") or {}).get("stable_without_control"))
         notes.add("degraded", "closed_loop", "the closed loop with the learned BEM " + ("kept q_u near its stable equilibrium"
                   if stable else "stayed up") + " but its actuated joints left the reference"
-                  + (" (so did the model BEM's: the EIC with these gains does not track this reference on this robot)"
-                     if mdl.get("diverged") else ""))
+                  + (" (so did the model BEM's, less: the learned BEM's loop tracks worse)" if mdl.get("diverged") else ""))
     else:
+        if p.get("diverged"):
+            notes.add("note", "closed_loop", f"the EIC with these gains tracks this reference poorly with the model BEM too "
+                      f"(tracking max {p['tracking_max']:.3g} learned, {mdl['tracking_max']:.3g} model, over twice the reference's "
+                      f"peak): a limit of the controller on this robot (for example dry friction's limit cycle), not of the learned "
+                      f"BEM, whose loop tracks as the model BEM's does")
         raw_bound: Any = (metrics.get("bem_design_region") or {}).get("bound")
         raw_dev: Any = p.get("qu_dev_max")
         bound = float(raw_bound) if _finite(raw_bound) else math.nan
