@@ -90,15 +90,16 @@ def _own_nodes(scope: ast.AST) -> list[ast.AST]:
     return out
 
 
-_OWN: dict[int, list[ast.AST]] = {}   # id(scope node) -> its own nodes, computed once per session
+#: id(scope node) -> (the node, kept alive so that its id is not reused; its own nodes), once per session
+_OWN: dict[int, tuple[ast.AST, list[ast.AST]]] = {}
 
 
 class _Scope:
     def __init__(self, node: ast.AST) -> None:
         self.node = node
-        own = _OWN.get(id(node))
-        if own is None:
-            own = _OWN[id(node)] = _own_nodes(node)
+        if id(node) not in _OWN:
+            _OWN[id(node)] = (node, _own_nodes(node))
+        own = _OWN[id(node)][1]
         self.binds = [n for n in own if isinstance(n, (ast.Assign, ast.AnnAssign, ast.NamedExpr, ast.For, ast.comprehension))]
         self.calls = [n for n in own if isinstance(n, ast.Call)]
         self.reads = [n for n in own if isinstance(n, (ast.Subscript, ast.Call))]

@@ -22,10 +22,9 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, TypeVar
 
-if TYPE_CHECKING:
-    from bemlearn.pipeline.verdict import Verdict
+from bemlearn.pipeline.verdict_types import Verdict
 
 __all__ = ["RunMetrics", "ModelCheck", "DataInfo", "DerivativeChoiceInfo", "DatasetInfo", "FitInfo", "RobotInfo",
            "DesignRegionInfo", "HeldoutBEM", "BoundViolationInfo", "DesignRegionErrorsInfo", "HeldoutTrial",
@@ -407,8 +406,6 @@ class LoopMetrics(_Record):
 
 
 def _load_verdict(doc: Mapping[str, Any]) -> Verdict:
-    from bemlearn.pipeline.verdict import Verdict  # verdict.py reads RunMetrics
-
     return Verdict.from_dict(dict(doc))
 
 
@@ -422,17 +419,15 @@ def _checks() -> dict[str, Any]:
 
 @dataclass(kw_only=True)
 class RunMetrics(_Record):
-    """A run's ``metrics.json`` (module docstring): training's entries, the closed loops, the data, the
-    model checks, the equilibrium, where a run failed, and the verdict.
+    """A run's ``metrics.json`` (module docstring), one field per entry, ``None`` where the run has none.
 
-    Attributes (``None`` where the run has no such entry):
-        robot, fit, dataset, uncertainty: the robot, the GP fit, the datasets' report, the band's calibration.
-        units: each GP input's and q_u's unit; unactuated: q_u's joint; output_unit: q_u's unit.
-        data_heldout, resolution, support, bem_slices: the data-only checks.
-        bem_heldout, bem_design_region: learned vs model BEM (robot runs).
-        closed_loop: one :class:`LoopMetrics` per BEM source.
-        data, feasibility, equilibrium: the data's summary, the model checks, the equilibrium held.
-        failed: where the run stopped; verdict: the run's verdict.
+    Training's entries: the robot, the GP fit, the datasets' report (``dataset``), the units, q_u's joint
+    (``unactuated``) and unit (``output_unit``), the validation figures, the band's calibration
+    (``uncertainty``), the data-only checks (``data_heldout``, ``resolution``, ``support``, ``bem_slices``)
+    and, with a model, learned vs model BEM (``bem_heldout``, ``bem_design_region``) and a torque logged
+    on q_u.  The run adds one :class:`LoopMetrics` per BEM source (``closed_loop``), the data's summary
+    (``data``), the model checks (``feasibility``), the equilibrium held, where it failed (``failed``) and
+    its :class:`~bemlearn.pipeline.verdict.Verdict`.
     """
 
     robot: RobotInfo | None = field(default=None, metadata=_one(RobotInfo))

@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bemlearn.pipeline.run_metrics import LoopMetrics, RunMetrics, Support
+from bemlearn.pipeline.verdict_types import EXIT_DEGRADED_STRICT, EXIT_UNUSABLE, SEVERITY_RANK, Finding, Verdict
 
 #: (S1), (S2) of :mod:`bemlearn.pipeline.data_evaluation` (kept here so reading a verdict needs no torch).
 SUPPORT_OK_SHARE = 0.9
@@ -60,57 +61,6 @@ __all__ = ["Finding", "Verdict", "judge_run", "GAIN_RANGE", "EXIT_UNUSABLE", "EX
 GAIN_RANGE = (0.95, 1.05)
 RMSE_OF_BOUND = 0.05           # RMSE ≤ 0.05 d (0.01 rad at d = 0.2 rad)
 MAX_OF_BOUND = 0.2             # max ≤ 0.2 d (0.04 rad)
-#: ``bemlearn run``'s exit status for an unusable run, and for a degraded one under ``--strict``.
-EXIT_UNUSABLE = 3
-EXIT_DEGRADED_STRICT = 4
-
-_RANK = {"note": -1, "ok": 0, "degraded": 1, "unusable": 2}
-
-
-@dataclass(frozen=True)
-class Finding:
-    """One check that did not pass: its severity, a key and a sentence with the numbers."""
-
-    severity: str
-    check: str
-    reason: str
-
-
-@dataclass(frozen=True)
-class Verdict:
-    """The verdict of a run (module docstring)."""
-
-    status: str
-    findings: tuple[Finding, ...] = field(default_factory=tuple)
-    checked: tuple[str, ...] = field(default_factory=tuple)
-
-    @property
-    def reasons(self) -> list[str]:
-        return [f.reason for f in self.findings]
-
-    def to_dict(self) -> dict[str, Any]:
-        """``{"status", "reasons", "findings": [{severity, check, reason}], "checked": [...]}``."""
-        return {"status": self.status, "reasons": self.reasons,
-                "findings": [{"severity": f.severity, "check": f.check, "reason": f.reason} for f in self.findings],
-                "checked": list(self.checked)}
-
-    @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> Verdict:
-        """The verdict :meth:`to_dict` wrote (``metrics.json``'s ``verdict``)."""
-        findings = tuple(Finding(f["severity"], f["check"], f["reason"]) for f in doc.get("findings", []))
-        return cls(doc["status"], findings, tuple(doc.get("checked", [])))
-
-    def exit_status(self, *, strict: bool = False) -> int:
-        """0 for ok (and degraded unless ``strict``), :data:`EXIT_UNUSABLE`, :data:`EXIT_DEGRADED_STRICT`."""
-        if self.status == "unusable":
-            return EXIT_UNUSABLE
-        return EXIT_DEGRADED_STRICT if strict and self.status == "degraded" else 0
-
-    def summary(self) -> str:
-        """One line: ``Verdict: degraded — reason; reason``."""
-        return f"Verdict: {self.status}" + (" — " + "; ".join(self.reasons) if self.findings else "")
-
-
 def _finite(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
@@ -128,9 +78,9 @@ def judge_run(metrics: RunMetrics | Mapping[str, Any]) -> Verdict:
     notes = _Notes()
     for check in _CHECKS:
         check(m, notes)
-    found = sorted(notes.found, key=lambda f: -_RANK[f.severity])
-    status = max((f.severity for f in found), key=_RANK.__getitem__, default="ok")
-    status = "ok" if _RANK[status] < 0 else status   # notes alone leave the run ok
+    found = sorted(notes.found, key=lambda f: -SEVERITY_RANK[f.severity])
+    status = max((f.severity for f in found), key=SEVERITY_RANK.__getitem__, default="ok")
+    status = "ok" if SEVERITY_RANK[status] < 0 else status   # notes alone leave the run ok
     return Verdict(status, tuple(found), tuple(notes.checked))
 
 
