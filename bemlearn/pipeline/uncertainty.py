@@ -53,14 +53,14 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, train_rows: t
         level: nominal level the band is calibrated to.
         seed: seed of the splits and draws.
     """
-    t0 = time.perf_counter()
-    meta = traj.meta
-    # the encoder steps (detected in the angles, or as an import recorded them before resampling)
-    steps = {k: v for k, v in traj.quantization_steps().items() if v is not None}
     est = dataset_config.estimator()
     if not getattr(est, "resolved", True):   # the σ build_datasets chose is in GPDatasets.config: pass that
         raise ArgumentError(f"calibrate_band: dataset_config: its estimator {est!r} leaves an option to the data; pass the "
                             "config the datasets were built with (GPDatasets.config), which holds the value chosen")
+    t0 = time.perf_counter()
+    meta = traj.meta
+    # the encoder steps (detected in the angles, or as an import recorded them before resampling)
+    steps = {k: v for k, v in traj.quantization_steps().items() if v is not None}
     s = quantization_input_std(state.input_names, steps, estimator=est, sample_rate_hz=meta.sample_rate_hz)
     pool = build_datasets(traj, dataclasses.replace(dataset_config, n_points=None, n_val_points=None))
     source = pool.val if len(pool.val) else pool.train
