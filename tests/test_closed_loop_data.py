@@ -20,10 +20,10 @@ def test_verdict_flips_from_lockstep_to_excited_data(tmp_path):
     res = bench_closed_loop_data(ClosedLoopCase(robot=str(ROBOT)), tmp_path)
     lock, excited = res["cases"]
     assert lock["sim"]["fell"] == 0 and excited["sim"]["fell"] == 0
-    assert lock["verdict"]["status"] != "ok"
-    first = next(f for f in lock["verdict"]["findings"] if f["check"] == "support")
-    assert "qdd_elbow ≈" in first["reason"] and "qdd_shoulder (corr -0.9" in first["reason"] and "bemlearn excite" in first["reason"]
-    assert excited["verdict"]["status"] == "ok", excited["verdict"]
+    assert lock["verdict"].status != "ok"
+    first = next(f for f in lock["verdict"].findings if f.check == "support")
+    assert "qdd_elbow ≈" in first.reason and "qdd_shoulder (corr -0.9" in first.reason and "bemlearn excite" in first.reason
+    assert excited["verdict"].status == "ok", excited["verdict"]
     model = res["model_slopes"]
     for key in ("q_shoulder", "qdd_shoulder"):
         assert abs(excited["slopes"][key] / model[key] - 1.0) <= 0.10, (key, excited["slopes"][key], model[key])

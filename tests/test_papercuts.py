@@ -81,6 +81,12 @@ def _resolution(slope: float, factor: float | None) -> dict:
                         "share": 0.1, "factor": factor}]}
 
 
+def _typed(doc: dict):
+    from bemlearn.pipeline.run_metrics import RunMetrics
+
+    return RunMetrics.from_dict(doc)
+
+
 class _Config:
     def __init__(self, signs):
         self.evaluate = type("E", (), {"slope_signs": signs})()
@@ -89,20 +95,20 @@ class _Config:
 def test_the_report_says_when_a_slope_sign_looks_flipped():
     from bemlearn.pipeline.report import _data_only_lines
 
-    text = "\n".join(_data_only_lines({"resolution": _resolution(+0.00765, 0.2)}, "rad", _Config({"qdd_theta": -1})))
+    text = "\n".join(_data_only_lines(_typed({"resolution": _resolution(+0.00765, 0.2)}), "rad", _Config({"qdd_theta": -1})))
     assert "qdd_theta: the sign looks flipped" in text and "0.00765" in text and "says negative" in text
-    text = "\n".join(_data_only_lines({"resolution": _resolution(-0.02, 0.2)}, "rad", _Config({"qdd_theta": -1})))
+    text = "\n".join(_data_only_lines(_typed({"resolution": _resolution(-0.02, 0.2)}), "rad", _Config({"qdd_theta": -1})))
     assert "flipped" not in text and "is negative, as the convention says" in text
-    text = "\n".join(_data_only_lines({"resolution": _resolution(+0.00765, 3.0)}, "rad", _Config({"qdd_theta": -1})))
+    text = "\n".join(_data_only_lines(_typed({"resolution": _resolution(+0.00765, 3.0)}), "rad", _Config({"qdd_theta": -1})))
     assert "flipped" not in text and "cannot tell its sign" in text  # a slope inside the band: no claim either way
-    assert "Sign convention" not in "\n".join(_data_only_lines({"resolution": _resolution(0.1, 0.2)}, "rad", _Config({})))
+    assert "Sign convention" not in "\n".join(_data_only_lines(_typed({"resolution": _resolution(0.1, 0.2)}), "rad", _Config({})))
 
 
 def test_the_report_gives_the_datas_range_as_the_slice_figure_marks_it():
     """One rule for "the data cover": the slices' quantiles, not ±1 std (the text said ±16 where the plot marked ±33)."""
     from bemlearn.pipeline.report import _data_only_lines
 
-    text = "\n".join(_data_only_lines({"resolution": _resolution(-0.02, 0.2)}, "rad", _Config({})))
+    text = "\n".join(_data_only_lines(_typed({"resolution": _resolution(-0.02, 0.2)}), "rad", _Config({})))
     assert "data cover -33.2 … 32.9 rad/s² (95 %)" in text and "±16" not in text
 
 
@@ -111,8 +117,10 @@ def test_the_zero_bem_is_labelled_the_expected_failure():
 
     row = {"fell": False, "diverged": True, "duration_s": 60.0, "tracking_rmse": 0.3, "qu_max": 60.47, "u_max": 5.0,
            "real_time_factor": 10.0}
-    sim = {"predictor": {**row, "diverged": False, "qu_max": 0.1}, "zero": row}
-    text = "\n".join(_closed_loop_lines(sim, {"input_units": "V"}, {"unactuated": "alpha"}, "rad"))
+    from bemlearn.pipeline.run_metrics import DataInfo, LoopMetrics
+
+    sim = {"predictor": LoopMetrics.from_dict({**row, "diverged": False, "qu_max": 0.1}), "zero": LoopMetrics.from_dict(row)}
+    text = "\n".join(_closed_loop_lines(sim, DataInfo(input_units="V"), _typed({"unactuated": "alpha"}), "rad"))
     (zero_row,) = [line for line in text.splitlines() if line.startswith("| zero")]
     assert "zero (baseline)" in zero_row and "diverged" in zero_row and "expected to fail" in zero_row
     (pred_row,) = [line for line in text.splitlines() if line.startswith("| predictor")]

@@ -51,7 +51,7 @@ def small(tmp_path_factory):
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(stage, "fit_gp", recording_fit)
-        metrics = train_run(cfg, path, out, progress=False).metrics
+        metrics = train_run(cfg, path, out, progress=False).metrics.as_dict()   # as metrics.json holds it
     assert seen, "train_run did not fit through gp_stage.fit_gp"
     TRAIN_SET[out] = (seen["x"], seen["y"])
     return cfg, path, out, metrics
@@ -150,7 +150,7 @@ def test_interrupt_leaves_usable_checkpoint_and_resume_continues(small, tmp_path
     assert ck["metadata"]["extra"]["interrupted"] is True
     monkeypatch.undo()
     m = train_run(cfg, path, out, resume=True, progress=False).metrics
-    assert not m["interrupted"] and m["fit"]["stop_reason"] in ("converged", "max_iter")
+    assert m.fit is not None and not m.interrupted and m.fit.stop_reason in ("converged", "max_iter")
 
 
 def test_train_cli_errors(tmp_path, capsys):

@@ -274,3 +274,15 @@ def test_reliability_table_on_gaussian_errors():
         assert row["kappa"] == pytest.approx(gaussian_quantile(row["level"]), rel=1e-12)
     assert gaussian_quantile(0.95) == pytest.approx(1.959963984540054, rel=1e-12)
     assert LearnedBEM.nominal_confidence(2.0) == pytest.approx(0.9544997361036416, rel=1e-12)
+
+
+def test_calibrate_band_takes_the_datasets_resolved_config():
+    """The σ the datasets chose from the data is calibrated with, not chosen again: a config that still leaves
+    it to the data is an argument error naming the config to pass (GPDatasets.config)."""
+    from bemlearn.data import DatasetConfig
+    from bemlearn.errors import ArgumentError
+    from bemlearn.pipeline.uncertainty import calibrate_band
+
+    assert not DatasetConfig().estimator().resolved
+    with pytest.raises(ArgumentError, match="GPDatasets.config"):
+        calibrate_band(None, None, DatasetConfig())  # type: ignore[arg-type]  # refused before either is read

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from bemlearn.errors import EnvironmentProblem
+from bemlearn.pipeline.run_metrics import RunMetrics
 
 __all__ = ["ClosedLoopCase", "simulate_logs", "bench_closed_loop_data", "learned_slopes"]
 
@@ -177,8 +178,8 @@ def _run_case(label: str, case: ClosedLoopCase, work: Path, *, schedule: dict | 
     p = _bemlearn("run", str(cfg), "--out", str(run), "--no-progress", "--force")
     if p.returncode not in (0, 3):
         raise EnvironmentProblem(f"bemlearn run failed ({p.returncode}): {p.stderr[-3000:]}")
-    metrics = json.loads((run / "metrics.json").read_text())
-    return {"label": label, "sim": sim, "verdict": metrics["verdict"], "support": metrics.get("support"),
+    metrics = RunMetrics.from_dict(json.loads((run / "metrics.json").read_text()))
+    return {"label": label, "sim": sim, "verdict": metrics.verdict, "support": metrics.support,
             "slopes": learned_slopes(run), "config": cfg, "run": run}
 
 

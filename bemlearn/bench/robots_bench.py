@@ -88,7 +88,7 @@ def robot_chain(robot_path: str, out_dir: str | Path, *, n_trials: int = 24, dur
     t0 = time.perf_counter()
     train = train_run(cfg, data_path, out, progress=False)
     export_run(out)
-    row["train"] = {"val_rmse": train.metrics.get("val_rmse"), "seconds": time.perf_counter() - t0}
+    row["train"] = {"val_rmse": train.metrics.val_rmse, "seconds": time.perf_counter() - t0}
     state = train.state
     refs = held_out_references(cfg.evaluate, robot.m)
     bound = cfg.collect.fall_window / 3

@@ -453,15 +453,17 @@ def _closed_loop_data(args) -> int:
           "| error | slope ∂q_u^e/∂q̈_a (model) | error |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for c in res["cases"]:
-        sup = c["support"] or {}
-        pair = next((p for p in sup.get("pairs", []) if p["input"].startswith("qdd_")), None)
+        sup = c["support"]   # a Support (bemlearn.pipeline.run_metrics) or None
+        pair = next((p for p in (sup.pairs if sup else None) or () if (p.input or "").startswith("qdd_")), None)
+        share = sup.share if sup and sup.share is not None else float("nan")
+        t = sup.t if sup and sup.t is not None else float("nan")
         cells = []
         for key in [k for k in model if k.startswith("q_")] + [k for k in model if k.startswith("qdd_")]:
             got, ref = c["slopes"][key], model[key]
             cells += [f"{got:.4g} ({ref:.4g})", f"{100 * (got - ref) / ref:+.1f} %" if ref else "—"]
-        print(f"| {c['label']} | {c['sim']['fell']} | {c['verdict']['status']} | {sup.get('share', float('nan')):.2f} | "
-              f"{sup.get('t', float('nan')):.1f} | {pair['corr'] if pair else float('nan'):+.3f} | " + " | ".join(cells) + " |")
+        print(f"| {c['label']} | {c['sim']['fell']} | {c['verdict'].status} | {share:.2f} | "
+              f"{t:.1f} | {pair.corr if pair else float('nan'):+.3f} | " + " | ".join(cells) + " |")
     for c in res["cases"]:
-        print(f"{c['label']}: Verdict: {c['verdict']['status']}" + (" — " + "; ".join(c["verdict"]["reasons"]) if c["verdict"]["reasons"] else ""))
+        print(f"{c['label']}: {c['verdict'].summary()}")
     print(res["excite_stdout"].rstrip())
     return 0

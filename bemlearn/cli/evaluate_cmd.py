@@ -67,11 +67,12 @@ def _evaluate(args, ck) -> int:
     result = evaluate_bem(ck.predictor_state, robot, refs, duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
     ev = result.as_dict()
     ev["robot"] = ref
+    region = None
     if ecfg.design_points > 0:
         from bemlearn.pipeline.design_evaluation import design_grid, evaluate_design_region
 
-        dr = evaluate_design_region(ck.predictor_state, design_grid(robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed))
-        ev["bem_design_region"] = dr.as_dict()   # over the whole design region (D1, D2); ev["design_region"] is along the references
+        region = evaluate_design_region(ck.predictor_state, design_grid(robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed))
+        ev["bem_design_region"] = region.as_dict()   # over the whole design region (D1, D2); ev["design_region"] is along the references
     c = result.curves
     unit = ck.metadata.units.get(f"qd_{ck.metadata.unactuated_name}", "rad/s").removesuffix("/s")
     fig, ax = plt.subplots(figsize=(9, 3.5))
@@ -87,19 +88,17 @@ def _evaluate(args, ck) -> int:
     atomic_write_text(out / "evaluation.json", json.dumps(ev, indent=2))
     print(f"robot: {ref['name']} ({ref['mjcf'] or ref['registry']})")
     print(f"{'reference':<10}{f'RMSE ({unit})':>12}{f'max ({unit})':>12}")
-    for i, r in enumerate(ev["per_reference"]):
-        print(f"{i:<10}{r['rmse']:>12.5f}{r['max_abs']:>12.5f}")
-    print(f"{'all':<10}{ev['rmse']:>12.5f}{ev['max_abs']:>12.5f}")
-    print(f"inside ±2σ: {100 * ev['coverage_2sigma_latent']:.1f}% with the latent std, "
-          f"{100 * ev['coverage_2sigma_predictive']:.1f}% with the predictive std (eq. 12 as printed: k* includes σ_0²)")
-    if "coverage_2sigma_band" in ev:
-        v = ev["bound_violation"]
-        print(f"calibrated band (exported std): inside ±2σ {100 * ev['coverage_2sigma_band']:.1f}%, median σ / RMSE "
-              f"{ev['median_band_std_over_rmse']:.2f}; eq. (13)/(15) bound at κ = 2 violated {100 * v['observed']:.1f}% "
-              f"(nominal {100 * v['nominal']:.1f}%)")
-    if "bem_design_region" in ev:
-        dr = ev["bem_design_region"]
-        print(f"design region |q_u^e| ≤ {dr['bound']:g} {unit} ({dr['n_points']} actuated motions): RMSE {dr['rmse']:.5f}, "
-              f"max {dr['max_abs']:.5f} {unit}, gain {dr['gain']:.3f} (least-squares slope of learned on model)")
+    for i, r in enumerate(result.per_reference):
+        print(f"{i:<10}{r.rmse:>12.5f}{r.max_abs:>12.5f}")
+    print(f"{'all':<10}{result.rmse:>12.5f}{result.max_abs:>12.5f}")
+    print(f"inside ±2σ: {100 * result.coverage_2sigma_latent:.1f}% with the latent std, "
+          f"{100 * result.coverage_2sigma_predictive:.1f}% with the predictive std (eq. 12 as printed: k* includes σ_0²)")
+    v = result.bound_violation
+    print(f"calibrated band (exported std): inside ±2σ {100 * result.coverage_2sigma_band:.1f}%, median σ / RMSE "
+          f"{result.median_band_std_over_rmse:.2f}; eq. (13)/(15) bound at κ = 2 violated {100 * v.observed:.1f}% "
+          f"(nominal {100 * v.nominal:.1f}%)")
+    if region is not None:
+        print(f"design region |q_u^e| ≤ {region.bound:g} {unit} ({region.n_points} actuated motions): RMSE {region.rmse:.5f}, "
+              f"max {region.max_abs:.5f} {unit}, gain {region.gain:.3f} (least-squares slope of learned on model)")
     print(f"wrote {out / 'evaluation.json'} and {out / 'evaluation.png'}")
     return 0

@@ -84,10 +84,12 @@ def _run(args) -> int:
 def _written_verdict(out: Path):
     """The verdict an application's run wrote to ``out/metrics.json`` (``None`` when it wrote none)."""
     from bemlearn.pipeline.failure import read_metrics
-    from bemlearn.pipeline.verdict import Verdict
+    from bemlearn.pipeline.run_metrics import RunMetrics
 
-    doc = read_metrics(out).get("verdict")
-    return Verdict.from_dict(doc) if isinstance(doc, dict) and "status" in doc else None
+    try:
+        return RunMetrics.from_dict(read_metrics(out)).verdict
+    except KeyError:    # a verdict without a status: none
+        return None
 
 
 def _simulate(args) -> int:

@@ -63,22 +63,24 @@ def run(args) -> int:
             _remove_stale(out, args)
             raise
         _remove_stale(out, args)
-    unit = m["output_unit"]
+    unit = m.unit()
+    fit = m.fit
+    seconds = fit.seconds if fit and fit.seconds is not None else float("nan")
     print(f"run folder: {out}")
-    print(f"fit: {m['fit'].get('stop_reason')} in {m['fit'].get('seconds', float('nan')):.1f} s on {m['n_train']} points")
-    if "val_rmse" in m:
-        print(f"validation: RMSE {m['val_rmse']:.5f} {unit}, mean predictive log-likelihood {m['val_mean_log_likelihood']:.3f}")
-    b = m.get("bem_heldout")
+    print(f"fit: {fit.stop_reason if fit else None} in {seconds:.1f} s on {m.n_train} points")
+    if m.val_rmse is not None:
+        print(f"validation: RMSE {m.val_rmse:.5f} {unit}, mean predictive log-likelihood {m.val_mean_log_likelihood:.3f}")
+    b = m.bem_heldout
     if b is None:
         print("no model to compare with (a model-free run): see the data-only evaluation in metrics.json")
     else:
-        print(f"held-out BEM vs model ({m['robot']['name']}): RMSE {b['rmse']:.5f} {unit}, max {b['max_abs']:.5f} {unit}, "
-              f"inside ±2σ: {100 * b['coverage_2sigma_latent']:.1f}% (latent), {100 * b['coverage_2sigma_predictive']:.1f}% (predictive)")
-    if b is not None and "coverage_2sigma_band" in b:
-        v = b["bound_violation"]
-        print(f"calibrated band (exported std): inside ±2σ {100 * b['coverage_2sigma_band']:.1f}%, median σ / RMSE "
-              f"{b['median_band_std_over_rmse']:.2f}; eq. (13)/(15) bound at κ = 2 violated {100 * v['observed']:.1f}% "
-              f"(nominal {100 * v['nominal']:.1f}%)")
+        print(f"held-out BEM vs model ({m.robot.name if m.robot else None}): RMSE {b.rmse:.5f} {unit}, max {b.max_abs:.5f} {unit}, "
+              f"inside ±2σ: {100 * b.coverage_2sigma_latent:.1f}% (latent), {100 * b.coverage_2sigma_predictive:.1f}% (predictive)")  # type: ignore[operator]
+    if b is not None and b.coverage_2sigma_band is not None and b.bound_violation is not None:
+        v = b.bound_violation
+        print(f"calibrated band (exported std): inside ±2σ {100 * b.coverage_2sigma_band:.1f}%, median σ / RMSE "
+              f"{b.median_band_std_over_rmse:.2f}; eq. (13)/(15) bound at κ = 2 violated {100 * v.observed:.1f}% "  # type: ignore[operator]
+              f"(nominal {100 * v.nominal:.1f}%)")  # type: ignore[operator]
     return 0
 
 

@@ -36,7 +36,7 @@ import numpy as np
 from bemlearn.data.gaussian_derivative import GaussianDerivative, apply_kernel, gaussian_kernels
 from bemlearn.data.trajectory import Trajectory
 
-__all__ = ["SigmaChoice", "choose_sigma", "resolve_estimator", "estimate_states", "KEPT_MOTION", "NOISY"]
+__all__ = ["SigmaChoice", "choose_sigma", "resolve_estimator", "estimate_states", "estimate_states_of", "KEPT_MOTION", "NOISY"]
 
 log = logging.getLogger(__name__)
 
@@ -118,6 +118,19 @@ def estimate_states(traj: Trajectory, estimator, *, within: np.ndarray | None = 
     if key not in memo:
         memo[key] = _estimate_states(traj, estimator, within)
     return tuple(a.copy() for a in memo[key])
+
+
+def estimate_states_of(traj: Trajectory, estimators, *, within: np.ndarray | None = None
+                       ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """:func:`estimate_states` of each of ``estimators`` (in their order), from the trajectory's memo.
+
+    One call for a caller that needs several estimates of the same rows, e.g. the chosen estimator
+    and its neighbours (:func:`~bemlearn.fitting.estimator_sensitivity.estimator_sensitivity`).
+
+    Returns:
+        one ``(q, qd, qdd, valid)`` per estimator, as :func:`estimate_states` returns it.
+    """
+    return [estimate_states(traj, est, within=within) for est in estimators]
 
 
 def _estimate_states(traj: Trajectory, estimator, within: np.ndarray | None

@@ -126,7 +126,7 @@ def estimator_sensitivity(state: PredictorState, traj: Trajectory, estimator, ro
         :class:`EstimatorSensitivity`; ``delta`` has K = 0 columns for an estimator without
         neighbours (e.g. central differences).
     """
-    from bemlearn.data.derivative_choice import estimate_states
+    from bemlearn.data.derivative_choice import estimate_states_of
     from bemlearn.data.features import gp_inputs
 
     meta = traj.meta
@@ -138,7 +138,7 @@ def estimator_sensitivity(state: PredictorState, traj: Trajectory, estimator, ro
         return EstimatorSensitivity(torch.zeros(M, 0, dtype=torch.float64), (), None, ())
     iu = meta.unactuated_index
     within = traj.qu_window_mask(qu_window)
-    q0, qd0, qdd0, valid0 = estimate_states(traj, estimator, within=within)
+    (q0, qd0, qdd0, valid0), *around = estimate_states_of(traj, (estimator, *neighbours), within=within)
     if not valid0[rows_np].all():
         bad = int(rows_np[~valid0[rows_np]][0])
         raise ArgumentError(f"estimator_sensitivity: rows: trial {int(traj.trial[bad])} holds training rows (row {bad}) where "
@@ -152,10 +152,9 @@ def estimator_sensitivity(state: PredictorState, traj: Trajectory, estimator, ro
     x0, y0 = inputs(q0, qd0, qdd0)
     a0 = projected_weights(state, x0, y0)
     deltas, shorts = [], []
-    for est in neighbours:
+    for q, qd, qdd, valid in around:
         # rows where the neighbour has no valid estimate (a trial too short for it, or a wider
         # kernel's edge) keep the chosen estimator's values: their contribution to δ is 0
-        q, qd, qdd, valid = estimate_states(traj, est, within=within)
         keep0 = ~valid
         q[keep0], qd[keep0], qdd[keep0] = q0[keep0], qd0[keep0], qdd0[keep0]
         xk, yk = inputs(q, qd, qdd)

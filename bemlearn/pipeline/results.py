@@ -22,6 +22,7 @@ from bemlearn.files import atomic_write_text
 if TYPE_CHECKING:
     from bemlearn.data.trajectory import Trajectory
     from bemlearn.models.predictor_state import PredictorState
+    from bemlearn.pipeline.run_metrics import RunMetrics
     from bemlearn.pipeline.verdict import Verdict
     from bemlearn.robots.protocol import BalanceRobot
 
@@ -86,13 +87,14 @@ class TrainResult:
 
     Attributes:
         metrics: the training run's summary (fit, hyperparameters, validation, held-out and design-region
-            BEM evaluations, data-only checks): the entries of ``metrics.json`` training produces.
+            BEM evaluations, data-only checks): the entries of ``metrics.json`` training produces, typed
+            (:class:`~bemlearn.pipeline.run_metrics.RunMetrics`).
         state: the frozen predictor (what the exporters write).
         trajectory: the trajectory it was trained on.
         robot: the robot that collected the data (``None`` for a model-free run).
     """
 
-    metrics: dict[str, Any]
+    metrics: RunMetrics
     state: PredictorState
     trajectory: Trajectory
     robot: BalanceRobot | None = None
@@ -193,7 +195,8 @@ class RunResult:
     Attributes:
         out: the run folder.
         verdict: the run's verdict (:func:`~bemlearn.pipeline.verdict.judge_run`), judged once.
-        metrics: the run's ``metrics.json`` (written by :meth:`write_metrics`).
+        metrics: the run's ``metrics.json``, typed (:class:`~bemlearn.pipeline.run_metrics.RunMetrics`; written
+            by :meth:`write_metrics`).
         collect: the collect stage (``None`` when the run trained on a file or stopped before).
         train: the train stage (``None`` when the run stopped before training).
         simulate: the closed loops (``None`` for a model-free run or one that stopped before).
@@ -202,7 +205,7 @@ class RunResult:
 
     out: Path
     verdict: Verdict
-    metrics: dict[str, Any]
+    metrics: RunMetrics
     collect: CollectResult | None = None
     train: TrainResult | None = None
     simulate: SimulateResult | None = None
@@ -211,5 +214,5 @@ class RunResult:
     def write_metrics(self) -> Path:
         """Write ``out/metrics.json`` (atomically); returns its path."""
         path = self.out / "metrics.json"
-        atomic_write_text(path, json.dumps(self.metrics, indent=2, default=float))
+        atomic_write_text(path, json.dumps(self.metrics.as_dict(), indent=2, default=float))
         return path

@@ -32,7 +32,8 @@ from bemlearn.files import atomic_write_text, new_run_dir
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.resolve import ResolvedConfig, resolve_pipeline_config
 from bemlearn.pipeline.results import CollectResult, DataSummary, RunResult, SimulateResult
-from bemlearn.pipeline.verdict import Verdict, judge_run
+from bemlearn.pipeline.run_metrics import DataInfo, Equilibrium, LoopMetrics, ModelCheck, RunMetrics
+from bemlearn.pipeline.verdict import judge_run
 
 __all__ = ["run_pipeline"]
 
@@ -113,27 +114,29 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
             stage = "simulate"
             log.info("[4/%d] closed-loop simulation", stages)
             sim = simulate_stage(cfg, out, predictor=out / "bem_predictor.pt", progress=progress, robot=train.robot)
-            metrics["closed_loop"] = sim.summary()
+            metrics.closed_loop = {src: LoopMetrics.from_dict(loop) for src, loop in sim.summary().items()}
         stage = "verdict"
-        metrics["data"] = summary.as_dict()
-        metrics["feasibility"] = feasibility
+        metrics.data = DataInfo.from_dict(summary.as_dict())
+        metrics.feasibility = tuple(ModelCheck.from_dict(c) for c in feasibility)
         if equilibrium is not None:
-            metrics["equilibrium"] = equilibrium
+            metrics.equilibrium = Equilibrium.from_dict(equilibrium)
         verdict = judge_run(metrics)
-        metrics["verdict"] = verdict.to_dict()
+        metrics.verdict = verdict
         result = RunResult(out, verdict, metrics, collected, train, sim)
         result.write_metrics()
         _record_data_choices(out, resolved, metrics)
         stage = "report"
         log.info("[%d/%d] report", stages, stages)
-        result.report = write_report(out, config=cfg, resolved=resolved, data=metrics["data"], train=metrics, export=files,
-                                     sim=sim.as_dict() if sim is not None else {})
+        result.report = write_report(out, config=cfg, resolved=resolved, data=metrics.data, train=metrics, export=files,
+                                     sim={src: LoopMetrics.from_dict(loop) for src, loop in sim.as_dict().items()} if sim is not None else {})
     except Exception as exc:
         from bemlearn.pipeline.failure import record_failure
 
-        metrics.setdefault("data", summary.as_dict())
-        metrics.setdefault("feasibility", feasibility)
-        record_failure(out, stage, exc, metrics, since_ns=started_ns)
+        if metrics.data is None:
+            metrics.data = DataInfo.from_dict(summary.as_dict())
+        if metrics.feasibility is None:
+            metrics.feasibility = tuple(ModelCheck.from_dict(c) for c in feasibility)
+        record_failure(out, stage, exc, metrics.as_dict(), since_ns=started_ns)
         raise
     log.info("done in %.0f s: %s", time.perf_counter() - t0, result.report)
     return result
@@ -146,12 +149,12 @@ def _train_failed(out: Path, exc: Exception, data_info: dict, *, collected: bool
 
     ck = out / "checkpoint.pt"
     if ck.is_file() and ck.stat().st_mtime_ns >= since_ns:
-        doc = read_metrics(out)
-        if isinstance(doc.get("failed"), dict):
-            doc["data"] = data_info
-            atomic_write_text(out / "metrics.json", json.dumps(doc, indent=2, default=float))
+        written = RunMetrics.from_dict(read_metrics(out))
+        written.data = DataInfo.from_dict(data_info)
+        if written.failed is not None:
+            atomic_write_text(out / "metrics.json", json.dumps(written.as_dict(), indent=2, default=float))
             return
-        record_failure(out, "train", exc, {**doc, "data": data_info}, since_ns=started_ns)
+        record_failure(out, "train", exc, written.as_dict(), since_ns=started_ns)
     elif collected:
         record_failure(out, "train", exc, {"data": data_info}, since_ns=started_ns)
 
@@ -160,10 +163,10 @@ def _stop_after_preflight(out: Path, cfg: PipelineConfig, resolved: ResolvedConf
     """Write the verdict of a robot its model says cannot be balanced (metrics.json, report.md); no data."""
     from bemlearn.pipeline.report import write_report
 
-    metrics: dict[str, Any] = {"robot": {"name": Path(str(cfg.robot)).stem, "source": str(cfg.robot)}, "feasibility": feasibility,
-               "stopped_after": "preflight"}
+    metrics = RunMetrics.from_dict({"robot": {"name": Path(str(cfg.robot)).stem, "source": str(cfg.robot)},
+                                    "feasibility": feasibility, "stopped_after": "preflight"})
     verdict = judge_run(metrics)
-    metrics["verdict"] = verdict.to_dict()
+    metrics.verdict = verdict
     result = RunResult(out, verdict, metrics)
     result.write_metrics()
     result.report = write_report(out, config=cfg, resolved=resolved, data=None, train=metrics, export=[], sim={})
@@ -177,23 +180,24 @@ def _stop_after_collect(out: Path, cfg: PipelineConfig, resolved: ResolvedConfig
     from bemlearn.pipeline.failure import record_failure
     from bemlearn.pipeline.report import write_report
 
-    metrics: dict[str, Any] = {"robot": {"name": Path(str(cfg.robot)).stem, "source": str(cfg.robot)}, "feasibility": feasibility,
-                               "stopped_after": "collect"}
-    metrics = record_failure(out, "collect", exc, metrics)
-    verdict = Verdict.from_dict(metrics["verdict"])
+    doc: dict[str, Any] = {"robot": {"name": Path(str(cfg.robot)).stem, "source": str(cfg.robot)}, "feasibility": feasibility,
+                           "stopped_after": "collect"}
+    metrics = RunMetrics.from_dict(record_failure(out, "collect", exc, doc))   # written there, with its verdict
+    assert metrics.verdict is not None
+    verdict = metrics.verdict
     result = RunResult(out, verdict, metrics)
     result.report = write_report(out, config=cfg, resolved=resolved, data=None, train=metrics, export=[], sim={})
     log.warning("stopped after collecting (%.1f s): %s", time.perf_counter() - t0, "; ".join(verdict.reasons))
     return result
 
 
-def _record_data_choices(out: Path, resolved: ResolvedConfig, metrics: dict) -> None:
+def _record_data_choices(out: Path, resolved: ResolvedConfig, metrics: RunMetrics) -> None:
     """Add the values chosen from the data when training (e.g. the Gaussian σ) to config_resolved.json."""
-    choice = (metrics.get("dataset") or {}).get("derivative_choice")
+    choice = metrics.dataset.derivative_choice if metrics.dataset else None
     if not choice:
         return
     rows = resolved.to_json_dict()
-    rows["dataset.derivative_options.sigma_s"] = {"value": choice["sigma_s"], "origin": "data", "note": choice["note"]}
+    rows["dataset.derivative_options.sigma_s"] = {"value": choice.sigma_s, "origin": "data", "note": choice.note}
     atomic_write_text(out / "config_resolved.json", json.dumps(rows, indent=2, ensure_ascii=False))
 
 

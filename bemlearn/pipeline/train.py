@@ -40,6 +40,7 @@ from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.evaluation import BEMCurves, EvaluationConfig, evaluate_bem, held_out_references
 from bemlearn.pipeline.reliability import reliability_figure
 from bemlearn.pipeline.results import TrainResult
+from bemlearn.pipeline.run_metrics import RunMetrics
 from bemlearn.pipeline.uncertainty import calibrate_band
 from bemlearn.robots.protocol import BalanceRobot, ControlRobot
 from bemlearn.units import gp_input_units
@@ -171,12 +172,13 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         record_failure(out, "train: evaluation", exc, metrics, since_ns=started_ns)
         raise
     writer.close()
+    typed = RunMetrics.from_dict(metrics)      # the sections as the verdict, the report and the run read them
     if not part_of_run:
         from bemlearn.pipeline.verdict import judge_run
 
-        metrics["verdict"] = judge_run(metrics).to_dict()        # what training alone can tell
-        atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
-    return TrainResult(metrics, state, traj, robot)
+        typed.verdict = judge_run(typed)        # what training alone can tell
+        atomic_write_text(out / "metrics.json", json.dumps(typed.as_dict(), indent=2, default=float))
+    return TrainResult(typed, state, traj, robot)
 
 
 def _torque_metrics(traj, truth_robot) -> dict | None:
@@ -197,10 +199,11 @@ def _validation_metrics(stage: GPStageResult, train: BEMDataset, val: BEMDataset
     mean = mean.cpu().to(torch.float64) * train.y_std + train.y_mean
     var_pred = var.cpu().to(torch.float64) * train.y_std**2
     err = mean - val.y
-    metrics = {"val_rmse": float(err.pow(2).mean().sqrt()),
-               "val_mean_log_likelihood": float((-0.5 * (err**2 / var_pred + var_pred.log() + math.log(2 * math.pi))).mean())}
-    writer.add_scalar("val/rmse", metrics["val_rmse"], 0)
-    writer.add_scalar("val/mean_log_likelihood", metrics["val_mean_log_likelihood"], 0)
+    rmse = float(err.pow(2).mean().sqrt())
+    mll = float((-0.5 * (err**2 / var_pred + var_pred.log() + math.log(2 * math.pi))).mean())
+    metrics = {"val_rmse": rmse, "val_mean_log_likelihood": mll}
+    writer.add_scalar("val/rmse", rmse, 0)
+    writer.add_scalar("val/mean_log_likelihood", mll, 0)
     from bemlearn.models.band import band_reference
 
     band = band_reference(state, val.x)[1]  # model-free: held-out q_u inside ±2√(σ_band² + σ_0²)
@@ -217,8 +220,8 @@ def _data_only_metrics(state: PredictorState, train: BEMDataset, val: BEMDataset
     metrics: dict = {}
     if len(val):
         held = heldout_prediction(state, val, train=train)
-        metrics["data_heldout"] = {k: v for k, v in held.items() if k != "per_trial"}
-        metrics["data_heldout"]["per_trial"] = {str(k): v for k, v in held["per_trial"].items()}
+        metrics["data_heldout"] = {**{k: v for k, v in held.items() if k != "per_trial"},
+                                   "per_trial": {str(k): v for k, v in held["per_trial"].items()}}
     metrics["resolution"] = bem_resolution(state, train)   # do the data resolve the BEM at all (model-free)?
     metrics["support"] = design_support(train)             # are its queries supported by the data jointly?
     slices = bem_slices(state, train)

@@ -24,8 +24,7 @@ import time
 import torch
 
 from bemlearn.data import build_datasets
-from bemlearn.data.derivative_choice import resolve_estimator
-from bemlearn.errors import DataError
+from bemlearn.errors import ArgumentError, DataError
 from bemlearn.fitting.calibration import calibrate_replicas
 from bemlearn.fitting.estimator_sensitivity import estimator_sensitivity
 from bemlearn.models.input_noise import quantization_input_std
@@ -45,7 +44,8 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, train_rows: t
         state: the fitted posterior (input columns as built from ``traj`` by ``dataset_config``).
         traj: the training :class:`~bemlearn.data.trajectory.Trajectory`.
         dataset_config: the :class:`~bemlearn.data.DatasetConfig` the posterior was trained with
-            (``GPDatasets.config``: with the options chosen from the data written out).
+            (``GPDatasets.config``: with the options chosen from the data written out; an estimator
+            that still leaves an option to the data is an :class:`~bemlearn.errors.ArgumentError`).
         train_rows: ``(N,)`` the rows of ``traj`` the posterior was trained on
             (``BEMDataset.row``); default: drawn again by ``build_datasets(traj, dataset_config)``.
         n_queries: held-out BEM queries x_0^e for the replica calibration.
@@ -53,13 +53,14 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, train_rows: t
         level: nominal level the band is calibrated to.
         seed: seed of the splits and draws.
     """
+    est = dataset_config.estimator()
+    if not getattr(est, "resolved", True):   # the σ build_datasets chose is in GPDatasets.config: pass that
+        raise ArgumentError(f"calibrate_band: dataset_config: its estimator {est!r} leaves an option to the data; pass the "
+                            "config the datasets were built with (GPDatasets.config), which holds the value chosen")
     t0 = time.perf_counter()
     meta = traj.meta
     # the encoder steps (detected in the angles, or as an import recorded them before resampling)
     steps = {k: v for k, v in traj.quantization_steps().items() if v is not None}
-    est, choice = resolve_estimator(dataset_config.estimator(), traj, qu_window=dataset_config.qu_window)
-    if choice is not None:    # an option left to the data (the Gaussian's σ): the same choice build_datasets makes
-        dataset_config = dataset_config.with_estimator(est)
     s = quantization_input_std(state.input_names, steps, estimator=est, sample_rate_hz=meta.sample_rate_hz)
     pool = build_datasets(traj, dataclasses.replace(dataset_config, n_points=None, n_val_points=None))
     source = pool.val if len(pool.val) else pool.train

@@ -44,8 +44,12 @@ The status is the worst finding's; ``reasons`` lists one sentence per finding, w
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
+
+from bemlearn.pipeline.run_metrics import LoopMetrics, RunMetrics, Support
+from bemlearn.pipeline.verdict_types import EXIT_DEGRADED_STRICT, EXIT_UNUSABLE, SEVERITY_RANK, Finding, Verdict
 
 #: (S1), (S2) of :mod:`bemlearn.pipeline.data_evaluation` (kept here so reading a verdict needs no torch).
 SUPPORT_OK_SHARE = 0.9
@@ -57,74 +61,26 @@ __all__ = ["Finding", "Verdict", "judge_run", "GAIN_RANGE", "EXIT_UNUSABLE", "EX
 GAIN_RANGE = (0.95, 1.05)
 RMSE_OF_BOUND = 0.05           # RMSE ≤ 0.05 d (0.01 rad at d = 0.2 rad)
 MAX_OF_BOUND = 0.2             # max ≤ 0.2 d (0.04 rad)
-#: ``bemlearn run``'s exit status for an unusable run, and for a degraded one under ``--strict``.
-EXIT_UNUSABLE = 3
-EXIT_DEGRADED_STRICT = 4
-
-_RANK = {"note": -1, "ok": 0, "degraded": 1, "unusable": 2}
-
-
-@dataclass(frozen=True)
-class Finding:
-    """One check that did not pass: its severity, a key and a sentence with the numbers."""
-
-    severity: str
-    check: str
-    reason: str
-
-
-@dataclass(frozen=True)
-class Verdict:
-    """The verdict of a run (module docstring)."""
-
-    status: str
-    findings: tuple[Finding, ...] = field(default_factory=tuple)
-    checked: tuple[str, ...] = field(default_factory=tuple)
-
-    @property
-    def reasons(self) -> list[str]:
-        return [f.reason for f in self.findings]
-
-    def to_dict(self) -> dict[str, Any]:
-        """``{"status", "reasons", "findings": [{severity, check, reason}], "checked": [...]}``."""
-        return {"status": self.status, "reasons": self.reasons,
-                "findings": [{"severity": f.severity, "check": f.check, "reason": f.reason} for f in self.findings],
-                "checked": list(self.checked)}
-
-    @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> Verdict:
-        """The verdict :meth:`to_dict` wrote (``metrics.json``'s ``verdict``)."""
-        findings = tuple(Finding(f["severity"], f["check"], f["reason"]) for f in doc.get("findings", []))
-        return cls(doc["status"], findings, tuple(doc.get("checked", [])))
-
-    def exit_status(self, *, strict: bool = False) -> int:
-        """0 for ok (and degraded unless ``strict``), :data:`EXIT_UNUSABLE`, :data:`EXIT_DEGRADED_STRICT`."""
-        if self.status == "unusable":
-            return EXIT_UNUSABLE
-        return EXIT_DEGRADED_STRICT if strict and self.status == "degraded" else 0
-
-    def summary(self) -> str:
-        """One line: ``Verdict: degraded — reason; reason``."""
-        return f"Verdict: {self.status}" + (" — " + "; ".join(self.reasons) if self.findings else "")
-
-
 def _finite(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
-def judge_run(metrics: dict[str, Any]) -> Verdict:
-    """The verdict of a run from its metrics (``metrics.json``; keys a run lacks are not checked).
+def judge_run(metrics: RunMetrics | Mapping[str, Any]) -> Verdict:
+    """The verdict of a run from its metrics (entries a run lacks are not checked).
 
-    Reads ``feasibility`` (model checks of :mod:`bemlearn.pipeline.feasibility`), ``data`` (trials,
-    failed), ``dataset.derivative_choice``, ``fit``, ``bem_design_region`` (with its ``bound``),
-    ``resolution``, ``closed_loop`` and ``closed_loop.predictor.lemma1``.
+    Reads :class:`~bemlearn.pipeline.run_metrics.RunMetrics`: ``feasibility`` (model checks of
+    :mod:`bemlearn.pipeline.feasibility`), ``data`` (trials, failed), ``dataset.derivative_choice``,
+    ``fit``, ``bem_design_region`` (with its ``bound``), ``resolution``, ``closed_loop`` and
+    ``closed_loop.predictor.lemma1``.  A mapping (a ``metrics.json`` read from a run folder) is read
+    into a :class:`RunMetrics` once.
     """
+    m = metrics if isinstance(metrics, RunMetrics) else RunMetrics.from_dict(metrics)
     notes = _Notes()
     for check in _CHECKS:
-        check(metrics, notes)
-    found = sorted(notes.found, key=lambda f: -_RANK[f.severity])
-    status = max((f.severity for f in found), key=_RANK.__getitem__, default="ok")
-    status = "ok" if _RANK[status] < 0 else status   # notes alone leave the run ok
+        check(m, notes)
+    found = sorted(notes.found, key=lambda f: -SEVERITY_RANK[f.severity])
+    status = max((f.severity for f in found), key=SEVERITY_RANK.__getitem__, default="ok")
+    status = "ok" if SEVERITY_RANK[status] < 0 else status   # notes alone leave the run ok
     return Verdict(status, tuple(found), tuple(notes.checked))
 
 
@@ -139,172 +95,177 @@ class _Notes:
         self.found.append(Finding(sev, check, reason))
 
 
-def _check_model(metrics: dict[str, Any], notes: _Notes) -> None:
-    for c in metrics.get("feasibility") or []:
-        notes.checked.append(f"model:{c['name']}")
-        if not c["passed"]:
-            notes.add(c["severity"], f"model:{c['name']}", c["text"])
+def _check_model(m: RunMetrics, notes: _Notes) -> None:
+    for c in m.feasibility or ():
+        notes.checked.append(f"model:{c.name}")
+        if not c.passed:
+            notes.add(str(c.severity), f"model:{c.name}", str(c.text))
 
 
-def _check_excitation(metrics: dict[str, Any], notes: _Notes) -> None:
-    data = metrics.get("data")
-    if data and data.get("collected") and data.get("trials"):
+def _check_excitation(m: RunMetrics, notes: _Notes) -> None:
+    data = m.data
+    if data and data.collected and data.trials:
         notes.checked.append("excitation")
-        n, f = int(data["trials"]), int(data.get("failed", 0))
+        n, f = int(data.trials), int(data.failed or 0)
         if f == n:
             notes.add("unusable", "excitation", f"all {n} excitation trials fell: no data from balanced motion")
         elif f > n / 2:
             notes.add("degraded", "excitation", f"{f} of {n} excitation trials fell: the data come mostly from falling trials")
 
 
-def _check_derivatives(metrics: dict[str, Any], notes: _Notes) -> None:
-    choice = (metrics.get("dataset") or {}).get("derivative_choice")
+def _check_derivatives(m: RunMetrics, notes: _Notes) -> None:
+    choice = m.dataset.derivative_choice if m.dataset else None
     if choice:
         notes.checked.append("derivatives")
-        noisy = {j: v for j, v in (choice.get("qdd_noise_fraction") or {}).items() if v > 0.04}
+        noisy = {j: v for j, v in (choice.qdd_noise_fraction or {}).items() if v > 0.04}
         if noisy:
             notes.add("degraded", "derivatives", "the estimated accelerations are noise-dominated ("
                       + ", ".join(f"{j}: quantization noise {100 * v:.0f} % of q̈'s spread" for j, v in noisy.items())
                       + "): the learned slopes are attenuated; log at a higher rate or with a finer encoder")
 
 
-def _check_fit(metrics: dict[str, Any], notes: _Notes) -> None:
-    fit = metrics.get("fit")
+def _check_fit(m: RunMetrics, notes: _Notes) -> None:
+    fit = m.fit
     if fit:
         notes.checked.append("fit")
-        stop = fit.get("stop_reason")
+        stop = fit.stop_reason
         if stop == "max_iter":
-            notes.add("degraded", "fit", f"the GP fit stopped at its iteration limit ({fit.get('steps')} evaluations) before "
+            notes.add("degraded", "fit", f"the GP fit stopped at its iteration limit ({fit.steps} evaluations) before "
                       "converging: raise train.max_iter")
         elif stop not in (None, "converged"):
             notes.add("degraded", "fit", f"the GP fit ended by {stop}: its hyperparameters are the best found before that")
 
 
-def _check_design_region(metrics: dict[str, Any], notes: _Notes) -> None:
-    dr = metrics.get("bem_design_region")
-    if not (dr and dr.get("n_points")):
+def _check_design_region(m: RunMetrics, notes: _Notes) -> None:
+    dr = m.bem_design_region
+    if not (dr and dr.n_points):
         return
     notes.checked.append("design_region")
-    d, unit = dr["bound"], metrics.get("output_unit", "rad")
-    gain, rmse, mx = dr.get("gain"), dr.get("rmse"), dr.get("max_abs")
+    d, unit = float(dr.bound or math.nan), m.unit()
+    gain, rmse, mx = dr.gain, dr.rmse, dr.max_abs
     bad = []
-    if _finite(gain) and not GAIN_RANGE[0] <= gain <= GAIN_RANGE[1]:
+    if _finite(gain) and not GAIN_RANGE[0] <= gain <= GAIN_RANGE[1]:  # type: ignore[operator]  # _finite: a number
         bad.append(f"gain {gain:.3f} (target {GAIN_RANGE[0]}–{GAIN_RANGE[1]})")
-    if _finite(rmse) and rmse > RMSE_OF_BOUND * d:
+    if _finite(rmse) and rmse > RMSE_OF_BOUND * d:  # type: ignore[operator]
         bad.append(f"RMSE {rmse:.4f} {unit} (target ≤ {RMSE_OF_BOUND * d:.3g})")
-    if _finite(mx) and mx > MAX_OF_BOUND * d:
+    if _finite(mx) and mx > MAX_OF_BOUND * d:  # type: ignore[operator]
         bad.append(f"max {mx:.4f} {unit} (target ≤ {MAX_OF_BOUND * d:.3g})")
     if bad:
-        severe = (_finite(gain) and not 0.5 <= gain <= 2.0) or (_finite(rmse) and rmse > 0.25 * d)
+        severe = (_finite(gain) and not 0.5 <= gain <= 2.0) or (_finite(rmse) and rmse > 0.25 * d)  # type: ignore[operator]
         notes.add("unusable" if severe else "degraded", "design_region",
                   f"learned vs model BEM over |q_u^e| ≤ {d:g} {unit}: " + ", ".join(bad))
-    cov = dr.get("coverage_2sigma_band")
-    if _finite(cov) and cov < 0.8:
-        notes.add("degraded", "band", f"the exported ±2σ band holds only {100 * cov:.0f} % of the model BEM over the design region")
+    cov = dr.coverage_2sigma_band
+    if _finite(cov) and cov < 0.8:  # type: ignore[operator]
+        notes.add("degraded", "band", f"the exported ±2σ band holds only {100 * cov:.0f} % of the model BEM over the design region")  # type: ignore[operator]
 
 
-def _check_resolution(metrics: dict[str, Any], notes: _Notes) -> None:
-    res = metrics.get("resolution")
-    held = metrics.get("data_heldout")
-    if not (res and _finite(res.get("spread"))):
+def _check_resolution(m: RunMetrics, notes: _Notes) -> None:
+    res, held = m.resolution, m.data_heldout
+    if not (res and _finite(res.spread)):
         return
+    spread = float(res.spread)  # type: ignore[arg-type]  # _finite
     notes.checked.append("resolution")
     # the uncertainty the data leave on the BEM: the exported band's σ, or, if larger, the error of f on
     # trials the fit never saw (median over them; a fit that memorises its trials has a small band)
-    scale, what = res["band_std"], "its band's σ"
-    per = [t["rmse"] for t in ((held or {}).get("per_trial") or {}).values() if _finite(t.get("rmse"))]
+    scale, what = float(res.band_std if res.band_std is not None else math.nan), "its band's σ"
+    per = [float(t.rmse) for t in ((held.per_trial if held else None) or {}).values() if _finite(t.rmse)]  # type: ignore[arg-type]
     if per:
         med = sorted(per)[len(per) // 2] if len(per) % 2 else 0.5 * sum(sorted(per)[len(per) // 2 - 1:len(per) // 2 + 1])
         if med > scale:
             scale, what = med, "the held-out trials' median q_u error"
-    r = res["spread"] / scale if scale > 0 else math.inf
+    r = spread / scale if scale > 0 else math.inf
     if r < 4.0:
-        unit = res.get("unit", "rad")
+        unit = res.unit or "rad"
         text = (f"the data {'do not' if r < 2 else 'barely'} resolve the BEM: over the data's actuated motions it varies by "
-                f"{res['spread']:.3g} {unit} (std), {r:.1f}× {what} ({scale:.3g} {unit})")
-        weak = [(w, 2 * scale / w["share"]) for w in res.get("inputs", []) if w.get("share")]
+                f"{spread:.3g} {unit} (std), {r:.1f}× {what} ({scale:.3g} {unit})")
+        weak = [(w, 2 * scale / w.share) for w in res.inputs or () if w.share]
         weak = [(w, f) for w, f in weak if f > 1.0][:3]
-        if _lockstep(metrics):      # more of the same motion cannot separate inputs that move together
+        if _lockstep(m):      # more of the same motion cannot separate inputs that move together
             text += ("; more amplitude of the same motion cannot help while the inputs move in lockstep: a reference motion "
                      "that changes their ratio can (`bemlearn excite CONFIG`)")
         elif weak:
             text += "; at the learned slopes, " + ", ".join(
-                f"{w['input']} (±{w['amplitude']:.3g} {w['unit']} in the data) would need about {f:.1f}× that amplitude"
+                f"{w.input} (±{w.amplitude:.3g} {w.unit} in the data) would need about {f:.1f}× that amplitude"
                 for w, f in weak) + " to move the BEM by more than ±2× that uncertainty"
         notes.add("unusable" if r < 2 else "degraded", "resolution", text)
 
 
-def _support_sentence(sup: dict[str, Any]) -> str:
+def _support_sentence(sup: Support) -> str:
     """Which inputs move together, and where the BEM queries have no training sample near them."""
-    qdd_u = sup.get("qdd_u") or ""
-    pairs = sorted(sup.get("pairs") or [], key=lambda p: (p["input"] != qdd_u, -abs(p["corr"])))
+    qdd_u = sup.qdd_u or ""
+    pairs = sorted(sup.pairs or (), key=lambda p: (p.input != qdd_u, -abs(p.corr or 0.0)))
     text = ""
     if pairs:
         p = pairs[0]
-        text = f"{p['input']} ≈ {p['ratio']:+.3g}·{p['with']} (corr {p['corr']:+.3f})"
+        text = f"{p.input} ≈ {p.ratio:+.3g}·{p.with_} (corr {p.corr:+.3f})"
     where = ""
     if pairs:
-        inp = next((i for i in sup.get("inputs") or [] if i["input"] == pairs[0]["with"]), None)
-        if inp and inp.get("reach") is not None:
-            hi = max(abs(inp["data"][0]), abs(inp["data"][1]))
-            where = (f"no training sample near {pairs[0]['input']} = 0 beyond |{inp['input']}| ≈ {inp['reach']:.3g} {inp['unit']} "
+        inp = next((i for i in sup.inputs or () if i.input == pairs[0].with_), None)
+        if inp and inp.reach is not None and inp.data is not None:
+            hi = max(abs(inp.data[0]), abs(inp.data[1]))
+            where = (f"no training sample near {pairs[0].input} = 0 beyond |{inp.input}| ≈ {inp.reach:.3g} {inp.unit} "
                      f"(the data reach ±{hi:.3g})")
-    share = float(sup.get("share", math.nan))
+    share = float(sup.share if sup.share is not None else math.nan)
     head = f"{100 * (1 - share):.0f} % of the BEM queries (q̈_u = q̇_u = 0 at the data's actuated motions) lie beyond the training data jointly" \
         if _finite(share) else "the BEM queries lie beyond the training data jointly"
     return "; ".join(t for t in (text, head + (f": {where}" if where else "")) if t)
 
 
-def _check_support(metrics: dict[str, Any], notes: _Notes) -> None:
+def _check_support(m: RunMetrics, notes: _Notes) -> None:
     """Joint support of the BEM queries (docs/verdict.md, (S1) and (S2) of bemlearn.pipeline.data_evaluation)."""
-    sup = metrics.get("support")
-    if not (sup and _finite(sup.get("share"))):
+    sup = m.support
+    if not (sup and _finite(sup.share)):
         return
     notes.checked.append("support")
-    t = sup.get("t")
+    t = sup.t
     if not _finite(t):
         return
+    assert t is not None and sup.share is not None   # _finite
     if t <= -EXTRAPOLATION_T:
         notes.add("unusable", "support", f"the data were taken about an equilibrium that is stable without control: q_u rises "
-                  f"as {sup['qdd_u']} falls (slope {sup['slope']:.3g}, t = {t:.1f}; an upright that needs balancing gives a "
+                  f"as {sup.qdd_u} falls (slope {sup.slope:.3g}, t = {t:.1f}; an upright that needs balancing gives a "
                   "positive slope 1/λ²): this is not a balanced upright, and no BEM of one can be learned from it")
         return
-    if sup["share"] >= SUPPORT_OK_SHARE or t >= EXTRAPOLATION_T:
+    if sup.share >= SUPPORT_OK_SHARE or t >= EXTRAPOLATION_T:
         return
     sev = "unusable" if t < 2.0 else "degraded"
-    notes.add(sev, "support", _support_sentence(sup) + f"; and the data do not resolve how q_u depends on {sup['qdd_u']} apart "
+    notes.add(sev, "support", _support_sentence(sup) + f"; and the data do not resolve how q_u depends on {sup.qdd_u} apart "
               f"from the actuated inputs (t = {t:.1f}, need ≥ {EXTRAPOLATION_T:g}): the BEM there is extrapolation the data "
               "cannot check. More amplitude along the same line cannot help; a motion of the actuated reference that changes "
               "that ratio can: play the schedule `bemlearn excite CONFIG` writes during balance and log again")
 
 
-def _lockstep(metrics: dict[str, Any]) -> bool:
+def _lockstep(m: RunMetrics) -> bool:
     """The inputs move together (|corr| ≥ 0.9 between an unactuated and an actuated input) and (S2) does not
     resolve q_u's dependence on q̈_u apart from them: more of the same motion cannot separate them."""
-    sup = metrics.get("support") or {}
-    together = any(abs(p.get("corr", 0.0)) >= 0.9 for p in sup.get("pairs") or [])
-    return together and _finite(sup.get("t")) and sup["t"] < EXTRAPOLATION_T
+    sup = m.support
+    if sup is None:
+        return False
+    together = any(abs(p.corr or 0.0) >= 0.9 for p in sup.pairs or ())
+    return together and _finite(sup.t) and sup.t < EXTRAPOLATION_T  # type: ignore[operator]  # _finite
 
 
-def _check_equilibrium(metrics: dict[str, Any], notes: _Notes) -> None:
+def _check_equilibrium(m: RunMetrics, notes: _Notes) -> None:
     """An equilibrium that is stable without control is never reported as balanced (its gravity stiffness Γ_q < 0)."""
-    eq = metrics.get("equilibrium")
-    if not (eq and _finite(eq.get("gravity_stiffness"))):
+    eq = m.equilibrium
+    if not (eq and _finite(eq.gravity_stiffness)):
         return
     notes.checked.append("equilibrium")
-    if eq.get("stable_without_control"):
-        notes.add("unusable", "equilibrium", f"the equilibrium the run held ({eq.get('joint', 'q_u')} = {eq.get('qu', math.nan):.4g} "
-                  f"{eq.get('unit', 'rad')}) is stable without control: gravity's stiffness there Γ_q = −∂Γ₀/∂q_u = "
-                  f"{eq['gravity_stiffness']:.3g} < 0 (eq. 5 linearised), so it is a hanging branch, not the upright; "
+    if eq.stable_without_control:
+        qu = eq.qu if eq.qu is not None else math.nan
+        notes.add("unusable", "equilibrium", f"the equilibrium the run held ({eq.joint or 'q_u'} = {qu:.4g} "
+                  f"{eq.unit or 'rad'}) is stable without control: gravity's stiffness there Γ_q = −∂Γ₀/∂q_u = "
+                  f"{eq.gravity_stiffness:.3g} < 0 (eq. 5 linearised), so it is a hanging branch, not the upright; "
                   "nothing was balanced and the learned BEM is not the upright's")
 
 
-def _check_heldout(metrics: dict[str, Any], notes: _Notes) -> None:
-    held = metrics.get("data_heldout")
-    if held and _finite(held.get("coverage")):
+def _check_heldout(m: RunMetrics, notes: _Notes) -> None:
+    held = m.data_heldout
+    if held and _finite(held.coverage):
         notes.checked.append("heldout")
-        if held["coverage"] < 0.8:
-            notes.add("degraded", "heldout", f"only {100 * held['coverage']:.0f} % of the held-out trials' q_u lie inside the predictive "
+        cov = float(held.coverage)  # type: ignore[arg-type]  # _finite
+        if cov < 0.8:
+            notes.add("degraded", "heldout", f"only {100 * cov:.0f} % of the held-out trials' q_u lie inside the predictive "
                       "±2σ: the GP is overconfident away from its training trials")
 
 
@@ -312,85 +273,87 @@ def _check_heldout(metrics: dict[str, Any], notes: _Notes) -> None:
 TRACKS_LIKE_MODEL = 1.2
 
 
-def _tracks_like_the_model(p: dict[str, Any], mdl: dict[str, Any]) -> bool:
+def _tracks_like_the_model(p: LoopMetrics, mdl: LoopMetrics) -> bool:
     """Both loops stayed up and left the reference, and the learned BEM's tracks within :data:`TRACKS_LIKE_MODEL` × the
     model BEM's RMSE: the EIC's tracking, not the learned BEM, is what falls short (measured: a two-link arm with joint
     friction circles at twice its reference's peak with either BEM, RMSE 0.0354 learned vs 0.0357 model)."""
-    if not (mdl and mdl.get("diverged") and not mdl.get("fell")):
+    if not (mdl.diverged and not mdl.fell):
         return False
-    a, b = p.get("tracking_rmse"), mdl.get("tracking_rmse")
-    return _finite(a) and _finite(b) and a <= TRACKS_LIKE_MODEL * b
+    a, b = p.tracking_rmse, mdl.tracking_rmse
+    return a is not None and b is not None and _finite(a) and _finite(b) and a <= TRACKS_LIKE_MODEL * b
 
 
-def _check_closed_loop(metrics: dict[str, Any], notes: _Notes) -> None:
-    loops = metrics.get("closed_loop") or {}
+def _check_closed_loop(m: RunMetrics, notes: _Notes) -> None:
+    loops = m.closed_loop or {}
     if "predictor" not in loops:
         return
     notes.checked.append("closed_loop")
-    p, mdl = loops["predictor"], loops.get("model", {})
-    if p.get("fell"):
-        both = mdl.get("fell")
-        notes.add("unusable", "closed_loop", f"the closed loop with the learned BEM fell at {p.get('duration_s', math.nan):.2f} s"
-                  + (" (so did the model BEM's: the EIC cannot balance this robot with these gains)" if both else ""))
-    elif p.get("diverged") and not _tracks_like_the_model(p, mdl):
-        stable = bool((metrics.get("equilibrium") or {}).get("stable_without_control"))
+    p, mdl = loops["predictor"], loops.get("model") or LoopMetrics()
+    if p.fell:
+        dur = p.duration_s if p.duration_s is not None else math.nan
+        notes.add("unusable", "closed_loop", f"the closed loop with the learned BEM fell at {dur:.2f} s"
+                  + (" (so did the model BEM's: the EIC cannot balance this robot with these gains)" if mdl.fell else ""))
+    elif p.diverged and not _tracks_like_the_model(p, mdl):
+        stable = bool(m.equilibrium and m.equilibrium.stable_without_control)
         notes.add("degraded", "closed_loop", "the closed loop with the learned BEM " + ("kept q_u near its stable equilibrium"
                   if stable else "stayed up") + " but its actuated joints left the reference"
-                  + (" (so did the model BEM's, less: the learned BEM's loop tracks worse)" if mdl.get("diverged") else ""))
+                  + (" (so did the model BEM's, less: the learned BEM's loop tracks worse)" if mdl.diverged else ""))
     else:
-        if p.get("diverged"):
+        if p.diverged:
             notes.add("note", "closed_loop", f"the EIC with these gains tracks this reference poorly with the model BEM too "
-                      f"(tracking max {p['tracking_max']:.3g} learned, {mdl['tracking_max']:.3g} model, over twice the reference's "
+                      f"(tracking max {p.tracking_max:.3g} learned, {mdl.tracking_max:.3g} model, over twice the reference's "
                       f"peak): a limit of the controller on this robot (for example dry friction's limit cycle), not of the learned "
                       f"BEM, whose loop tracks as the model BEM's does")
-        raw_bound: Any = (metrics.get("bem_design_region") or {}).get("bound")
-        raw_dev: Any = p.get("qu_dev_max")
-        bound = float(raw_bound) if _finite(raw_bound) else math.nan
-        dev = float(raw_dev) if _finite(raw_dev) else math.nan
+        raw_bound = m.bem_design_region.bound if m.bem_design_region else None
+        bound = float(raw_bound) if _finite(raw_bound) else math.nan  # type: ignore[arg-type]
+        dev = float(p.qu_dev_max) if _finite(p.qu_dev_max) else math.nan  # type: ignore[arg-type]
         if dev > 1.5 * bound:   # False when either is NaN
-            unit = metrics.get("output_unit", "rad")
-            mdev = mdl.get("qu_dev_max")
+            unit = m.unit()
+            mdev = mdl.qu_dev_max
             notes.add("degraded", "closed_loop", f"the closed loop with the learned BEM stayed up, but q_u strayed {dev:.3g} {unit} from "
                       f"the upright, {dev / bound:.1f}× the design bound {bound:g} {unit} (its reference asks for about half the bound): "
                       "it barely holds" + (f" (so did the model BEM's, {mdev:.3g} {unit}: the EIC with these gains barely holds this robot)"
-                                           if _finite(mdev) and mdev > 1.5 * bound else ""))
-    lem = p.get("lemma1")
-    if lem and _finite(lem.get("r_learned_vs_model_delta_gamma")):
+                                           if _finite(mdev) and mdev > 1.5 * bound else ""))  # type: ignore[operator]
+    lem = p.lemma1
+    if lem and _finite(lem.r_learned_vs_model_delta_gamma):
         notes.checked.append("lemma1")
-        r = lem["r_learned_vs_model_delta_gamma"]
+        r = float(lem.r_learned_vs_model_delta_gamma)  # type: ignore[arg-type]  # _finite
         if r < 0.9:
             notes.add("degraded", "lemma1", f"Lemma 1 (eq. 10) does not hold for the learned BEM: its ΔΓ correlates with the model's "
                       f"ΔΓ = Ḣ_u + b_u q̇_u^e at r = {r:.2f}")
 
 
-def _check_failed(metrics: dict[str, Any], notes: _Notes) -> None:
-    failed = metrics.get("failed")
-    if isinstance(failed, dict):
+def _check_failed(m: RunMetrics, notes: _Notes) -> None:
+    failed = m.failed
+    if failed is not None:
         notes.checked.append("failed")
-        what = f"{failed.get('error_type', 'error')}: {failed.get('error', '')}".rstrip(": ")
-        notes.add("unusable", "failed", f"the run failed at stage '{failed.get('stage')}' ({what}): the stages after it did not "
-                  f"run and its numbers are incomplete; the run folder keeps {', '.join(failed.get('kept') or [])}")
+        what = f"{failed.error_type or 'error'}: {failed.error or ''}".rstrip(": ")
+        notes.add("unusable", "failed", f"the run failed at stage '{failed.stage}' ({what}): the stages after it did not "
+                  f"run and its numbers are incomplete; the run folder keeps {', '.join(failed.kept or [])}")
 
 
-def _check_unactuated_torque(metrics: dict[str, Any], notes: _Notes) -> None:
-    tq = metrics.get("unactuated_torque")
-    if not (isinstance(tq, dict) and _finite(tq.get("rms"))):
+def _check_unactuated_torque(m: RunMetrics, notes: _Notes) -> None:
+    tq = m.unactuated_torque
+    if not (tq is not None and _finite(tq.rms)):
         return
     notes.checked.append("unactuated_torque")
-    if tq["rms"] == 0:
+    rms = float(tq.rms)  # type: ignore[arg-type]  # _finite
+    if rms == 0:
         return
-    unit = tq.get("unit", "N·m")
-    text = (f"the unactuated joint {tq.get('joint')} carries a logged {'force' if unit == 'N' else 'torque'} of "
-            f"{tq['rms']:.3g} {unit} rms (mean {tq.get('mean', math.nan):.3g}): the BEM assumes it unactuated (Γ_u = 0, eq. 2), "
+    unit = tq.unit or "N·m"
+    mean = tq.mean if tq.mean is not None else math.nan
+    text = (f"the unactuated joint {tq.joint} carries a logged {'force' if unit == 'N' else 'torque'} of "
+            f"{rms:.3g} {unit} rms (mean {mean:.3g}): the BEM assumes it unactuated (Γ_u = 0, eq. 2), "
             "so the learned map mixes it in")
-    shift, target = tq.get("shift_rms"), tq.get("target")
+    shift, target = tq.shift_rms, tq.target
     if _finite(shift) and _finite(target):
-        q_unit = metrics.get("output_unit", "rad")
+        q_unit = m.unit()
         big = float(shift) > float(target)  # type: ignore[arg-type]  # _finite checked both
-        text += (f"; against the model's gravity stiffness {tq['stiffness']:.3g} {tq.get('stiffness_unit', '')} it moves the "
+        gscale = float(tq.gravity_scale) if tq.gravity_scale is not None else math.nan
+        text += (f"; against the model's gravity stiffness {tq.stiffness:.3g} {tq.stiffness_unit or ''} it moves the "
                  f"equilibrium by {shift:.3g} {q_unit} rms, {'more' if big else 'less'} than the accuracy target "
-                 f"{target:.3g} {q_unit} (0.05 d; {100 * tq['rms'] / tq['gravity_scale']:.2g} % of the gravity torque "
-                 f"{tq['gravity_scale']:.3g} {unit} at d)")
+                 f"{target:.3g} {q_unit} (0.05 d; {100 * rms / gscale:.2g} % of the gravity torque "
+                 f"{gscale:.3g} {unit} at d)")
         if big:
             text += ": log without it (friction compensation off) or subtract its effect before learning"
         notes.add("degraded" if big else "note", "unactuated_torque", text)

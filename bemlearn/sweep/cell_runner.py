@@ -233,11 +233,9 @@ def _cpu_seconds() -> float:
 
 
 def _verdict(metrics: dict[str, Any]) -> tuple[str | None, list[str]]:
-    v = metrics.get("verdict")
-    if not isinstance(v, dict):
-        return None, []
-    reasons = v.get("reasons") or []
-    return (str(v["status"]) if v.get("status") is not None else None), [str(r) for r in reasons]
+    from bemlearn.pipeline.run_metrics import written_verdict
+
+    return written_verdict(metrics)
 
 
 def warm_worker() -> int:

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from bemlearn.errors import BemlearnError, ConfigError
+from bemlearn.pipeline.run_metrics import LoopMetrics, RunMetrics
 
 __all__ = ["SweepStage", "core_stages", "get_stage", "stage_names", "dotted_get"]
 
@@ -113,19 +114,38 @@ RUN_HEADLINE_MORE = (
 LOOP_HEADLINE = ("fell", "tracking_rmse", "diverged", "bem_vs_model_rmse", "bem_inside_2sigma")
 
 
+#: How each column of :data:`RUN_HEADLINE` / :data:`RUN_HEADLINE_MORE` is read from the typed metrics.
+_COLUMNS: dict[str, Callable[[RunMetrics], Any]] = {
+    "bem_heldout.rmse": lambda m: m.bem_heldout and m.bem_heldout.rmse,
+    "bem_design_region.gain": lambda m: m.bem_design_region and m.bem_design_region.gain,
+    "bem_heldout.coverage_2sigma_band": lambda m: m.bem_heldout and m.bem_heldout.coverage_2sigma_band,
+    "bem_heldout.max_abs": lambda m: m.bem_heldout and m.bem_heldout.max_abs,
+    "bem_heldout.design_region.rmse": lambda m: m.bem_heldout and m.bem_heldout.design_region and m.bem_heldout.design_region.rmse,
+    "val_rmse": lambda m: m.val_rmse,
+    "data_heldout.rmse": lambda m: m.data_heldout and m.data_heldout.rmse,
+    "data_heldout.coverage": lambda m: m.data_heldout and m.data_heldout.coverage,
+}
+
+
 def _run_headline(metrics: Mapping[str, Any]) -> dict[str, Any]:
+    """The headline of a run / train cell from its ``metrics.json`` (read once into :class:`RunMetrics`)."""
+    return _headline(RunMetrics.from_dict(metrics))
+
+
+def _headline(m: RunMetrics) -> dict[str, Any]:
     def pick(keys):
-        return {k: v for k in keys if (v := dotted_get(metrics, k, _MISSING)) is not _MISSING}
+        return {k: v for k in keys if (v := _COLUMNS[k](m)) is not None}
 
     out = pick(RUN_HEADLINE)
-    for src, loop in (metrics.get("closed_loop") or {}).items():
-        out.update({f"closed_loop.{src}.{k}": loop[k] for k in LOOP_HEADLINE if k in loop})
+    for src, loop in (m.closed_loop or {}).items():
+        out.update({f"closed_loop.{src}.{k}": v for k in LOOP_HEADLINE if (v := getattr(loop, k)) is not None})
     out.update(pick(RUN_HEADLINE_MORE))
     return out
 
 
 def _simulate_headline(metrics: Mapping[str, Any]) -> dict[str, Any]:
-    return _run_headline({"closed_loop": {src: m for src, m in metrics.items() if isinstance(m, Mapping)}})
+    loops = {src: LoopMetrics.from_dict(m) for src, m in metrics.items() if isinstance(m, Mapping)}
+    return _headline(RunMetrics(closed_loop=loops))
 
 
 def _resolve_pipeline(raw: dict[str, Any], where: str):

@@ -4,9 +4,13 @@ upright, whether a non-ok verdict's first reason is true, and the per-feature ta
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+
+from bemlearn.pipeline.run_metrics import RunMetrics
 
 __all__ = ["FEATURES", "compare_predictor", "balanced_at_upright", "judge_reason", "score_run", "feature_table", "format_table"]
 
@@ -56,7 +60,7 @@ def compare_predictor(predictor_path: str | Path, xml: str, truth: dict, *, n_qu
             "intercept": float(icpt), "n_queries": int(err.size), "learned_at_rest_minus_upright": float(wrap_angle(at_rest - qs))}
 
 
-def balanced_at_upright(metrics: dict, qu_upright: float) -> tuple[bool | None, str]:
+def balanced_at_upright(metrics: RunMetrics | Mapping[str, Any], qu_upright: float) -> tuple[bool | None, str]:
     """Whether the run's closed loop with the learned BEM stayed up at the *true* upright.
 
     ``closed_loop.predictor.qu_max`` is max |q_u| over the loop in the robot's coordinates (MuJoCo's qpos;
@@ -65,15 +69,16 @@ def balanced_at_upright(metrics: dict, qu_upright: float) -> tuple[bool | None, 
     qu_max ≤ BALANCE_TOL).  How well the actuated joints tracked their reference is not part of it (the target asks
     where the robot was balanced; a loop that stayed up while its arm left the reference is named in the note, and the
     run's verdict judges the tracking against the model BEM's loop).  ``None`` when the run has no closed loop of the
-    predictor.
+    predictor.  A mapping (a run's ``metrics.json``) is read into :class:`~bemlearn.pipeline.run_metrics.RunMetrics` once.
     """
-    cl = (metrics.get("closed_loop") or {}).get("predictor")
+    m = metrics if isinstance(metrics, RunMetrics) else RunMetrics.from_dict(metrics)
+    cl = (m.closed_loop or {}).get("predictor")
     if not cl:
         return None, "no closed loop with the learned BEM"
-    if cl.get("fell"):
+    if cl.fell:
         return False, "the learned-BEM loop fell"
-    drift = " (its actuated joints left the reference)" if cl.get("diverged") else ""
-    qmax = cl.get("qu_max")
+    drift = " (its actuated joints left the reference)" if cl.diverged else ""
+    qmax = cl.qu_max
     if qmax is None or not np.isfinite(qmax):
         return None, "closed loop without qu_max"
     a = abs(qu_upright)
@@ -142,16 +147,13 @@ def score_run(run_dir: Path, xml: str, truth: dict, record: dict) -> dict:
                  "qu_upright": truth["qu_upright"], "holdable": bool(truth["holdable"]), "hold_reason": truth["hold"]["reason"],
                  "exit_code": record.get("exit_code"), "wall_s": record.get("wall_s"), "commit": record.get("commit")}
     mpath = run_dir / "metrics.json"
-    metrics = json.loads(mpath.read_text()) if mpath.is_file() else {}
-    verdict = metrics.get("verdict") or {}
+    metrics = RunMetrics.from_dict(json.loads(mpath.read_text()) if mpath.is_file() else {})
+    verdict = metrics.verdict
     # no verdict: exit 2 is a named error (BemlearnError, one line), anything else a crash (traceback, timeout)
     code = record.get("exit_code")
-    row["verdict"] = verdict.get("status") or ("none" if code in (0, 3, 4) else "error" if code == 2 else "crash")
-    reasons = verdict.get("reasons") or []
-    first = reasons[0] if reasons else ""
-    row["first_reason"] = first if isinstance(first, str) else json.dumps(first)
-    findings = verdict.get("findings") or []
-    row["first_check"] = findings[0].get("check", "") if findings and isinstance(findings[0], dict) else ""
+    row["verdict"] = (verdict.status if verdict else None) or ("none" if code in (0, 3, 4) else "error" if code == 2 else "crash")
+    row["first_reason"] = verdict.findings[0].reason if verdict and verdict.findings else ""
+    row["first_check"] = verdict.findings[0].check if verdict and verdict.findings else ""
     if row["verdict"] in ("error", "crash"):
         row["first_reason"] = record.get("error_tail", "")
     pred = run_dir / "bem_predictor.pt"
