@@ -30,7 +30,14 @@ from typing import Any
 
 import numpy as np
 
-from bemlearn.robots.scales import bem_gain, bem_slopes, instability_rate, qa_half_ranges, qu_half_range
+from bemlearn.robots.scales import (
+    bem_gain,
+    bem_slopes,
+    instability_rate,
+    qa_half_ranges,
+    qu_half_range,
+    velocity_stiffening_speed,
+)
 from bemlearn.warnings import DesignWarning, warn
 
 __all__ = [
@@ -264,9 +271,17 @@ def excitation_directions(robot, rate: RateChoice, signals: dict) -> Derived:
     lam = instability_rate(robot)
     half = qa_half_ranges(robot)
     limited = _limited_actuated(robot)
-    P = np.where(limited, 0.8 * half, half)
+    kinds = tuple(getattr(robot, "coordinate_kinds", ()))
+    full_turn = np.array([not limited[j] and len(kinds) == robot.n and kinds[robot.actuated_index[j]] == "hinge"
+                          for j in range(robot.m)], dtype=bool)
+    P = np.where(limited, 0.8 * half, np.where(full_turn, math.pi, half))
     P = np.where(np.abs(sp) > 1e-9, np.minimum(P, d / np.maximum(np.abs(sp), 1e-300)), P)
-    a = np.where(np.abs(sa) > 1e-9, 1.3 * d / np.maximum(np.abs(sa), 1e-300), P * w_hi**2)
+    # the slopes where the excitation goes, not only at rest (a turntable's yaw turns s_a of the slides)
+    sp_max, sa_max = _slopes_over_extents(robot, P, np.abs(sp), np.abs(sa))
+    P = np.where(sp_max > 1e-9, np.minimum(P, d / np.maximum(sp_max, 1e-300)), P)
+    a = np.where(sa_max > 1e-9, 1.3 * d / np.maximum(sa_max, 1e-300), P * w_hi**2)
+    v_tip = velocity_stiffening_speed(robot)
+    a = np.minimum(a, v_tip**2 / np.maximum(P, 1e-300))  # a component's peak speed √(a P) ≤ v_tip
     scaled = []
     try:
         inv = MujocoActuatorInverse(robot)
@@ -296,10 +311,33 @@ def excitation_directions(robot, rate: RateChoice, signals: dict) -> Derived:
     ext = tuple(float(f"{x:.6g}") for x in (*P, *a))
     note = (f"m = {robot.m}: each actuated coordinate its own sines, q_u target on their periodic BEM motion (λ = {lam:.3g} 1/s) "
             f"with the model's feedforward; extents P = {tuple(round(float(x), 4) for x in P)}, "
-            f"a = {tuple(round(float(x), 4) for x in a)} (d/|s_p|, 1.3 d/|s_a|, 0.8 × half range"
+            f"a = {tuple(round(float(x), 4) for x in a)} (d/max|s_p|, 1.3 d/max|s_a| over each coordinate's extent, "
+            f"0.8 × half range, ±π for an unlimited hinge; a ≤ v²/P, v = {tuple(round(float(x), 3) for x in v_tip)} the speed "
+            f"that doubles the upright's stiffness"
             f"{'; scaled to half the actuator limits on ' + ', '.join(scaled) if scaled else ''}); "
             f"component amplitude U{tuple(round(x, 3) for x in frac)} × min(P_j, a_j/ω²)")
     return Derived({"reference_bem": ref, "excursion": ext, "amplitude": frac}, note)
+
+
+def _slopes_over_extents(robot, P: np.ndarray, sp0: np.ndarray, sa0: np.ndarray, *, steps: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """``(max |s_p|, max |s_a|)``, ``(m,)`` each: the BEM slopes (:func:`~bemlearn.robots.scales.bem_slopes`) at rest and
+    with each actuated coordinate i alone at ±k/``steps`` × P_i (k = 1 … steps), the largest magnitude per input.
+    ``sp0``, ``sa0``: the magnitudes at rest.  A turntable at ψ makes the slide across the pole's plane move the BEM
+    (s_a = sin ψ / g) although it does not at ψ = 0; slopes that do not vary leave the maxima those at rest."""
+    from bemlearn.errors import RobotModelError
+
+    sp_max, sa_max = sp0.copy(), sa0.copy()
+    for i in range(robot.m):
+        for k in range(1, steps + 1):
+            for sign in (1.0, -1.0):
+                at = np.zeros((3, robot.m))
+                at[0, i] = sign * k / steps * P[i]
+                try:
+                    s = np.abs(bem_slopes(robot, at=at))
+                except RobotModelError:  # no BEM near upright there: that pose does not bound the slopes
+                    continue
+                sp_max, sa_max = np.maximum(sp_max, s[0]), np.maximum(sa_max, s[2])
+    return sp_max, sa_max
 
 
 def _effort_cap(robot, a_hi: float, n_max: int, omega: float, *, budget: float = 0.5) -> float:
@@ -482,7 +520,9 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     both joint angles: stable only near ω_u/ω_a ∝ (ω_u/λ)²), and the fixed ratio 7 misses it (measured: the model
     BEM's own closed loop fell); there the critically damped pair whose linearised loop
     (:func:`~bemlearn.control.eic_linear.eic_linear_matrix`) decays fastest is taken
-    (:func:`~bemlearn.control.eic_linear.eic_fastest_gains`), if its command stays within the limits, else the rule above.
+    (:func:`~bemlearn.control.eic_linear.eic_fastest_gains`), if its command stays within the limits and its loop as
+    it runs (sampled, with the velocity filter) decays too, else the rule and the search above (an x-y cart on a
+    turntable: the fastest continuous gains grew at 0.31 1/s sampled at 238 Hz).
 
     Returns:
         ``Derived(EICGains, note)``.
@@ -495,6 +535,8 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     d = design_region(robot).value
     e0 = d / 4 if qu_error is None else qu_error
     w_max = 2 * math.pi * rate.rate_hz / 20
+    wc = closed_loop_sensor(robot, rate).value["velocity_cutoff"] if velocity_cutoff is None else velocity_cutoff
+    fastest_fails = ""
     if robot.m >= 2:
         from bemlearn.control.eic_linear import eic_fastest_gains
 
@@ -502,10 +544,17 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
         peak = _eic_peak(robot, w_u, e0)
         if peak <= 1.0 and ab < 0:
             g = _critical(w_u, w_u / w_a)
-            return Derived(g, f"m = {robot.m}: ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/{w_u / w_a:.3g}: "
-                           f"the critically damped gains whose linearised EIC loop (eq. 8 with the null-space projector) decays "
-                           f"fastest, max Re λ = {ab:.3g} 1/s (ω_u ∈ [1.2 λ, min(6 λ, 2π·rate/20)], ω_u/ω_a ∈ [2, 60]); "
-                           f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange)")
+            note = (f"m = {robot.m}: ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/{w_u / w_a:.3g}: "
+                    f"the critically damped gains whose linearised EIC loop (eq. 8 with the null-space projector) decays "
+                    f"fastest, max Re λ = {ab:.3g} 1/s (ω_u ∈ [1.2 λ, min(6 λ, 2π·rate/20)], ω_u/ω_a ∈ [2, 60]); "
+                    f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange)")
+            sampled = _sampled_loop(robot, g, rate, wc)
+            if sampled is None or sampled.spectral_radius < 1.0:
+                return Derived(g, note + ("" if sampled is None else f"; sampled at {rate.rate_hz:g} Hz with its velocity filter "
+                                                                      f"it decays at {sampled.decay_rate:.3g} 1/s"))
+            # the continuous loop decays, the loop as it runs does not (measured: an x-y cart on a turntable)
+            fastest_fails = (f"; the fastest continuous gains (ω_u = {w_u / lam:.2g} λ, ω_a = ω_u/{w_u / w_a:.3g}) grow at "
+                             f"{-sampled.decay_rate:.3g} 1/s sampled at {rate.rate_hz:g} Hz with the velocity filter")
     w_u = min(2.2 * lam, w_max)
     peak = _eic_peak(robot, w_u, e0)
     while peak > 1.0 and w_u > 1.2 * lam:
@@ -513,8 +562,7 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
         peak = _eic_peak(robot, w_u, e0)
     g = _critical(w_u, 7.0)
     note = (f"ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/7, critically damped; "
-            f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange)")
-    wc = closed_loop_sensor(robot, rate).value["velocity_cutoff"] if velocity_cutoff is None else velocity_cutoff
+            f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange){fastest_fails}")
     try:
         plant = linearize(robot, rate_hz=rate.rate_hz, timestep=rate.timestep)[:2]
         loop = eic_tick_loop(robot, g, rate_hz=rate.rate_hz, velocity_cutoff=wc, plant=plant)
@@ -524,7 +572,7 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
         return Derived(g, note + f"; the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) "
                                  f"decays at {loop.decay_rate:.3g} 1/s at upright")
     why = (f"the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) grows at "
-           f"{-loop.decay_rate:.3g} 1/s with them")
+           f"{-loop.decay_rate:.3g} 1/s with them{fastest_fails}")
     stable = []
     for wl in EIC_GRID_OMEGA_U:
         wu = wl * lam
@@ -552,6 +600,19 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     return Derived(gg, f"ω_u = {wl:g} λ (λ = {lam:.3g} 1/s), ω_a = ω_u/{ratio:g}, critically damped, the fastest decaying "
                        f"({decay:.3g} 1/s) of the grid's sampled-stable gains ({why} with the rule's); none brings the robot "
                        f"back in MuJoCo: " + "; ".join(tried))
+
+
+def _sampled_loop(robot, gains, rate: RateChoice, velocity_cutoff: float):
+    """:func:`~bemlearn.control.eic_linear.eic_tick_loop` at ``gains``; ``None`` where the linearisation does not cover the actuators."""
+    from bemlearn.control.eic_linear import eic_tick_loop
+    from bemlearn.control.lqr import linearize
+    from bemlearn.errors import ArgumentError, NumericalError, RobotModelError
+
+    try:
+        plant = linearize(robot, rate_hz=rate.rate_hz, timestep=rate.timestep)[:2]
+        return eic_tick_loop(robot, gains, rate_hz=rate.rate_hz, velocity_cutoff=velocity_cutoff, plant=plant)
+    except (RobotModelError, NumericalError, ArgumentError):
+        return None
 
 
 def eic_recovery(robot, gains, rate: RateChoice, *, qu0: float, velocity_cutoff: float, duration_s: float = 3.0) -> tuple[bool, str]:
