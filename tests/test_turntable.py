@@ -73,7 +73,13 @@ def test_yaw_rate_that_doubles_the_upright_stiffness_oracle_and_pipeline(index, 
     assert o.stiffening_speed(2) == pytest.approx(want, rel=1e-6)
     assert math.isinf(o.stiffening_speed(0)) and math.isinf(o.stiffening_speed(1))
     # the oracle's box: no yaw rate beyond it (before: π ω_u ≈ 17 rad/s on an unlimited turntable)
-    assert o.scales()["vel"][2] <= want * (1 + 1e-6)
+    sc = o.scales()
+    assert sc["vel"][2] <= want * (1 + 1e-6)
+    # the y slide, flat at ψ = 0, moves the BEM at the yaw poses k/4 of the way to the span's ends: a_y = g tan 0.2 / max|sin ψ|
+    # (before: ω_u² × its half span, 11–21 m/s², where the learned BEM was asked about ÿ the data never held)
+    ends = sc["pos"][2]
+    s_max = max(abs(math.sin(k / 4 * end)) for k in range(1, 5) for end in ends)
+    assert sc["acc"][1] == pytest.approx(G * math.tan(0.2) / s_max, rel=1e-6)
     path = tmp_path / "robot.xml"
     path.write_text(xml)
     robot = load(str(path))
@@ -164,3 +170,31 @@ def test_excitation_target_takes_the_slopes_at_the_reference_pose(tmp_path):
     path2.write_text(xml2)
     cart = load(str(path2))
     assert _pose_slopes(cart, np.array([0.3, 0.3]), instability_rate(cart)) is None
+
+
+def test_design_grid_reaches_the_collection_extents(tmp_path):
+    """The design-region check covers what the excitation moved (``collect.excursion``): a turntable's yaw to ±π, its
+    rate to √(a P), the slides' accelerations to a; without the extents the box is the held-out references' own
+    (|q| ≤ Σ|A| on every coordinate) and misses most yaw angles."""
+    from bemlearn.pipeline.design_evaluation import design_grid
+    from bemlearn.pipeline.evaluation import EvaluationConfig
+
+    xml, _ = generate_robot(0, 5, hold_check=False)
+    path = tmp_path / "robot.xml"
+    path.write_text(xml)
+    robot = load(str(path))
+    ecfg = EvaluationConfig(amplitude_max=0.064, frequency_hz=(0.08, 0.86), n_sines=(2, 3), amplitude_min=0.032)
+    P, a = np.array([0.34, 0.34, math.pi]), np.array([2.55, 2.55, 9.97])
+    narrow = design_grid(robot, ecfg, n_points=256, seed=0)
+    wide = design_grid(robot, ecfg, n_points=256, seed=0, excursion=(*P, *a))
+    assert narrow.box["yaw"]["q"] == pytest.approx(0.064)
+    assert wide.box["yaw"]["q"] == pytest.approx(math.pi) and wide.box["yaw"]["qd"] == pytest.approx(math.sqrt(a[2] * P[2]))
+    assert wide.box["y"]["qdd"] >= a[1] and wide.box["x"]["q"] == pytest.approx(0.34)
+    x = wide.x.numpy()  # [q̈_a, q̇_a, q_a, 0, 0], m = 3
+    yaw, yaw_rate = x[:, 8], x[:, 5]
+    assert np.abs(yaw).max() > 2.5
+    # at ψ̇ ≈ 0 the kept points' model BEM is the static closed form at their yaw
+    still = np.abs(yaw_rate) < 0.05
+    assert still.sum() > 0
+    want = robot.qu_nominal + np.arctan((x[:, 0] * np.cos(yaw) + x[:, 1] * np.sin(yaw)) / G)
+    np.testing.assert_allclose(wide.qu[still], want[still], atol=1e-4)

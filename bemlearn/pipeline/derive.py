@@ -245,12 +245,18 @@ def excitation_directions(robot, rate: RateChoice, signals: dict) -> Derived:
     joint's reference with another's to keep q_u at nominal, and the actuated accelerations move in lockstep (a
     two-link arm: corr(q̈₁, q̈₂) ≈ −0.99), so the data cannot resolve the BEM's dependence on each.  Instead each
     actuated coordinate j follows its own sines, the q_u target is the periodic motion they drive through the
-    linearised BEM (s_p, s_v, s_a at upright, λ; :func:`~bemlearn.sim.collect._trajectory_reference`), and the
+    linearised BEM (s_p, s_v, s_a at upright, λ; :func:`~bemlearn.sim.collect._trajectory_reference`; where the slopes
+    change with the pose, those at the reference's pose, :func:`~bemlearn.sim.collect._pose_slopes`), and the
     command carries the model's feedforward along it.  Each direction gets its own extents, its units:
 
-        P_j = min(d/|s_p,j|, 0.8 × half range_j)   (0.8 × half range where s_p,j = 0)
-        a_j = 1.3 d/|s_a,j|                         (P_j ω_hi² where s_a,j = 0)
+        P_j = min(d/max|s_p,j|, 0.8 × half range_j)   (0.8 × half range where s_p,j = 0; ±π for an unlimited hinge)
+        a_j = min(1.3 d/max|s_a,j|, v_j²/P_j)          (P_j ω_hi² where s_a,j = 0 everywhere)
 
+    the maxima over the rest pose and each coordinate alone across its extent (:func:`_slopes_over_extents`: a
+    turntable at ψ turns the slide across the pole's plane into one that moves the BEM, s_a = sin ψ/g, although it
+    does not at ψ = 0 — bounded at rest only, its accelerations reached 17–25 m/s² and the trials fell), and v_j the
+    speed at which the coordinate's velocity doubles the upright's stiffness
+    (:func:`~bemlearn.robots.scales.velocity_stiffening_speed`: a component's peak speed √(a_j P_j) stays below it);
     both scaled down together until (q_a,j = ±P_j, q̈_a,j = ∓a_j) alone takes at most half the actuator limits
     (:func:`actuator_effort`); a component at ω on j has amplitude U(0.2, 1)/√n_max · min(P_j, a_j/ω²) (random
     phases: n components add up as √n).

@@ -69,7 +69,8 @@ class CollectConfig:
         input_units: unit of the logged inputs, e.g. ``V`` for a motor driven in volts (``null``: derived from the model, see ``bemlearn config show``).
         reference_bem: ``[]``: the paper's excitation (q_u target at nominal).  Else the linearised BEM (eq. 9) at upright,
             s_p, s_v, s_a per actuated coordinate, then λ (1/s): the q_u target is the periodic motion of q_u the actuated
-            sines drive (:func:`_trajectory_reference`), and the command carries the model's inverse dynamics along that
+            sines drive (:func:`_trajectory_reference`; with ``excursion``, the slopes' change with the pose from the
+            model added, :func:`_pose_slopes`), and the command carries the model's inverse dynamics along that
             reference, u = u_ff(q_t, q̇_t, q̈_t) + kᵀe, so that each actuated direction follows its own sines instead of
             the LQR cancelling one joint's reference with another's (``null``: derived from the model, see ``bemlearn config show``).
         excursion: ``[]``: every component's amplitude is drawn from ``amplitude`` (rad or m, shared by the actuated

@@ -21,7 +21,9 @@ drives.
   velocity a_i / ω_u (ω_u = √(|∂²V/∂q_u²| / M_uu) the upright's divergence rate), and the position span
   (the joint range, or the offset that moves q_u^e by ``bound``).  A joint whose acceleration alone never
   moves q_u^e at rest (an x-y cart's y slide under a pole that tilts in x-z, a turntable's yaw) has no such
-  a_i (q_u^e within 10⁻⁶ × the bound up to the search's bracket): it gets the balance's own scale, a sine at ω_u
+  a_i (q_u^e within 10⁻⁶ × the bound up to the search's bracket) takes the smallest a_i over the poses with one other
+  joint at k/4 of its span (k = 1 … 4; a turntable at ψ turns the y slide into the pole's plane: a_y = g tan 0.2 at
+  ψ = π/2, where at rest it looked flat); one flat at all of them gets the balance's own scale, a sine at ω_u
   across its range, a_i = ω_u² × its position half span, not the search's bracket (10³ per s², which asked the
   learned BEM about 1300 m/s² and 200 m/s).  No joint moves faster than v_tip, the speed at which its velocity
   alone doubles the upright's stiffness (:meth:`Oracle.stiffening_speed`; a turntable's yaw rate: its centrifugal
@@ -294,16 +296,37 @@ class Oracle:
                 margin = 0.1 * (hi - lo)
                 lo_j, hi_j = max(lo_j, lo + margin), min(hi_j, hi - margin)
             pos.append((float(lo_j), float(hi_j)))
+        for j in range(self.m):
+            e = np.zeros(self.m)
+            e[j] = 1.0
+            lo_j, hi_j = pos[j]
             v_tip = self.stiffening_speed(j)
             a = self._reach(lambda s, e=e: (self.qa0, z, s * e), ACC_CAP)
             if a >= ACC_CAP and self._flat(lambda s, e=e: (self.qa0, z, s * e), ACC_CAP):
-                # the BEM does not depend on this acceleration at rest: a sine at ω_u across the span, no faster than v_tip
-                a = omega**2 * 0.5 * (hi_j - lo_j) if 0.5 * (hi_j - lo_j) * omega <= v_tip else omega * v_tip
+                # flat at rest; where another joint's position makes it move the BEM (a turntable turning the y slide
+                # into the pole's plane), the smallest reach over those poses
+                a = min((self._reach(lambda s, e=e, at=at: (at, z, s * e), ACC_CAP) for at in self._poses(pos, j)), default=ACC_CAP)
+                if a >= ACC_CAP:  # flat everywhere: a sine at ω_u across the span, no faster than v_tip
+                    a = omega**2 * 0.5 * (hi_j - lo_j) if 0.5 * (hi_j - lo_j) * omega <= v_tip else omega * v_tip
             acc.append(a)
             v = self._reach(lambda s, e=e: (self.qa0, s * e, z), a / omega)
             vel.append(min(v, a / omega, v_tip))
         self._scales = {"omega_u": omega, "acc": acc, "vel": vel, "pos": pos}
         return self._scales
+
+    def _poses(self, pos: list, j: int, steps: int = 4) -> list[np.ndarray]:
+        """Actuated poses q_a0 with one other joint i ≠ ``j`` at k/``steps`` of the way to either end of its span
+        (k = 1 … steps)."""
+        out = []
+        for i in range(self.m):
+            if i == j:
+                continue
+            for k in range(1, steps + 1):
+                for end in pos[i]:
+                    at = self.qa0.copy()
+                    at[i] = self.qa0[i] + k / steps * (end - self.qa0[i])
+                    out.append(at)
+        return out
 
     def _flat(self, query, cap: float) -> bool:
         """Whether q_u^e stays within 10⁻⁶ × the bound of q_u* all the way to ±``cap`` (the BEM does not depend on it)."""
