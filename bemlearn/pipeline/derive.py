@@ -30,7 +30,14 @@ from typing import Any
 
 import numpy as np
 
-from bemlearn.robots.scales import bem_gain, bem_slopes, instability_rate, qa_half_ranges, qu_half_range
+from bemlearn.robots.scales import (
+    bem_gain,
+    bem_slopes,
+    instability_rate,
+    qa_half_ranges,
+    qu_half_range,
+    velocity_stiffening_speed,
+)
 from bemlearn.warnings import DesignWarning, warn
 
 __all__ = [
@@ -238,12 +245,18 @@ def excitation_directions(robot, rate: RateChoice, signals: dict) -> Derived:
     joint's reference with another's to keep q_u at nominal, and the actuated accelerations move in lockstep (a
     two-link arm: corr(q̈₁, q̈₂) ≈ −0.99), so the data cannot resolve the BEM's dependence on each.  Instead each
     actuated coordinate j follows its own sines, the q_u target is the periodic motion they drive through the
-    linearised BEM (s_p, s_v, s_a at upright, λ; :func:`~bemlearn.sim.collect._trajectory_reference`), and the
+    linearised BEM (s_p, s_v, s_a at upright, λ; :func:`~bemlearn.sim.collect._trajectory_reference`; where the slopes
+    change with the pose, those at the reference's pose, :func:`~bemlearn.sim.collect._pose_slopes`), and the
     command carries the model's feedforward along it.  Each direction gets its own extents, its units:
 
-        P_j = min(d/|s_p,j|, 0.8 × half range_j)   (0.8 × half range where s_p,j = 0)
-        a_j = 1.3 d/|s_a,j|                         (P_j ω_hi² where s_a,j = 0)
+        P_j = min(d/max|s_p,j|, 0.8 × half range_j)   (0.8 × half range where s_p,j = 0; ±π for an unlimited hinge)
+        a_j = min(1.3 d/max|s_a,j|, v_j²/P_j)          (P_j ω_hi² where s_a,j = 0 everywhere)
 
+    the maxima over the rest pose and each coordinate alone across its extent (:func:`_slopes_over_extents`: a
+    turntable at ψ turns the slide across the pole's plane into one that moves the BEM, s_a = sin ψ/g, although it
+    does not at ψ = 0 — bounded at rest only, its accelerations reached 17–25 m/s² and the trials fell), and v_j the
+    speed at which the coordinate's velocity doubles the upright's stiffness
+    (:func:`~bemlearn.robots.scales.velocity_stiffening_speed`: a component's peak speed √(a_j P_j) stays below it);
     both scaled down together until (q_a,j = ±P_j, q̈_a,j = ∓a_j) alone takes at most half the actuator limits
     (:func:`actuator_effort`); a component at ω on j has amplitude U(0.2, 1)/√n_max · min(P_j, a_j/ω²) (random
     phases: n components add up as √n).
@@ -264,9 +277,17 @@ def excitation_directions(robot, rate: RateChoice, signals: dict) -> Derived:
     lam = instability_rate(robot)
     half = qa_half_ranges(robot)
     limited = _limited_actuated(robot)
-    P = np.where(limited, 0.8 * half, half)
+    kinds = tuple(getattr(robot, "coordinate_kinds", ()))
+    full_turn = np.array([not limited[j] and len(kinds) == robot.n and kinds[robot.actuated_index[j]] == "hinge"
+                          for j in range(robot.m)], dtype=bool)
+    P = np.where(limited, 0.8 * half, np.where(full_turn, math.pi, half))
     P = np.where(np.abs(sp) > 1e-9, np.minimum(P, d / np.maximum(np.abs(sp), 1e-300)), P)
-    a = np.where(np.abs(sa) > 1e-9, 1.3 * d / np.maximum(np.abs(sa), 1e-300), P * w_hi**2)
+    # the slopes where the excitation goes, not only at rest (a turntable's yaw turns s_a of the slides)
+    sp_max, sa_max = _slopes_over_extents(robot, P, np.abs(sp), np.abs(sa))
+    P = np.where(sp_max > 1e-9, np.minimum(P, d / np.maximum(sp_max, 1e-300)), P)
+    a = np.where(sa_max > 1e-9, 1.3 * d / np.maximum(sa_max, 1e-300), P * w_hi**2)
+    v_tip = velocity_stiffening_speed(robot)
+    a = np.minimum(a, v_tip**2 / np.maximum(P, 1e-300))  # a component's peak speed √(a P) ≤ v_tip
     scaled = []
     try:
         inv = MujocoActuatorInverse(robot)
@@ -296,10 +317,33 @@ def excitation_directions(robot, rate: RateChoice, signals: dict) -> Derived:
     ext = tuple(float(f"{x:.6g}") for x in (*P, *a))
     note = (f"m = {robot.m}: each actuated coordinate its own sines, q_u target on their periodic BEM motion (λ = {lam:.3g} 1/s) "
             f"with the model's feedforward; extents P = {tuple(round(float(x), 4) for x in P)}, "
-            f"a = {tuple(round(float(x), 4) for x in a)} (d/|s_p|, 1.3 d/|s_a|, 0.8 × half range"
+            f"a = {tuple(round(float(x), 4) for x in a)} (d/max|s_p|, 1.3 d/max|s_a| over each coordinate's extent, "
+            f"0.8 × half range, ±π for an unlimited hinge; a ≤ v²/P, v = {tuple(round(float(x), 3) for x in v_tip)} the speed "
+            f"that doubles the upright's stiffness"
             f"{'; scaled to half the actuator limits on ' + ', '.join(scaled) if scaled else ''}); "
             f"component amplitude U{tuple(round(x, 3) for x in frac)} × min(P_j, a_j/ω²)")
     return Derived({"reference_bem": ref, "excursion": ext, "amplitude": frac}, note)
+
+
+def _slopes_over_extents(robot, P: np.ndarray, sp0: np.ndarray, sa0: np.ndarray, *, steps: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """``(max |s_p|, max |s_a|)``, ``(m,)`` each: the BEM slopes (:func:`~bemlearn.robots.scales.bem_slopes`) at rest and
+    with each actuated coordinate i alone at ±k/``steps`` × P_i (k = 1 … steps), the largest magnitude per input.
+    ``sp0``, ``sa0``: the magnitudes at rest.  A turntable at ψ makes the slide across the pole's plane move the BEM
+    (s_a = sin ψ / g) although it does not at ψ = 0; slopes that do not vary leave the maxima those at rest."""
+    from bemlearn.errors import RobotModelError
+
+    sp_max, sa_max = sp0.copy(), sa0.copy()
+    for i in range(robot.m):
+        for k in range(1, steps + 1):
+            for sign in (1.0, -1.0):
+                at = np.zeros((3, robot.m))
+                at[0, i] = sign * k / steps * P[i]
+                try:
+                    s = np.abs(bem_slopes(robot, at=at))
+                except RobotModelError:  # no BEM near upright there: that pose does not bound the slopes
+                    continue
+                sp_max, sa_max = np.maximum(sp_max, s[0]), np.maximum(sa_max, s[2])
+    return sp_max, sa_max
 
 
 def _effort_cap(robot, a_hi: float, n_max: int, omega: float, *, budget: float = 0.5) -> float:
@@ -480,7 +524,9 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     both joint angles: stable only near ω_u/ω_a ∝ (ω_u/λ)²), and the fixed ratio 7 misses it (measured: the model
     BEM's own closed loop fell); there the critically damped pair whose linearised loop
     (:func:`~bemlearn.control.eic_linear.eic_linear_matrix`) decays fastest is the first choice
-    (:func:`~bemlearn.control.eic_linear.eic_fastest_gains`), if its command stays within the limits, else the rule above.
+    (:func:`~bemlearn.control.eic_linear.eic_fastest_gains`), if its command stays within the limits and its loop as
+    it runs (sampled, with the velocity filter) decays too, else the rule above (an x-y cart on a turntable: the
+    fastest continuous gains grew at 0.31 1/s sampled at 238 Hz).
 
     The first choice is kept when the loop *as it runs* — sampled at the control rate, the command held over the
     tick, the rates from the closed loop's velocity filter (cutoff ``velocity_cutoff``, default
@@ -506,18 +552,27 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     e0 = d / 4 if qu_error is None else qu_error
     w_max = 2 * math.pi * rate.rate_hz / 20
     wc = closed_loop_sensor(robot, rate).value["velocity_cutoff"] if velocity_cutoff is None else velocity_cutoff
-    first: tuple | None = None    # (gains, note) of the rule (m = 1) or the fastest pair (m ≥ 2), before MuJoCo's check
+    first: tuple | None = None    # (gains, note) of the fastest pair (m ≥ 2) when its sampled loop decays
+    fastest_fails = ""
     if robot.m >= 2:
         from bemlearn.control.eic_linear import eic_fastest_gains
 
         w_u, w_a, ab = eic_fastest_gains(robot, lam, w_max)
         peak = _eic_peak(robot, w_u, e0)
         if peak <= 1.0 and ab < 0:
-            first = (_critical(w_u, w_u / w_a),
-                     f"m = {robot.m}: ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/{w_u / w_a:.3g}: "
-                     f"the critically damped gains whose linearised EIC loop (eq. 8 with the null-space projector) decays "
-                     f"fastest, max Re λ = {ab:.3g} 1/s (ω_u ∈ [1.2 λ, min(6 λ, 2π·rate/20)], ω_u/ω_a ∈ [2, 60]); "
-                     f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange)")
+            gf = _critical(w_u, w_u / w_a)
+            nf = (f"m = {robot.m}: ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/{w_u / w_a:.3g}: "
+                  f"the critically damped gains whose linearised EIC loop (eq. 8 with the null-space projector) decays "
+                  f"fastest, max Re λ = {ab:.3g} 1/s (ω_u ∈ [1.2 λ, min(6 λ, 2π·rate/20)], ω_u/ω_a ∈ [2, 60]); "
+                  f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange)")
+            sampled = _sampled_loop(robot, gf, rate, wc)
+            if sampled is None:
+                return Derived(gf, nf)
+            if sampled.spectral_radius < 1.0:
+                first = (gf, nf + f"; sampled at {rate.rate_hz:g} Hz with its velocity filter it decays at {sampled.decay_rate:.3g} 1/s")
+            else:  # the continuous loop decays, the loop as it runs does not (measured: an x-y cart on a turntable)
+                fastest_fails = (f"; the fastest continuous gains (ω_u = {w_u / lam:.2g} λ, ω_a = ω_u/{w_u / w_a:.3g}) grow at "
+                                 f"{-sampled.decay_rate:.3g} 1/s sampled at {rate.rate_hz:g} Hz with the velocity filter")
     w_u = min(2.2 * lam, w_max)
     peak = _eic_peak(robot, w_u, e0)
     while peak > 1.0 and w_u > 1.2 * lam:
@@ -525,7 +580,7 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
         peak = _eic_peak(robot, w_u, e0)
     g = _critical(w_u, 7.0)
     note = (f"ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/7, critically damped; "
-            f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange)")
+            f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange){fastest_fails}")
     try:
         plant = linearize(robot, rate_hz=rate.rate_hz, timestep=rate.timestep)[:2]
         if first is None:
@@ -582,6 +637,19 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
 
 #: Sampled-stable grid gains tried in MuJoCo by :func:`eic_gains` (fastest decay first).
 EIC_SEARCH_TRIES = 8
+
+
+def _sampled_loop(robot, gains, rate: RateChoice, velocity_cutoff: float):
+    """:func:`~bemlearn.control.eic_linear.eic_tick_loop` at ``gains``; ``None`` where the linearisation does not cover the actuators."""
+    from bemlearn.control.eic_linear import eic_tick_loop
+    from bemlearn.control.lqr import linearize
+    from bemlearn.errors import ArgumentError, NumericalError, RobotModelError
+
+    try:
+        plant = linearize(robot, rate_hz=rate.rate_hz, timestep=rate.timestep)[:2]
+        return eic_tick_loop(robot, gains, rate_hz=rate.rate_hz, velocity_cutoff=velocity_cutoff, plant=plant)
+    except (RobotModelError, NumericalError, ArgumentError):
+        return None
 
 
 def eic_recovery(robot, gains, rate: RateChoice, *, qu0: float, velocity_cutoff: float, duration_s: float = 3.0) -> tuple[bool, str]:

@@ -11,6 +11,8 @@ coordinate j,
 
     |q_a,j| ≤ Q_j,    |q̇_a,j| ≤ Q_j ω,    |q̈_a,j| ≤ max(Q_j ω², 1.3 d / |s_a,j|)           (D1)
 
+widened to the excitation's own extents where it has them (m ≥ 2, ``collect.excursion``: :func:`design_grid`)
+
 with Q_j = min(Σ|A| of the held-out references, the joint's half range), ω = 2π × their top
 frequency (``evaluate:``), and s_a,j = ∂q_u^e/∂q̈_a,j at upright (:func:`~bemlearn.robots.scales.bem_slopes`):
 the acceleration range reaches past the design bound whatever the references' amplitudes.  The
@@ -62,7 +64,8 @@ class DesignGrid:
     n_drawn: int
 
 
-def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_points: int = 4096, seed: int = 0, bound: float | None = None) -> DesignGrid:
+def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_points: int = 4096, seed: int = 0, bound: float | None = None,
+                excursion: tuple[float, ...] | None = None) -> DesignGrid:
     """The queries of (D1) for ``robot`` (module docstring).
 
     Args:
@@ -72,6 +75,10 @@ def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_poi
         n_points: Sobol points drawn (rounded to a power of two).
         seed: the Sobol scrambling seed.
         bound: d (default :func:`~bemlearn.pipeline.derive.design_region`).
+        excursion: the excitation's per-direction extents (``collect.excursion``: P_j, then a_j; m ≥ 2): the box
+            then reaches them too, |q_a,j| ≤ max(Q_j, P_j), |q̇_a,j| ≤ max(V_j, √(a_j P_j)), |q̈_a,j| ≤ max(A_j, a_j),
+            so that the check covers every motion the run claims to have excited (a turntable's yaw over ±π), not only
+            the held-out references' amplitude.
     """
     from scipy.stats import qmc
 
@@ -90,6 +97,10 @@ def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_poi
     Q = np.minimum(float(evaluate_config.amplitude_max), qa_half_ranges(robot))
     V = Q * w
     A = np.maximum(Q * w * w, np.where(s_a > 0, 1.3 * d / np.maximum(s_a, 1e-300), 0.0))
+    if excursion:
+        ext = np.asarray(excursion, dtype=np.float64)
+        P, a = ext[:m], ext[m:2 * m]
+        Q, V, A = np.maximum(Q, P), np.maximum(V, np.sqrt(a * P)), np.maximum(A, a)
     k = max(4, int(math.ceil(math.log2(max(n_points, 16)))))
     u = qmc.Sobol(3 * m, scramble=True, seed=seed).random_base2(k) * 2.0 - 1.0
     qadd, qad, qa = u[:, :m] * A, u[:, m:2 * m] * V, u[:, 2 * m:] * Q

@@ -161,7 +161,8 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         metrics.update(_data_only_metrics(state, train, val, meta.unactuated, out, writer))
         if truth_robot is not None:  # held-out learned BEM vs model-based BEM (eq. 14 vs 9)
             metrics.update(_model_metrics(state, truth_robot, config.evaluate, meta.unactuated,
-                                          units[f"qd_{meta.unactuated}"].removesuffix("/s"), out, writer))
+                                          units[f"qd_{meta.unactuated}"].removesuffix("/s"), out, writer,
+                                          excursion=_collected_excursion(meta)))
         tq = _torque_metrics(traj, truth_robot)
         if tq is not None:
             metrics["unactuated_torque"] = tq
@@ -232,10 +233,19 @@ def _data_only_metrics(state: PredictorState, train: BEMDataset, val: BEMDataset
     return metrics
 
 
+def _collected_excursion(meta) -> tuple[float, ...] | None:
+    """The per-direction extents the data were collected with (``collect.excursion`` in the trajectory's provenance,
+    written by :func:`~bemlearn.sim.collect.collect`); ``None`` for data from elsewhere or without them."""
+    cc = (meta.extra or {}).get("collect_config") or {}
+    ext = cc.get("excursion") if isinstance(cc, dict) else None
+    return tuple(float(x) for x in ext) if ext else None
+
+
 def _model_metrics(state: PredictorState, truth_robot: ControlRobot, ecfg: EvaluationConfig, unactuated: str, unit: str,
-                   out: Path, writer) -> dict:
+                   out: Path, writer, *, excursion: tuple[float, ...] | None = None) -> dict:
     """Learned vs model-based BEM along held-out references and over the design region (writes
-    ``reliability.png``, ``bem_validation.png``, ``design_region.png``)."""
+    ``reliability.png``, ``bem_validation.png``, ``design_region.png``); ``excursion``: the data's collection extents,
+    which the design region's box then covers (:func:`~bemlearn.pipeline.design_evaluation.design_grid`)."""
     ev = evaluate_bem(state, truth_robot, held_out_references(ecfg, truth_robot.m), duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
     metrics: dict = {"bem_heldout": ev.as_dict()}
     for k in ("rmse", "max_abs", "coverage_2sigma_latent", "coverage_2sigma_predictive", "coverage_2sigma_band"):
@@ -250,7 +260,7 @@ def _model_metrics(state: PredictorState, truth_robot: ControlRobot, ecfg: Evalu
     if ecfg.design_points > 0:   # over the whole design region (D1, D2), not only along the references
         from bemlearn.pipeline.design_evaluation import design_grid, design_region_figure, evaluate_design_region
 
-        dr = evaluate_design_region(state, design_grid(truth_robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed))
+        dr = evaluate_design_region(state, design_grid(truth_robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed, excursion=excursion))
         metrics["bem_design_region"] = dr.as_dict()
         for k in ("rmse", "max_abs", "gain"):
             writer.add_scalar(f"bem/design_region_{k}", getattr(dr, k), 0)

@@ -22,7 +22,7 @@ from bemlearn.robots.bem import find_roots
 from bemlearn.robots.mujoco_robot import MujocoRobot
 from bemlearn.robots.protocol import BalanceRobot, ControlRobot
 
-__all__ = ["upright_stiffness", "instability_rate", "bem_slopes", "qu_half_range", "qa_half_ranges", "qa_limited", "bem_gain", "UNLIMITED_HALF_RANGE"]
+__all__ = ["upright_stiffness", "instability_rate", "bem_slopes", "velocity_stiffening_speed", "qu_half_range", "qa_half_ranges", "qa_limited", "bem_gain", "UNLIMITED_HALF_RANGE"]
 
 UNLIMITED_HALF_RANGE = 0.5
 """Half range assumed for an unlimited actuated coordinate, rad or m."""
@@ -54,14 +54,21 @@ def instability_rate(robot: ControlRobot, *, step: float = 1e-5) -> float:
     return math.sqrt(gq / duu)
 
 
-def bem_slopes(robot: ControlRobot, *, step: float = 1e-4) -> np.ndarray:
+def bem_slopes(robot: ControlRobot, *, step: float = 1e-4, at: np.ndarray | None = None) -> np.ndarray:
     """``(3, m)`` rows (s_p, s_v, s_a): ∂q_u^e/∂q_a, ∂/∂q̇_a, ∂/∂q̈_a at upright (module docstring).
 
     Central differences of the model BEM (eq. 9: the root of Γ_0 nearest q_u,nominal in
     :attr:`qu_range`, :func:`~bemlearn.robots.bem.find_roots`) at ±``step`` on each input.
+
+    Args:
+        at: ``(3, m)`` the actuated motion (q_a, q̇_a, q̈_a) about which to differentiate (joint units; default
+            rest at q_a = 0).  A turntable's yaw ψ turns the direction a pole balances: there s_a of the two slides
+            is (cos ψ, sin ψ)/g, which the slopes at rest (ψ = 0) do not show.
     """
     m = robot.m
     rows = np.zeros((6 * m, 3, m))
+    if at is not None:
+        rows += np.asarray(at, dtype=np.float64).reshape(1, 3, m)
     for k in range(3):
         for j in range(m):
             rows[(2 * k) * m + j, k, j] = step
@@ -78,6 +85,33 @@ def bem_slopes(robot: ControlRobot, *, step: float = 1e-4) -> np.ndarray:
     for k in range(3):
         for j in range(m):
             out[k, j] = (qu[(2 * k) * m + j] - qu[(2 * k + 1) * m + j]) / (2 * step)
+    return out
+
+
+def velocity_stiffening_speed(robot: ControlRobot, *, step: float = 1e-5) -> np.ndarray:
+    """``(m,)`` per actuated coordinate j the speed v_j at which its velocity alone (others at rest at 0, q_u at
+    nominal) doubles the upright's stiffness Γ_q = −∂Γ_0/∂q_u: the velocity's forces then tip the pole as hard as
+    gravity does, the upright diverges at √2 λ and the BEM's response to the accelerations is halved (a pole on a
+    turntable spinning at ψ̇: Γ_q(ψ̇) = Γ_q(0) + ψ̇² (I_⊥ + m l² − I_∥), so v = √(m g l / (I_⊥ + m l² − I_∥)) ≈ λ
+    for a thin rod).  Velocity forces are quadratic in the velocities (eq. 1: C(q, q̇) q̇; damping does not
+    depend on q_u), so Γ_q(v e_j) = Γ_q(0) + c_j v², c_j from one evaluation at unit speed:
+
+        v_j = √(Γ_q(0) / |c_j|)     (∞ where c_j = 0: the velocity does not change the balance, e.g. a slide)
+    """
+    m, z = robot.m, np.zeros(robot.m)
+    qn = robot.qu_nominal
+
+    def gq(qad: np.ndarray) -> float:
+        return -(robot.gamma0_scalar(qn + step, z, qad, z) - robot.gamma0_scalar(qn - step, z, qad, z)) / (2 * step)
+
+    g0 = gq(z)
+    out = np.full(m, math.inf)
+    for j in range(m):
+        e = np.zeros(m)
+        e[j] = 1.0
+        c = gq(e) - g0
+        if abs(c) > 1e-9 * max(abs(g0), 1e-300) and g0 > 0:
+            out[j] = math.sqrt(g0 / abs(c))
     return out
 
 

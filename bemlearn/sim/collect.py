@@ -69,7 +69,8 @@ class CollectConfig:
         input_units: unit of the logged inputs, e.g. ``V`` for a motor driven in volts (``null``: derived from the model, see ``bemlearn config show``).
         reference_bem: ``[]``: the paper's excitation (q_u target at nominal).  Else the linearised BEM (eq. 9) at upright,
             s_p, s_v, s_a per actuated coordinate, then λ (1/s): the q_u target is the periodic motion of q_u the actuated
-            sines drive (:func:`_trajectory_reference`), and the command carries the model's inverse dynamics along that
+            sines drive (:func:`_trajectory_reference`; with ``excursion``, the slopes' change with the pose from the
+            model added, :func:`_pose_slopes`), and the command carries the model's inverse dynamics along that
             reference, u = u_ff(q_t, q̇_t, q̈_t) + kᵀe, so that each actuated direction follows its own sines instead of
             the LQR cancelling one joint's reference with another's (``null``: derived from the model, see ``bemlearn config show``).
         excursion: ``[]``: every component's amplitude is drawn from ``amplitude`` (rad or m, shared by the actuated
@@ -170,6 +171,9 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
         comps = [(A * np.minimum(ext[j], ext[m + j] / w**2), w, ph) for j, (A, w, ph) in enumerate(comps)]
     ia, iu = list(robot.actuated_index), robot.unactuated_index
     traj = _trajectory_reference(config.reference_bem, comps, m)
+    pose = None
+    if traj is not None and config.excursion and config.reference_bem:
+        pose = _pose_slopes(robot, np.asarray(config.excursion, dtype=np.float64)[:m], float(config.reference_bem[-1]))
     inverse = None
     if traj is not None:
         from bemlearn.control.actuator_inverse import MujocoActuatorInverse  # the model's feedforward along the reference
@@ -180,7 +184,7 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
     q0[iu] = robot.qu_nominal + rng.uniform(*config.initial_qu)
     qd0 = None
     if traj is not None:  # start on the reference (its initial state plus the drawn offsets)
-        r0 = _reference_state(0.0, comps, traj, ia, iu, n, robot.qu_nominal)
+        r0 = _reference_state(0.0, comps, traj, ia, iu, n, robot.qu_nominal, pose)
         q0 += r0[0] - np.where(np.arange(n) == iu, robot.qu_nominal, 0.0)
         qd0 = r0[1]
     plant.reset(q0, qd0)
@@ -197,7 +201,7 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
             failed, k = True, tick
             break
         y, v = plant.measure(q_true)
-        q_ref, qd_ref, qdd_ref = _reference_state(t, comps, traj, ia, iu, n, robot.qu_nominal)
+        q_ref, qd_ref, qdd_ref = _reference_state(t, comps, traj, ia, iu, n, robot.qu_nominal, pose)
         u = K @ np.concatenate([y - q_ref, v - qd_ref])
         if inverse is not None:
             D, h = robot.terms(q_ref, qd_ref)
@@ -231,18 +235,67 @@ def _trajectory_reference(reference_bem: tuple[float, ...] | None, comps: list, 
 
 
 def _reference_state(t: float, comps: list, traj: list | None, ia: list[int], iu: int, n: int,
-                     qu_nominal: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(q_t, q̇_t, q̈_t)`` (n,) each: the actuated sines and the q_u target (nominal, or on the periodic BEM motion)."""
+                     qu_nominal: float, pose: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(q_t, q̇_t, q̈_t)`` (n,) each: the actuated sines and the q_u target (nominal, or on the periodic BEM motion).
+
+    ``pose`` (:func:`_pose_slopes`): the BEM slopes change with the actuated pose; the target's gains
+    (:func:`_trajectory_reference`) then take the slopes at the reference's own pose q_a,t (a turntable at ψ: the
+    slides' s_a = (cos ψ, sin ψ)/g), the pose varying slowly against the components."""
     out = np.zeros((3, n))
     out[0, iu] = qu_nominal
     for j, (A, w, ph) in zip(ia, comps):
         s_ = np.sin(w * t + ph)
         out[:, j] = (np.sum(A * s_), np.sum(A * w * np.cos(w * t + ph)), -np.sum(A * w**2 * s_))
     if traj is not None:
-        for (A, w, ph), G in zip(comps, traj):
+        gains = traj
+        if pose is not None:
+            grids, deltas, lam = pose
+            ds = np.zeros(deltas[0].shape[1])  # (3m,) the slopes' change at q_a,t: s_p, s_v, s_a per coordinate
+            for i, j in enumerate(ia):
+                ds += np.array([np.interp(out[0, j], grids[i], deltas[i][:, r]) for r in range(ds.size)])
+            m = len(ia)
+            gains = [G + (ds[k] + 1j * w * ds[m + k] - ds[2 * m + k] * w**2) / (1 + (w / lam) ** 2)
+                     for k, (G, (_, w, _)) in enumerate(zip(traj, comps))]
+        for (A, w, ph), G in zip(comps, gains):
             e = G * A * np.exp(1j * (w * t + ph))
             out[:, iu] += (np.sum(e.imag), np.sum((1j * w * e).imag), np.sum((-(w**2) * e).imag))
     return out[0], out[1], out[2]
+
+
+_POSE_SLOPES: dict = {}
+
+
+def _pose_slopes(robot: MujocoRobot, extents: np.ndarray, lam: float, *, points: int = 49) -> tuple | None:
+    """How the BEM slopes (eq. 9 linearised, :func:`~bemlearn.robots.scales.bem_slopes`) change with the actuated pose:
+    per actuated coordinate i alone on a grid over ±1.5 P_i (``extents``), Δs_i(q) = s(q e_i) − s(0), ``(points, 3m)``;
+    the slopes at a pose are s(0) + Σ_i Δs_i(q_a,i).  ``None`` where no slope changes by more than 10⁻⁶ of the largest
+    (a cart's: the q_u target is then exactly the one of constant slopes).  Cached per robot and extents.
+
+    Returns ``(grids, deltas, λ)``: ``grids`` m arrays (points,), ``deltas`` m arrays (points, 3m)."""
+    from bemlearn.robots.scales import bem_slopes
+
+    key = (robot.name, robot.model.nq, tuple(float(x) for x in extents), float(lam), points)
+    if key in _POSE_SLOPES:
+        return _POSE_SLOPES[key]
+    m = robot.m
+    s0 = bem_slopes(robot)
+    grids, deltas = [], []
+    for i in range(m):
+        g = np.linspace(-1.5 * extents[i], 1.5 * extents[i], points)
+        rows = np.zeros((points, 3 * m))
+        for k, q in enumerate(g):
+            at = np.zeros((3, m))
+            at[0, i] = q
+            try:
+                rows[k] = (bem_slopes(robot, at=at) - s0).ravel()
+            except RobotModelError:  # no BEM near upright at that pose: keep the slopes at rest there
+                rows[k] = 0.0
+        grids.append(g)
+        deltas.append(rows)
+    scale = float(np.max(np.abs(s0))) or 1.0
+    out = (grids, deltas, lam) if max(float(np.max(np.abs(d))) for d in deltas) > 1e-6 * scale else None
+    _POSE_SLOPES[key] = out
+    return out
 
 
 _WORKER_ROBOT = None

@@ -21,8 +21,15 @@ drives.
   velocity a_i / ω_u (ω_u = √(|∂²V/∂q_u²| / M_uu) the upright's divergence rate), and the position span
   (the joint range, or the offset that moves q_u^e by ``bound``).  A joint whose acceleration alone never
   moves q_u^e at rest (an x-y cart's y slide under a pole that tilts in x-z, a turntable's yaw) has no such
-  a_i (q_u^e within 10⁻⁶ × the bound up to the search's bracket): it gets the balance's own scale, a_i = ω_u² × its position half span (a sine at ω_u across its range),
-  not the search's bracket (10³ per s², which asked the learned BEM about 1300 m/s² and 200 m/s).
+  a_i (q_u^e within 10⁻⁶ × the bound up to the search's bracket) takes the smallest a_i over the poses with one other
+  joint at k/4 of its span (k = 1 … 4; a turntable at ψ turns the y slide into the pole's plane: a_y = g tan 0.2 at
+  ψ = π/2, where at rest it looked flat); one flat at all of them gets the balance's own scale, a sine at ω_u
+  across its range, a_i = ω_u² × its position half span, not the search's bracket (10³ per s², which asked the
+  learned BEM about 1300 m/s² and 200 m/s).  No joint moves faster than v_tip, the speed at which its velocity
+  alone doubles the upright's stiffness (:meth:`Oracle.stiffening_speed`; a turntable's yaw rate: its centrifugal
+  forces then tip the pole as hard as gravity, v_tip ≈ ω_u for a thin rod); the flat fallback's a_i is then
+  ω_u · v_tip.  Before 2026-11-28 a full-circle turntable swept ψ̇ to π ω_u ≈ 17 rad/s, where the yaw rate alone
+  cut the BEM's response to the slides tenfold.
 * **Holdable**: (1) *static* — along the design region, the actuated generalized forces ``mj_inverse`` demands,
   widened by each joint's ``frictionloss``, lie inside what each actuator delivers at that state:
   gear · ([gain · ctrl + bias(L, L̇)] over ``ctrlrange``, ∩ ``forcerange``) for the affine actuators of MuJoCo
@@ -166,13 +173,37 @@ class Oracle:
     def _tau_u(self, qa, qu, qda, qdda) -> float:
         return float(self.inverse(qa, qu, qda, qdda)[self.u])
 
-    def stiffness(self, qa: np.ndarray | None = None, qu: float | None = None) -> float:
-        """∂τ_u/∂q_u at rest = ∂²V/∂q_u² (N·m/rad); negative at an unstable (upright) equilibrium."""
+    def stiffness(self, qa: np.ndarray | None = None, qu: float | None = None, qda: np.ndarray | None = None) -> float:
+        """∂τ_u/∂q_u (N·m/rad) at rest = ∂²V/∂q_u²; negative at an unstable (upright) equilibrium.  With actuated
+        velocities ``qda`` (q̈ = 0) it includes the velocity forces' share (a turntable's centrifugal tipping)."""
         qa = self.qa0 if qa is None else qa
         qu = self.qu_star if qu is None else qu
         h = 1e-5
         z = np.zeros(self.m)
-        return (self._tau_u(qa, qu + h, z, z) - self._tau_u(qa, qu - h, z, z)) / (2 * h)
+        qd = z if qda is None else np.asarray(qda, dtype=float)
+        return (self._tau_u(qa, qu + h, qd, z) - self._tau_u(qa, qu - h, qd, z)) / (2 * h)
+
+    def stiffening_speed(self, j: int) -> float:
+        """The speed of actuated joint ``j`` alone (rad/s | m/s) at which the upright's stiffness (:meth:`stiffness`)
+        has doubled — its velocity forces tip the pole as hard as gravity — by bisection on a doubling bracket up to
+        ``ACC_CAP``; ``inf`` if it never does (a slide's velocity does not change the balance)."""
+        k0 = self.stiffness()
+
+        def doubled(v: float) -> bool:
+            e = np.zeros(self.m)
+            e[j] = v
+            return abs(self.stiffness(qda=e) - k0) >= abs(k0)
+
+        v = 1e-3
+        while v < ACC_CAP and not doubled(v):
+            v *= 2.0
+        if v >= ACC_CAP:
+            return math.inf
+        lo, hi = v / 2.0, v
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if doubled(mid) else (mid, hi)
+        return float(hi)
 
     def potential(self, qa: np.ndarray, qu: float) -> float:
         """Gravitational potential energy V(q_a, q_u) (J), MuJoCo's ``mj_energyPos``."""
@@ -265,14 +296,37 @@ class Oracle:
                 margin = 0.1 * (hi - lo)
                 lo_j, hi_j = max(lo_j, lo + margin), min(hi_j, hi - margin)
             pos.append((float(lo_j), float(hi_j)))
+        for j in range(self.m):
+            e = np.zeros(self.m)
+            e[j] = 1.0
+            lo_j, hi_j = pos[j]
+            v_tip = self.stiffening_speed(j)
             a = self._reach(lambda s, e=e: (self.qa0, z, s * e), ACC_CAP)
             if a >= ACC_CAP and self._flat(lambda s, e=e: (self.qa0, z, s * e), ACC_CAP):
-                a = omega**2 * 0.5 * (hi_j - lo_j)  # the BEM does not depend on this acceleration at rest (docstring)
+                # flat at rest; where another joint's position makes it move the BEM (a turntable turning the y slide
+                # into the pole's plane), the smallest reach over those poses
+                a = min((self._reach(lambda s, e=e, at=at: (at, z, s * e), ACC_CAP) for at in self._poses(pos, j)), default=ACC_CAP)
+                if a >= ACC_CAP:  # flat everywhere: a sine at ω_u across the span, no faster than v_tip
+                    a = omega**2 * 0.5 * (hi_j - lo_j) if 0.5 * (hi_j - lo_j) * omega <= v_tip else omega * v_tip
             acc.append(a)
             v = self._reach(lambda s, e=e: (self.qa0, s * e, z), a / omega)
-            vel.append(min(v, a / omega))
+            vel.append(min(v, a / omega, v_tip))
         self._scales = {"omega_u": omega, "acc": acc, "vel": vel, "pos": pos}
         return self._scales
+
+    def _poses(self, pos: list, j: int, steps: int = 4) -> list[np.ndarray]:
+        """Actuated poses q_a0 with one other joint i ≠ ``j`` at k/``steps`` of the way to either end of its span
+        (k = 1 … steps)."""
+        out = []
+        for i in range(self.m):
+            if i == j:
+                continue
+            for k in range(1, steps + 1):
+                for end in pos[i]:
+                    at = self.qa0.copy()
+                    at[i] = self.qa0[i] + k / steps * (end - self.qa0[i])
+                    out.append(at)
+        return out
 
     def _flat(self, query, cap: float) -> bool:
         """Whether q_u^e stays within 10⁻⁶ × the bound of q_u* all the way to ±``cap`` (the BEM does not depend on it)."""
