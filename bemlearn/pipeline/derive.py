@@ -473,8 +473,9 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
 
     These gains are kept when the loop *as it runs* — sampled at the control rate, the command held over the
     tick, the rates from the closed loop's velocity filter (cutoff ``velocity_cutoff``, default
-    :func:`closed_loop_sensor`'s) — is stable at upright (:func:`~bemlearn.control.eic_linear.eic_tick_loop`).
-    Otherwise critically damped gains are searched on the grid ω_u ∈ {1.2 … 8} λ (≤ 2π·rate/10),
+    :func:`closed_loop_sensor`'s) — is stable at upright (:func:`~bemlearn.control.eic_linear.eic_tick_loop`)
+    and brings the robot back from a ``qu_error`` start in MuJoCo (:func:`eic_recovery`; a loop that decays
+    slowly at upright may still fall, e.g. a velocity servo's wheel drifting away).  Otherwise critically damped gains are searched on the grid ω_u ∈ {1.2 … 8} λ (≤ 2π·rate/10),
     ω_u/ω_a ∈ {3 … 60}: the sampled loops that are stable, fastest decay first, and the first of them (at most
     four tried) whose loop in MuJoCo — the model BEM, the sensors, every actuator limit — brings the robot
     back from a ``qu_error`` start (:func:`eic_recovery`) is kept; if none does, the fastest-decaying one (the
@@ -522,10 +523,15 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     except (RobotModelError, NumericalError, ArgumentError) as exc:  # an actuator model the linearisation does not cover
         return Derived(g, note + f"; the sampled loop was not checked ({exc})")
     if loop.spectral_radius < 1.0:
-        return Derived(g, note + f"; the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) "
-                                 f"decays at {loop.decay_rate:.3g} 1/s at upright")
-    why = (f"the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) grows at "
-           f"{-loop.decay_rate:.3g} 1/s with them")
+        sampled = (f"the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) "
+                   f"decays at {loop.decay_rate:.3g} 1/s at upright")
+        ok, how = eic_recovery(robot, g, rate, qu0=e0, velocity_cutoff=wc)
+        if ok:
+            return Derived(g, note + f"; {sampled}, and in MuJoCo {how}")
+        why = f"{sampled} but in MuJoCo {how}"
+    else:
+        why = (f"the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) grows at "
+               f"{-loop.decay_rate:.3g} 1/s with them")
     stable = []
     for wl in EIC_GRID_OMEGA_U:
         wu = wl * lam
