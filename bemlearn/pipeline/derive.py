@@ -129,6 +129,8 @@ def excitation_gains(robot, rate: RateChoice) -> Derived:
             f"{''.join('; ' + n for n in res.notes)}; closed-loop spectral radius "
             f"{res.spectral_radius:.4f}; per-trial gain scale U{scale}: the widest of ±40/20/10 % with ≥ 95 % of 400 "
             f"random per-gain scalings stable ({100 * frac:.0f} %), else none")
+    if (grouping := robot.actuation.describe(tuple(robot.actuated_names))):
+        note += f"; {grouping}"
     return Derived({"gains": gains, "gain_scale": scale}, note)
 
 
@@ -401,9 +403,15 @@ def sensor(robot, rate: RateChoice) -> Derived:
     lam = instability_rate(robot)
     wc = float(np.clip(10 * lam, 50.0, 0.2 * 2 * math.pi * rate.rate_hz))
     slide = "slide" in getattr(robot, "coordinate_kinds", ())   # the measured coordinates (a rolling slide is not one)
-    out = {"counts_per_rev": 4096, "noise_std": 0.0, "velocity_cutoff": wc, "m_per_count": 2.5e-5 if slide else 0.0}
+    out = {**_encoder(robot), "velocity_cutoff": wc}
     note = f"hinges 4096 counts/rev{', slides 2.5e-5 m/count' if slide else ''} (defaults, not from the model); velocity filter {wc:.3g} rad/s = clip(10 λ, 50, 0.2·2π·rate)"
     return Derived(out, note)
+
+
+def _encoder(robot) -> dict:
+    """The encoder part of :func:`sensor` (4096 counts/rev, 2.5e-5 m/count where a coordinate is a slide, no noise)."""
+    slide = "slide" in getattr(robot, "coordinate_kinds", ())
+    return {"counts_per_rev": 4096, "noise_std": 0.0, "m_per_count": 2.5e-5 if slide else 0.0}
 
 
 def input_units(robot) -> Derived:
@@ -574,7 +582,7 @@ def eic_recovery(robot, gains, rate: RateChoice, *, qu0: float, velocity_cutoff:
 
     fw = fall_window(robot).value
     cfg = SimulateConfig(duration_s=duration_s, rate_hz=rate.rate_hz, bem_source="model", reference=ReferenceConfig((0.0,), (0.0,), (0.0,), 0.0),
-                         gains=gains, sensor=SensorConfig(**{**sensor(robot, rate).value, "velocity_cutoff": velocity_cutoff}),
+                         gains=gains, sensor=SensorConfig(**_encoder(robot), velocity_cutoff=velocity_cutoff),
                          initial_qu=qu0, fall_window=fw, warmup_s=0.0, physics_timestep=rate.timestep if rate.timestep_changed else None)
     res = simulate(robot, cfg, progress=False)
     iu, ia = robot.unactuated_index, list(robot.actuated_index)
