@@ -77,6 +77,7 @@ class LQRResult:
         u_peak: max |u| / u_max of the linear closed loop from the check's initial error.
         r_scale: factor applied to Bryson's R to respect ctrlrange and forcerange.
         notes: how the linearisation departed from the plain model (dry friction left out), for messages.
+        force_weighted: the second design (the actuator force weighed against its limits) was kept.
     """
 
     K: np.ndarray
@@ -91,6 +92,7 @@ class LQRResult:
     u_peak: float
     r_scale: float
     notes: tuple[str, ...] = ()
+    force_weighted: bool = False
 
 
 def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = None, eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray, int, float]:
@@ -379,6 +381,7 @@ def discrete_lqr(
     starts = [qu_start, *qa_starts]
     K, Q, R, peak, scale = first
     holds, why = holds_in_mujoco(robot, -K, rate_hz=rate_hz, timestep=timestep, starts=starts, check_s=check_s, qu0=qu0)
+    force_weighted = False
     if not holds:
         Ru2 = np.diag(np.where(np.isfinite(limits.u_ctrl), 1.0 / limits.u_ctrl**2, 0.0))
         Rf = np.diag(np.where(np.isfinite(limits.f_max), 1.0 / limits.f_max**2, 0.0))
@@ -388,6 +391,7 @@ def discrete_lqr(
         holds2, why2 = holds_in_mujoco(robot, -second[0], rate_hz=rate_hz, timestep=timestep, starts=starts, check_s=check_s, qu0=qu0)
         if holds2:
             K, Q, R, peak, scale = second
+            force_weighted = True
             notes.append(f"weighs the actuator force too: with ctrl weights alone {why}")
         else:
             notes.append(f"neither design brings the robot back in MuJoCo ({why}; with force weights: {why2})")
@@ -395,4 +399,4 @@ def discrete_lqr(
         warn(DesignWarning, log, "discrete_lqr: %s needs %.2f× its actuator limits for a %.3g initial q_u error%s even with R × %g", robot.name,
                                  peak, qu0, f" (or {qa0:.3g} of an actuated coordinate)" if qa0 else "", scale)
     rho = float(np.max(np.abs(np.linalg.eigvals(A - B @ K))))
-    return LQRResult(-K, A, B, Q, R, float(rate_hz), N, h, rho, peak, scale, tuple(notes))
+    return LQRResult(-K, A, B, Q, R, float(rate_hz), N, h, rho, peak, scale, tuple(notes), force_weighted)
