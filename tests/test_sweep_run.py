@@ -96,9 +96,29 @@ def test_resume_runs_only_the_incomplete_cells_and_an_existing_sweep_is_not_repl
 @pytest.fixture(scope="module")
 def ray_instance():
     ray = pytest.importorskip("ray", reason="Ray is the [ray] extra (installed by the [test] extra)")
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
     yield ray
     ray.shutdown()
+    for sig, handler in handlers.items():   # ray.init leaves its SIGTERM handler: later tests in this process need theirs
+        signal.signal(sig, handler)
+
+
+def test_a_ray_instance_the_backend_starts_leaves_the_signal_handlers_as_they_were():
+    """ray.init installs its own SIGTERM handler and leaves it after shutdown (Ray 2.x); a process that goes on after a
+    sweep (a notebook, a script calling run_sweep) must get its own handlers back."""
+    ray = pytest.importorskip("ray", reason="Ray is the [ray] extra (installed by the [test] extra)")
+    from bemlearn.sweep.backends import RayBackend
+    from bemlearn.sweep.config import SweepResources
+
+    assert not ray.is_initialized()
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    backend = RayBackend(SweepResources(cpus=1))
+    try:
+        assert backend.started_here and signal.getsignal(signal.SIGTERM) is not before[signal.SIGTERM]  # Ray's, while it runs
+    finally:
+        backend.close()
+    assert {sig: signal.getsignal(sig) for sig in before} == before
 
 
 def test_the_ray_backend_runs_the_same_cells_in_workers_with_the_same_metrics(serial, ray_instance, tmp_path):

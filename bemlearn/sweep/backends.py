@@ -24,6 +24,8 @@ from __future__ import annotations
 import collections
 import logging
 import os
+import signal
+import threading
 import time
 from typing import Any
 
@@ -108,6 +110,7 @@ class RayBackend:
         self._ray = ray
         t0 = time.perf_counter()
         self.started_here = not ray.is_initialized()
+        self._handlers: dict = {}
         if self.started_here:
             kwargs: dict[str, Any] = dict(include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING)
             niceness_set = False
@@ -118,9 +121,11 @@ class RayBackend:
                     niceness_set = True
             if address is not None:
                 probe_address(address)
+            self._handlers = _signal_handlers()   # ray.init installs its own SIGTERM handler and leaves it after shutdown
             try:
                 ray.init(address=address or "local", **kwargs)
             except (ConnectionError, RuntimeError, ValueError) as exc:
+                _restore_signal_handlers(self._handlers)
                 cause = str(exc.__cause__ or exc).strip().splitlines()[0][:400]  # Ray's reason (e.g. a missing auth token)
                 what = f"--address {address}: cannot connect to a Ray cluster there" if address else \
                     "--backend ray: cannot start a local Ray instance"
@@ -193,6 +198,22 @@ class RayBackend:
         """Shut the Ray instance down if this backend started it."""
         if self.started_here and self._ray.is_initialized():
             self._ray.shutdown()
+        if self.started_here:
+            _restore_signal_handlers(self._handlers)
+
+
+def _signal_handlers() -> dict:
+    """The process's SIGINT and SIGTERM handlers (restored by :func:`_restore_signal_handlers`)."""
+    return {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+
+def _restore_signal_handlers(handlers: dict) -> None:
+    """Put back handlers saved before ``ray.init`` (which leaves its own SIGTERM handler behind, so a later
+    SIGTERM in a process that goes on after the sweep would run Ray's); only the main thread may set them."""
+    if threading.current_thread() is threading.main_thread():
+        for sig, handler in handlers.items():
+            if handler is not None:
+                signal.signal(sig, handler)
 
 
 #: Seconds to wait for a TCP connection to a Ray cluster's address before giving up.
