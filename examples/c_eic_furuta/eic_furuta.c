@@ -58,7 +58,7 @@ double eic_furuta_command(const eic_furuta_params *p, const eic_gains *g, const 
     hu = -(p->sin2 - p->cos2) * s * c * qd[0] * qd[0] - p->mgl * s + p->B_p * qd[1];
     v_a = -(p->Duu * v_u + hu) / dau;                  /* eq. (8), m = 1 */
     tau = daa * v_a + dau * v_u + ha;                  /* eq. (3) */
-    volts = (ha + p->hold_phi * (tau - ha) + p->b_emf * qd[0]) / p->k_u;   /* held over the tick (A4) */
+    volts = (tau + p->b_emf * qd[0]) / p->k_u;
     if (volts > p->V_max) volts = p->V_max;
     if (volts < -p->V_max) volts = -p->V_max;
     if (info != NULL) {

@@ -10,10 +10,7 @@
  *   3. internal loop   v_u = alphadd_e - kd_u (qd_alpha - alphad_e) - kp_u (alpha - alpha_e)
  *   4. eq. (8), m = 1: v_a = -(D_uu v_u + h_u) / D_ua
  *   5. eq. (3)         tau = D_aa v_a + D_au v_u + h_a, and the Quanser motor inverse
- *                      V = (tau0 + b_emf qd_theta) / k_u clipped to +-V_max (volts), where the voltage is
- *                      held over the tick and the back-EMF relaxes the torque within it, so the first
- *                      instant's torque is tau0 = h_a + hold_phi (tau - h_a) (eq. A4 of bemlearn.robots.actuation;
- *                      hold_phi = 1: the torque now)
+ *                      V = (tau + b_emf qd_theta) / k_u clipped to +-V_max (volts)
  * D, h are the analytic rigid-body Furuta rows (bemlearn/robots/furuta.py, AnalyticFuruta).
  * Same law as bemlearn.control.eic.EICController.  No heap, no static state: reentrant.
  */
@@ -31,7 +28,6 @@ typedef struct {
     double mgl;    /* m_p g l, N m */
     double B_r, B_p;            /* viscous damping, N m s/rad */
     double k_u, b_emf, V_max;   /* motor: N m/V, N m s/rad, V */
-    double hold_phi;            /* A3: kappa dt / (1 - exp(-kappa dt)) of the motor's back-EMF over a tick, 1 */
 } eic_furuta_params;
 
 typedef struct {

@@ -25,7 +25,6 @@ from bemlearn.apps.furuta.model import AnalyticFuruta, FurutaParameters
 from bemlearn.export.c_build import STRICT_FLAGS, compile_shared
 from bemlearn.pipeline.resolve import load_pipeline_config
 from bemlearn.robots import load
-from bemlearn.robots.actuation import hold_factors, servo_relaxation
 from bemlearn.sim.closed_loop import SimulateConfig
 from bemlearn.sim.plant import SensedPlant
 
@@ -41,8 +40,7 @@ def simulate_config(predictor: Path, *, duration_s: float, config: Path = FURUTA
 
 
 class Params(ctypes.Structure):
-    _fields_ = [(n, ctypes.c_double) for n in ("Daa0", "sin2", "cos2", "mLl", "Duu", "mgl", "B_r", "B_p", "k_u", "b_emf", "V_max",
-                                               "hold_phi")]
+    _fields_ = [(n, ctypes.c_double) for n in ("Daa0", "sin2", "cos2", "mLl", "Duu", "mgl", "B_r", "B_p", "k_u", "b_emf", "V_max")]
 
 
 class Gains(ctypes.Structure):
@@ -65,12 +63,11 @@ def build(bem_c_dir: Path, out: Path) -> Path:
                           flags=(*STRICT_FLAGS, "-O2", f"-I{bem_c_dir}", f"-I{HERE}"))
 
 
-def furuta_params(p: FurutaParameters | None = None, *, hold_phi: float = 1.0) -> Params:
-    """The controller's nominal model: the rigid-body rows of AnalyticFuruta (default: the shipped parameters), and
-    the motor's hold factor over a tick (``hold_phi``, eq. A3 of bemlearn.robots.actuation; 1: none)."""
+def furuta_params(p: FurutaParameters | None = None) -> Params:
+    """The controller's nominal model: the rigid-body rows of AnalyticFuruta (default: the shipped parameters)."""
     p = p if p is not None else FurutaParameters()
     a = AnalyticFuruta(p)
-    return Params(a._Daa0, a._sin2, a._cos2, a._mLl, a._Duu, a._mgl, p.B_r, p.B_p, p.k_u, p.b_emf, p.V_max, hold_phi)
+    return Params(a._Daa0, a._sin2, a._cos2, a._mLl, a._Duu, a._mgl, p.B_r, p.B_p, p.k_u, p.b_emf, p.V_max)
 
 
 @dataclass(frozen=True)
@@ -99,10 +96,9 @@ def run(lib_path: Path, config: SimulateConfig) -> CRun:
     rc = config.reference
     ref = Reference(len(rc.amplitudes), (ctypes.c_double * 8)(*rc.amplitudes), (ctypes.c_double * 8)(*rc.frequencies_hz),
                     (ctypes.c_double * 8)(*rc.phases), rc.offset)
-    plant = load("furuta")
-    # the voltage is held over the tick, as bemlearn's actuator inverse assumes (A3, A4)
-    params = furuta_params(hold_phi=float(hold_factors(servo_relaxation(plant), 1.0 / config.rate_hz)[0]))
+    params = furuta_params()
     reference = rc.build(1)
+    plant = load("furuta")
     sensed = SensedPlant(plant, rate_hz=config.rate_hz, sensor=config.sensor, rng=np.random.default_rng(config.seed), where="c_eic",
                          timestep=config.physics_timestep)
     q0, qd0 = np.zeros(2), np.zeros(2)
