@@ -122,8 +122,7 @@ def excitation_gains(robot, rate: RateChoice) -> Derived:
     """Excitation feedback u = K e (collect's convention) by discrete LQR (:mod:`bemlearn.control.lqr`).
 
     Returns:
-        ``Derived({"gains": tuple (m·2n,), "gain_scale": (0.6, 1.4), "force_weighted": bool}, note)`` (force_weighted:
-        the LQR weighs an actuator's force against its limit, :attr:`~bemlearn.control.lqr.LQRResult.force_weighted`).
+        ``Derived({"gains": tuple (m·2n,), "gain_scale": (0.6, 1.4)}, note)``.
     """
     from bemlearn.control.lqr import discrete_lqr
 
@@ -137,9 +136,7 @@ def excitation_gains(robot, rate: RateChoice) -> Derived:
             f"{''.join('; ' + n for n in res.notes)}; closed-loop spectral radius "
             f"{res.spectral_radius:.4f}; per-trial gain scale U{scale}: the widest of ±40/20/10 % with ≥ 95 % of 400 "
             f"random per-gain scalings stable ({100 * frac:.0f} %), else none")
-    if (grouping := robot.actuation.describe(tuple(robot.actuated_names))):
-        note += f"; {grouping}"
-    return Derived({"gains": gains, "gain_scale": scale, "force_weighted": res.force_weighted}, note)
+    return Derived({"gains": gains, "gain_scale": scale}, note)
 
 
 def _robust_gain_scale(A: np.ndarray, B: np.ndarray, K: np.ndarray, *, draws: int = 400) -> tuple[tuple[float, float], float]:
@@ -378,12 +375,11 @@ def actuator_effort(robot, inv, q: np.ndarray, qdd: np.ndarray) -> float:
     tau_a = (D @ qdd + h)[list(robot.actuated_index)]
     ctrl = inv.command(tau_a, q, np.zeros(robot.n), clip=False)
     force = inv.B_pinv @ tau_a
-    from bemlearn.robots.actuation import force_limits
-
+    model = robot.model
     out = float(np.max(np.abs(ctrl) / inv.limit)) if inv.limited.any() else 0.0
-    fmax = force_limits(robot.model, getattr(robot, "traction_limits", None))   # forcerange, actuatorfrcrange, a wheel's grip
-    flim = np.isfinite(fmax)
+    flim = model.actuator_forcelimited.astype(bool)
     if flim.any():
+        fmax = np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1]))
         out = max(out, float(np.max(np.abs(force[flim]) / fmax[flim])))
     return out
 
@@ -438,12 +434,9 @@ def initial_ranges(robot) -> Derived:
 
 
 def sensor(robot, rate: RateChoice) -> Derived:
-    """Encoder and velocity filter of the excitation: 4096 counts/rev for hinges (a common optical encoder,
+    """Encoder and velocity filter: 4096 counts/rev for hinges (a common optical encoder,
     1.53 mrad), 2.5e-5 m/count for slides (a typical linear encoder), velocity filter cutoff
-    ω_c = 2 · clip(10 λ, 50, 0.2 · 2π · rate) rad/s, the closed loop's (:func:`closed_loop_sensor`): the
-    excitation's LQR balances the robot as the EIC does, and the velocity estimate is not logged (the data
-    keep the encoder's angles; q̇, q̈ come from the derivative estimator).  With half of it, 6 of 12 five-second
-    excitation trials of a velocity-servo two-wheeler fell against 1 of 12 (docs/wheeled.md).
+    ω_c = clip(10 λ, 50, 0.2 · 2π · rate) rad/s.
 
     Returns:
         ``Derived(dict of SensorConfig fields, note)``.
@@ -451,9 +444,8 @@ def sensor(robot, rate: RateChoice) -> Derived:
     lam = instability_rate(robot)
     wc = float(np.clip(10 * lam, 50.0, 0.2 * 2 * math.pi * rate.rate_hz))
     slide = "slide" in getattr(robot, "coordinate_kinds", ())   # the measured coordinates (a rolling slide is not one)
-    out = {**_encoder(robot), "velocity_cutoff": 2 * wc}
-    note = (f"hinges 4096 counts/rev{', slides 2.5e-5 m/count' if slide else ''} (defaults, not from the model); velocity filter "
-            f"{2 * wc:.3g} rad/s = 2 clip(10 λ, 50, 0.2·2π·rate), the closed loop's")
+    out = {**_encoder(robot), "velocity_cutoff": wc}
+    note = f"hinges 4096 counts/rev{', slides 2.5e-5 m/count' if slide else ''} (defaults, not from the model); velocity filter {wc:.3g} rad/s = clip(10 λ, 50, 0.2·2π·rate)"
     return Derived(out, note)
 
 
@@ -496,14 +488,14 @@ def evaluation(robot, signals: dict, *, n_references: int = 5) -> Derived:
 
 
 def closed_loop_sensor(robot, rate: RateChoice) -> Derived:
-    """The closed loop's encoder and velocity filter: the excitation's (:func:`sensor`: cutoff
-    2 · clip(10 λ, 50, 0.2 · 2π · rate) rad/s; the balance loop needs the lag of a fast filter).
+    """The closed loop's encoder and velocity filter: :func:`sensor` with the filter cutoff doubled (the
+    balance loop needs less lag than the excitation's logging).
 
     Returns:
         ``Derived(dict of SensorConfig fields, note)``.
     """
     sen = sensor(robot, rate)
-    return Derived(dict(sen.value), sen.note)
+    return Derived({**sen.value, "velocity_cutoff": 2 * sen.value["velocity_cutoff"]}, sen.note + "; × 2 in the closed loop")
 
 
 EIC_GRID_OMEGA_U = (1.2, 1.6, 2.2, 3.0, 4.0, 5.0, 6.0, 8.0)
@@ -720,9 +712,9 @@ def _eic_peak(robot, w_u: float, e0: float) -> float:
     force = inv.B_pinv @ tau
     raw = force / inv.gainprm[:, 0]
     umax = np.where(inv.limited, inv.limit, np.inf)
-    from bemlearn.robots.actuation import force_limits
-
-    fmax = force_limits(robot.model, getattr(robot, "traction_limits", None))
+    model = robot.model
+    fmax = np.where(model.actuator_forcelimited.astype(bool),
+                    np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1])), np.inf)
     return float(max(np.max(np.abs(raw) / umax), np.max(np.abs(force) / fmax)))
 
 

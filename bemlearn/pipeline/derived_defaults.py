@@ -118,14 +118,12 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
         return any(not _given(given, f"{prefix}.{k}") for k in keys)
 
     fw = derive.fall_window(robot)
-    force_weighted: list[bool] = []   # the derived excitation LQR weighs a force limit: its authority is limited
 
     @functools.cache
     def excitation() -> dict:  # collect's sines, also the base of evaluate's references and of the closed loop's
         sig = derive.excitation_signals(robot, rc)
         value, note = dict(sig.value), sig.note
-        # the trials decide the amplitude where the limits bind: the reference's effort, or the balance LQR's force
-        if (value.get("effort_capped") or any(force_weighted)) and not _given(given, "collect.amplitude"):
+        if value.get("effort_capped") and not _given(given, "collect.amplitude"):
             check = derive.excitation_amplitude_check(robot, _collect_for_check(robot, config, given, out, value, rc, fw.value))
             note += f"; {check.note}"
             if check.value < 1:
@@ -138,7 +136,6 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
     _leaves("collect.physics_timestep", rc.timestep if rc.timestep_changed else None, crate.note, out)
     if wanted("collect", ("gains", "gain_scale")):
         gains = derive.excitation_gains(robot, rc)
-        force_weighted.append(bool(gains.value.get("force_weighted")))
         _leaves("collect.gains", gains.value["gains"], gains.note, out)
         _leaves("collect.gain_scale", gains.value["gain_scale"], gains.note, out)
     _leaves("collect.fall_window", fw.value, fw.note, out)
