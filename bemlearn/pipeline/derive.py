@@ -552,6 +552,17 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     e0 = d / 4 if qu_error is None else qu_error
     w_max = 2 * math.pi * rate.rate_hz / 20
     wc = closed_loop_sensor(robot, rate).value["velocity_cutoff"] if velocity_cutoff is None else velocity_cutoff
+    try:   # one linearisation serves every sampled-loop check below
+        plant = linearize(robot, rate_hz=rate.rate_hz, timestep=rate.timestep)[:2]
+        unchecked = ""
+    except (RobotModelError, NumericalError, ArgumentError) as exc:  # an actuator model the linearisation does not cover
+        plant, unchecked = None, f"; the sampled loop was not checked ({exc})"
+
+    def sampled(gains):
+        if plant is None:
+            return None
+        return eic_tick_loop(robot, gains, rate_hz=rate.rate_hz, velocity_cutoff=wc, plant=plant)
+
     first: tuple | None = None    # (gains, note) of the fastest pair (m ≥ 2) when its sampled loop decays
     fastest_fails = ""
     if robot.m >= 2:
@@ -565,14 +576,17 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
                   f"the critically damped gains whose linearised EIC loop (eq. 8 with the null-space projector) decays "
                   f"fastest, max Re λ = {ab:.3g} 1/s (ω_u ∈ [1.2 λ, min(6 λ, 2π·rate/20)], ω_u/ω_a ∈ [2, 60]); "
                   f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange)")
-            sampled = _sampled_loop(robot, gf, rate, wc)
-            if sampled is None:
+            try:
+                fast = sampled(gf)
+            except (RobotModelError, NumericalError, ArgumentError):
+                fast = None
+            if fast is None:
                 return Derived(gf, nf)
-            if sampled.spectral_radius < 1.0:
-                first = (gf, nf + f"; sampled at {rate.rate_hz:g} Hz with its velocity filter it decays at {sampled.decay_rate:.3g} 1/s")
+            if fast.spectral_radius < 1.0:
+                first = (gf, nf + f"; sampled at {rate.rate_hz:g} Hz with its velocity filter it decays at {fast.decay_rate:.3g} 1/s")
             else:  # the continuous loop decays, the loop as it runs does not (measured: an x-y cart on a turntable)
                 fastest_fails = (f"; the fastest continuous gains (ω_u = {w_u / lam:.2g} λ, ω_a = ω_u/{w_u / w_a:.3g}) grow at "
-                                 f"{-sampled.decay_rate:.3g} 1/s sampled at {rate.rate_hz:g} Hz with the velocity filter")
+                                 f"{-fast.decay_rate:.3g} 1/s sampled at {rate.rate_hz:g} Hz with the velocity filter")
     w_u = min(2.2 * lam, w_max)
     peak = _eic_peak(robot, w_u, e0)
     while peak > 1.0 and w_u > 1.2 * lam:
@@ -581,23 +595,24 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     g = _critical(w_u, 7.0)
     note = (f"ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/7, critically damped; "
             f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange){fastest_fails}")
-    try:
-        plant = linearize(robot, rate_hz=rate.rate_hz, timestep=rate.timestep)[:2]
-        if first is None:
-            loop = eic_tick_loop(robot, g, rate_hz=rate.rate_hz, velocity_cutoff=wc, plant=plant)
-    except (RobotModelError, NumericalError, ArgumentError) as exc:  # an actuator model the linearisation does not cover
-        return Derived(first[0], first[1]) if first is not None else Derived(g, note + f"; the sampled loop was not checked ({exc})")
     if first is not None:
         g, note = first
-        why = "they"
-    elif loop.spectral_radius < 1.0:
-        note += (f"; the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) decays at "
-                 f"{loop.decay_rate:.3g} 1/s at upright")
-        why = "they"
+        candidate = True
     else:
-        why = (f"the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) grows at "
-               f"{-loop.decay_rate:.3g} 1/s with them")
-    if why == "they":
+        try:
+            loop = sampled(g)
+        except (RobotModelError, NumericalError, ArgumentError) as exc:
+            loop, unchecked = None, f"; the sampled loop was not checked ({exc})"
+        if loop is None:
+            return Derived(g, note + unchecked)
+        candidate = loop.spectral_radius < 1.0
+        if candidate:
+            note += (f"; the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) decays at "
+                     f"{loop.decay_rate:.3g} 1/s at upright")
+        else:
+            why = (f"the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) grows at "
+                   f"{-loop.decay_rate:.3g} 1/s with them")
+    if candidate:
         ok, how, _ = _recovery_run(robot, g, rate, qu0=e0, velocity_cutoff=wc)
         if ok:
             return Derived(g, note + f"; in MuJoCo {how}")
@@ -609,7 +624,7 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
             continue
         for ratio in EIC_GRID_RATIO:
             gg = _critical(wu, ratio)
-            lp = eic_tick_loop(robot, gg, rate_hz=rate.rate_hz, velocity_cutoff=wc, plant=plant)
+            lp = sampled(gg)
             if lp.spectral_radius < 1.0:
                 stable.append((lp.decay_rate, wl, ratio, gg))
     if not stable:
@@ -637,19 +652,6 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
 
 #: Sampled-stable grid gains tried in MuJoCo by :func:`eic_gains` (fastest decay first).
 EIC_SEARCH_TRIES = 8
-
-
-def _sampled_loop(robot, gains, rate: RateChoice, velocity_cutoff: float):
-    """:func:`~bemlearn.control.eic_linear.eic_tick_loop` at ``gains``; ``None`` where the linearisation does not cover the actuators."""
-    from bemlearn.control.eic_linear import eic_tick_loop
-    from bemlearn.control.lqr import linearize
-    from bemlearn.errors import ArgumentError, NumericalError, RobotModelError
-
-    try:
-        plant = linearize(robot, rate_hz=rate.rate_hz, timestep=rate.timestep)[:2]
-        return eic_tick_loop(robot, gains, rate_hz=rate.rate_hz, velocity_cutoff=velocity_cutoff, plant=plant)
-    except (RobotModelError, NumericalError, ArgumentError):
-        return None
 
 
 def eic_recovery(robot, gains, rate: RateChoice, *, qu0: float, velocity_cutoff: float, duration_s: float = 3.0) -> tuple[bool, str]:
