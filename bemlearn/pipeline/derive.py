@@ -730,7 +730,8 @@ def _reference_run(robot, gains, rate: RateChoice, reference: dict | None, *, ve
 
     if not reference:
         return True, "", math.nan
-    ref = ReferenceConfig(**{k: (tuple(v) if isinstance(v, (list, tuple)) else v) for k, v in reference.items()})
+    ref = ReferenceConfig(amplitudes=tuple(reference["amplitudes"]), frequencies_hz=tuple(reference["frequencies_hz"]),
+                          phases=tuple(reference["phases"]), offset=float(reference["offset"]))
     freqs = [f for f, a in zip(ref.frequencies_hz or (), ref.amplitudes or ()) if f > 0 and a != 0]
     if not freqs:
         return True, "", math.nan
