@@ -36,8 +36,8 @@ disagreement at the same queries gives c_col as in step 4.  c is the largest of 
 every column's (each is a test σ̃ must pass).  Measured on two family robots whose learned BEM is
 right but whose band held 78–79 % of the model BEM over the design region (a cart-pole on a position
 servo, corr(q̈_a, q̈_u) = −0.97; a rotary arm): trial-split c = 1.09 and 1.00, residual-split c = 1.35
-and 1.47, design-region coverage 95.4 % and 90.2 %; on eight robots already covered the median σ
-moved by ≤ 9 % (docs/uncertainty.md).
+and 1.27, design-region coverage 100 % and 84.6 %; on eight robots already covered c rose on four
+and the median σ by at most 1.26 × (docs/uncertainty.md).
 
 The cost is 2 · ``n_pairs`` (+ 2 · ``n_pairs`` per lockstep column) Cholesky factorizations of
 ``n_points`` points; prediction cost is one scalar multiply.
