@@ -271,6 +271,54 @@ def test_replica_calibration_sees_trial_correlated_errors():
         calibrate_replicas(st, x, iid, torch.zeros_like(trial), q)
 
 
+def test_residual_split_replicas_see_the_lockstep_extrapolation():
+    """Inputs [a, ȧ, q, u, u̇] where u moves in lockstep with a (u = −0.8 a + 0.15 ε, u̇ = 0.6 ȧ + 0.15 ε'),
+    f = sin(x·w) + u², a GP whose lengthscale (3) is too long for that curvature, queries at u = u̇ = 0 (the BEM
+    slice), six seeds.  Every trial has the same lockstep, so trial halves agree (mean raw c ≈ 0.95) while
+    μ ± 1.96 σ̃ holds the true f at the queries on about 62 %; halves split by u's residual from the actuated
+    columns (C2) disagree more (mean raw ≥ 1.25 × the trial split's) and raise the mean coverage by ≥ 4 points
+    (measured 62 → 69 %: the split sees part of the extrapolation error, not all of it).  With independent
+    inputs and a lengthscale that fits (1.5, no u² term) no split inflates σ̃ (every raw ≤ 1.4, c = 1)."""
+    w = torch.tensor([0.9, -0.6, 0.5, 0.4, -0.3], dtype=F64)
+    n_trials, per = 20, 60
+    trial = torch.arange(n_trials).repeat_interleave(per)
+
+    def state(ls):
+        st = _state(n=3, std_scale=1.0)
+        return dataclasses.replace(st, x_mean=torch.zeros(5, dtype=F64), x_std=torch.ones(5, dtype=F64),
+                                   y_mean=torch.tensor(0.0, dtype=F64), y_std=torch.tensor(1.0, dtype=F64),
+                                   lengthscale=torch.full((5,), ls, dtype=F64), noise=torch.tensor(0.01, dtype=F64), n_train=300)
+
+    kw = dict(n_points=300, n_pairs=4, lockstep_columns=(3, 4), motion_columns=3, column_names=NAMES)
+    raw_t, raw_u, cov_t, cov_u = [], [], [], []
+    for seed in range(6):
+        g = torch.Generator().manual_seed(seed)
+        x = torch.randn(n_trials * per, 5, generator=g, dtype=F64)
+        q = torch.randn(500, 5, generator=g, dtype=F64) * 0.7
+        q[:, 3:] = 0.0
+        noise = 0.1 * torch.randn(len(x), generator=g, dtype=F64)
+        if seed < 2:
+            honest = calibrate_replicas(state(1.5), x, torch.sin(x @ w) + noise, trial, q, seed=seed, **kw)
+            assert max(honest.raw_by_split.values()) <= 1.4 and honest.scale == 1.0, honest
+            assert set(honest.raw_by_split) == {"trials", NAMES[3], NAMES[4]}
+        xl = x.clone()
+        xl[:, 3] = -0.8 * x[:, 0] + 0.15 * x[:, 3]
+        xl[:, 4] = 0.6 * x[:, 1] + 0.15 * x[:, 4]
+        y = torch.sin(xl @ w) + xl[:, 3] ** 2 + noise
+        st = state(3.0)
+        cal = calibrate_replicas(st, xl, y, trial, q, seed=seed, **kw)
+        raw_t.append(cal.raw_by_split["trials"])
+        raw_u.append(cal.raw_by_split[NAMES[3]])
+        mean, lat = condition_state(st, xl[::4], y[::4]).predict_reference(q)
+        err = (mean - torch.sin(q @ w)).abs()
+        cov_t.append(float((err <= 1.96 * max(1.0, raw_t[-1]) * lat).double().mean()))
+        cov_u.append(float((err <= 1.96 * cal.scale * lat).double().mean()))
+    assert np.mean(raw_u) >= 1.25 * np.mean(raw_t), (raw_t, raw_u)
+    assert np.mean(cov_t) < 0.75 and np.mean(cov_u) >= np.mean(cov_t) + 0.04, (cov_t, cov_u)
+    only = calibrate_replicas(st, xl, y, trial, q, n_points=300, n_pairs=4)
+    assert only.raw_by_split == {"trials": only.raw_scale} and only.method == "trial-split replicas"
+
+
 def test_reliability_table_on_gaussian_errors():
     rng = np.random.default_rng(0)
     std = rng.uniform(0.5, 2.0, 40_000)

@@ -511,7 +511,8 @@ def _critical(w_u: float, ratio: float):
     return EICGains(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u)
 
 
-def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocity_cutoff: float | None = None) -> Derived:
+def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocity_cutoff: float | None = None,
+              reference: dict | None = None) -> Derived:
     """EIC gains from the model (eq. 3, 8): critically damped loops
 
         internal: ω_u = min(2.2 λ, 2π·rate/20),  k_p,u = ω_u², k_d,u = 2 ω_u
@@ -539,6 +540,15 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     the linear decay rate does not rank: measured on a two-link arm with joint friction, the fastest-decaying
     pair circled at ±0.08 rad while ω_u = 6 λ, ω_u/ω_a = 40 settled within 0.001 rad); if none does, the
     fastest-decaying one (the model check ``eic_recovery`` then says the robot cannot be balanced by the EIC).
+
+    With ``reference`` (the closed-loop reference the run will play, :func:`closed_loop_reference`'s fields) a
+    candidate must also hold that loop: the model BEM, the same sensors and limits, the reference played from rest
+    for two periods of its slowest component (5–20 s) without a fall (:func:`_reference_run`).  A recovery from
+    rest does not show what the reference does: on a two-link arm with a pole (velocity servos, 4096-count
+    encoders) the fastest-decaying gains (ω_u = 34 rad/s) recovered from d/4 and then circled at ±0.045 rad around
+    the BEM at rest, each encoder count passing through k_d,u into the commanded q̈_a and so into the BEM; playing a
+    0.04 rad reference the arm drifted along the joints' null direction and fell at 4.7 s (with an ideal encoder
+    it tracked within 0.02 rad).
 
     Returns:
         ``Derived(EICGains, note)``.
@@ -615,8 +625,12 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     if candidate:
         ok, how, _ = _recovery_run(robot, g, rate, qu0=e0, velocity_cutoff=wc)
         if ok:
-            return Derived(g, note + f"; in MuJoCo {how}")
-        why = f"in MuJoCo they do not bring the robot back ({how})"
+            held_ref, how_ref, _ = _reference_run(robot, g, rate, reference, velocity_cutoff=wc)
+            if held_ref:
+                return Derived(g, note + f"; in MuJoCo {how}" + (f"; {how_ref}" if how_ref else ""))
+            why = f"in MuJoCo they bring the robot back ({how}) but {how_ref}"
+        else:
+            why = f"in MuJoCo they do not bring the robot back ({how})"
     stable = []
     for wl in EIC_GRID_OMEGA_U:
         wu = wl * lam
@@ -631,12 +645,20 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
         warn(DesignWarning, log, "%s: no EIC gains of the grid make the sampled loop stable at upright", robot.name)
         return Derived(g, note + f"; {why}, and no gain of the grid (ω_u = 1.2–8 λ, ω_u/ω_a = 3–60) makes the sampled loop stable")
     stable.sort(key=lambda c: -c[0])
-    tried, held = [], []
+    tried, held, recovered = [], [], []
     for decay, wl, ratio, gg in stable[:EIC_SEARCH_TRIES]:
         ok, how, tail = _recovery_run(robot, gg, rate, qu0=e0, velocity_cutoff=wc)
-        tried.append(f"{wl:g} λ, ω_u/ω_a = {ratio:g}: {how}")
         if ok:
-            held.append((tail, decay, wl, ratio, gg, how))
+            recovered.append((tail, decay, wl, ratio, gg, how))
+            held_ref, how_ref, _ = _reference_run(robot, gg, rate, reference, velocity_cutoff=wc)
+            if held_ref:
+                held.append((tail, decay, wl, ratio, gg, how + (f"; {how_ref}" if how_ref else "")))
+            else:
+                how += f", but {how_ref}"
+        tried.append(f"{wl:g} λ, ω_u/ω_a = {ratio:g}: {how}")
+    if not held and recovered:   # none holds the reference loop: the recovery alone decides (as without a reference)
+        warn(DesignWarning, log, "%s: no EIC gains tried hold the closed-loop reference in MuJoCo", robot.name)
+        held = recovered
     if held:
         tail, decay, wl, ratio, gg, how = min(held, key=lambda c: c[0])
         return Derived(gg, f"ω_u = {wl:g} λ (λ = {lam:.3g} 1/s), ω_a = ω_u/{ratio:g}, critically damped: the first choice ({note}) "
@@ -696,6 +718,32 @@ def _recovery_run(robot, gains, rate: RateChoice, *, qu0: float, velocity_cutoff
                        f"(ends {end:.3g})"), tail
     return True, (f"from a {qu0:.3g} error q_u stays within {tail:.3g} of nominal over the last second of {duration_s:g} s "
                   f"(ends {end:.3g}), peak command {res.metrics['u_max']:.3g} ctrl"), tail
+
+
+def _reference_run(robot, gains, rate: RateChoice, reference: dict | None, *, velocity_cutoff: float) -> tuple[bool, str, float]:
+    """Whether the EIC loop with the model BEM holds ``robot`` in MuJoCo while it plays ``reference`` (the closed-loop
+    reference's fields, :func:`closed_loop_reference`) from rest: the sensors and limits of :func:`_recovery_run`, for
+    two periods of the reference's slowest component (5–20 s).  Returns ``(holds, what happened, tracking RMSE of
+    q_a)``; ``(True, "", nan)`` without a reference."""
+    from bemlearn.data.sensors import SensorConfig
+    from bemlearn.sim.closed_loop import ReferenceConfig, SimulateConfig, simulate
+
+    if not reference:
+        return True, "", math.nan
+    ref = ReferenceConfig(amplitudes=tuple(reference["amplitudes"]), frequencies_hz=tuple(reference["frequencies_hz"]),
+                          phases=tuple(reference["phases"]), offset=float(reference["offset"]))
+    freqs = [f for f, a in zip(ref.frequencies_hz or (), ref.amplitudes or ()) if f > 0 and a != 0]
+    if not freqs:
+        return True, "", math.nan
+    duration = float(min(20.0, max(5.0, 2.0 / min(freqs))))
+    cfg = SimulateConfig(duration_s=duration, rate_hz=rate.rate_hz, bem_source="model", reference=ref, gains=gains,
+                         sensor=SensorConfig(**_encoder(robot), velocity_cutoff=velocity_cutoff), initial_qu=0.0,
+                         fall_window=fall_window(robot).value, physics_timestep=rate.timestep if rate.timestep_changed else None)
+    res = simulate(robot, cfg, progress=False)
+    rms = float(res.metrics.get("tracking_rmse", math.nan))
+    if res.fell:
+        return False, f"playing the closed-loop reference it falls at {res.metrics['duration_s']:.2f} s", math.inf
+    return True, f"playing the closed-loop reference for {duration:.3g} s it stays up (tracking RMSE {rms:.3g})", rms
 
 
 def _eic_peak(robot, w_u: float, e0: float) -> float:

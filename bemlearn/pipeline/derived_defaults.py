@@ -162,12 +162,14 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
         _leaves("evaluate", {k: v for k, v in to_dict(ev.value).items() if k in _EVALUATE}, ev.note, out)
     _leaves("simulate.rate_hz", rs.rate_hz, srate.note + ("" if _given(given, "simulate.rate_hz") else " (the collection's rate)"), out)
     _leaves("simulate.physics_timestep", rs.timestep if rs.timestep_changed else None, srate.note, out)
+    ref = derive.closed_loop_reference(robot, excitation()) if wanted("simulate.reference", _REFERENCE) else None
     if wanted("simulate.gains", _EIC_GAINS):
         wc = config.simulate.sensor.velocity_cutoff if _given(given, "simulate.sensor.velocity_cutoff") else None
-        eic = derive.eic_gains(robot, rs, velocity_cutoff=wc)
+        # the gains must hold the loop the run will play: the derived reference, or the given one
+        played = ref.value if ref is not None else to_dict(config.simulate.reference)
+        eic = derive.eic_gains(robot, rs, velocity_cutoff=wc, reference=played if all(v is not None for v in played.values()) else None)
         _leaves("simulate.gains", {k: v for k, v in to_dict(eic.value).items() if k in _EIC_GAINS}, eic.note, out)
-    if wanted("simulate.reference", _REFERENCE):
-        ref = derive.closed_loop_reference(robot, excitation())
+    if ref is not None:
         _leaves("simulate.reference", ref.value, ref.note, out)
     _leaves("simulate.fall_window", fw.value, fw.note, out)
     if wanted("simulate.sensor", _SENSOR):

@@ -271,12 +271,22 @@ def _band_lines(train: RunMetrics, unit: str) -> list[str]:
     units = train.units or {}
     return ["### The exported std (calibrated band, eq. B1)", "",
             f"std² = c² · latent std² + max(Σ_i (s_i ∂μ/∂x_i)², mean over the neighbouring derivative estimators of the BEM's "
-            f"shift²); c = {_f(unc.std_scale, '.3f')} (trial-split replicas); "
+            f"shift²); c = {_f(unc.std_scale, '.3f')} ({_replica_text(unc)}); "
             + ("s from the quantization steps " + ", ".join(f"{k} {v:.3g} {units.get(f'q_{k}', 'rad')}" for k, v in (unc.quantization_step or {}).items())
                if unc.quantization_step else "no quantization grid detected (s = 0)") + "; "
             + (f"{len(names)} neighbouring estimators (median BEM shift at held-out queries, {unit}): "
                + ", ".join(f"{n} {_f(m, '.2g')}" for n, m in zip(names, med)) if names else "no estimator term (the estimator has no neighbours)")
             + ".", ""]
+
+
+def _replica_text(unc) -> str:
+    """Which replica splits set c: each split's raw scale (``uncertainty.replicas.raw_by_split``)."""
+    rep = unc.extra.get("replicas") if isinstance(unc.extra, dict) else None
+    raws = rep.get("raw_by_split") if isinstance(rep, dict) else None
+    if not isinstance(raws, dict) or not raws:
+        return "trial-split replicas"
+    return "replicas split by trials and by the residual of " + ", ".join(k for k in raws if k != "trials") + ": raw " + ", ".join(
+        f"{k} {_f(v, '.2f')}" for k, v in raws.items()) if len(raws) > 1 else "trial-split replicas"
 
 
 def _closed_loop_lines(sim: Mapping[str, LoopMetrics], data: DataInfo, train: RunMetrics, unit: str) -> list[str]:

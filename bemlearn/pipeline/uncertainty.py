@@ -5,8 +5,8 @@
 * s (``PredictorState.input_std``): the derivative estimator's noise gains applied to the
   quantization step detected in each joint's recorded angles (eq. N3,
   :mod:`bemlearn.models.input_noise`); joints without a detectable grid get s = 0;
-* c (``PredictorState.std_scale``): trial-split replica calibration at held-out BEM queries
-  (:mod:`bemlearn.fitting.calibration`);
+* c (``PredictorState.std_scale``): trial-split and residual-split (q̈_u, q̇_u given the actuated
+  motion) replica calibration at held-out BEM queries (:mod:`bemlearn.fitting.calibration`);
 * δ (``PredictorState.estimator_delta``): the mean weights' shift when the training rows'
   derivatives come from each neighbouring estimator (eq. E2,
   :mod:`bemlearn.fitting.estimator_sensitivity`).
@@ -71,8 +71,10 @@ def calibrate_band(state: PredictorState, traj, dataset_config, *, train_rows: t
                      "quantization_step": steps, "input_std": dict(zip(state.input_names, s.tolist())),
                      "estimator": repr(est), "queries_from": "validation trials" if len(pool.val) else "training trials"}
     try:
+        d = state.dim   # columns [q̈_a, q̇_a, q_a] (3m), then q̈_u, q̇_u: the two the BEM query sets to 0 (eq. 14)
         cal = calibrate_replicas(state, pool.train.x, pool.train.y, pool.train.trial, queries,
-                                 n_points=state.n_train, n_pairs=n_pairs, level=level, seed=seed)
+                                 n_points=state.n_train, n_pairs=n_pairs, level=level, seed=seed,
+                                 lockstep_columns=(d - 2, d - 1), motion_columns=d - 2, column_names=tuple(state.input_names))
         scale = cal.scale
         summary["replicas"] = cal.to_dict()
     except DataError as exc:  # a single training trial: nothing to split
