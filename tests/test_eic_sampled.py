@@ -129,6 +129,24 @@ def test_effort_capped_excitation_is_halved_until_its_trials_stay_up(tmp_path):
     assert math.isfinite(collect.amplitude[1])
 
 
+def test_excitation_amplitude_set_by_the_bem_budget_is_checked_by_trials_too(tmp_path):
+    """Family robot (1, 15), a pendubot on a velocity servo at 192 Hz: the BEM budget, not the actuator limits, sets the
+    amplitude (0.063 rad), yet 11 of 12 five-second trials fell there (none without sines); the trials decide, and
+    the derived amplitude is halved."""
+    from bemlearn.bench.family.generator import generate_robot
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
+
+    xml, _ = generate_robot(1, 15, hold_check=False)
+    path = tmp_path / "fam1_015.xml"
+    path.write_text(xml)
+    robot = MujocoRobot.from_xml(path)
+    sig = derive.excitation_signals(robot, derive.control_rate(robot).value).value
+    assert not sig["effort_capped"]
+    resolved = resolve_pipeline_config({"robot": str(path)})
+    assert resolved.config.collect.amplitude[1] == pytest.approx(0.5 * sig["amplitude"][1], rel=1e-12)
+    assert "fall at A × 0.5: A × 0.5" in resolved.notes["collect.n_sines"]
+
+
 def test_eic_gains_hold_the_closed_loop_reference_not_only_a_recovery(tmp_path):
     """Family robot (0, 58), a two-link arm with a pole on velocity servos: the fastest-decaying grid gains
     (ω_u = 5 λ, ω_u/ω_a = 30) bring the pole back from d/4 at rest, but with the 4096-count encoders the loop

@@ -172,7 +172,8 @@ def excitation_signals(robot, rate: RateChoice, *, n_sines: tuple[int, int] = (2
 
     Returns:
         ``Derived({"n_sines", "amplitude", "frequency_hz", "effort_capped"}, note)`` (amplitudes in rad or m;
-        ``effort_capped``: the actuator limits set A_hi, then :func:`excitation_amplitude_check` applies).
+        ``effort_capped``: the actuator limits set A_hi).  The derivation then lets trials decide
+        (:func:`excitation_amplitude_check`).
     """
     d = design_region(robot).value
     f_lo, f_hi, lam = _frequency_band(robot, rate)
@@ -207,11 +208,14 @@ def excitation_amplitude_check(robot, collect, *, trials: int = 24, duration_s: 
     1 % with 24 trials, 7 % with 12, 14 % with 8).  Most falls come in the first seconds (the tracking error
     the reference starts with), so 5 s trials.
 
-    Where the actuator limits set the top amplitude (:func:`excitation_signals`), the reference takes half of
-    them and the balance the rest; whether that is enough depends on the balance loop: its feedback on a
-    tracking error (the reference starts away from the robot's rest state and with a velocity the robot does
-    not have) saturates an actuator long before the linear design says (a servo whose ``forcerange`` binds far
-    inside its ``ctrlrange``).  So the trials themselves decide: :func:`~bemlearn.sim.collect.simulate_trial`,
+    Whatever sets the top amplitude (:func:`excitation_signals`), whether the balance holds it depends on the
+    balance loop: where the actuator limits set it, the reference takes half of them and the balance the rest,
+    and the loop's feedback on a tracking error (the reference starts away from the robot's rest state and with a
+    velocity the robot does not have) saturates an actuator long before the linear design says (a servo whose
+    ``forcerange`` binds far inside its ``ctrlrange``); where the BEM budget sets it, the loop holds q_u at nominal
+    while the BEM moves by up to 1.5 d, and the tracking error can take the state out of the loop's basin (a
+    pendubot on a velocity servo at 192 Hz: 11 of 12 trials fell at A × 1, 2 at A × 0.5, none without sines).
+    So the trials themselves decide: :func:`~bemlearn.sim.collect.simulate_trial`,
     the collection's loop with every limit, the encoder and the velocity filter, ``duration_s`` each, with seeds of
     their own (:data:`EXCITATION_CHECK_SEED`: the derived amplitude is a property of the robot, not of
     ``collect.seed``).  ``collect`` is a complete

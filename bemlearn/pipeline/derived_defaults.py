@@ -123,7 +123,9 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
     def excitation() -> dict:  # collect's sines, also the base of evaluate's references and of the closed loop's
         sig = derive.excitation_signals(robot, rc)
         value, note = dict(sig.value), sig.note
-        if value.get("effort_capped") and not _given(given, "collect.amplitude"):
+        # the trials decide, whatever set A_hi, where they play the collection that will run: m = 1 (with m ≥ 2 the
+        # collection moves each direction on its own, excitation_directions, which these trials do not play yet)
+        if not _given(given, "collect.amplitude") and (robot.m == 1 or value.get("effort_capped")):
             check = derive.excitation_amplitude_check(robot, _collect_for_check(robot, config, given, out, value, rc, fw.value))
             note += f"; {check.note}"
             if check.value < 1:
@@ -188,7 +190,7 @@ def _collect_for_check(robot, config: PipelineConfig, given, out: dict, signals:
     gains = c.gains if _given(given, "collect.gains") else out["collect.gains"][0]
     scale = c.gain_scale if _given(given, "collect.gain_scale") else out["collect.gain_scale"][0]
     init = derive.initial_ranges(robot).value
-    sen = derive.sensor(robot, rate).value
+    sen = derive.sensor(robot, rate).value if any(not _given(given, f"collect.sensor.{k}") for k in _SENSOR) else {}
     sensor = SensorConfig(**{k: getattr(c.sensor, k) if _given(given, f"collect.sensor.{k}") else sen[k] for k in _SENSOR})
     return dataclasses.replace(
         c, rate_hz=rate.rate_hz, physics_timestep=rate.timestep if rate.timestep_changed else None, gains=gains, gain_scale=scale,

@@ -140,6 +140,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
         except (BemlearnError, OSError) as exc:
             raise ConfigError(f"{source}: robot: {str(exc).removeprefix('robot: ')}") from exc
         _check_actuators(robot, source)
+        _check_for_robot(parsed, robot, source)   # the given values first: the derivation runs trials with them
         derived_key = ("derived", robot_key, frozenset(given), parsed.collect.rate_hz, parsed.simulate.rate_hz,
                        parsed.collect.physics_timestep, parsed.simulate.physics_timestep)
         if memo is not None and derived_key in memo:
