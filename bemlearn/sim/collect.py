@@ -157,7 +157,10 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
     K = np.asarray(config.gains, dtype=np.float64)
     if K.size != m * 2 * n:
         raise ConfigError(f"collect.gains: expected m·2n = {m * 2 * n} values for robot {robot.name!r}, got {K.size}")
-    K = K.reshape(m, 2 * n) * rng.uniform(*config.gain_scale, size=(m, 2 * n))
+    K0 = K.reshape(m, 2 * n)
+    K_scale = rng.uniform(*config.gain_scale, size=(m, 2 * n))
+    K = K0 * K_scale
+    schedule = _gain_schedule(robot, config, K0)
     # reference: per actuated joint a random sum of sines
     n_sines = rng.integers(config.n_sines[0], config.n_sines[1] + 1, size=m)
     comps = [
@@ -202,7 +205,8 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
             break
         y, v = plant.measure(q_true)
         q_ref, qd_ref, qdd_ref = _reference_state(t, comps, traj, ia, iu, n, robot.qu_nominal, pose)
-        u = K @ np.concatenate([y - q_ref, v - qd_ref])
+        Kt = K if schedule is None else (K0 + schedule.delta(y[ia])) * K_scale
+        u = Kt @ np.concatenate([y - q_ref, v - qd_ref])
         if inverse is not None:
             D, h = robot.terms(q_ref, qd_ref)
             u = u + inverse.command((D @ qdd_ref + h)[ia], q_ref, qd_ref, clip=False)
@@ -214,6 +218,26 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
         rec["q_meas"][tick], rec["u"][tick], rec["q"][tick], rec["qd"][tick], rec["qdd"][tick] = y, u, q_true, qd, qdd
     times = np.arange(k) * dt
     return TrialResult(trial_id, failed, times, *(rec[name][:k] for name in ("q_meas", "u", "q", "qd", "qdd")))
+
+
+def _gain_schedule(robot: MujocoRobot, config: CollectConfig, K: np.ndarray):
+    """The excitation balance scheduled over the actuated pose (:func:`~bemlearn.control.lqr.pose_gain_schedule`), or
+    ``None`` where the fixed gains ``K (m, 2n)`` stabilise the linearisation at every pose the reference reaches (each
+    coordinate's ``excursion`` extent, or with the paper's excitation n_max × the top amplitude).  The design is the
+    derived one's: |q_u| ≤ d (:func:`~bemlearn.robots.scales.design_bound`), a d/4 q_u start, the ``initial_qa`` start."""
+    from bemlearn.control.lqr import pose_gain_schedule
+    from bemlearn.robots.scales import design_bound
+
+    assert config.rate_hz is not None and config.n_sines is not None and config.amplitude is not None and config.initial_qa is not None
+    m = robot.m
+    if config.excursion:
+        extents = np.asarray(config.excursion, dtype=np.float64)[:m]
+    else:
+        extents = np.full(m, config.n_sines[1] * config.amplitude[1])
+    d = design_bound(robot)
+    qa0 = float(config.initial_qa[1]) or None
+    return pose_gain_schedule(robot, K, rate_hz=config.rate_hz, timestep=config.physics_timestep, extents=extents,
+                              design_qu=d, qu0=d / 4, qa0=qa0)
 
 
 def _trajectory_reference(reference_bem: tuple[float, ...] | None, comps: list, m: int) -> list | None:
