@@ -457,14 +457,14 @@ class GainSchedule:
 
 
 def _pose_grid(robot: MujocoRobot, j: int, extent: float, points: int) -> tuple[np.ndarray, bool]:
-    """Poses of actuated coordinate ``j``: [−π, π] on an unlimited hinge (periodic), else ±1.5 × ``extent`` within
-    the coordinate's range."""
+    """Poses of actuated coordinate ``j``: ±1.5 × ``extent`` within the coordinate's range, or [−π, π] (periodic) on an
+    unlimited hinge whose ±1.5 × extent reaches a half turn."""
     from bemlearn.robots.scales import qa_limited
 
     kinds = tuple(getattr(robot, "coordinate_kinds", ()))
     i = robot.actuated_index[j]
     limited = bool(qa_limited(robot)[j])
-    if not limited and len(kinds) == robot.n and kinds[i] == "hinge":
+    if not limited and len(kinds) == robot.n and kinds[i] == "hinge" and 1.5 * extent >= math.pi:
         return np.linspace(-math.pi, math.pi, points), True
     lo, hi = -1.5 * extent, 1.5 * extent
     if limited and (lim := robot.coordinate_limits[i]) is not None:   # a pose at the stop would linearise the stop
@@ -481,7 +481,7 @@ def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, tim
     scheduled over them (:class:`GainSchedule`).
 
     Coordinate j is scheduled when u = K e does not stabilise the tick map linearised at some pose of j alone within
-    ``extents[j]`` (±1.5 × its extent, the range, or a full turn of an unlimited hinge; :func:`linearize` with ``at``):
+    ``extents[j]`` (:func:`_pose_grid`; :func:`linearize` with ``at``):
     spectral radius of A(q) + B(q) K ≥ 1.  A turntable's yaw ψ turns the pole's plane: at ψ = π/2 the slide that
     balanced it at ψ = 0 moves it no more.  There the design of :func:`discrete_lqr` (``design_qu``, ``qu0``, ``qa0``,
     its Bryson weights, effort scale and, for design 2, force weights) is solved at each pose with the same weights

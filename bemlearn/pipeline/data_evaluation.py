@@ -313,7 +313,8 @@ def bem_resolution(model: PredictorState | LearnedBEM, train: BEMDataset, *, max
 
 
 
-def design_support(train: BEMDataset, *, max_queries: int = 2000, ratio: float = SUPPORT_RATIO) -> dict[str, Any]:
+def design_support(train: BEMDataset, *, max_queries: int = 2000, ratio: float = SUPPORT_RATIO,
+                   model: PredictorState | LearnedBEM | None = None) -> dict[str, Any]:
     """Are the BEM queries x_0^e = [q̈_a, q̇_a, q_a, 0, 0] (eq. 14) at the data's actuated motions
     supported by the training inputs *jointly* (:func:`support_of_queries`, (S1))?
 
@@ -326,7 +327,8 @@ def design_support(train: BEMDataset, *, max_queries: int = 2000, ratio: float =
         "pairs": [{"input", "with", "corr", "ratio"}] (largest |corr| first), "inputs": [{"input",
         "unit", "data": [lo, hi], "supported": [lo, hi] or None, "reach": max |x| of the supported
         queries or None}]}``; ``data`` are the training inputs' 2.5 / 97.5 % quantiles,
-        ``supported`` those of the supported queries.
+        ``supported`` those of the supported queries.  ``model``: the learned BEM, for (S2) where the BEM is not
+        linear in the actuated inputs over the data (:func:`~bemlearn.pipeline.support.extrapolation_leverage`).
     """
     meta = train.meta
     names = tuple(train.input_names)
@@ -347,5 +349,13 @@ def design_support(train: BEMDataset, *, max_queries: int = 2000, ratio: float =
     out = {"share": res["share"], "ratio_median": res["r_median"], "ratio_q90": res["r_q90"], "limit": ratio,
            "spacing": res["spacing"], "n_queries": len(q), "n_train": len(x), "pairs": _lockstep_pairs(x, names, n_act),
            "inputs": inputs, "unit": joint_unit(meta.kind_of(meta.unactuated))}
-    out.update(extrapolation_leverage(x, train.y.to(torch.float64).numpy(), names))
+    bem = None
+    if model is not None:   # (S2) where the BEM is not linear over the data: the learned μ(x_0^e) at each sample
+        from bemlearn.models.band import band_reference
+
+        state = _state(model)
+        x0 = train.x.to(torch.float64).clone()
+        x0[:, -2:] = 0.0
+        bem = band_reference(state, x0, n_inputs=state.dim - 2)[0].numpy()
+    out.update(extrapolation_leverage(x, train.y.to(torch.float64).numpy(), names, bem=bem))
     return out

@@ -224,7 +224,7 @@ def _data_only_metrics(state: PredictorState, train: BEMDataset, val: BEMDataset
         metrics["data_heldout"] = {**{k: v for k, v in held.items() if k != "per_trial"},
                                    "per_trial": {str(k): v for k, v in held["per_trial"].items()}}
     metrics["resolution"] = bem_resolution(state, train)   # do the data resolve the BEM at all (model-free)?
-    metrics["support"] = design_support(train)             # are its queries supported by the data jointly?
+    metrics["support"] = design_support(train, model=state)           # are its queries supported by the data jointly?
     slices = bem_slices(state, train)
     metrics["bem_slices"] = {"summary": slices["summary"],
                              "slices": [{k: v for k, v in sl.items() if not hasattr(v, "shape")} for sl in slices["slices"]]}

@@ -173,6 +173,14 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
             raise ConfigError(f"collect.excursion: expected 2·m = {2 * m} positive extents (positions, then accelerations) or [], got {list(ext)}")
         comps = [(A * np.minimum(ext[j], ext[m + j] / w**2), w, ph) for j, (A, w, ph) in enumerate(comps)]
     ia, iu = list(robot.actuated_index), robot.unactuated_index
+    sweep = _sweep_components(robot, config, rng)
+    stiff_v = None
+    if sweep is not None:
+        from bemlearn.robots.scales import velocity_stiffening_speed
+
+        comps = [(np.append(A, a_s), np.append(w, w_s), np.append(ph, p_s)) if a_s > 0 else (A, w, ph)
+                 for (A, w, ph), (a_s, w_s, p_s) in zip(comps, sweep)]
+        stiff_v = velocity_stiffening_speed(robot)
     traj = _trajectory_reference(config.reference_bem, comps, m)
     pose = None
     if traj is not None and config.excursion and config.reference_bem:
@@ -187,7 +195,7 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
     q0[iu] = robot.qu_nominal + rng.uniform(*config.initial_qu)
     qd0 = None
     if traj is not None:  # start on the reference (its initial state plus the drawn offsets)
-        r0 = _reference_state(0.0, comps, traj, ia, iu, n, robot.qu_nominal, pose)
+        r0 = _reference_state(0.0, comps, traj, ia, iu, n, robot.qu_nominal, pose, stiff_v)
         q0 += r0[0] - np.where(np.arange(n) == iu, robot.qu_nominal, 0.0)
         qd0 = r0[1]
     plant.reset(q0, qd0)
@@ -204,7 +212,7 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
             failed, k = True, tick
             break
         y, v = plant.measure(q_true)
-        q_ref, qd_ref, qdd_ref = _reference_state(t, comps, traj, ia, iu, n, robot.qu_nominal, pose)
+        q_ref, qd_ref, qdd_ref = _reference_state(t, comps, traj, ia, iu, n, robot.qu_nominal, pose, stiff_v)
         Kt = K if schedule is None else (K0 + schedule.delta(y[ia])) * K_scale
         u = Kt @ np.concatenate([y - q_ref, v - qd_ref])
         if inverse is not None:
@@ -259,8 +267,13 @@ def _trajectory_reference(reference_bem: tuple[float, ...] | None, comps: list, 
 
 
 def _reference_state(t: float, comps: list, traj: list | None, ia: list[int], iu: int, n: int,
-                     qu_nominal: float, pose: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                     qu_nominal: float, pose: tuple | None = None, stiff_v: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(q_t, q̇_t, q̈_t)`` (n,) each: the actuated sines and the q_u target (nominal, or on the periodic BEM motion).
+
+    ``stiff_v`` ``(m,)`` (with a sweep, :func:`_sweep_components`): the speeds that double the upright's stiffness
+    (:func:`~bemlearn.robots.scales.velocity_stiffening_speed`); the target's offset from nominal is divided by
+    Γ_q(q̇_t)/Γ_q(0) = 1 + Σ_j (q̇_t,j/v_j)² (a turntable turning at ψ̇: tan θ (m l g + ψ̇² J) ≈ m l a), the
+    reference's rate varying slowly against the target's components.
 
     ``pose`` (:func:`_pose_slopes`): the BEM slopes change with the actuated pose; the target's gains
     (:func:`_trajectory_reference`) then take the slopes at the reference's own pose q_a,t (a turntable at ψ: the
@@ -283,7 +296,36 @@ def _reference_state(t: float, comps: list, traj: list | None, ia: list[int], iu
         for (A, w, ph), G in zip(comps, gains):
             e = G * A * np.exp(1j * (w * t + ph))
             out[:, iu] += (np.sum(e.imag), np.sum((1j * w * e).imag), np.sum((-(w**2) * e).imag))
+        if stiff_v is not None:
+            rate = out[1, ia] / stiff_v
+            out[:, iu] = np.array([qu_nominal, 0.0, 0.0]) + (out[:, iu] - np.array([qu_nominal, 0.0, 0.0])) / (1.0 + float(np.sum(rate**2)))
     return out[0], out[1], out[2]
+
+
+def _sweep_components(robot: MujocoRobot, config: CollectConfig, rng: np.random.Generator) -> list | None:
+    """Per actuated coordinate ``(A_s, ω_s, φ_s)``: one more sine for an unlimited hinge whose ``excursion`` extent P_j
+    is a half turn (A_s = 0 elsewhere), A_s = P_j at ω_s = Ω/P_j, Ω ~ U(0.5, 1) √(a_j P_j) (a_j its acceleration
+    extent; √(a_j P_j) is the components' speed bound, within the stiffening speed,
+    :func:`~bemlearn.pipeline.derive.excitation_directions`), φ_s ~ U(0, 2π).  The sines shared among n components
+    (each ≤ P_j/√n_max) keep such a coordinate near its start — a turntable's yaw within ±1.9 rad and its rate below
+    3.3 rad/s of the ±π and 5.6 rad/s its design region spans (measured on ``fam0_005``); the sweep visits the whole
+    turn at rates up to that speed.  ``None`` (no draw from ``rng``) where no coordinate sweeps: every other robot's
+    trials are unchanged."""
+    if not config.excursion:
+        return None
+    from bemlearn.robots.scales import qa_limited
+
+    m = robot.m
+    ext = np.asarray(config.excursion, dtype=np.float64)
+    kinds = tuple(getattr(robot, "coordinate_kinds", ()))
+    limited = qa_limited(robot)
+    turns = [len(kinds) == robot.n and kinds[robot.actuated_index[j]] == "hinge" and not limited[j]
+             and ext[j] >= math.pi * (1 - 1e-5) for j in range(m)]
+    if not any(turns):
+        return None
+    rate = rng.uniform(0.5, 1.0, size=m) * np.sqrt(ext[:m] * ext[m:2 * m])
+    phase = rng.uniform(0.0, 2 * math.pi, size=m)
+    return [(float(ext[j]), float(rate[j] / ext[j]), float(phase[j])) if turns[j] else (0.0, 0.0, 0.0) for j in range(m)]
 
 
 _POSE_SLOPES: dict = {}
