@@ -137,8 +137,8 @@ def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = No
         # at the pose), else the linearisation is of a state accelerating away from it
         from bemlearn.control.actuator_inverse import MujocoActuatorInverse
 
-        h = np.asarray(robot.terms(q0, np.zeros(n))[1], dtype=np.float64)
-        data.ctrl[:] = MujocoActuatorInverse(robot).command(h[list(robot.actuated_index)], q0, np.zeros(n), clip=False)
+        bias = np.asarray(robot.terms(q0, np.zeros(n))[1], dtype=np.float64)
+        data.ctrl[:] = MujocoActuatorInverse(robot).command(bias[list(robot.actuated_index)], q0, np.zeros(n), clip=False)
     mujoco.mj_forward(model, data)
     nx = 2 * model.nv + model.na
     A1 = np.zeros((nx, nx))

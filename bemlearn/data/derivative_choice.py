@@ -258,28 +258,39 @@ def choose_sigma(traj: Trajectory, *, qu_window: float | None = 0.5, truncate: f
             a, b = kept[k - 1], kept[k]
             sigma = float(f"{math.exp(lo + (hi - lo) * (a - kept_motion) / (a - b)):.4g}")
             note = f"σ = {sigma:g} s chosen from the data: the smoothed {meta.unactuated} keeps {kept_motion:.0%} of its motion"
+    steps = traj.quantization_steps()       # detected, or recorded by an import before resampling
     turning = _turning_directions(traj, rows, within, GaussianDerivative(sigma_s=sigma, truncate=truncate))
     for name, (sig_j, span, w95) in turning.items():
         if sig_j < sigma:
-            note = (f"σ = {sig_j:g} s chosen from the data: {name} turns through {span:.3g} rad at up to {w95:.3g} rad/s "
-                    f"(95 %), and the smoothing keeps {TURNING_KEPT:.0%} of its direction's products there (the label "
-                    f"alone would allow {sigma:g} s)")
-            sigma, limited = sig_j, None
-    noise: dict[str, float] = {}
-    w2 = gaussian_kernels(sigma, rate, truncate)[2]
-    est = GaussianDerivative(sigma_s=sigma, truncate=truncate)
-    _, _, qdd, ok = estimate_states(traj, est, within=within)
-    steps = traj.quantization_steps()       # detected, or recorded by an import before resampling
-    for j, name in enumerate(meta.joint_names):
-        step = steps.get(name)
-        sd = float(np.std(qdd[ok, j])) if ok.any() else 0.0
-        if step is not None and sd > 0:
-            noise[name] = float(step / math.sqrt(12.0) * np.linalg.norm(w2) / sd)
+            # not into the noise: the quantization noise in S[q̈] grows as σ^(−5/2); where it passes NOISY at the
+            # turning bound, σ is raised to where it meets it (never above the label's σ)
+            worst = max(_noise(traj, steps, sig_j, rate, truncate, within).values(), default=0.0)
+            floor = sig_j * (worst / NOISY) ** 0.4 if worst > NOISY else sig_j
+            chosen = float(f"{min(sigma, floor):.4g}")
+            note = (f"σ = {chosen:g} s chosen from the data: {name} turns through {span:.3g} rad at up to {w95:.3g} rad/s "
+                    f"(95 %), and the smoothing keeps {TURNING_KEPT:.0%} of its direction's products at {sig_j:g} s"
+                    + (f", raised to where q̈'s quantization noise is {NOISY:.0%} of its spread" if chosen > sig_j else "")
+                    + f" (the label alone would allow {sigma:g} s)")
+            sigma, limited = chosen, None
+    noise = _noise(traj, steps, sigma, rate, truncate, within)
     noisy = [j for j, v in noise.items() if v > NOISY]
     if noisy:
         note += "; q̈ noise-dominated in " + ", ".join(f"{j} ({noise[j]:.0%} of its std)" for j in noisy)
     log.info("derivatives: %s", note)
     return SigmaChoice(sigma, ladder, kept, int(rows.size), noise, limited, note)
+
+
+def _noise(traj: Trajectory, steps: dict, sigma: float, rate: float, truncate: float, within: np.ndarray | None) -> dict[str, float]:
+    """Per joint with a detected encoder step δ: δ/√12 · ‖w2‖ as a fraction of the std of S_σ[q̈] in the data."""
+    w2 = gaussian_kernels(sigma, rate, truncate)[2]
+    _, _, qdd, ok = estimate_states(traj, GaussianDerivative(sigma_s=sigma, truncate=truncate), within=within)
+    noise: dict[str, float] = {}
+    for j, name in enumerate(traj.meta.joint_names):
+        step = steps.get(name)
+        sd = float(np.std(qdd[ok, j])) if ok.any() else 0.0
+        if step is not None and sd > 0:
+            noise[name] = float(step / math.sqrt(12.0) * np.linalg.norm(w2) / sd)
+    return noise
 
 
 #: An actuated hinge whose angle spans more than this (rad, 2.5–97.5 % of the data) bounds σ by its turning rate.
@@ -328,7 +339,7 @@ def _turning_directions(traj: Trajectory, rows: np.ndarray, within: np.ndarray |
         if use.size < 50:
             continue
         y = q_s[use, iu] - q_s[use, iu].mean()
-        others = [k for k in acts if k != j]
+        others = np.array([k for k in acts if k != j], dtype=np.int64)
         base = np.c_[np.ones(use.size), qdd_s[np.ix_(use, others)]]
         c, sn = np.cos(q_s[use, j])[:, None], np.sin(q_s[use, j])[:, None]
         ext = np.c_[base, qdd_s[np.ix_(use, others)] * c, qdd_s[np.ix_(use, others)] * sn]
