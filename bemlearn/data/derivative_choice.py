@@ -264,8 +264,12 @@ def choose_sigma(traj: Trajectory, *, qu_window: float | None = 0.5, truncate: f
         if sig_j < sigma:
             # not into the noise: the quantization noise in S[q̈] grows as σ^(−5/2); where it passes NOISY at the
             # turning bound, σ is raised to where it meets it (never above the label's σ)
-            worst = max(_noise(traj, steps, sig_j, rate, truncate, within).values(), default=0.0)
-            floor = sig_j * (worst / NOISY) ** 0.4 if worst > NOISY else sig_j
+            floor = sig_j
+            for _ in range(4):   # the law is ‖w2‖'s; S_σ[q̈]'s spread shrinks a little with σ too: a few steps
+                worst = max(_noise(traj, steps, floor, rate, truncate, within).values(), default=0.0)
+                if worst <= NOISY or floor >= sigma:
+                    break
+                floor = float(f"{floor * (worst / NOISY) ** 0.4 * 1.001:.4g}")
             chosen = float(f"{min(sigma, floor):.4g}")
             note = (f"σ = {chosen:g} s chosen from the data: {name} turns through {span:.3g} rad at up to {w95:.3g} rad/s "
                     f"(95 %), and the smoothing keeps {TURNING_KEPT:.0%} of its direction's products at {sig_j:g} s"
