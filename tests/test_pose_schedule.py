@@ -119,19 +119,24 @@ def test_robots_whose_fixed_gains_hold_at_every_pose_are_not_scheduled(name):
     assert _gain_schedule(robot, cfg, np.asarray(gains).reshape(robot.m, 2 * robot.n)) is None
 
 
-def test_sweep_only_for_a_full_turn_and_unchanged_draws_elsewhere(turntable):
-    from bemlearn.sim.collect import CollectConfig, _sweep_components
+def test_sweep_only_where_the_pose_turns_the_slopes_over_a_wide_extent(turntable):
+    from bemlearn.sim.collect import CollectConfig, _pose_slopes, _sweep_components
 
-    cfg = CollectConfig(excursion=(0.3, 0.3, math.pi, 2.0, 2.0, 9.0))
-    sw = _sweep_components(turntable, cfg, np.random.default_rng(0))
-    assert sw is not None and sw[0] == (0.0, 0.0, 0.0) and sw[1] == (0.0, 0.0, 0.0)
-    A, w, _ = sw[2]
+    ext = (0.3, 0.3, math.pi, 2.0, 2.0, 9.0)
+    pose = _pose_slopes(turntable, np.array(ext[:3]), 6.0)
+    assert pose is not None   # the yaw turns the slides' s_a
+    sw = _sweep_components(turntable, CollectConfig(excursion=ext), np.random.default_rng(0), pose)
+    assert sw is not None and sw[0] == (0.0, 0.0, 0.0, 1.0) and sw[1] == (0.0, 0.0, 0.0, 1.0)   # slides: no sweep
+    A, w, _, keep = sw[2]
     v = math.sqrt(math.pi * 9.0)
-    assert pytest.approx(math.pi) == A and 0.5 * v <= A * w <= v   # peak rate A ω within [v/2, v]
+    assert pytest.approx(math.pi) == A and keep == 1.0 and 0.5 * v <= A * w <= v   # unlimited yaw: peak rate A ω in [v/2, v]
+    assert A * w**2 <= 9.0 * (1 + 1e-12)   # and its acceleration within the extent
     rng = np.random.default_rng(0)
     before = rng.bit_generator.state
-    assert _sweep_components(turntable, CollectConfig(excursion=(0.3, 0.3, 2.0, 2.0, 2.0, 9.0)), rng) is None
-    assert rng.bit_generator.state == before   # no draw: a robot without a full-turn coordinate keeps its trials
+    narrow = (0.3, 0.3, 0.8, 2.0, 2.0, 9.0)   # a yaw extent below a radian: the sines visit it
+    assert _sweep_components(turntable, CollectConfig(excursion=narrow), rng, _pose_slopes(turntable, np.array(narrow[:3]), 6.0)) is None
+    assert _sweep_components(turntable, CollectConfig(excursion=ext), rng, None) is None   # no pose table (a cart)
+    assert rng.bit_generator.state == before   # no draw: a robot without a sweep keeps its trials
 
 
 def test_s2_with_a_bem_that_turns_with_the_pose():

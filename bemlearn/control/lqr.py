@@ -188,7 +188,8 @@ def bryson_scales(robot: MujocoRobot, *, design_qu: float = 0.2) -> tuple[np.nda
     """Bryson maxima ``(x_max (2n,), u_max (nu,), λ)`` (module docstring); λ = √(Γ_q/D_uu), 1/s.
 
     An unlimited actuated coordinate gets at least the amplitude a sine at λ needs to move the
-    BEM by ``design_qu`` (a reaction wheel turns through many radians to balance).
+    BEM by ``design_qu`` (a reaction wheel turns through many radians to balance); an unlimited hinge whose
+    motion does not move the BEM at rest (a turntable's yaw) a half turn.
     """
     from bemlearn.robots.scales import bem_gain, bem_slopes, instability_rate, qa_half_ranges, qu_half_range
 
@@ -198,8 +199,14 @@ def bryson_scales(robot: MujocoRobot, *, design_qu: float = 0.2) -> tuple[np.nda
     dq = min(design_qu, qu_half_range(robot))
     xmax[iu] = dq
     qa_max = qa_half_ranges(robot)
-    need = dq / np.maximum(bem_gain(bem_slopes(robot), lam), 1e-12)
+    gain = bem_gain(bem_slopes(robot), lam)
+    need = dq / np.maximum(gain, 1e-12)
     limited = _limited_actuated(robot)
+    # an unlimited hinge that does not move the BEM at rest (a turntable's yaw: it turns the slides' slopes instead)
+    # would get no weight at all, and nothing would hold it to its reference: a half turn is its scale
+    kinds = tuple(getattr(robot, "coordinate_kinds", ()))
+    idle = np.array([g <= 1e-12 and len(kinds) == n and kinds[j] == "hinge" for g, j in zip(gain, ia)], dtype=bool)
+    need = np.where(~limited & idle, np.maximum(qa_max, math.pi), need)
     xmax[ia] = np.where(limited, qa_max, np.maximum(qa_max, need))
     xmax[n:] = xmax[:n] * max(lam, 1.0)
     return xmax, actuator_limits(robot).u_max, lam

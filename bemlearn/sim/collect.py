@@ -18,6 +18,12 @@ ground-truth file (``<stem>.truth<suffix>``) for evaluation.
 
 Trials are seeded from ``numpy.random.SeedSequence(seed).spawn(n_trials)``, so the result
 does not depend on the number of worker processes.
+
+Where the fixed gains do not hold the linearisation at a pose the reference reaches (a turntable's yaw turns the
+pole's plane away from the slide that balanced it at 0), the gains are scheduled over that coordinate
+(:func:`_gain_schedule`, :func:`~bemlearn.control.lqr.pose_gain_schedule`: u = (K + ΔK(q̂_a)) ∘ scale, the measured
+pose in the tick); an unlimited hinge whose extent is a half turn also sweeps it (:func:`_sweep_components`).  Every
+other robot's trials are unchanged, draw for draw.
 """
 
 from __future__ import annotations
@@ -173,18 +179,20 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
             raise ConfigError(f"collect.excursion: expected 2·m = {2 * m} positive extents (positions, then accelerations) or [], got {list(ext)}")
         comps = [(A * np.minimum(ext[j], ext[m + j] / w**2), w, ph) for j, (A, w, ph) in enumerate(comps)]
     ia, iu = list(robot.actuated_index), robot.unactuated_index
-    sweep = _sweep_components(robot, config, rng)
+    pose = None
+    if config.reference_bem and config.excursion:
+        pose = _pose_slopes(robot, np.asarray(config.excursion, dtype=np.float64)[:m], float(config.reference_bem[-1]))
+    sweep = _sweep_components(robot, config, rng, pose)
     stiff_v = None
     if sweep is not None:
         from bemlearn.robots.scales import velocity_stiffening_speed
 
-        comps = [(np.append(A, a_s), np.append(w, w_s), np.append(ph, p_s)) if a_s > 0 else (A, w, ph)
-                 for (A, w, ph), (a_s, w_s, p_s) in zip(comps, sweep)]
+        comps = [(np.append(A * keep, a_s), np.append(w, w_s), np.append(ph, p_s)) if a_s > 0 else (A, w, ph)
+                 for (A, w, ph), (a_s, w_s, p_s, keep) in zip(comps, sweep)]
         stiff_v = velocity_stiffening_speed(robot)
     traj = _trajectory_reference(config.reference_bem, comps, m)
-    pose = None
-    if traj is not None and config.excursion and config.reference_bem:
-        pose = _pose_slopes(robot, np.asarray(config.excursion, dtype=np.float64)[:m], float(config.reference_bem[-1]))
+    if traj is None:
+        pose = None
     inverse = None
     if traj is not None:
         from bemlearn.control.actuator_inverse import MujocoActuatorInverse  # the model's feedforward along the reference
@@ -302,16 +310,18 @@ def _reference_state(t: float, comps: list, traj: list | None, ia: list[int], iu
     return out[0], out[1], out[2]
 
 
-def _sweep_components(robot: MujocoRobot, config: CollectConfig, rng: np.random.Generator) -> list | None:
-    """Per actuated coordinate ``(A_s, ω_s, φ_s)``: one more sine for an unlimited hinge whose ``excursion`` extent P_j
-    is a half turn (A_s = 0 elsewhere), A_s = P_j at ω_s = Ω/P_j, Ω ~ U(0.5, 1) √(a_j P_j) (a_j its acceleration
-    extent; √(a_j P_j) is the components' speed bound, within the stiffening speed,
+def _sweep_components(robot: MujocoRobot, config: CollectConfig, rng: np.random.Generator, pose: tuple | None) -> list | None:
+    """Per actuated coordinate ``(A_s, ω_s, φ_s, keep)``: one more sine for a hinge whose pose turns the BEM's slopes
+    (``pose``, :func:`_pose_slopes`: a turntable's yaw) over an ``excursion`` extent P_j ≥ :data:`SWEEP_SPAN`
+    (A_s = 0 elsewhere): A_s = P_j (0.75 P_j on a limited joint, whose own sines are then halved, ``keep`` = 0.5, to
+    stay off its stops) at ω_s = Ω/A_s, Ω ~ U(0.5, 1) √(a_j A_s) (a_j its acceleration extent: the sweep's
+    acceleration stays within it; √(a_j P_j) is the components' speed bound, within the stiffening speed,
     :func:`~bemlearn.pipeline.derive.excitation_directions`), φ_s ~ U(0, 2π).  The sines shared among n components
     (each ≤ P_j/√n_max) keep such a coordinate near its start — a turntable's yaw within ±1.9 rad and its rate below
-    3.3 rad/s of the ±π and 5.6 rad/s its design region spans (measured on ``fam0_005``); the sweep visits the whole
-    turn at rates up to that speed.  ``None`` (no draw from ``rng``) where no coordinate sweeps: every other robot's
-    trials are unchanged."""
-    if not config.excursion:
+    3.3 rad/s of the ±π and 5.6 rad/s its design region spans (measured on ``fam0_005``); the sweep visits the
+    whole extent at rates up to that speed.  ``None`` (no draw from ``rng``) where no coordinate sweeps: every other
+    robot's trials are unchanged."""
+    if not config.excursion or pose is None:
         return None
     from bemlearn.robots.scales import qa_limited
 
@@ -319,13 +329,22 @@ def _sweep_components(robot: MujocoRobot, config: CollectConfig, rng: np.random.
     ext = np.asarray(config.excursion, dtype=np.float64)
     kinds = tuple(getattr(robot, "coordinate_kinds", ()))
     limited = qa_limited(robot)
-    turns = [len(kinds) == robot.n and kinds[robot.actuated_index[j]] == "hinge" and not limited[j]
-             and ext[j] >= math.pi * (1 - 1e-5) for j in range(m)]
+    deltas = pose[1]
+    scale = max(float(np.max(np.abs(d))) for d in deltas) or 1.0
+    turns = [len(kinds) == robot.n and kinds[robot.actuated_index[j]] == "hinge" and ext[j] >= SWEEP_SPAN
+             and float(np.max(np.abs(deltas[j]))) > 1e-3 * scale for j in range(m)]
     if not any(turns):
         return None
-    rate = rng.uniform(0.5, 1.0, size=m) * np.sqrt(ext[:m] * ext[m:2 * m])
+    amp = np.where(limited, 0.75, 1.0) * ext[:m]
+    rate = rng.uniform(0.5, 1.0, size=m) * np.sqrt(amp * ext[m:2 * m])
     phase = rng.uniform(0.0, 2 * math.pi, size=m)
-    return [(float(ext[j]), float(rate[j] / ext[j]), float(phase[j])) if turns[j] else (0.0, 0.0, 0.0) for j in range(m)]
+    return [(float(amp[j]), float(rate[j] / amp[j]), float(phase[j]), 0.5 if limited[j] else 1.0) if turns[j]
+            else (0.0, 0.0, 0.0, 1.0) for j in range(m)]
+
+
+#: A hinge whose pose turns the BEM's slopes sweeps its extent when that is at least this (rad): beyond it cos and sin
+#: of the pose are far from linear, and sines shared among components leave most of the extent unvisited.
+SWEEP_SPAN = 1.0
 
 
 _POSE_SLOPES: dict = {}
