@@ -96,7 +96,9 @@ def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_poi
     s_a = np.abs(bem_slopes(robot)[2])
     Q = np.minimum(float(evaluate_config.amplitude_max), qa_half_ranges(robot))
     V = Q * w
-    A = np.maximum(Q * w * w, np.where(s_a > 0, 1.3 * d / np.maximum(s_a, 1e-300), 0.0))
+    # an s_a of rounding size (a turntable's yaw: 1e-18 rad per rad/s², where it is 0) is 0, as in the excitation's
+    # extents (derive.excitation_directions): else the box asks for yaw accelerations of 1e17 rad/s²
+    A = np.maximum(Q * w * w, np.where(s_a > 1e-9, 1.3 * d / np.maximum(s_a, 1e-300), 0.0))
     if excursion:
         ext = np.asarray(excursion, dtype=np.float64)
         P, a = ext[:m], ext[m:2 * m]
