@@ -161,6 +161,8 @@ def test_s2_with_a_bem_that_turns_with_the_pose():
     out = extrapolation_leverage(x, y, names, bem=bem)
     assert out["with_bem"] and out["r2"] > 0.99
     assert out["slope"] == pytest.approx(1 / lam2, rel=0.02) and out["t"] > 50
+    wrong = extrapolation_leverage(x, y, names, bem=rng.normal(0, 0.1, N))   # a "learned BEM" that describes nothing
+    assert wrong["with_bem"] and wrong["r2"] < LINEAR_R2 and wrong["t"] is None   # S2 then says nothing either way
     lin = 0.1 * qdd_a[:, 0] + 0.02 * qdd_a[:, 1] + qdd_u / lam2 + rng.normal(0, 1e-3, N)
     a, b = extrapolation_leverage(x, lin, names), extrapolation_leverage(x, lin, names, bem=np.zeros(N))
     assert a == b and not b["with_bem"]

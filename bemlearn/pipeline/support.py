@@ -134,13 +134,17 @@ def extrapolation_leverage(x: np.ndarray, y: np.ndarray, names: tuple[str, ...],
     Returns:
         ``{"qdd_u": name, "slope": β_q̈u in q_u's unit per q̈_u's, "t": t, "lambda2": 1/β_q̈u (1/s²),
         "vif": 1/(1 − R²), "r2": the fit's R², "with_bem": whether ``bem`` entered (then "r2_linear")}``; an empty dict
-        when the fit is degenerate.
+        when the fit is degenerate; ``t`` ``None`` where even the fit with ``bem`` leaves R² < :data:`LINEAR_R2` (the
+        learned BEM does not describe the data either — ``fam0_041``, 18 of 24 trials fallen: R² 0.76, t = −9.8 —
+        and the slope's sign says nothing about the equilibrium).
     """
     out = _leverage(x, y, names)
     if bem is not None and out and out["r2"] < LINEAR_R2:
         again = _leverage(np.c_[np.asarray(bem, dtype=np.float64).reshape(-1), np.asarray(x, dtype=np.float64)], y, names)
         if again:
-            return {**again, "with_bem": True, "r2_linear": out["r2"]}
+            out = {**again, "with_bem": True, "r2_linear": out["r2"]}
+            if out["r2"] < LINEAR_R2:   # neither fit describes q_u: its slope in q̈_u says nothing either way
+                out["t"] = None
     return out
 
 
