@@ -108,6 +108,7 @@ def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_poi
         # the rates to the speed that doubles the upright's stiffness, not only as far as the sweep's effort-scaled
         # extents went (fam0_053: yaw to 1.55 rad and 4.6 rad/s of 1.89 and 5.6; ok by its own box, RMSE 0.011 by
         # the oracle's)
+        from bemlearn.robots.mujoco_robot import MujocoRobot
         from bemlearn.robots.scales import qa_limited, velocity_stiffening_speed
         from bemlearn.sim.collect import SWEEP_SPAN
 
@@ -115,7 +116,7 @@ def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_poi
         ia = list(getattr(robot, "actuated_index", range(m)))
         swept = np.array([len(kinds) == robot.n and kinds[ia[j]] == "hinge" and P[j] >= SWEEP_SPAN for j in range(m)], dtype=bool)
         if swept.any():
-            limited = qa_limited(robot) if hasattr(robot, "coordinate_limits") else np.ones(m, dtype=bool)
+            limited = qa_limited(robot) if isinstance(robot, MujocoRobot) else np.ones(m, dtype=bool)
             whole = np.where(limited, 0.8 * qa_half_ranges(robot), math.pi)
             v = velocity_stiffening_speed(robot)
             Q = np.where(swept, np.maximum(Q, whole), Q)
