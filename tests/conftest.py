@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import random
+import signal
 
 import numpy as np
 import pytest
@@ -11,16 +12,27 @@ import torch
 
 @pytest.fixture(autouse=True)
 def _deterministic():
-    """Seed every generator and restore torch's global defaults after each test."""
+    """Seed every generator; restore torch's global defaults and the process's signal handlers after each test.
+
+    Under pytest-xdist one worker runs many test files in an order that changes from run to run: a test that leaves
+    SIGINT or SIGTERM handled otherwise (a Ray instance, an interrupt context left open) would break the interrupt
+    tests that happen to run after it in the same worker, so it fails here, by name.
+    """
     dtype = torch.get_default_dtype()
     threads = torch.get_num_threads()
+    handlers = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
     random.seed(0)
     np.random.seed(0)
     torch.manual_seed(0)
     yield
+    changed = [signal.Signals(signum).name for signum, h in handlers.items() if signal.getsignal(signum) is not h]
+    for signum, h in handlers.items():
+        if h is not None:  # None: a handler not installed from Python, which Python cannot put back
+            signal.signal(signum, h)
     assert torch.get_default_dtype() == dtype, "a test changed torch's default dtype"
     torch.set_default_dtype(dtype)
     torch.set_num_threads(threads)
+    assert not changed, f"a test left the process's {changed} handler changed"
 
 
 FURUTA_CONFIG = __import__("pathlib").Path(__file__).resolve().parents[1] / "configs" / "furuta.yaml"

@@ -114,7 +114,7 @@ def test_a_bug_in_the_evaluation_after_the_fit_keeps_the_checkpoint(data, tmp_pa
     def bug(*args, **kwargs):
         raise RuntimeError("injected bug in the data-only evaluation")
 
-    monkeypatch.setattr("bemlearn.pipeline.train._data_only_metrics", bug)
+    monkeypatch.setattr("bemlearn.pipeline.train_metrics._data_only_metrics", bug)
     out = tmp_path / "run"
     assert main(["run", str(_config(tmp_path, data)), "--out", str(out), "--no-progress"]) == 1   # a bug: traceback, exit 1
     assert "injected bug" in capsys.readouterr().err

@@ -32,7 +32,7 @@ from bemlearn.fitting.calibration import (
     condition_state,
     gaussian_quantile,
 )
-from bemlearn.models.band import band_reference
+from bemlearn.models.band import band_and_gradient, band_reference
 from bemlearn.models.input_noise import (
     estimator_noise_gains,
     mean_gradient,
@@ -118,6 +118,12 @@ def test_band_reference_matches_autograd_formula(n_inputs):
     # the larger of the two terms: each one decides somewhere
     assert bool((band >= torch.maximum(no_est, no_in)).all()) and bool((band > no_est).any()) and bool((band > no_in).any())
     torch.testing.assert_close(lat, latent.detach(), rtol=0, atol=0)
+    # the same terms from one kernel row, with the gradient autograd gives
+    mean4, band4, lat4, grad4 = band_and_gradient(state, x.detach(), n_inputs=n_inputs)
+    torch.testing.assert_close(grad4, grad, rtol=1e-10, atol=1e-14)
+    torch.testing.assert_close(band4, band, rtol=1e-12, atol=0)
+    torch.testing.assert_close(mean4, mean.detach(), rtol=1e-12, atol=1e-15)
+    torch.testing.assert_close(lat4, lat, rtol=0, atol=0)
 
 
 @pytest.mark.parametrize("kind", ["exact", "sgpr"])

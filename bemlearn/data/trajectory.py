@@ -172,6 +172,15 @@ class TrajectoryMeta:
         """Nominal sample period, s."""
         return 1.0 / self.sample_rate_hz
 
+    @property
+    def collected_excursion(self) -> tuple[float, ...] | None:
+        """The per-direction extents the data were collected with (``collect.excursion`` in the provenance that
+        :func:`~bemlearn.sim.collect.collect` writes under ``extra["collect_config"]``); ``None`` for data from
+        elsewhere or without them."""
+        cc = (self.extra or {}).get("collect_config") or {}
+        ext = cc.get("excursion") if isinstance(cc, dict) else None
+        return tuple(float(x) for x in ext) if ext else None
+
     def kind_of(self, joint: str) -> str:
         """``"hinge"`` or ``"slide"``."""
         return self.joint_kinds[self.joint_names.index(joint)]

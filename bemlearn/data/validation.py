@@ -173,8 +173,10 @@ def _check_finite(traj: Trajectory, source: str, first_line: int | None) -> None
             )
 
 
-def check_robot(meta: TrajectoryMeta, robot: RobotLike, *, source: str = "<trajectory>") -> None:
+def check_robot(meta: TrajectoryMeta, robot: RobotLike, *, source: str = "<trajectory>", match_name: bool = True) -> None:
     """Require the file's robot name, joint names (in order) and unactuated joint to be ``robot``'s.
+
+    ``match_name=False`` leaves the robot's name out (an MJCF given by path is matched by its joints, not its label).
 
     Raises:
         TrajectoryFormatError: naming the first mismatch.
@@ -185,6 +187,8 @@ def check_robot(meta: TrajectoryMeta, robot: RobotLike, *, source: str = "<traje
         "unactuated": robot.unactuated_name,
     }
     found: dict[str, Any] = {"robot": meta.robot, "joint_names": meta.joint_names, "unactuated": meta.unactuated}
+    if not match_name:
+        del expected["robot"]
     for key, want in expected.items():
         if found[key] != want:
             has = "is" if key == "robot" else f"{robot.name!r} has"

@@ -25,10 +25,10 @@ from __future__ import annotations
 import torch
 
 from bemlearn.errors import ArgumentError
-from bemlearn.models.input_noise import mean_gradient
+from bemlearn.models.input_noise import mean_gradient_from_row
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["band_extra_variance", "band_reference", "BAND_FORMULA"]
+__all__ = ["band_and_gradient", "band_extra_variance", "band_reference", "BAND_FORMULA"]
 
 #: Eq. (B1) as computed by :func:`band_extra_variance`, in plain ASCII: the one text of the formula that
 #: the exported C header (and any other plain-text description of the band) prints.
@@ -43,25 +43,55 @@ def band_reference(state: PredictorState, x: torch.Tensor, *, n_inputs: int | No
     Args:
         n_inputs: columns 0..n−1 carry input noise (default d); the rest are exact.
     """
-    mean, latent = state.predict_reference(x)
-    extra = band_extra_variance(state, x, n_inputs=n_inputs)
+    mean, band, latent, _ = _band(state, x, n_inputs, gradient=False)
+    return mean, band, latent
+
+
+def band_and_gradient(state: PredictorState, x: torch.Tensor, *, n_inputs: int | None = None
+                      ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """:func:`band_reference`'s (μ, σ_band, σ) with ∂μ/∂x of (N2) ``(B, d)``, all from one kernel row k_Z(x̃)."""
+    mean, band, latent, grad = _band(state, x, n_inputs, gradient=True)
+    assert grad is not None
+    return mean, band, latent, grad
+
+
+def _band(state: PredictorState, x: torch.Tensor, n_inputs: int | None, *, gradient: bool
+          ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
+    mean, latent, k = state.reference_terms(x)
+    s = _noisy_inputs(state, n_inputs)
+    grad = mean_gradient_from_row(state, x, k) if gradient or s is not None else None
+    extra = _extra_variance(state, s, k, grad)
     assert state.std_scale is not None  # filled by PredictorState.__post_init__
-    return mean, torch.sqrt(state.std_scale**2 * latent**2 + extra), latent
+    return mean, torch.sqrt(state.std_scale**2 * latent**2 + extra), latent, grad
 
 
 def band_extra_variance(state: PredictorState, x: torch.Tensor, *, n_inputs: int | None = None) -> torch.Tensor:
     """The term of (B1) beyond the scaled latent variance, ``(B,)`` in q_u's unit squared, for physical ``x (B, d)``:
     max(Σ_{i < n} (s_i ∂μ/∂x_i)², (1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)²)."""
+    k = state.kernel_row(x.to(torch.float64))
+    s = _noisy_inputs(state, n_inputs)
+    return _extra_variance(state, s, k, mean_gradient_from_row(state, x, k) if s is not None else None)
+
+
+def _noisy_inputs(state: PredictorState, n_inputs: int | None) -> torch.Tensor | None:
+    """s of (N1) with the exact columns (≥ n) zeroed, or ``None`` when no column carries input noise."""
     n = state.dim if n_inputs is None else n_inputs
     if not 1 <= n <= state.dim:
         raise ArgumentError(f"band_reference: n_inputs: expected 1..{state.dim}, got {n}")
-    assert state.input_std is not None and state.estimator_delta is not None  # filled by PredictorState.__post_init__
+    assert state.input_std is not None  # filled by PredictorState.__post_init__
     s = state.input_std.clone()
     s[n:] = 0.0
-    var_in = torch.zeros(x.shape[0], dtype=torch.float64, device=x.device)
+    return s if bool((s > 0).any()) else None
+
+
+def _extra_variance(state: PredictorState, s: torch.Tensor | None, k: torch.Tensor, grad: torch.Tensor | None) -> torch.Tensor:
+    """max(σ_in², σ_est²) of (B1) from s (:func:`_noisy_inputs`), the kernel row k ``(B, M)`` and ∂μ/∂x ``(B, d)``."""
+    assert state.estimator_delta is not None  # filled by PredictorState.__post_init__
+    var_in = torch.zeros(k.shape[0], dtype=torch.float64, device=k.device)
     var_est = torch.zeros_like(var_in)
-    if bool((s > 0).any()):
-        var_in = ((mean_gradient(state, x) * s) ** 2).sum(-1)
+    if s is not None:
+        assert grad is not None
+        var_in = ((grad * s) ** 2).sum(-1)
     if state.n_estimators:
-        var_est = (state.y_std * (state.kernel_row(x.to(torch.float64)) @ state.estimator_delta)).square().mean(-1)
+        var_est = (state.y_std * (k @ state.estimator_delta)).square().mean(-1)
     return torch.maximum(var_in, var_est)

@@ -32,14 +32,19 @@ import torch
 
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["estimator_noise_gains", "estimator_noise_gains3", "mean_gradient", "propagated_variance", "quantization_input_std", "savgol_noise_std"]
+__all__ = ["estimator_noise_gains", "estimator_noise_gains3", "mean_gradient", "mean_gradient_from_row", "propagated_variance", "quantization_input_std", "savgol_noise_std"]
 
 
 def mean_gradient(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
     """∇μ of (N2): ``x (B, d)`` physical inputs → ``(B, d)`` q_u's unit per input unit."""
+    return mean_gradient_from_row(state, x, state.kernel_row(x.to(torch.float64)))
+
+
+def mean_gradient_from_row(state: PredictorState, x: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
+    """:func:`mean_gradient` from the kernel row k_Z(x̃) ``(B, M)`` at ``x (B, d)`` that the caller already holds
+    (:meth:`~bemlearn.models.predictor_state.PredictorState.reference_terms`)."""
     x = x.to(torch.float64)
     diff = (state.normalize(x)[:, None, :] - state.Z[None, :, :]) / state.lengthscale   # (B, M, d)
-    k = state.kernel_row(x)                                                  # (B, M)
     ak = k * state.alpha                                                     # (B, M)
     g = -(ak[:, :, None] * diff).sum(1) / state.lengthscale                  # ∂μ̃/∂x̃
     return state.y_std * g / state.x_std

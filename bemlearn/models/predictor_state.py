@@ -254,6 +254,12 @@ class PredictorState:
         Returns:
             mean ``(B,)`` and std ``(B,)`` in q_u's unit.
         """
+        mean, std, _ = self.reference_terms(x)
+        return mean, std
+
+    def reference_terms(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """:meth:`predict_reference`'s mean ``(B,)`` and std ``(B,)`` with the kernel row k_Z(x̃) ``(B, M)`` they
+        came from, for the terms of the band (eq. B1) that use it again (∂μ/∂x, the estimator shifts)."""
         k = self.kernel_row(x)
         mean = k @ self.alpha
         L = self.gram_cholesky()
@@ -266,4 +272,4 @@ class PredictorState:
         else:
             var = self.outputscale - ((k @ self.S) * k).sum(-1)
         std = var.clamp_min(0.0).sqrt()
-        return self.y_mean + self.y_std * mean, self.y_std * std
+        return self.y_mean + self.y_std * mean, self.y_std * std, k

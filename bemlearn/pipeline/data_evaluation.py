@@ -49,15 +49,17 @@ from bemlearn.pipeline.support import (
     support_of_queries,
 )
 from bemlearn.pipeline.verdict import EXTRAPOLATION_T, SUPPORT_OK_SHARE
-from bemlearn.units import joint_unit
+from bemlearn.units import gp_input_units, joint_unit
 
-__all__ = ["SliceSpec", "bem_slice_figure", "bem_slices", "heldout_prediction", "bem_resolution", "COVERED_QUANTILES",
+__all__ = ["DataOnlyEvaluation", "data_only_evaluation", "SliceSpec", "bem_slice_figure", "bem_slices", "heldout_prediction", "bem_resolution", "COVERED_QUANTILES",
            "design_support", "support_of_queries", "extrapolation_leverage", "SUPPORT_RATIO", "SUPPORT_OK_SHARE",
            "EXTRAPOLATION_T"]
 
 #: The range each input's data cover, as quantiles of the training points (the report's "data covers lo … hi"
 #: in :func:`bem_resolution`).  The slices' covered range is the joint support of their queries (:func:`support_of_queries`).
 COVERED_QUANTILES = (0.025, 0.975)
+#: Training points at most that :func:`bem_resolution` and :func:`design_support` take as the BEM's queries.
+MAX_QUERIES = 2000
 
 
 def _state(model: PredictorState | LearnedBEM) -> PredictorState:
@@ -76,6 +78,50 @@ def _predict(state: PredictorState, x: torch.Tensor, chunk: int = 4096) -> tuple
     mean, lat = torch.cat(means).numpy(), torch.cat(stds).numpy()
     noise_var = float(st.y_std**2 * st.noise)
     return mean, lat, np.sqrt(lat**2 + noise_var)
+
+
+def _units_of(dataset: BEMDataset) -> tuple[dict[str, str], str]:
+    """Each GP input's unit and q_u's, from the joints' kinds (hinge: rad, slide: m)."""
+    meta = dataset.meta
+    units = gp_input_units(dataset.input_names, meta.joint_names, [meta.kind_of(j) for j in meta.joint_names])
+    return units, joint_unit(meta.kind_of(meta.unactuated))
+
+
+@dataclass(frozen=True)
+class DataOnlyEvaluation:
+    """(a)–(d) of the module docstring for one fitted GP, as :func:`data_only_evaluation` returns them.
+
+    Attributes:
+        heldout: :func:`heldout_prediction` (``None`` without held-out points).
+        resolution: :func:`bem_resolution`.
+        slices: :func:`bem_slices` (with its arrays, for :func:`bem_slice_figure`).
+        support: :func:`design_support`.
+    """
+
+    heldout: dict[str, Any] | None
+    resolution: dict[str, Any]
+    slices: dict[str, Any]
+    support: dict[str, Any]
+
+
+def data_only_evaluation(model: PredictorState | LearnedBEM, train: BEMDataset, heldout: BEMDataset | None,
+                         units: dict[str, str], qu_unit: str) -> DataOnlyEvaluation:
+    """Every data-only check of the module docstring at once: (a) on ``heldout`` when given, (c), (b) and (d).
+
+    Args:
+        model: the fitted GP.
+        train: the training points.
+        heldout: points of trials the fit never saw, or ``None``.
+        units, qu_unit: each GP input's unit and q_u's (:func:`~bemlearn.units.gp_input_units`, as the run
+            recorded them).
+    """
+    state = _state(model)
+    return DataOnlyEvaluation(
+        heldout=_heldout(state, heldout, 2.0, train, qu_unit) if heldout is not None else None,
+        resolution=_resolution(state, train, MAX_QUERIES, units, qu_unit),  # do the data resolve the BEM at all?
+        slices=_slices(state, train, SliceSpec(), units, qu_unit),
+        support=_support(train, MAX_QUERIES, SUPPORT_RATIO, units, qu_unit, model=state),  # are its queries supported jointly?
+    )
 
 
 def _check_names(state: PredictorState, dataset: BEMDataset) -> None:
@@ -102,7 +148,10 @@ def heldout_prediction(model: PredictorState | LearnedBEM, heldout: BEMDataset, 
         "coverage", "n_points", "failed", "beyond_training"}}}``; coverage is the fraction of q_u
         inside μ ± κ σ_pred; ``failed``: the trial fell (as the data file records).
     """
-    state = _state(model)
+    return _heldout(_state(model), heldout, kappa, train, _units_of(heldout)[1])
+
+
+def _heldout(state: PredictorState, heldout: BEMDataset, kappa: float, train: BEMDataset | None, qu_unit: str) -> dict[str, Any]:
     _check_names(state, heldout)
     if len(heldout) == 0:
         raise DataError("heldout_prediction: the held-out dataset is empty (val_fraction = 0?)")
@@ -131,7 +180,7 @@ def heldout_prediction(model: PredictorState | LearnedBEM, heldout: BEMDataset, 
         "coverage": float(inside.mean()),
         "n_points": len(y),
         "kappa": kappa,
-        "unit": joint_unit(meta.kind_of(meta.unactuated)),
+        "unit": qu_unit,
         "per_trial": per,
     }
 
@@ -173,7 +222,10 @@ def bem_slices(model: PredictorState | LearnedBEM, train: BEMDataset, spec: Slic
         ``units`` {"qdd", "qd", "q", "qu"}; ``summary`` has the mean predictive σ inside and
         outside the covered ranges.
     """
-    state = _state(model)
+    return _slices(_state(model), train, spec, *_units_of(train))
+
+
+def _slices(state: PredictorState, train: BEMDataset, spec: SliceSpec, units: dict[str, str], qu_unit: str) -> dict[str, Any]:
     _check_names(state, train)
     meta = train.meta
     act = list(meta.actuated_names)
@@ -187,7 +239,6 @@ def bem_slices(model: PredictorState | LearnedBEM, train: BEMDataset, spec: Slic
     slices = []
     inside_std, outside_std = [], []
     for j, joint in enumerate(act):
-        kind = meta.kind_of(joint)
         qdd_col, qd_col, q_col = j, m + j, 2 * m + j
         levels = [(float(np.quantile(x[:, qd_col], p)), float(med[q_col])) for p in spec.velocity_quantiles]
         levels += [(float(med[qd_col]), float(np.quantile(x[:, q_col], p))) for p in spec.angle_quantiles]
@@ -215,8 +266,7 @@ def bem_slices(model: PredictorState | LearnedBEM, train: BEMDataset, spec: Slic
             slices.append({
                 "joint": joint, "qd": qd_level, "q": q_level, "grid": grid, "mean": mean, "std_latent": lat,
                 "std_pred": pred, "covered": covered, "n_near": int(near.sum()),
-                "units": {"qdd": joint_unit(kind, 2), "qd": joint_unit(kind, 1), "q": joint_unit(kind, 0),
-                          "qu": joint_unit(meta.kind_of(meta.unactuated), 0)},
+                "units": {"qdd": units[f"qdd_{joint}"], "qd": units[f"qd_{joint}"], "q": units[f"q_{joint}"], "qu": qu_unit},
             })
     def cat(parts: list) -> float:
         return float(np.concatenate(parts).mean()) if parts else float("nan")
@@ -273,7 +323,7 @@ def bem_slice_figure(result: dict[str, Any], path: str | Path | None = None, *, 
     return fig
 
 
-def bem_resolution(model: PredictorState | LearnedBEM, train: BEMDataset, *, max_points: int = 2000) -> dict[str, Any]:
+def bem_resolution(model: PredictorState | LearnedBEM, train: BEMDataset, *, max_points: int = MAX_QUERIES) -> dict[str, Any]:
     """(c) of the module docstring: does the BEM vary over the data by more than its own band?
 
     Returns:
@@ -284,36 +334,34 @@ def bem_resolution(model: PredictorState | LearnedBEM, train: BEMDataset, *, max
         :data:`COVERED_QUANTILES`, the rule of the slices' covered range), the share |slope| · amplitude of
         the BEM it explains and ``factor`` (``None`` where the learned slope is 0).
     """
-    from bemlearn.models.band import band_reference
-    from bemlearn.models.input_noise import mean_gradient
+    return _resolution(_state(model), train, max_points, *_units_of(train))
 
-    state = _state(model)
+
+def _resolution(state: PredictorState, train: BEMDataset, max_points: int, units: dict[str, str], qu_unit: str) -> dict[str, Any]:
+    from bemlearn.models.band import band_and_gradient
+
     _check_names(state, train)
     x = train.x.to(torch.float64)[:max_points].clone()
     x[:, -2:] = 0.0                                           # x_0^e = [q̈_a, q̇_a, q_a, 0, 0] (eq. 14)
-    mean, band, _ = band_reference(state, x, n_inputs=state.dim - 2)
-    grad = mean_gradient(state, x).mean(0).numpy()
+    mean, band, _, grad_all = band_and_gradient(state, x, n_inputs=state.dim - 2)
+    grad = grad_all.mean(0).numpy()
     amp = train.x.to(torch.float64).std(0, correction=0).numpy()
     ranges = np.quantile(train.x.to(torch.float64).numpy(), COVERED_QUANTILES, axis=0)  # (2, d)
     spread, bstd = float(mean.std(correction=0)), float(band.median())
-    meta = train.meta
-    unit = joint_unit(meta.kind_of(meta.unactuated))
     inputs: list[dict[str, Any]] = []
     for i, name in enumerate(state.input_names[:-2]):
-        prefix, joint = name.split("_", 1)
         share = abs(float(grad[i])) * float(amp[i])
         inputs.append({"input": name, "slope": float(grad[i]), "amplitude": float(amp[i]),
-                       "range": [float(ranges[0, i]), float(ranges[1, i])],
-                       "unit": joint_unit(meta.kind_of(joint), {"q": 0, "qd": 1, "qdd": 2}[prefix]),
+                       "range": [float(ranges[0, i]), float(ranges[1, i])], "unit": units[name],
                        "share": share, "factor": (2.0 * bstd / share) if share > 0 else None})
     inputs.sort(key=lambda r: -r["share"])
-    return {"spread": spread, "band_std": bstd, "ratio": spread / bstd if bstd > 0 else float("inf"), "unit": unit,
+    return {"spread": spread, "band_std": bstd, "ratio": spread / bstd if bstd > 0 else float("inf"), "unit": qu_unit,
             "inputs": inputs}
 
 
 
 
-def design_support(train: BEMDataset, *, max_queries: int = 2000, ratio: float = SUPPORT_RATIO,
+def design_support(train: BEMDataset, *, max_queries: int = MAX_QUERIES, ratio: float = SUPPORT_RATIO,
                    model: PredictorState | LearnedBEM | None = None) -> dict[str, Any]:
     """Are the BEM queries x_0^e = [q̈_a, q̇_a, q_a, 0, 0] (eq. 14) at the data's actuated motions
     supported by the training inputs *jointly* (:func:`support_of_queries`, (S1))?
@@ -330,7 +378,11 @@ def design_support(train: BEMDataset, *, max_queries: int = 2000, ratio: float =
         ``supported`` those of the supported queries.  ``model``: the learned BEM, for (S2) where the BEM is not
         linear in the actuated inputs over the data (:func:`~bemlearn.pipeline.support.extrapolation_leverage`).
     """
-    meta = train.meta
+    return _support(train, max_queries, ratio, *_units_of(train), model=model)
+
+
+def _support(train: BEMDataset, max_queries: int, ratio: float, units: dict[str, str], qu_unit: str,
+             model: PredictorState | LearnedBEM | None = None) -> dict[str, Any]:
     names = tuple(train.input_names)
     x = train.x.to(torch.float64).numpy()
     n_act = x.shape[1] - 2
@@ -340,15 +392,13 @@ def design_support(train: BEMDataset, *, max_queries: int = 2000, ratio: float =
     sup = res["supported"]
     inputs = []
     for i, name in enumerate(names[:n_act]):
-        prefix, joint = name.split("_", 1)
         rng = [float(v) for v in np.quantile(x[:, i], [0.025, 0.975])]
-        inputs.append({"input": name, "unit": joint_unit(meta.kind_of(joint), {"q": 0, "qd": 1, "qdd": 2}[prefix]),
-                       "data": rng,
+        inputs.append({"input": name, "unit": units[name], "data": rng,
                        "supported": [float(v) for v in np.quantile(q[sup, i], [0.025, 0.975])] if sup.any() else None,
                        "reach": float(np.abs(q[sup, i]).max()) if sup.any() else None})
     out = {"share": res["share"], "ratio_median": res["r_median"], "ratio_q90": res["r_q90"], "limit": ratio,
            "spacing": res["spacing"], "n_queries": len(q), "n_train": len(x), "pairs": _lockstep_pairs(x, names, n_act),
-           "inputs": inputs, "unit": joint_unit(meta.kind_of(meta.unactuated))}
+           "inputs": inputs, "unit": qu_unit}
     bem = None
     if model is not None:   # (S2) where the BEM is not linear over the data: the learned μ(x_0^e) at each sample
         from bemlearn.models.band import band_reference

@@ -23,7 +23,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import math
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -34,23 +33,17 @@ from bemlearn.config import save_yaml
 from bemlearn.data import build_datasets, read_trajectory
 from bemlearn.data.validation import check_robot
 from bemlearn.errors import ArgumentError, EnvironmentProblem
-from bemlearn.files import atomic_path, atomic_write_text, file_sha256
-from bemlearn.models import predict
+from bemlearn.files import atomic_write_text, file_sha256
 from bemlearn.pipeline.config import PipelineConfig
-from bemlearn.pipeline.evaluation import BEMCurves, EvaluationConfig, evaluate_bem, held_out_references
-from bemlearn.pipeline.reliability import reliability_figure
 from bemlearn.pipeline.results import TrainResult
 from bemlearn.pipeline.run_metrics import RunMetrics
+from bemlearn.pipeline.train_metrics import evaluate_trained
 from bemlearn.pipeline.uncertainty import calibrate_band
-from bemlearn.robots.protocol import BalanceRobot, ControlRobot
+from bemlearn.robots.protocol import BalanceRobot
 from bemlearn.units import gp_input_units
 
 if TYPE_CHECKING:
-    from bemlearn.data.dataset_types import BEMDataset
     from bemlearn.data.trajectory import Trajectory
-    from bemlearn.fitting.gp_config import GPConfig
-    from bemlearn.models.predictor_state import PredictorState
-    from bemlearn.pipeline.gp_stage import GPStageResult
     from bemlearn.robots.registry import RobotRef
 
 __all__ = ["train_run", "file_sha256"]
@@ -124,7 +117,7 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     robot, ref, truth_robot = run_robot(config, loaded)
     traj = trajectory if trajectory is not None else read_trajectory(data_path)
     if robot is not None:  # the file's joints must be the robot's (its robot label matters only for registry names)
-        check_robot(traj.meta, robot if ref.registry else _Named(robot, traj.meta.robot), source=str(data_path))
+        check_robot(traj.meta, robot, source=str(data_path), match_name=ref.registry)
     else:
         ref = dataclasses.replace(ref, name=traj.meta.robot or ref.name)
     ds = build_datasets(traj, config.dataset, progress=progress)
@@ -155,17 +148,7 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
         raise KeyboardInterrupt
     try:   # the checkpoint exists: a failure from here on keeps it, and metrics.json says where the run stopped
-        if len(val):
-            metrics.update(_validation_metrics(stage, train, val, gp_cfg, writer))
-        metrics["uncertainty"] = stage.calibration
-        metrics.update(_data_only_metrics(state, train, val, meta.unactuated, out, writer))
-        if truth_robot is not None:  # held-out learned BEM vs model-based BEM (eq. 14 vs 9)
-            metrics.update(_model_metrics(state, truth_robot, config.evaluate, meta.unactuated,
-                                          units[f"qd_{meta.unactuated}"].removesuffix("/s"), out, writer,
-                                          excursion=_collected_excursion(meta)))
-        tq = _torque_metrics(traj, truth_robot)
-        if tq is not None:
-            metrics["unactuated_torque"] = tq
+        evaluate_trained(stage, train, val, traj, truth_robot, config.evaluate, gp_cfg, units, out, writer, metrics)
     except Exception as exc:
         from bemlearn.pipeline.failure import record_failure
 
@@ -180,122 +163,3 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         typed.verdict = judge_run(typed)        # what training alone can tell
         atomic_write_text(out / "metrics.json", json.dumps(typed.as_dict(), indent=2, default=float))
     return TrainResult(typed, state, traj, robot)
-
-
-def _torque_metrics(traj, truth_robot) -> dict | None:
-    """A torque logged on q_u, weighed against the model's gravity stiffness when there is a model
-    (:mod:`bemlearn.pipeline.logged_torque`)."""
-    from bemlearn.pipeline.derive import design_region
-    from bemlearn.pipeline.logged_torque import unactuated_torque_metrics
-
-    bound = design_region(truth_robot).value if truth_robot is not None else None
-    return unactuated_torque_metrics(traj, truth_robot, bound=bound)
-
-
-def _validation_metrics(stage: GPStageResult, train: BEMDataset, val: BEMDataset, gp_cfg: GPConfig, writer) -> dict[str, float]:
-    """The fitted GP on the validation split: RMSE (q_u's unit), mean log likelihood and ±2σ coverages."""
-    state, model, lik = stage.state, stage.model, stage.likelihood
-    dtype = gp_cfg.torch_dtype
-    mean, var = predict(model, lik, val.x_normalized.to(device=gp_cfg.device, dtype=dtype), noisy=True)
-    mean = mean.cpu().to(torch.float64) * train.y_std + train.y_mean
-    var_pred = var.cpu().to(torch.float64) * train.y_std**2
-    err = mean - val.y
-    rmse = float(err.pow(2).mean().sqrt())
-    mll = float((-0.5 * (err**2 / var_pred + var_pred.log() + math.log(2 * math.pi))).mean())
-    metrics = {"val_rmse": rmse, "val_mean_log_likelihood": mll}
-    writer.add_scalar("val/rmse", rmse, 0)
-    writer.add_scalar("val/mean_log_likelihood", mll, 0)
-    from bemlearn.models.band import band_reference
-
-    band = band_reference(state, val.x)[1]  # model-free: held-out q_u inside ±2√(σ_band² + σ_0²)
-    metrics["val_coverage_2sigma_band"] = float((err.abs() <= 2 * (band**2 + state.y_std**2 * state.noise).sqrt()).double().mean())
-    metrics["val_coverage_2sigma_predictive"] = float((err.abs() <= 2 * var_pred.sqrt()).double().mean())
-    return metrics
-
-
-def _data_only_metrics(state: PredictorState, train: BEMDataset, val: BEMDataset, unactuated: str, out: Path, writer) -> dict:
-    """Data-only evaluation (no model): held-out trials' q_u from f(x), and the BEM on slices with the
-    region the data cover marked, so that extrapolation is visible (writes ``bem_slices.png``)."""
-    from bemlearn.pipeline.data_evaluation import bem_resolution, bem_slice_figure, bem_slices, design_support, heldout_prediction
-
-    metrics: dict = {}
-    if len(val):
-        held = heldout_prediction(state, val, train=train)
-        metrics["data_heldout"] = {**{k: v for k, v in held.items() if k != "per_trial"},
-                                   "per_trial": {str(k): v for k, v in held["per_trial"].items()}}
-    metrics["resolution"] = bem_resolution(state, train)   # do the data resolve the BEM at all (model-free)?
-    metrics["support"] = design_support(train, model=state)           # are its queries supported by the data jointly?
-    slices = bem_slices(state, train)
-    metrics["bem_slices"] = {"summary": slices["summary"],
-                             "slices": [{k: v for k, v in sl.items() if not hasattr(v, "shape")} for sl in slices["slices"]]}
-    fig = bem_slice_figure(slices, out / "bem_slices.png", unactuated=unactuated)
-    writer.add_figure("bem/slices", fig, 0)
-    return metrics
-
-
-def _collected_excursion(meta) -> tuple[float, ...] | None:
-    """The per-direction extents the data were collected with (``collect.excursion`` in the trajectory's provenance,
-    written by :func:`~bemlearn.sim.collect.collect`); ``None`` for data from elsewhere or without them."""
-    cc = (meta.extra or {}).get("collect_config") or {}
-    ext = cc.get("excursion") if isinstance(cc, dict) else None
-    return tuple(float(x) for x in ext) if ext else None
-
-
-def _model_metrics(state: PredictorState, truth_robot: ControlRobot, ecfg: EvaluationConfig, unactuated: str, unit: str,
-                   out: Path, writer, *, excursion: tuple[float, ...] | None = None) -> dict:
-    """Learned vs model-based BEM along held-out references and over the design region (writes
-    ``reliability.png``, ``bem_validation.png``, ``design_region.png``); ``excursion``: the data's collection extents,
-    which the design region's box then covers (:func:`~bemlearn.pipeline.design_evaluation.design_grid`)."""
-    ev = evaluate_bem(state, truth_robot, held_out_references(ecfg, truth_robot.m), duration_s=ecfg.duration_s, rate_hz=ecfg.rate_hz)
-    metrics: dict = {"bem_heldout": ev.as_dict()}
-    for k in ("rmse", "max_abs", "coverage_2sigma_latent", "coverage_2sigma_predictive", "coverage_2sigma_band"):
-        writer.add_scalar(f"bem/{k}", getattr(ev, k), 0)
-    writer.add_figure("bem/reliability", reliability_figure(ev.reliability), 0)
-    with atomic_path(out / "reliability.png") as tmp:
-        reliability_figure(ev.reliability).savefig(tmp, dpi=110)
-    fig = _bem_figure(ev.curves, unactuated, unit)
-    writer.add_figure("bem/learned_vs_model", fig, 0)
-    with atomic_path(out / "bem_validation.png") as tmp:
-        fig.savefig(tmp, dpi=110)
-    if ecfg.design_points > 0:   # over the whole design region (D1, D2), not only along the references
-        from bemlearn.pipeline.design_evaluation import design_grid, design_region_figure, evaluate_design_region
-
-        dr = evaluate_design_region(state, design_grid(truth_robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed, excursion=excursion))
-        metrics["bem_design_region"] = dr.as_dict()
-        for k in ("rmse", "max_abs", "gain"):
-            writer.add_scalar(f"bem/design_region_{k}", getattr(dr, k), 0)
-        fig = design_region_figure(dr, unactuated, unit)
-        writer.add_figure("bem/design_region", fig, 0)
-        with atomic_path(out / "design_region.png") as tmp:
-            fig.savefig(tmp, dpi=110)
-    return metrics
-
-
-class _Named:
-    """``robot`` under another name (an MJCF given by path is matched by its joints, not its label)."""
-
-    def __init__(self, robot: BalanceRobot, name: str) -> None:
-        self.name, self.joint_names, self.unactuated_name = name, robot.joint_names, robot.unactuated_name
-        self.actuated_names = robot.actuated_names
-
-
-def _bem_figure(curves: BEMCurves, qu_name: str, unit: str = "rad"):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    t, model, mean, std = curves.t, curves.model, curves.mean, curves.band_std
-    fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
-    ax[0].plot(t, model, "k", lw=1.2, label="model-based BEM (eq. 9)")
-    ax[0].plot(t, mean, "C1--", lw=1.2, label="learned BEM μ(x₀ᵉ) (eq. 14)")
-    ax[0].fill_between(t, mean - 2 * std, mean + 2 * std, color="C1", alpha=0.25, label="±2σ (calibrated band, eq. B1)")
-    ax[0].set_ylabel(f"{qu_name} ({unit})")
-    ax[0].legend(fontsize=8)
-    ax[0].set_title("held-out composite-sinusoid reference")
-    ax[1].plot(t, mean - model, "C3", lw=1)
-    ax[1].fill_between(t, -2 * std, 2 * std, color="C1", alpha=0.2)
-    ax[1].set_ylabel(f"error ({unit})")
-    ax[1].set_xlabel("t (s)")
-    fig.tight_layout()
-    return fig
