@@ -51,7 +51,7 @@ from bemlearn.warnings import DesignWarning, warn
 if TYPE_CHECKING:
     from bemlearn.robots.mujoco_robot import MujocoRobot
 
-__all__ = ["LQRResult", "ActuatorLimits", "actuator_limits", "holds_in_mujoco", "linearize", "discrete_lqr"]
+__all__ = ["LQRResult", "ActuatorLimits", "GainSchedule", "actuator_limits", "holds_in_mujoco", "linearize", "discrete_lqr", "pose_gain_schedule", "upright_at"]
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +74,7 @@ class LQRResult:
         u_peak: max |u| / u_max of the linear closed loop from the check's initial error.
         r_scale: factor applied to Bryson's R to respect ctrlrange and forcerange.
         notes: how the linearisation departed from the plain model (dry friction left out), for messages.
+        S: the state-input cross weight of design 2 (``None``: design 1, no cross term).
     """
 
     K: np.ndarray
@@ -88,14 +89,19 @@ class LQRResult:
     u_peak: float
     r_scale: float
     notes: tuple[str, ...] = ()
+    S: np.ndarray | None = None
 
 
-def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = None, eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray, int, float]:
+def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = None, eps: float = 1e-6,
+              at: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int, float]:
     """Tick map (A_N, B_N) of ``robot`` (a MujocoRobot) in its coordinates at upright.
 
     Args:
         rate_hz: control rate, Hz; 1/rate must be a whole number of physics steps.
         timestep: physics step override, s (default: the model's).
+        at: ``(m,)`` actuated pose q_a (joint units; default 0): the linearisation is taken there, at rest, with q_u
+            at the BEM of that pose (the root of Γ_0(q_u; q_a, 0, 0) nearest nominal, :func:`upright_at`) and the
+            actuators commanded to hold it (their inverse, :class:`~bemlearn.control.actuator_inverse.MujocoActuatorInverse`).
 
     Returns:
         ``(A (2n, 2n), B (2n, nu), substeps, timestep)``.
@@ -122,7 +128,17 @@ def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = No
     n = robot.n
     q0 = np.zeros(n)
     q0[robot.unactuated_index] = robot.qu_nominal
+    if at is not None:
+        q0[list(robot.actuated_index)] = at
+        q0[robot.unactuated_index] = upright_at(robot, np.asarray(at, dtype=np.float64))
     data.qpos[:] = robot.state_to_mujoco(q0)[0]
+    if at is not None and np.any(at):
+        # held at rest there: the actuators' command that balances the pose's static forces (a servo's setpoint
+        # at the pose), else the linearisation is of a state accelerating away from it
+        from bemlearn.control.actuator_inverse import MujocoActuatorInverse
+
+        bias = np.asarray(robot.terms(q0, np.zeros(n))[1], dtype=np.float64)
+        data.ctrl[:] = MujocoActuatorInverse(robot).command(bias[list(robot.actuated_index)], q0, np.zeros(n), clip=False)
     mujoco.mj_forward(model, data)
     nx = 2 * model.nv + model.na
     A1 = np.zeros((nx, nx))
@@ -141,6 +157,23 @@ def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = No
     return P @ AN @ Pplus, P @ BN, N, h
 
 
+def upright_at(robot: MujocoRobot, qa: np.ndarray) -> float:
+    """q_u^e(q_a, 0, 0): the root of Γ_0 (eq. 9 at rest) nearest q_u,nominal in :attr:`qu_range` with the actuated
+    coordinates at ``qa (m,)``; q_u,nominal where there is none (or ``qa`` is 0)."""
+    if not np.any(qa):
+        return float(robot.qu_nominal)
+    from bemlearn.robots.bem import find_roots
+
+    z = np.zeros(robot.m)
+    lo, hi = robot.qu_range
+
+    def gamma0(x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        return np.array([[robot.gamma0_scalar(float(v), qa, z, z) for v in row] for row in x])
+
+    root = float(find_roots(gamma0, 1, lo=lo, hi=hi, nominal=robot.qu_nominal)[0][0])
+    return root if math.isfinite(root) else float(robot.qu_nominal)
+
+
 def _model_copy(model: mujoco.MjModel, timestep: float | None) -> mujoco.MjModel:
     if timestep is None or timestep == model.opt.timestep:
         return model
@@ -155,7 +188,8 @@ def bryson_scales(robot: MujocoRobot, *, design_qu: float = 0.2) -> tuple[np.nda
     """Bryson maxima ``(x_max (2n,), u_max (nu,), λ)`` (module docstring); λ = √(Γ_q/D_uu), 1/s.
 
     An unlimited actuated coordinate gets at least the amplitude a sine at λ needs to move the
-    BEM by ``design_qu`` (a reaction wheel turns through many radians to balance).
+    BEM by ``design_qu`` (a reaction wheel turns through many radians to balance); an unlimited hinge whose
+    motion does not move the BEM at rest (a turntable's yaw) a half turn.
     """
     from bemlearn.robots.scales import bem_gain, bem_slopes, instability_rate, qa_half_ranges, qu_half_range
 
@@ -165,8 +199,14 @@ def bryson_scales(robot: MujocoRobot, *, design_qu: float = 0.2) -> tuple[np.nda
     dq = min(design_qu, qu_half_range(robot))
     xmax[iu] = dq
     qa_max = qa_half_ranges(robot)
-    need = dq / np.maximum(bem_gain(bem_slopes(robot), lam), 1e-12)
+    gain = bem_gain(bem_slopes(robot), lam)
+    need = dq / np.maximum(gain, 1e-12)
     limited = _limited_actuated(robot)
+    # an unlimited hinge that does not move the BEM at rest (a turntable's yaw: it turns the slides' slopes instead)
+    # would get no weight at all, and nothing would hold it to its reference: a half turn is its scale
+    kinds = tuple(getattr(robot, "coordinate_kinds", ()))
+    idle = np.array([g <= 1e-12 and len(kinds) == n and kinds[j] == "hinge" for g, j in zip(gain, ia)], dtype=bool)
+    need = np.where(~limited & idle, np.maximum(qa_max, math.pi), need)
     xmax[ia] = np.where(limited, qa_max, np.maximum(qa_max, need))
     xmax[n:] = xmax[:n] * max(lam, 1.0)
     return xmax, actuator_limits(robot).u_max, lam
@@ -351,6 +391,7 @@ def discrete_lqr(
     first = _lqr_scaled(robot, A, B, Q0, Ru, None, None, [qu_start], steps, limits, force=False)
     starts = [qu_start, *qa_starts]
     K, Q, R, peak, scale = first
+    S: np.ndarray | None = None
     holds, why = holds_in_mujoco(robot, -K, rate_hz=rate_hz, timestep=timestep, starts=starts, check_s=check_s, qu0=qu0)
     if not holds:
         Ru2 = np.diag(np.where(np.isfinite(limits.u_ctrl), 1.0 / limits.u_ctrl**2, 0.0))
@@ -360,6 +401,7 @@ def discrete_lqr(
         holds2, why2 = holds_in_mujoco(robot, -second[0], rate_hz=rate_hz, timestep=timestep, starts=starts, check_s=check_s, qu0=qu0)
         if holds2:
             K, Q, R, peak, scale = second
+            S = scale * (F.T @ Rf @ G)
             notes.append(f"weighs the actuator force too: with ctrl weights alone {why}")
         else:
             notes.append(f"neither design brings the robot back in MuJoCo ({why}; with force weights: {why2})")
@@ -367,4 +409,145 @@ def discrete_lqr(
         warn(DesignWarning, log, "discrete_lqr: %s needs %.2f× its actuator limits for a %.3g initial q_u error%s even with R × %g", robot.name,
                                  peak, qu0, f" (or {qa0:.3g} of an actuated coordinate)" if qa0 else "", scale)
     rho = float(np.max(np.abs(np.linalg.eigvals(A - B @ K))))
-    return LQRResult(-K, A, B, Q, R, float(rate_hz), N, h, rho, peak, scale, tuple(notes))
+    return LQRResult(-K, A, B, Q, R, float(rate_hz), N, h, rho, peak, scale, tuple(notes), S)
+
+
+@dataclass(frozen=True)
+class GainSchedule:
+    """Gains scheduled over the actuated coordinates whose pose changes the linearisation (:func:`pose_gain_schedule`):
+
+        u = (K + Σ_i ΔK_i(q_a,i)) e,   ΔK_i(q) = K_i*(q) − K_i*(0)
+
+    K_i*(q) the discrete LQR of the tick map linearised at q on coordinate i alone (the others at 0, q_u at that pose's
+    BEM) with the weights of the design at rest; ΔK_i linear between the grid poses, held beyond the grid's ends, and
+    periodic over [−π, π) for an unlimited hinge.
+
+    Attributes:
+        coords: indices into the actuated coordinates (0 … m−1) that are scheduled.
+        grids: per scheduled coordinate the poses ``(points,)``, its unit, increasing.
+        deltas: per scheduled coordinate ΔK ``(points, nu, 2n)`` (collect's convention u = K e).
+        periodic: per scheduled coordinate whether it wraps (an unlimited hinge).
+        rho_fixed: per scheduled coordinate the worst spectral radius of the fixed gains over its grid (≥ 1: why it is
+            scheduled).
+        rho_scheduled: per scheduled coordinate the worst spectral radius of the scheduled gains over its grid.
+    """
+
+    coords: tuple[int, ...]
+    grids: tuple[np.ndarray, ...]
+    deltas: tuple[np.ndarray, ...]
+    periodic: tuple[bool, ...]
+    rho_fixed: tuple[float, ...]
+    rho_scheduled: tuple[float, ...]
+
+    def delta(self, qa: np.ndarray) -> np.ndarray:
+        """ΔK ``(nu, 2n)`` at the actuated pose ``qa (m,)`` (joint units)."""
+        out = np.zeros(self.deltas[0].shape[1:])
+        for i, g, d, per in zip(self.coords, self.grids, self.deltas, self.periodic):
+            q = float(qa[i])
+            if per:
+                q = (q + math.pi) % (2 * math.pi) - math.pi
+            if q <= g[0]:
+                out += d[0]
+            elif q >= g[-1]:
+                out += d[-1]
+            else:
+                k = int(np.searchsorted(g, q)) - 1
+                w = (q - g[k]) / (g[k + 1] - g[k])
+                out += (1.0 - w) * d[k] + w * d[k + 1]
+        return out
+
+    def describe(self, names: list[str]) -> str:
+        """One line for messages: which coordinates are scheduled and why."""
+        return "; ".join(f"gains scheduled over {names[i]} ({len(g)} poses{', periodic' if per else ''}): the fixed gains' "
+                         f"spectral radius reaches {rf:.3g} there, the scheduled {rs:.3g}"
+                         for i, g, per, rf, rs in zip(self.coords, self.grids, self.periodic, self.rho_fixed, self.rho_scheduled))
+
+
+def _pose_grid(robot: MujocoRobot, j: int, extent: float, points: int) -> tuple[np.ndarray, bool]:
+    """Poses of actuated coordinate ``j``: ±1.5 × ``extent`` within the coordinate's range, or [−π, π] (periodic) on an
+    unlimited hinge whose ±1.5 × extent reaches a half turn."""
+    from bemlearn.robots.scales import qa_limited
+
+    kinds = tuple(getattr(robot, "coordinate_kinds", ()))
+    i = robot.actuated_index[j]
+    limited = bool(qa_limited(robot)[j])
+    if not limited and len(kinds) == robot.n and kinds[i] == "hinge" and 1.5 * extent >= math.pi:
+        return np.linspace(-math.pi, math.pi, points), True
+    lo, hi = -1.5 * extent, 1.5 * extent
+    if limited and (lim := robot.coordinate_limits[i]) is not None:   # a pose at the stop would linearise the stop
+        lo, hi = max(lo, 0.98 * lim[0]), min(hi, 0.98 * lim[1])
+    return np.linspace(lo, hi, points), False
+
+
+_SCHEDULES: dict = {}
+
+
+def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, timestep: float | None, extents: np.ndarray,
+                       design_qu: float, qu0: float, qa0: float | None, points: int = 49) -> GainSchedule | None:
+    """Which actuated coordinates' pose makes the fixed gains ``K (nu, 2n)`` (collect's convention) fail, and the gains
+    scheduled over them (:class:`GainSchedule`).
+
+    Coordinate j is scheduled when u = K e does not stabilise the tick map linearised at some pose of j alone within
+    ``extents[j]`` (:func:`_pose_grid`; :func:`linearize` with ``at``):
+    spectral radius of A(q) + B(q) K ≥ 1.  A turntable's yaw ψ turns the pole's plane: at ψ = π/2 the slide that
+    balanced it at ψ = 0 moves it no more.  There the design of :func:`discrete_lqr` (``design_qu``, ``qu0``, ``qa0``,
+    its Bryson weights, effort scale and, for design 2, force weights) is solved at each pose with the same weights
+    (``scipy.linalg.solve_discrete_are``), and its change from rest is added to K.  ``None`` where no coordinate needs
+    it (a cart's slides, whose linearisation does not change with the pose: the excitation is then unchanged).
+    Cached per robot, gains, rate and extents.
+    """
+    from scipy.linalg import solve_discrete_are
+
+    K = np.asarray(K, dtype=np.float64)
+    key = (robot.name, robot.model.nq, K.tobytes(), float(rate_hz), timestep, tuple(float(x) for x in extents),
+           float(design_qu), float(qu0), qa0, points)
+    if key in _SCHEDULES:
+        return _SCHEDULES[key]
+    m = robot.m
+    tables = []
+    for j in range(m):
+        grid, periodic = _pose_grid(robot, j, float(extents[j]), points)
+        maps, rho = [], 0.0
+        for q in grid:
+            at = np.zeros(m)
+            at[j] = q
+            A, B, _, _ = linearize(robot, rate_hz=rate_hz, timestep=timestep, at=at)
+            maps.append((A, B))
+            rho = max(rho, float(np.max(np.abs(np.linalg.eigvals(A + B @ K)))))
+        if rho >= 1.0:
+            tables.append((j, grid, periodic, maps, rho))
+    if not tables:
+        _SCHEDULES[key] = None
+        return None
+    res = discrete_lqr(robot, rate_hz=rate_hz, timestep=timestep, design_qu=design_qu, qu0=qu0, qa0=qa0)
+    Q, R, S = res.Q, res.R, res.S
+
+    def design(A: np.ndarray, B: np.ndarray) -> np.ndarray | None:
+        try:
+            P = solve_discrete_are(A, B, Q, R, s=S)
+        except (np.linalg.LinAlgError, ValueError):
+            return None
+        return -np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A + (S.T if S is not None else 0.0))
+
+    K_rest = design(res.A, res.B)
+    if K_rest is None:
+        _SCHEDULES[key] = None
+        return None
+    coords, grids, deltas, periodics, rho_fixed, rho_sched = [], [], [], [], [], []
+    for j, grid, periodic, maps, rho in tables:
+        d = np.zeros((len(grid), *K.shape))
+        worst = 0.0
+        for k, (A, B) in enumerate(maps):
+            Kq = design(A, B)
+            d[k] = Kq - K_rest if Kq is not None else 0.0   # no stabilising design at that pose: the gains at rest
+            worst = max(worst, float(np.max(np.abs(np.linalg.eigvals(A + B @ (K + d[k]))))))
+        coords.append(j)
+        grids.append(grid)
+        deltas.append(d)
+        periodics.append(periodic)
+        rho_fixed.append(rho)
+        rho_sched.append(worst)
+    out = GainSchedule(tuple(coords), tuple(grids), tuple(deltas), tuple(periodics), tuple(rho_fixed), tuple(rho_sched))
+    log.info("%s: %s", robot.name, out.describe([robot.joint_names[i] for i in robot.actuated_index]))
+    _SCHEDULES[key] = out
+    return out

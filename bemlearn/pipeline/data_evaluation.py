@@ -120,7 +120,7 @@ def data_only_evaluation(model: PredictorState | LearnedBEM, train: BEMDataset, 
         heldout=_heldout(state, heldout, 2.0, train, qu_unit) if heldout is not None else None,
         resolution=_resolution(state, train, MAX_QUERIES, units, qu_unit),  # do the data resolve the BEM at all?
         slices=_slices(state, train, SliceSpec(), units, qu_unit),
-        support=_support(train, MAX_QUERIES, SUPPORT_RATIO, units, qu_unit),  # are its queries supported jointly?
+        support=_support(train, MAX_QUERIES, SUPPORT_RATIO, units, qu_unit, model=state),  # are its queries supported jointly?
     )
 
 
@@ -361,7 +361,8 @@ def _resolution(state: PredictorState, train: BEMDataset, max_points: int, units
 
 
 
-def design_support(train: BEMDataset, *, max_queries: int = MAX_QUERIES, ratio: float = SUPPORT_RATIO) -> dict[str, Any]:
+def design_support(train: BEMDataset, *, max_queries: int = MAX_QUERIES, ratio: float = SUPPORT_RATIO,
+                   model: PredictorState | LearnedBEM | None = None) -> dict[str, Any]:
     """Are the BEM queries x_0^e = [q̈_a, q̇_a, q_a, 0, 0] (eq. 14) at the data's actuated motions
     supported by the training inputs *jointly* (:func:`support_of_queries`, (S1))?
 
@@ -374,12 +375,14 @@ def design_support(train: BEMDataset, *, max_queries: int = MAX_QUERIES, ratio: 
         "pairs": [{"input", "with", "corr", "ratio"}] (largest |corr| first), "inputs": [{"input",
         "unit", "data": [lo, hi], "supported": [lo, hi] or None, "reach": max |x| of the supported
         queries or None}]}``; ``data`` are the training inputs' 2.5 / 97.5 % quantiles,
-        ``supported`` those of the supported queries.
+        ``supported`` those of the supported queries.  ``model``: the learned BEM, for (S2) where the BEM is not
+        linear in the actuated inputs over the data (:func:`~bemlearn.pipeline.support.extrapolation_leverage`).
     """
-    return _support(train, max_queries, ratio, *_units_of(train))
+    return _support(train, max_queries, ratio, *_units_of(train), model=model)
 
 
-def _support(train: BEMDataset, max_queries: int, ratio: float, units: dict[str, str], qu_unit: str) -> dict[str, Any]:
+def _support(train: BEMDataset, max_queries: int, ratio: float, units: dict[str, str], qu_unit: str,
+             model: PredictorState | LearnedBEM | None = None) -> dict[str, Any]:
     names = tuple(train.input_names)
     x = train.x.to(torch.float64).numpy()
     n_act = x.shape[1] - 2
@@ -396,5 +399,13 @@ def _support(train: BEMDataset, max_queries: int, ratio: float, units: dict[str,
     out = {"share": res["share"], "ratio_median": res["r_median"], "ratio_q90": res["r_q90"], "limit": ratio,
            "spacing": res["spacing"], "n_queries": len(q), "n_train": len(x), "pairs": _lockstep_pairs(x, names, n_act),
            "inputs": inputs, "unit": qu_unit}
-    out.update(extrapolation_leverage(x, train.y.to(torch.float64).numpy(), names))
+    bem = None
+    if model is not None:   # (S2) where the BEM is not linear over the data: the learned μ(x_0^e) at each sample
+        from bemlearn.models.band import band_reference
+
+        state = _state(model)
+        x0 = train.x.to(torch.float64).clone()
+        x0[:, -2:] = 0.0
+        bem = band_reference(state, x0, n_inputs=state.dim - 2)[0].numpy()
+    out.update(extrapolation_leverage(x, train.y.to(torch.float64).numpy(), names, bem=bem))
     return out

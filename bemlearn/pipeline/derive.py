@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from bemlearn.robots.scales import (
+    DESIGN_QU,
     bem_gain,
     bem_slopes,
     instability_rate,
@@ -63,8 +64,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-DESIGN_QU = 0.2
-"""The BEM range the data must cover, |q_u^e − nominal| ≤ 0.2 in q_u's unit (rad for a hinge, m for a slide)."""
 
 
 @dataclass(frozen=True)

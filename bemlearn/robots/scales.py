@@ -22,10 +22,18 @@ from bemlearn.robots.bem import find_roots
 from bemlearn.robots.mujoco_robot import MujocoRobot
 from bemlearn.robots.protocol import BalanceRobot, ControlRobot
 
-__all__ = ["upright_stiffness", "instability_rate", "bem_slopes", "velocity_stiffening_speed", "qu_half_range", "qa_half_ranges", "qa_limited", "bem_gain", "UNLIMITED_HALF_RANGE"]
+__all__ = ["upright_stiffness", "instability_rate", "bem_slopes", "velocity_stiffening_speed", "qu_half_range", "qa_half_ranges", "qa_limited", "bem_gain", "design_bound", "UNLIMITED_HALF_RANGE", "DESIGN_QU"]
 
 UNLIMITED_HALF_RANGE = 0.5
 """Half range assumed for an unlimited actuated coordinate, rad or m."""
+
+DESIGN_QU = 0.2
+"""The BEM range the data must cover, |q_u^e − nominal| ≤ 0.2 in q_u's unit (rad for a hinge, m for a slide)."""
+
+
+def design_bound(robot: BalanceRobot) -> float:
+    """d = min(:data:`DESIGN_QU`, q_u half range): the half width of the BEM design region, q_u's unit."""
+    return float(min(DESIGN_QU, qu_half_range(robot)))
 
 
 def upright_stiffness(robot: ControlRobot, *, step: float = 1e-5) -> tuple[float, float]:

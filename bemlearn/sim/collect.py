@@ -18,6 +18,12 @@ ground-truth file (``<stem>.truth<suffix>``) for evaluation.
 
 Trials are seeded from ``numpy.random.SeedSequence(seed).spawn(n_trials)``, so the result
 does not depend on the number of worker processes.
+
+Where the fixed gains do not hold the linearisation at a pose the reference reaches (a turntable's yaw turns the
+pole's plane away from the slide that balanced it at 0), the gains are scheduled over that coordinate
+(:func:`_gain_schedule`, :func:`~bemlearn.control.lqr.pose_gain_schedule`: u = (K + ΔK(q̂_a)) ∘ scale, the measured
+pose in the tick); an unlimited hinge whose extent is a half turn also sweeps it (:func:`_sweep_components`).  Every
+other robot's trials are unchanged, draw for draw.
 """
 
 from __future__ import annotations
@@ -157,7 +163,10 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
     K = np.asarray(config.gains, dtype=np.float64)
     if K.size != m * 2 * n:
         raise ConfigError(f"collect.gains: expected m·2n = {m * 2 * n} values for robot {robot.name!r}, got {K.size}")
-    K = K.reshape(m, 2 * n) * rng.uniform(*config.gain_scale, size=(m, 2 * n))
+    K0 = K.reshape(m, 2 * n)
+    K_scale = rng.uniform(*config.gain_scale, size=(m, 2 * n))
+    K = K0 * K_scale
+    schedule = _gain_schedule(robot, config, K0)
     # reference: per actuated joint a random sum of sines
     n_sines = rng.integers(config.n_sines[0], config.n_sines[1] + 1, size=m)
     comps = [
@@ -170,10 +179,20 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
             raise ConfigError(f"collect.excursion: expected 2·m = {2 * m} positive extents (positions, then accelerations) or [], got {list(ext)}")
         comps = [(A * np.minimum(ext[j], ext[m + j] / w**2), w, ph) for j, (A, w, ph) in enumerate(comps)]
     ia, iu = list(robot.actuated_index), robot.unactuated_index
-    traj = _trajectory_reference(config.reference_bem, comps, m)
     pose = None
-    if traj is not None and config.excursion and config.reference_bem:
+    if config.reference_bem and config.excursion:
         pose = _pose_slopes(robot, np.asarray(config.excursion, dtype=np.float64)[:m], float(config.reference_bem[-1]))
+    sweep = _sweep_components(robot, config, rng, pose)
+    stiff_v = None
+    if sweep is not None:
+        from bemlearn.robots.scales import velocity_stiffening_speed
+
+        comps = [(np.append(A * keep, a_s), np.append(w, w_s), np.append(ph, p_s)) if a_s > 0 else (A, w, ph)
+                 for (A, w, ph), (a_s, w_s, p_s, keep) in zip(comps, sweep)]
+        stiff_v = velocity_stiffening_speed(robot)
+    traj = _trajectory_reference(config.reference_bem, comps, m)
+    if traj is None:
+        pose = None
     inverse = None
     if traj is not None:
         from bemlearn.control.actuator_inverse import MujocoActuatorInverse  # the model's feedforward along the reference
@@ -184,7 +203,7 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
     q0[iu] = robot.qu_nominal + rng.uniform(*config.initial_qu)
     qd0 = None
     if traj is not None:  # start on the reference (its initial state plus the drawn offsets)
-        r0 = _reference_state(0.0, comps, traj, ia, iu, n, robot.qu_nominal, pose)
+        r0 = _reference_state(0.0, comps, traj, ia, iu, n, robot.qu_nominal, pose, stiff_v)
         q0 += r0[0] - np.where(np.arange(n) == iu, robot.qu_nominal, 0.0)
         qd0 = r0[1]
     plant.reset(q0, qd0)
@@ -201,8 +220,9 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
             failed, k = True, tick
             break
         y, v = plant.measure(q_true)
-        q_ref, qd_ref, qdd_ref = _reference_state(t, comps, traj, ia, iu, n, robot.qu_nominal, pose)
-        u = K @ np.concatenate([y - q_ref, v - qd_ref])
+        q_ref, qd_ref, qdd_ref = _reference_state(t, comps, traj, ia, iu, n, robot.qu_nominal, pose, stiff_v)
+        Kt = K if schedule is None else (K0 + schedule.delta(y[ia])) * K_scale
+        u = Kt @ np.concatenate([y - q_ref, v - qd_ref])
         if inverse is not None:
             D, h = robot.terms(q_ref, qd_ref)
             u = u + inverse.command((D @ qdd_ref + h)[ia], q_ref, qd_ref, clip=False)
@@ -214,6 +234,26 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
         rec["q_meas"][tick], rec["u"][tick], rec["q"][tick], rec["qd"][tick], rec["qdd"][tick] = y, u, q_true, qd, qdd
     times = np.arange(k) * dt
     return TrialResult(trial_id, failed, times, *(rec[name][:k] for name in ("q_meas", "u", "q", "qd", "qdd")))
+
+
+def _gain_schedule(robot: MujocoRobot, config: CollectConfig, K: np.ndarray):
+    """The excitation balance scheduled over the actuated pose (:func:`~bemlearn.control.lqr.pose_gain_schedule`), or
+    ``None`` where the fixed gains ``K (m, 2n)`` stabilise the linearisation at every pose the reference reaches (each
+    coordinate's ``excursion`` extent, or with the paper's excitation n_max × the top amplitude).  The design is the
+    derived one's: |q_u| ≤ d (:func:`~bemlearn.robots.scales.design_bound`), a d/4 q_u start, the ``initial_qa`` start."""
+    from bemlearn.control.lqr import pose_gain_schedule
+    from bemlearn.robots.scales import design_bound
+
+    assert config.rate_hz is not None and config.n_sines is not None and config.amplitude is not None and config.initial_qa is not None
+    m = robot.m
+    if config.excursion:
+        extents = np.asarray(config.excursion, dtype=np.float64)[:m]
+    else:
+        extents = np.full(m, config.n_sines[1] * config.amplitude[1])
+    d = design_bound(robot)
+    qa0 = float(config.initial_qa[1]) or None
+    return pose_gain_schedule(robot, K, rate_hz=config.rate_hz, timestep=config.physics_timestep, extents=extents,
+                              design_qu=d, qu0=d / 4, qa0=qa0)
 
 
 def _trajectory_reference(reference_bem: tuple[float, ...] | None, comps: list, m: int) -> list | None:
@@ -235,8 +275,13 @@ def _trajectory_reference(reference_bem: tuple[float, ...] | None, comps: list, 
 
 
 def _reference_state(t: float, comps: list, traj: list | None, ia: list[int], iu: int, n: int,
-                     qu_nominal: float, pose: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                     qu_nominal: float, pose: tuple | None = None, stiff_v: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(q_t, q̇_t, q̈_t)`` (n,) each: the actuated sines and the q_u target (nominal, or on the periodic BEM motion).
+
+    ``stiff_v`` ``(m,)`` (with a sweep, :func:`_sweep_components`): the speeds that double the upright's stiffness
+    (:func:`~bemlearn.robots.scales.velocity_stiffening_speed`); the target's offset from nominal is divided by
+    Γ_q(q̇_t)/Γ_q(0) = 1 + Σ_j (q̇_t,j/v_j)² (a turntable turning at ψ̇: tan θ (m l g + ψ̇² J) ≈ m l a), the
+    reference's rate varying slowly against the target's components.
 
     ``pose`` (:func:`_pose_slopes`): the BEM slopes change with the actuated pose; the target's gains
     (:func:`_trajectory_reference`) then take the slopes at the reference's own pose q_a,t (a turntable at ψ: the
@@ -259,7 +304,47 @@ def _reference_state(t: float, comps: list, traj: list | None, ia: list[int], iu
         for (A, w, ph), G in zip(comps, gains):
             e = G * A * np.exp(1j * (w * t + ph))
             out[:, iu] += (np.sum(e.imag), np.sum((1j * w * e).imag), np.sum((-(w**2) * e).imag))
+        if stiff_v is not None:
+            rate = out[1, ia] / stiff_v
+            out[:, iu] = np.array([qu_nominal, 0.0, 0.0]) + (out[:, iu] - np.array([qu_nominal, 0.0, 0.0])) / (1.0 + float(np.sum(rate**2)))
     return out[0], out[1], out[2]
+
+
+def _sweep_components(robot: MujocoRobot, config: CollectConfig, rng: np.random.Generator, pose: tuple | None) -> list | None:
+    """Per actuated coordinate ``(A_s, ω_s, φ_s, keep)``: one more sine for a hinge whose pose turns the BEM's slopes
+    (``pose``, :func:`_pose_slopes`: a turntable's yaw) over an ``excursion`` extent P_j ≥ :data:`SWEEP_SPAN`
+    (A_s = 0 elsewhere): A_s = P_j (0.75 P_j on a limited joint, whose own sines are then halved, ``keep`` = 0.5, to
+    stay off its stops) at ω_s = Ω/A_s, Ω ~ U(0.5, 1) √(a_j A_s) (a_j its acceleration extent: the sweep's
+    acceleration stays within it; √(a_j P_j) is the components' speed bound, within the stiffening speed,
+    :func:`~bemlearn.pipeline.derive.excitation_directions`), φ_s ~ U(0, 2π).  The sines shared among n components
+    (each ≤ P_j/√n_max) keep such a coordinate near its start — a turntable's yaw within ±1.9 rad and its rate below
+    3.3 rad/s of the ±π and 5.6 rad/s its design region spans (measured on ``fam0_005``); the sweep visits the
+    whole extent at rates up to that speed.  ``None`` (no draw from ``rng``) where no coordinate sweeps: every other
+    robot's trials are unchanged."""
+    if not config.excursion or pose is None:
+        return None
+    from bemlearn.robots.scales import qa_limited
+
+    m = robot.m
+    ext = np.asarray(config.excursion, dtype=np.float64)
+    kinds = tuple(getattr(robot, "coordinate_kinds", ()))
+    limited = qa_limited(robot)
+    deltas = pose[1]
+    scale = max(float(np.max(np.abs(d))) for d in deltas) or 1.0
+    turns = [len(kinds) == robot.n and kinds[robot.actuated_index[j]] == "hinge" and ext[j] >= SWEEP_SPAN
+             and float(np.max(np.abs(deltas[j]))) > 1e-3 * scale for j in range(m)]
+    if not any(turns):
+        return None
+    amp = np.where(limited, 0.75, 1.0) * ext[:m]
+    rate = rng.uniform(0.5, 1.0, size=m) * np.sqrt(amp * ext[m:2 * m])
+    phase = rng.uniform(0.0, 2 * math.pi, size=m)
+    return [(float(amp[j]), float(rate[j] / amp[j]), float(phase[j]), 0.5 if limited[j] else 1.0) if turns[j]
+            else (0.0, 0.0, 0.0, 1.0) for j in range(m)]
+
+
+#: A hinge whose pose turns the BEM's slopes sweeps its extent when that is at least this (rad): beyond it cos and sin
+#: of the pose are far from linear, and sines shared among components leave most of the extent unvisited.
+SWEEP_SPAN = 1.0
 
 
 _POSE_SLOPES: dict = {}

@@ -1,0 +1,204 @@
+"""The excitation balance scheduled over the actuated pose (issue 28, the turntable carts): the scheduled LQR gains of a
+rotation-symmetric x-y turntable equal the ψ = 0 gains rotated (closed form: the slide inputs and positions turn with
+ψ), robots whose fixed gains hold at every pose stay unscheduled, the yaw sweep, (S2) with a BEM that turns with the
+pose, and the Gaussian σ bounded by a turning pose's rate."""
+
+import math
+
+import numpy as np
+import pytest
+
+from bemlearn.control.lqr import discrete_lqr, linearize, pose_gain_schedule
+from bemlearn.robots import load
+
+# x and y slides with equal moving masses (the carriage under the y slide is nearly massless), equal ranges and motors,
+# an unlimited yaw, a pole tilting in the turntable's x-z plane with an axisymmetric inertia: the robot at yaw ψ is the
+# robot at 0 with the slide coordinates and forces turned by ψ.
+TURNTABLE = """<mujoco model="tt_sym">
+<option timestep="0.002" gravity="0 0 -9.81"/>
+<worldbody>
+<body name="carriage">
+<joint name="x" type="slide" axis="1 0 0" range="-0.5 0.5"/>
+<inertial pos="0 0 0" mass="1e-7" diaginertia="1e-9 1e-9 1e-9"/>
+<body name="cart">
+<joint name="y" type="slide" axis="0 1 0" range="-0.5 0.5"/>
+<inertial pos="0 0 0" mass="1.0" diaginertia="0.002 0.002 0.002"/>
+<body name="turntable" pos="0 0 0.03">
+<joint name="yaw" type="hinge" axis="0 0 1"/>
+<inertial pos="0 0 0" mass="0.2" diaginertia="1e-4 1e-4 2e-4"/>
+<body name="pole" pos="0 0 0.03">
+<joint name="pole" type="hinge" axis="0 1 0" range="-90 90"/>
+<inertial pos="0 0 0.25" mass="0.2" diaginertia="0.004 0.004 1e-5"/>
+</body>
+</body>
+</body>
+</body>
+</worldbody>
+<actuator>
+<motor name="x_act" joint="x" ctrlrange="-20 20"/>
+<motor name="y_act" joint="y" ctrlrange="-20 20"/>
+<motor name="yaw_act" joint="yaw" ctrlrange="-2 2"/>
+</actuator>
+</mujoco>"""
+
+RATE = 250.0
+
+
+@pytest.fixture(scope="module")
+def turntable(tmp_path_factory):
+    path = tmp_path_factory.mktemp("tt") / "turntable.xml"
+    path.write_text(TURNTABLE)
+    return load(str(path))
+
+
+def _turned(K0: np.ndarray, psi: float, ix: list[int], n: int) -> np.ndarray:
+    """K(ψ) = T_u(ψ) K0 T_x(−ψ): the slide forces turn by ψ, the slide errors by −ψ (positions and velocities)."""
+    c, s = math.cos(psi), math.sin(psi)
+    R = np.array([[c, -s], [s, c]])
+    Tu = np.eye(K0.shape[0])
+    Tu[:2, :2] = R
+    Tx = np.eye(2 * n)
+    for off in (0, n):
+        Tx[np.ix_([off + i for i in ix], [off + i for i in ix])] = R.T
+    return Tu @ K0 @ Tx
+
+
+def test_scheduled_gains_are_the_rest_gains_turned_with_the_yaw(turntable):
+    robot = turntable
+    assert list(robot.joint_names) == ["x", "y", "yaw", "pole"]
+    res = discrete_lqr(robot, rate_hz=RATE, design_qu=0.2, qu0=0.05, qa0=0.05)
+    K0 = res.K
+    sched = pose_gain_schedule(robot, K0, rate_hz=RATE, timestep=None, extents=np.array([0.3, 0.3, math.pi]),
+                               design_qu=0.2, qu0=0.05, qa0=0.05)
+    assert sched is not None and sched.coords == (2,) and sched.periodic == (True,)   # the yaw alone, over a full turn
+    assert sched.rho_fixed[0] > 1.0 > sched.rho_scheduled[0]   # the rest gains lose the pole at ψ = π/2; the schedule holds it
+    grid = sched.grids[0]
+    scale = np.abs(K0).max()
+    for psi in (grid[12], grid[24], grid[36], grid[0], grid[5]):   # −π/2, 0, π/2, −π, and an off-axis pose
+        qa = np.array([0.0, 0.0, psi])
+        want = _turned(K0, psi, [0, 1], robot.n)
+        np.testing.assert_allclose(K0 + sched.delta(qa), want, atol=2e-4 * scale)
+    # periodic: a pose one turn on reads the same gains
+    np.testing.assert_allclose(sched.delta(np.array([0.0, 0.0, grid[5] + 2 * math.pi])), sched.delta(np.array([0.0, 0.0, grid[5]])),
+                               atol=1e-9 * scale)
+
+
+def test_linearisation_at_a_yaw_is_the_rest_one_turned(turntable):
+    """The tick map at ψ, in coordinates turned by −ψ, is the map at rest (to the finite differences' accuracy)."""
+    robot = turntable
+    A0, B0, _, _ = linearize(robot, rate_hz=RATE)
+    psi = 1.1
+    A, B, _, _ = linearize(robot, rate_hz=RATE, at=np.array([0.0, 0.0, psi]))
+    c, s = math.cos(psi), math.sin(psi)
+    R = np.array([[c, -s], [s, c]])
+    P = np.eye(2 * robot.n)
+    for off in (0, robot.n):
+        P[off:off + 2, off:off + 2] = R
+    Tu = np.eye(3)
+    Tu[:2, :2] = R
+    np.testing.assert_allclose(P.T @ A @ P, A0, atol=1e-6)
+    np.testing.assert_allclose(P.T @ B @ Tu, B0, atol=1e-7)
+
+
+@pytest.mark.parametrize("name", ["cartpole", "pendubot", "arm2_pole"])
+def test_robots_whose_fixed_gains_hold_at_every_pose_are_not_scheduled(name):
+    """A cart's linearisation does not change with its slide; a pendubot's shoulder and an arm's joints move within
+    extents where the rest gains still hold: none is scheduled, so their trials are the ones they always were
+    (``simulate_trial`` uses K unchanged when the schedule is ``None``)."""
+    from bemlearn.pipeline import derive
+    from bemlearn.sim.collect import CollectConfig, _gain_schedule
+
+    robot = load(f"tests/robots/{name}.xml")
+    rate = derive.control_rate(robot).value
+    gains = derive.excitation_gains(robot, rate).value["gains"]
+    sig = derive.excitation_signals(robot, rate).value
+    dirs = derive.excitation_directions(robot, rate, sig).value
+    cfg = CollectConfig(rate_hz=rate.rate_hz, physics_timestep=rate.timestep if rate.timestep_changed else None, gains=gains,
+                        n_sines=sig["n_sines"], amplitude=dirs["amplitude"], initial_qa=derive.initial_ranges(robot).value["initial_qa"],
+                        excursion=dirs["excursion"], reference_bem=dirs["reference_bem"])
+    assert _gain_schedule(robot, cfg, np.asarray(gains).reshape(robot.m, 2 * robot.n)) is None
+
+
+def test_sweep_only_where_the_pose_turns_the_slopes_over_a_wide_extent(turntable):
+    from bemlearn.sim.collect import CollectConfig, _pose_slopes, _sweep_components
+
+    ext = (0.3, 0.3, math.pi, 2.0, 2.0, 9.0)
+    pose = _pose_slopes(turntable, np.array(ext[:3]), 6.0)
+    assert pose is not None   # the yaw turns the slides' s_a
+    sw = _sweep_components(turntable, CollectConfig(excursion=ext), np.random.default_rng(0), pose)
+    assert sw is not None and sw[0] == (0.0, 0.0, 0.0, 1.0) and sw[1] == (0.0, 0.0, 0.0, 1.0)   # slides: no sweep
+    A, w, _, keep = sw[2]
+    v = math.sqrt(math.pi * 9.0)
+    assert pytest.approx(math.pi) == A and keep == 1.0 and 0.5 * v <= A * w <= v   # unlimited yaw: peak rate A ω in [v/2, v]
+    assert A * w**2 <= 9.0 * (1 + 1e-12)   # and its acceleration within the extent
+    rng = np.random.default_rng(0)
+    before = rng.bit_generator.state
+    narrow = (0.3, 0.3, 0.8, 2.0, 2.0, 9.0)   # a yaw extent below a radian: the sines visit it
+    assert _sweep_components(turntable, CollectConfig(excursion=narrow), rng, _pose_slopes(turntable, np.array(narrow[:3]), 6.0)) is None
+    assert _sweep_components(turntable, CollectConfig(excursion=ext), rng, None) is None   # no pose table (a cart)
+    assert rng.bit_generator.state == before   # no draw: a robot without a sweep keeps its trials
+
+
+def test_s2_with_a_bem_that_turns_with_the_pose():
+    """q_u = atan((ẍ cos ψ + ÿ sin ψ)/g) + q̈_u/λ²: the fit linear in the actuated inputs does not describe it; with the
+    learned BEM (here the exact one) as a regressor the slope 1/λ² is recovered and resolved.  A linear BEM's fit is
+    unchanged by the argument."""
+    from bemlearn.pipeline.support import LINEAR_R2, extrapolation_leverage
+
+    rng = np.random.default_rng(1)
+    N, g, lam2 = 600, 9.81, 40.0
+    qdd_a = rng.normal(0, 1.5, (N, 3))
+    qd_a = rng.normal(0, 0.5, (N, 3))
+    q_a = np.c_[rng.normal(0, 0.2, (N, 2)), rng.uniform(-math.pi, math.pi, N)]
+    qdd_u = rng.normal(0, 2.0, N)
+    qd_u = rng.normal(0, 0.3, N)
+    bem = np.arctan((qdd_a[:, 0] * np.cos(q_a[:, 2]) + qdd_a[:, 1] * np.sin(q_a[:, 2])) / g)
+    y = bem + qdd_u / lam2 + rng.normal(0, 1e-3, N)
+    x = np.c_[qdd_a, qd_a, q_a, qdd_u, qd_u]
+    names = ("qdd_x", "qdd_y", "qdd_yaw", "qd_x", "qd_y", "qd_yaw", "q_x", "q_y", "q_yaw", "qdd_pole", "qd_pole")
+    plain = extrapolation_leverage(x, y, names)
+    assert plain["r2"] < LINEAR_R2 and not plain["with_bem"]
+    out = extrapolation_leverage(x, y, names, bem=bem)
+    assert out["with_bem"] and out["r2"] > 0.99
+    assert out["slope"] == pytest.approx(1 / lam2, rel=0.02) and out["t"] > 50
+    wrong = extrapolation_leverage(x, y, names, bem=rng.normal(0, 0.1, N))   # a "learned BEM" that describes nothing
+    assert wrong["with_bem"] and wrong["r2"] < LINEAR_R2 and wrong["t"] is None   # S2 then says nothing either way
+    lin = 0.1 * qdd_a[:, 0] + 0.02 * qdd_a[:, 1] + qdd_u / lam2 + rng.normal(0, 1e-3, N)
+    a, b = extrapolation_leverage(x, lin, names), extrapolation_leverage(x, lin, names, bem=np.zeros(N))
+    assert a == b and not b["with_bem"]
+
+
+def _turntable_log(yaw_rate: float, *, with_products: bool):
+    """Two trials at 250 Hz: slides x, y with sines, a yaw turning at ``yaw_rate`` (rad/s) with a sine, and a pole
+    that follows atan((ẍ cos ψ + ÿ sin ψ)/g) (``with_products``) or ẍ/g alone."""
+    from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
+
+    rate, T = 250.0, 5000
+    t = np.arange(T) / rate
+    rows = []
+    for k in range(2):
+        ph = 0.7 * k
+        x = 0.05 * np.sin(2 * math.pi * 1.1 * t + ph) + 0.03 * np.sin(2 * math.pi * 0.37 * t)
+        y = 0.05 * np.sin(2 * math.pi * 0.9 * t + 2 * ph) + 0.03 * np.sin(2 * math.pi * 0.53 * t + 1.0)
+        psi = yaw_rate * t * (-1) ** k + 0.5 * np.sin(2 * math.pi * 0.2 * t)
+        ax = -0.05 * (2 * math.pi * 1.1) ** 2 * np.sin(2 * math.pi * 1.1 * t + ph) - 0.03 * (2 * math.pi * 0.37) ** 2 * np.sin(2 * math.pi * 0.37 * t)
+        ay = -0.05 * (2 * math.pi * 0.9) ** 2 * np.sin(2 * math.pi * 0.9 * t + 2 * ph) - 0.03 * (2 * math.pi * 0.53) ** 2 * np.sin(2 * math.pi * 0.53 * t + 1.0)
+        pole = np.arctan((ax * np.cos(psi) + ay * np.sin(psi)) / 9.81) if with_products else np.arctan(ax / 9.81)
+        rows.append((t + 100 * k, np.full(T, k), np.c_[x, y, psi, pole]))
+    meta = TrajectoryMeta(robot="synthetic", joint_names=("x", "y", "yaw", "pole"), unactuated="pole",
+                          actuator_names=("x_act", "y_act", "yaw_act"), sample_rate_hz=rate, trial_failed={0: False, 1: False},
+                          joint_kinds=("slide", "slide", "hinge", "hinge"))
+    q = np.concatenate([r[2] for r in rows])
+    return Trajectory(t=np.concatenate([r[0] for r in rows]), trial=np.concatenate([r[1] for r in rows]).astype(np.int64),
+                      q=q, u=np.zeros((len(q), 3)), meta=meta)
+
+
+def test_sigma_bounded_by_a_turning_pose_only_where_its_products_carry_the_label():
+    from bemlearn.data.derivative_choice import TURNING_KEPT, choose_sigma
+
+    turning = choose_sigma(_turntable_log(4.0, with_products=True), qu_window=None)
+    bound = math.sqrt(-2 * math.log(TURNING_KEPT)) / 4.0      # the yaw's rate is 4 ± 0.63 rad/s
+    assert "yaw turns through" in turning.note
+    assert 0.8 * bound <= turning.sigma_s <= bound
+    plain = choose_sigma(_turntable_log(4.0, with_products=False), qu_window=None)   # the yaw turns, the label ignores it
+    assert "yaw" not in plain.note and plain.sigma_s > 1.5 * turning.sigma_s
