@@ -24,13 +24,18 @@ def _near_singular(n_unique: int = 40, copies: int = 5) -> tuple[torch.Tensor, t
 
 
 def _near_singular_exact_gp():
-    """``(x, y, model, lik)``: an exact GP on :func:`_near_singular` data with noise 1e-15."""
+    """``(x, y, model, lik)``: an exact GP on :func:`_near_singular` data with noise 1e-16.
+
+    A noise of 1e-16 is below float64's resolution on the unit diagonal (1 + 1e-16 == 1), so every
+    duplicated row's pivot is zero to rounding and the Cholesky fails whatever the thread count;
+    with 1e-15 a one-thread factorisation happened to succeed (a positive rounding residue).
+    """
     x, y = _near_singular()
     lik = gaussian_likelihood(min_noise=1e-16)
     model = ExactBEMGP(x, y, lik)
     set_hyperparameters(
         model, lik, lengthscale=torch.full((5,), 0.7, dtype=F64),
-        outputscale=torch.tensor(1.0, dtype=F64), noise=torch.tensor(1e-15, dtype=F64),
+        outputscale=torch.tensor(1.0, dtype=F64), noise=torch.tensor(1e-16, dtype=F64),
     )
     return x, y, model, lik
 

@@ -179,21 +179,24 @@ def preflight(
         out_dir: the folder the command writes into; it must be writable.
         force: allow replacing ``outputs``.
     """
+    # cheap checks first: a wrong device or an existing output is reported before the robot is loaded
+    # and the config resolved (the derivation runs trials in MuJoCo: seconds)
     cfg: dict[str, Any] = {}
     resolved = None
     if config is not None:
         cfg = check_config_file(config)
-        if robot and "robot" in cfg:
-            check_robot(cfg["robot"], where=f"{config}: robot")
-        resolved = check_config(config, cfg)
         train = cfg.get("train")
         if device is None and isinstance(train, dict):
             check_device(train.get("device"), where=f"{config}: train.device")
     check_device(device)
-    if data is not None:  # the file must read; its joints are checked against the robot by the command itself
-        check_data_file(data)
     if out_dir is not None:
         check_writable(out_dir)
     check_outputs(outputs, force)
+    if data is not None:  # the file must read; its joints are checked against the robot by the command itself
+        check_data_file(data)
+    if config is not None:
+        if robot and "robot" in cfg:
+            check_robot(cfg["robot"], where=f"{config}: robot")
+        resolved = check_config(config, cfg)
     log.debug("preflight passed")
     return Preflight(config, cfg, resolved)
