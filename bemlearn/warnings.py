@@ -42,6 +42,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 __all__ = [
+    "issued",
     "BemlearnWarning",
     "DataWarning",
     "RobotModelWarning",
@@ -103,6 +104,15 @@ def _caller_stacklevel() -> int:
     return max(level, 1)
 
 
+_ISSUED = [0]
+
+
+def issued() -> int:
+    """How many warnings :func:`warn` has issued in this process (a computation whose result is reused where it
+    issued none need not replay any)."""
+    return _ISSUED[0]
+
+
 def warn(category: type[BemlearnWarning], logger: logging.Logger, msg: str, *args: object) -> None:
     """Issue ``msg % args`` as a ``category`` warning and log it at WARNING on ``logger``.
 
@@ -116,6 +126,7 @@ def warn(category: type[BemlearnWarning], logger: logging.Logger, msg: str, *arg
         msg: the message, with ``%`` placeholders as in ``logging``.
         args: the placeholders' values.
     """
+    _ISSUED[0] += 1
     warnings.warn(category(msg % args if args else msg), stacklevel=_caller_stacklevel())
     logger.warning(msg, *args, stacklevel=2)
 

@@ -196,3 +196,42 @@ def test_eic_gains_derived_with_the_reference_hold_it(tmp_path):
     g = derive.eic_gains(robot, rate, velocity_cutoff=wc, reference=ref).value
     held, how, rms = derive._reference_run(robot, g, rate, ref, velocity_cutoff=wc)
     assert held and rms < 0.05, how
+
+
+def test_a_trial_derivation_is_reused_for_the_same_model_and_not_for_another(monkeypatch):
+    """The derivations that play MuJoCo trials run once per process for the same compiled model and arguments
+    (a sweep's full resolutions, a test's): the reused result equals a fresh computation, an edited model is
+    computed again, and a computation that warned is not kept (its warning would not be replayed)."""
+    import dataclasses
+
+    from bemlearn.warnings import DesignWarning
+
+    calls = []
+    real = derive._eic_gains
+
+    def counting(*a, **k):
+        calls.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(derive, "_TRIAL_RESULTS", {})
+    monkeypatch.setattr(derive, "_eic_gains", counting)
+    robot = MujocoRobot.from_xml(ROBOTS / "cartpole.xml")
+    rate = derive.control_rate(robot).value
+    first = derive.eic_gains(robot, rate)
+    again = derive.eic_gains(MujocoRobot.from_xml(ROBOTS / "cartpole.xml"), rate)    # reloaded: the same bytes
+    assert len(calls) == 1 and again == first
+    derive._TRIAL_RESULTS.clear()
+    assert derive.eic_gains(robot, rate) == first and len(calls) == 2     # computed again: the same numbers
+    other = MujocoRobot.from_xml(ROBOTS / "cartpole.xml")
+    other.model.body_mass[-1] *= 1.5                                       # another model
+    derive.eic_gains(other, rate)
+    assert len(calls) == 3
+    slower = dataclasses.replace(rate, rate_hz=rate.rate_hz / 2)          # other arguments
+    derive.eic_gains(robot, slower)
+    assert len(calls) == 4
+    acrobot = MujocoRobot.from_xml(ROBOTS / "acrobot.xml")                 # no sampled-stable gains: it warns
+    arate = derive.control_rate(acrobot).value
+    for k in (5, 6):
+        with pytest.warns(DesignWarning, match="no sampled-stable EIC gains"):
+            derive.eic_gains(acrobot, arate)
+        assert len(calls) == k                                            # each time: the warning is issued again

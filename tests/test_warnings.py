@@ -48,7 +48,7 @@ WARNING_LOG_LINES = {"warnings.py": 1, "models/solver.py": 1}
 
 
 def test_the_family():
-    assert set(bw.__all__) == {"BemlearnWarning", *FAMILY, "warn", "shown_by_log"}
+    assert set(bw.__all__) == {"BemlearnWarning", *FAMILY, "warn", "shown_by_log", "issued"}
     assert bw.BemlearnWarning.__bases__ == (UserWarning,)
     for name, builtin in FAMILY.items():
         cls = getattr(bw, name)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -223,6 +224,49 @@ def excitation_amplitude_check(robot, collect, *, trials: int = 24, duration_s: 
     Returns:
         ``Derived(s, note)``.
     """
+    import dataclasses
+
+    return _per_model(_excitation_amplitude_trials, robot, dataclasses.replace(collect, seed=0, n_trials=1, workers=1),
+                      trials=trials, duration_s=duration_s, halvings=halvings)
+
+
+#: Results of the derivations that run MuJoCo trials (:func:`_per_model`), in this process.
+_TRIAL_RESULTS: dict[tuple, Derived] = {}
+
+
+def _per_model(fn: Callable[..., Derived], robot, *args: Any, **kwargs: Any) -> Derived:
+    """``fn(robot, *args, **kwargs)``, computed once per process for the same model and arguments.
+
+    The key is what a derivation that plays trials in MuJoCo is a function of: the compiled model's bytes
+    (``mj_saveModel``: an edited include or mesh changes them, a reloaded file does not) and the arguments' ``repr``
+    (the trials play their own fixed seeds).  A result is kept only where the computation issued no bemlearn warning,
+    so a reused one has none to replay; a robot without a MuJoCo model is computed every time.  A deep copy is
+    returned: callers may change what they get.
+    """
+    import copy
+    import hashlib
+
+    from bemlearn.warnings import issued
+
+    model = getattr(robot, "model", None)
+    key = None
+    if model is not None:
+        import mujoco
+
+        buf = np.empty(mujoco.mj_sizeModel(model), dtype=np.uint8)
+        mujoco.mj_saveModel(model, None, buf)
+        key = (fn.__qualname__, hashlib.sha256(buf.tobytes()).hexdigest(), type(robot).__name__, repr(args), repr(sorted(kwargs.items())))
+        if key in _TRIAL_RESULTS:
+            return copy.deepcopy(_TRIAL_RESULTS[key])
+    before = issued()
+    result = fn(robot, *args, **kwargs)
+    if key is not None and issued() == before:
+        _TRIAL_RESULTS[key] = copy.deepcopy(result)
+    return result
+
+
+def _excitation_amplitude_trials(robot, collect, *, trials: int, duration_s: float, halvings: int) -> Derived:
+    """:func:`excitation_amplitude_check`'s trials, run (``collect``'s seed, trial count and workers are not read)."""
     import dataclasses
 
     from bemlearn.sim.collect import simulate_trial
@@ -556,6 +600,12 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     Returns:
         ``Derived(EICGains, note)``.
     """
+    return _per_model(_eic_gains, robot, rate, qu_error=qu_error, velocity_cutoff=velocity_cutoff, reference=reference)
+
+
+def _eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocity_cutoff: float | None = None,
+               reference: dict | None = None) -> Derived:
+    """:func:`eic_gains`, computed."""
     from bemlearn.control.eic_linear import eic_tick_loop
     from bemlearn.control.lqr import linearize
     from bemlearn.errors import ArgumentError, NumericalError, RobotModelError

@@ -48,6 +48,18 @@ def memoized_derivation() -> Iterator[None]:
         _MEMO.reset(token)
 
 
+#: Given keys whose values the derivation does not read (the excitation check plays its own seeds and count).
+_NOT_READ_BY_DERIVATION = frozenset({"collect.seed", "collect.n_trials", "collect.workers", "simulate.seed"})
+
+
+def _read_by_derivation(raw: Mapping) -> tuple[tuple[str, str], ...]:
+    """The given ``collect.*`` and ``simulate.*`` values, as the derivation may read them (rates, steps, gains, the
+    sensor, the fall window, the initial ranges and the trial length the excitation check plays, the closed loop's
+    reference and velocity cutoff the EIC gains must hold): a memoized derivation is reused only where they agree."""
+    return tuple(sorted((k, repr(v)) for k, v in flatten(raw).items()
+                        if k.startswith(("collect.", "simulate.")) and k not in _NOT_READ_BY_DERIVATION))
+
+
 def _robot_key(name: str) -> tuple[Any, ...]:
     path = Path(name)
     try:
@@ -141,8 +153,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
             raise ConfigError(f"{source}: robot: {str(exc).removeprefix('robot: ')}") from exc
         _check_actuators(robot, source)
         _check_for_robot(parsed, robot, source)   # the given values first: the derivation runs trials with them
-        derived_key = ("derived", robot_key, frozenset(given), parsed.collect.rate_hz, parsed.simulate.rate_hz,
-                       parsed.collect.physics_timestep, parsed.simulate.physics_timestep)
+        derived_key = ("derived", robot_key, frozenset(given), _read_by_derivation(raw))
         if memo is not None and derived_key in memo:
             derived = memo[derived_key]
         else:
