@@ -229,6 +229,7 @@ def test_compare_predictor_scores_a_right_and_two_wrong_learned_bems(tmp_path):
     assert truth["features"]["upright_at"] == "other"
     right = compare_predictor(_predictor_file(tmp_path, xml, truth), xml, truth)
     assert right["rmse"] < 2e-3 and abs(right["gain"] - 1) < 0.02 and right["n_queries"] == 400
+    assert 0.0 <= right["band_coverage"] <= 1.0
     flat = compare_predictor(_predictor_file(tmp_path, xml, truth, scale=0.5), xml, truth)
     assert abs(flat["gain"] - 0.5) < 0.02 and flat["rmse"] > 0.02
     # the same BEM one turn of the hinge away is the same angle: not an error
@@ -260,6 +261,11 @@ def test_balance_and_reason_judgements_and_the_table():
     assert judge_reason("x", holdable=True, bem_right=True, check="closed_loop")[0] is False
     assert judge_reason("x", holdable=True, bem_right=False, check="closed_loop")[0] is True
     assert judge_reason("x", holdable=True, bem_right=True, check="resolution")[0] is False
+    # a band reason is judged by the band's coverage of the oracle BEM, which can be too narrow around a right mean
+    band = "the exported ±2σ band holds only 56 % of the model BEM over the design region"
+    assert judge_reason(band, holdable=True, bem_right=True, check="band", band_coverage=0.6)[0] is True
+    assert judge_reason(band, holdable=True, bem_right=True, check="band", band_coverage=0.95)[0] is False
+    assert judge_reason(band, holdable=True, bem_right=True, check="band")[0] is False   # no coverage: by the mean
     # a BEM on the hanging branch: "max 0.044 rad" names the wrong cause, "the hanging equilibrium" the right one
     assert judge_reason("max 0.044 rad", holdable=True, bem_right=False, check="design_region", off_branch=True)[0] is False
     assert judge_reason("the learned BEM is the hanging branch", holdable=True, bem_right=False, check="design_region",

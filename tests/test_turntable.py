@@ -12,7 +12,7 @@ from bemlearn.bench.family.generator import generate_robot
 from bemlearn.bench.family.oracle import Oracle
 from bemlearn.pipeline import derive
 from bemlearn.robots import load
-from bemlearn.robots.scales import bem_slopes, velocity_stiffening_speed
+from bemlearn.robots.scales import bem_slopes, instability_rate, velocity_stiffening_speed
 
 G = 9.81
 TURNTABLES = (5, 11)  # family seed 0: an unlimited and a limited yaw
@@ -190,6 +190,11 @@ def test_design_grid_reaches_the_collection_extents(tmp_path):
     assert narrow.box["yaw"]["q"] == pytest.approx(0.064)
     assert wide.box["yaw"]["q"] == pytest.approx(math.pi) and wide.box["yaw"]["qd"] == pytest.approx(math.sqrt(a[2] * P[2]))
     assert wide.box["y"]["qdd"] >= a[1] and wide.box["x"]["q"] == pytest.approx(0.34)
+    # the swept yaw's accelerations reach λ·v_tip (a motion on the balance's time scale up to the stiffening speed;
+    # the yaw rate at which the thin pole's stiffness doubles is ≈ λ), beyond the excitation's own 9.97 rad/s²
+    lam, v_tip = instability_rate(robot), velocity_stiffening_speed(robot)[2]
+    assert v_tip == pytest.approx(lam, rel=0.05)
+    assert wide.box["yaw"]["qdd"] == pytest.approx(lam * v_tip) and wide.box["yaw"]["qdd"] > 2 * a[2]
     x = wide.x.numpy()  # [q̈_a, q̇_a, q_a, 0, 0], m = 3
     yaw, yaw_rate = x[:, 8], x[:, 5]
     assert np.abs(yaw).max() > 2.5

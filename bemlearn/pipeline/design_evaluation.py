@@ -78,7 +78,10 @@ def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_poi
         excursion: the excitation's per-direction extents (``collect.excursion``: P_j, then a_j; m ≥ 2): the box
             then reaches them too, |q_a,j| ≤ max(Q_j, P_j), |q̇_a,j| ≤ max(V_j, √(a_j P_j)), |q̈_a,j| ≤ max(A_j, a_j),
             so that the check covers every motion the run claims to have excited (a turntable's yaw over ±π), not only
-            the held-out references' amplitude.
+            the held-out references' amplitude.  A hinge the excitation sweeps is checked over its whole design region:
+            poses to 0.8 × its half range (a half turn where unlimited), rates to its stiffening speed v_j
+            (:func:`~bemlearn.robots.scales.velocity_stiffening_speed`) and accelerations to λ·v_j (λ the instability
+            rate: a motion on the balance's own time scale that reaches v_j).
     """
     from scipy.stats import qmc
 
@@ -119,8 +122,15 @@ def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_poi
             limited = qa_limited(robot) if isinstance(robot, MujocoRobot) else np.ones(m, dtype=bool)
             whole = np.where(limited, 0.8 * qa_half_ranges(robot), math.pi)
             v = velocity_stiffening_speed(robot)
+            vf = np.where(np.isfinite(v), v, 0.0)
             Q = np.where(swept, np.maximum(Q, whole), Q)
-            V = np.where(swept & np.isfinite(v), np.maximum(V, np.where(np.isfinite(v), v, 0.0)), V)
+            V = np.where(swept & np.isfinite(v), np.maximum(V, vf), V)
+            # and the accelerations of a motion on the balance's own time scale that reaches that speed, λ·v_j (the
+            # same extent as a flat joint's in the family oracle): fam0_017's yaw was checked to 9.2 rad/s² of λ·v =
+            # 29; ok by its own box (max 0.039 rad), max 0.055 by the oracle's
+            from bemlearn.robots.scales import instability_rate
+
+            A = np.where(swept & np.isfinite(v), np.maximum(A, instability_rate(robot) * vf), A)
     k = max(4, int(math.ceil(math.log2(max(n_points, 16)))))
     u = qmc.Sobol(3 * m, scramble=True, seed=seed).random_base2(k) * 2.0 - 1.0
     qadd, qad, qa = u[:, :m] * A, u[:, m:2 * m] * V, u[:, 2 * m:] * Q

@@ -61,6 +61,7 @@ __all__ = ["Finding", "Verdict", "judge_run", "GAIN_RANGE", "EXIT_UNUSABLE", "EX
 GAIN_RANGE = (0.95, 1.05)
 RMSE_OF_BOUND = 0.05           # RMSE ≤ 0.05 d (0.01 rad at d = 0.2 rad)
 MAX_OF_BOUND = 0.2             # max ≤ 0.2 d (0.04 rad)
+BAND_COVERAGE_MIN = 0.8        # the exported ±2σ band holds at least 80 % of the model BEM
 def _finite(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
@@ -155,7 +156,7 @@ def _check_design_region(m: RunMetrics, notes: _Notes) -> None:
         notes.add("unusable" if severe else "degraded", "design_region",
                   f"learned vs model BEM over |q_u^e| ≤ {d:g} {unit}: " + ", ".join(bad))
     cov = dr.coverage_2sigma_band
-    if _finite(cov) and cov < 0.8:  # type: ignore[operator]
+    if _finite(cov) and cov < BAND_COVERAGE_MIN:  # type: ignore[operator]
         notes.add("degraded", "band", f"the exported ±2σ band holds only {100 * cov:.0f} % of the model BEM over the design region")  # type: ignore[operator]
 
 

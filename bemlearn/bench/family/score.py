@@ -29,7 +29,10 @@ def compare_predictor(predictor_path: str | Path, xml: str, truth: dict, *, n_qu
     Errors are wrapped into (−π, π] (a predictor on another 2π sheet is not penalised for it).  ``gain`` is the
     least-squares slope (with intercept) of learned − q_u* on oracle − q_u*.
 
-    Returns: ``{"rmse", "max_abs", "gain", "intercept", "n_queries", "learned_at_rest"}`` (rad).
+    ``band_coverage`` is the share of the oracle BEM inside the exported ±2σ band (the predictor's ``forward``: mean and
+    calibrated σ), which judges a run's ``band`` reason.
+
+    Returns: ``{"rmse", "max_abs", "gain", "intercept", "n_queries", "learned_at_rest", "band_coverage"}`` (rad).
     """
     import torch
 
@@ -47,7 +50,7 @@ def compare_predictor(predictor_path: str | Path, xml: str, truth: dict, *, n_qu
     order = [truth["actuated_joints"].index(n) for n in names]
     x = np.concatenate([q["qdda"][:, order], q["qda"][:, order], q["qa"][:, order]], axis=1)
     with torch.no_grad():
-        learned = module.bem_mean(torch.from_numpy(np.ascontiguousarray(x, dtype=np.float64))).numpy()
+        learned, band = (v.numpy() for v in module(torch.from_numpy(np.ascontiguousarray(x, dtype=np.float64))))
         z = np.zeros((1, 3 * len(names)))
         z[0, 2 * len(names):] = np.asarray(truth["qa_rest"])[order]
         at_rest = float(module.bem_mean(torch.from_numpy(z)).numpy()[0])
@@ -57,7 +60,8 @@ def compare_predictor(predictor_path: str | Path, xml: str, truth: dict, *, n_qu
     yl = wrap_angle(learned - qs)
     gain, icpt = (np.polyfit(xo, yl, 1) if xo.size > 2 and np.ptp(xo) > 0 else (float("nan"), float("nan")))
     return {"rmse": float(np.sqrt(np.mean(err**2))), "max_abs": float(np.abs(err).max()), "gain": float(gain),
-            "intercept": float(icpt), "n_queries": int(err.size), "learned_at_rest_minus_upright": float(wrap_angle(at_rest - qs))}
+            "intercept": float(icpt), "n_queries": int(err.size), "learned_at_rest_minus_upright": float(wrap_angle(at_rest - qs)),
+            "band_coverage": float(np.mean(np.abs(err) <= 2 * band)) if err.size else float("nan")}
 
 
 def balanced_at_upright(metrics: RunMetrics | Mapping[str, Any], qu_upright: float) -> tuple[bool | None, str]:
@@ -105,7 +109,7 @@ OFF_BRANCH = 0.5
 
 
 def judge_reason(reason: str, *, holdable: bool, bem_right: bool | None, check: str = "",
-                 off_branch: bool = False) -> tuple[bool | None, str]:
+                 off_branch: bool = False, band_coverage: float | None = None) -> tuple[bool | None, str]:
     """Is a non-ok verdict's first reason true by the oracle?  ``(None, why)`` where it cannot be judged.
 
     By the first finding's key (``check``) when there is one, else by the reason's words:
@@ -118,12 +122,19 @@ def judge_reason(reason: str, *, holdable: bool, bem_right: bool | None, check: 
     * the learned BEM's own checks (design region, resolution, held-out, band, derivatives, fit, Lemma 1) — true iff
       the comparison with the oracle fails; when the learned BEM sits on another equilibrium (``off_branch``: its
       value at rest more than :data:`OFF_BRANCH` from q_u*), only a reason that says so (upright, hanging, branch,
-      stable equilibrium) is true — "max 0.044 rad against the model" about a BEM π away names the wrong cause.
+      stable equilibrium) is true — "max 0.044 rad against the model" about a BEM π away names the wrong cause;
+    * ``band`` (the exported ±2σ band holds too little of the model BEM) — true iff the band holds less than
+      :data:`~bemlearn.pipeline.verdict.BAND_COVERAGE_MIN` of the oracle BEM (``band_coverage``): the reason is about
+      the band, which can be too narrow around a right mean (else judged as the learned BEM's other checks).
     """
     c = check.lower()
     r = reason.lower()
     if off_branch and not c.startswith("model:") and c not in ("excitation",):
         return any(w in r for w in _BRANCH_WORDS), "the learned BEM is on another branch: true only if the reason says so"
+    if c == "band" and band_coverage is not None and np.isfinite(band_coverage):
+        from bemlearn.pipeline.verdict import BAND_COVERAGE_MIN
+
+        return bool(band_coverage < BAND_COVERAGE_MIN), f"{check}: the band's coverage of the oracle BEM ({100 * band_coverage:.0f} %)"
     if c.startswith("model:"):
         return (not holdable), f"{check}: the model says it cannot be held"
     if c == "excitation":
@@ -157,7 +168,7 @@ def score_run(run_dir: Path, xml: str, truth: dict, record: dict) -> dict:
     if row["verdict"] in ("error", "crash"):
         row["first_reason"] = record.get("error_tail", "")
     pred = run_dir / "bem_predictor.pt"
-    row.update({"rmse": None, "max_abs": None, "gain": None, "learned_at_rest_minus_upright": None})
+    row.update({"rmse": None, "max_abs": None, "gain": None, "learned_at_rest_minus_upright": None, "band_coverage": None})
     if pred.is_file():
         try:
             row.update(compare_predictor(pred, xml, truth))
@@ -173,7 +184,8 @@ def score_run(run_dir: Path, xml: str, truth: dict, record: dict) -> dict:
     if row["verdict"] not in ("ok",):
         off = row["learned_at_rest_minus_upright"] is not None and abs(row["learned_at_rest_minus_upright"]) > OFF_BRANCH
         row["reason_true"], row["reason_judged_as"] = judge_reason(row["first_reason"] or "", holdable=row["holdable"],
-                                                                   bem_right=bem_right, check=row["first_check"], off_branch=off)
+                                                                   bem_right=bem_right, check=row["first_check"], off_branch=off,
+                                                                   band_coverage=row.get("band_coverage"))
         if row["verdict"] in ("error", "crash", "none"):
             row["reason_true"], row["reason_judged_as"] = False, f"{row['verdict']}: no verdict"
     else:
