@@ -11,4 +11,6 @@ class _NoBemlearn:
 
 sys.meta_path.insert(0, _NoBemlearn())
 import torch
+
+torch.set_num_threads(1)  # as the test process (tests/conftest.py): the same reductions, so the same bits
 """
