@@ -29,7 +29,7 @@ from bemlearn.export.torchscript import load_torchscript, torchscript_bytes
 from bemlearn.export.verify import verification_cases, verify_predictor
 from bemlearn.files import atomic_write_files, check_outputs, check_writable
 
-__all__ = ["export_run", "export_files", "export_targets", "ExportFormat", "DEFAULT_NAME", "AOTI_NAME"]
+__all__ = ["export_run", "export_files", "write_exported", "export_targets", "ExportFormat", "DEFAULT_NAME", "AOTI_NAME"]
 
 log = logging.getLogger(__name__)
 
@@ -87,10 +87,23 @@ def export_run(
     """
     paths = export_targets(run_dir_or_file, out=out, fmt=fmt)
     ckpt = load_checkpoint(run_dir_or_file)
+    _check_targets(paths, force)
+    return write_exported(_serialized(ckpt, paths, fmt, verify=verify), force=force)
+
+
+def _check_targets(paths: list[Path], force: bool) -> None:
     check_outputs(paths, force, what="export")
     for folder in {p.parent for p in paths}:
         check_writable(folder, what="export")
-    written = atomic_write_files(_serialized(ckpt, paths, fmt, verify=verify))   # room checked first; all files or none
+
+
+def write_exported(files: dict[Path, bytes], *, force: bool = True) -> list[Path]:
+    """Write the checked predictor files of :func:`export_files` (all or none, room checked first); the paths.
+
+    ``force=False`` raises :class:`~bemlearn.errors.OutputExistsError` for a file that exists.
+    """
+    _check_targets(list(files), force)
+    written = atomic_write_files(files)
     for path in written:
         log.info("wrote BEM predictor %s", path)
     return written
@@ -100,8 +113,8 @@ def export_files(run_dir_or_file: str | os.PathLike[str], *, out: str | os.PathL
                  fmt: ExportFormat = "torchscript", verify: bool = True) -> dict[Path, bytes]:
     """The files :func:`export_run` would write, serialized and checked in memory: ``{path: bytes}``.
 
-    Nothing is written: a worker process exports a run's ``.pt2`` this way and its parent writes the
-    bytes (:func:`~bemlearn.files.atomic_write_files`) when the run reaches its export stage.
+    Nothing is written: a run exports its predictors this way beside its evaluation (the ``.pt2`` in a
+    worker process) and writes them with :func:`write_exported` when it reaches its export stage.
     Arguments as :func:`export_run`'s.
     """
     paths = export_targets(run_dir_or_file, out=out, fmt=fmt)

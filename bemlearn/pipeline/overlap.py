@@ -7,26 +7,28 @@ depend on less than their place in that order suggests:
   right after the model checks, beside collection and training;
 - the **learned** closed loop needs only the TorchScript predictor, and the ``.pt2`` export only
   the checkpoint: once training writes ``checkpoint.pt`` (before its evaluation) the TorchScript
-  file is exported and checked in the run's process, then both start in workers, beside the
-  evaluation of the trained GP.
+  predictor is serialized and checked in the run's process, then the ``.pt2`` export and the
+  learned loop (flying a private temporary copy of the checked TorchScript bytes) start in
+  workers, beside the evaluation of the trained GP.
 
-The run then takes their results at the stage where the serial run computes them: the ``.pt2``
-bytes are written at the export stage (a failed overlapped export is the ``export`` stage's
-failure, as in the serial run), the loops' results and figures at the simulate stage.  A loop or
-an export computes the same numbers in a worker as in the run's process (each is seeded by its
-own config).  What differs on a failure: the TorchScript file, written before the evaluation of
-the trained GP, is kept when a later step fails.
+The run takes their results at the stage where the serial run computes them: both predictor files
+are written at the export stage, all or none (a failed overlapped export is the ``export`` stage's
+failure, recorded as in the serial run), the loops' results and figures at the simulate stage.  A
+run folder therefore holds the same files at every stage, and on every failure, as with ``jobs = 1``;
+a loop or an export computes the same numbers in a worker as in the run's process (each is seeded
+by its own config).
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
+import tempfile
 from concurrent.futures import Executor, Future
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from bemlearn.files import atomic_write_files
+from bemlearn.files import atomic_write_bytes
 from bemlearn.pipeline.workers import check_jobs, stop_pool
 
 if TYPE_CHECKING:
@@ -58,7 +60,7 @@ class RunOverlap(contextlib.AbstractContextManager):
         self._opened = False
         self.loops: dict[str, Future[LoopOutput]] = {}
         self._pt2: Future[dict[Path, bytes]] | None = None
-        self._torchscript: list[Path] = []
+        self._torchscript: dict[Path, bytes] = {}
         self._export_error: Exception | None = None
 
     def __enter__(self) -> RunOverlap:
@@ -108,10 +110,10 @@ class RunOverlap(contextlib.AbstractContextManager):
             return None
 
         def on_checkpoint(checkpoint: Path) -> None:
-            from bemlearn.export.export_run import export_files, export_run
+            from bemlearn.export.export_run import export_files
 
             try:
-                self._torchscript = export_run(self.out, fmt="torchscript")
+                self._torchscript = export_files(self.out, fmt="torchscript")
             except Exception as exc:  # noqa: BLE001 - raised again, traceback kept, by export(): the export stage fails
                 self._export_error = exc
                 return
@@ -119,7 +121,9 @@ class RunOverlap(contextlib.AbstractContextManager):
             if robot is not None:
                 from bemlearn.pipeline.simulate import start_loops
 
-                self.loops.update(start_loops(pool, self.config, self.out, sources=("predictor",), predictor=self.predictor))
+                folder = Path(self._stack.enter_context(tempfile.TemporaryDirectory(prefix="bemlearn-run-")))
+                flown = atomic_write_bytes(folder / self.predictor.name, self._torchscript[self.predictor])
+                self.loops.update(start_loops(pool, self.config, self.out, sources=("predictor",), predictor=flown))
 
         return on_checkpoint
 
@@ -127,15 +131,12 @@ class RunOverlap(contextlib.AbstractContextManager):
         """The export stage: the predictor files written (TorchScript first), as ``export_run(fmt="both")`` returns them.
 
         Without overlap it runs :func:`~bemlearn.export.export_run.export_run`; with it, it raises the
-        overlapped export's error or writes the ``.pt2`` bytes its worker checked.
+        overlapped export's error or writes the files checked beside the evaluation (the ``.pt2`` by its worker).
         """
-        from bemlearn.export.export_run import export_run
+        from bemlearn.export.export_run import export_run, write_exported
 
         if self._export_error is not None:
             raise self._export_error
         if self._pt2 is None:      # nothing overlapped (jobs = 1, or training wrote no checkpoint through the hook)
             return export_run(self.out, fmt="both")
-        written = atomic_write_files(self._pt2.result())   # a failure in the worker is raised here
-        for path in written:
-            log.info("wrote BEM predictor %s", path)
-        return [*self._torchscript, *written]
+        return write_exported({**self._torchscript, **self._pt2.result()})   # a failure in the worker is raised here
