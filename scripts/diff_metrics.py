@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Compare two run ``metrics.json`` files key by key: ``scripts/diff_metrics.py A/metrics.json B/metrics.json``.
+r"""Compare two run ``metrics.json`` files key by key: ``scripts/diff_metrics.py A/metrics.json B/metrics.json``.
 
 Every leaf is named by its dotted path (``closed_loop.model.tracking_rmse``, ``bem_slices.slices[0].qd``).
 A key present in one file only, or whose values differ, is printed with both values; numbers that
@@ -8,7 +8,8 @@ significant digits, default 4) and ``exact`` when they agree there and differ on
 Strings are compared with each file's own run folder replaced by ``<run>`` (a run records its
 data file's path).
 
-Wall-clock measurements (``--timing``, default: keys ending in ``seconds``, ``real_time_factor``,
+Keys matching ``--ignore`` are skipped (e.g. ``--ignore '^robot\.mjcf$'`` for the robot file of two
+source trees).  Wall-clock measurements (``--timing``, default: keys ending in ``seconds``, ``real_time_factor``,
 ``tick_us``) differ from run to run; they are listed apart and do not count.
 
 Exit status: 0 when nothing else differs, 1 otherwise (2 for unreadable files).
@@ -61,14 +62,17 @@ def compare(a: Any, b: Any, *, digits: int) -> str | None:
 
 
 def diff(a: dict, b: dict, *, digits: int = 4, folders: tuple[str, str] = ("", ""),
-         timing: tuple[str, ...] = TIMING) -> tuple[list[tuple[str, Any, Any, str]], list[tuple[str, Any, Any, str]]]:
+         timing: tuple[str, ...] = TIMING, ignore: tuple[str, ...] = ()) -> tuple[list[tuple[str, Any, Any, str]], list[tuple[str, Any, Any, str]]]:
     """The differing keys of two metrics documents: ``(differences, timing differences)``, each a list of
     ``(key, value in a, value in b, kind)`` (``kind``: ``printed``, ``exact``, ``value``, ``only in A/B``)."""
     fa, fb = dict(flatten(a)), dict(flatten(b))
     patterns = [re.compile(p) for p in timing]
+    skipped = [re.compile(p) for p in ignore]
     out: list[tuple[str, Any, Any, str]] = []
     timed: list[tuple[str, Any, Any, str]] = []
     for key in [*fa, *(k for k in fb if k not in fa)]:
+        if any(p.search(key) for p in skipped):
+            continue
         va, vb = fa.get(key, "<missing>"), fb.get(key, "<missing>")
         if key not in fb or key not in fa:
             kind: str | None = "only in A" if key in fa else "only in B"
@@ -97,6 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--digits", type=int, default=4, help="significant digits a report prints (default 4)")
     p.add_argument("--timing", action="append", metavar="REGEX",
                    help=f"keys that hold wall-clock measurements, listed apart (default: {' '.join(TIMING)})")
+    p.add_argument("--ignore", action="append", default=[], metavar="REGEX", help="keys to skip (repeatable)")
     args = p.parse_args(argv)
     if args.digits < 1:
         p.error(f"--digits: expected a positive integer, got {args.digits}")
@@ -106,7 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     if not (isinstance(a, dict) and isinstance(b, dict)):
         return 2      # 1 means "they differ"
     folders = (str(args.a.resolve().parent), str(args.b.resolve().parent))
-    found, timed = diff(a, b, digits=args.digits, folders=folders, timing=tuple(args.timing or TIMING))
+    found, timed = diff(a, b, digits=args.digits, folders=folders, timing=tuple(args.timing or TIMING),
+                       ignore=tuple(args.ignore))
     for title, rows in (("differ", found), ("wall-clock measurements (not counted)", timed)):
         if rows:
             print(f"{len(rows)} key(s) {title}:")

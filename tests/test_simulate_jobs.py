@@ -139,15 +139,18 @@ def test_a_run_with_workers_equals_the_serial_run(tmp_path):
 def test_a_failed_overlapped_export_is_the_export_stage(tmp_path, monkeypatch):
     """The .pt2 export fails in its worker: the run records it at the export stage, keeps the checkpoint and
     writes no predictor file (as the serial run: both files or none)."""
-    import bemlearn.export.export_run as export_module
+    import importlib
+
     from bemlearn.pipeline.resolve import resolve_pipeline_config
     from bemlearn.pipeline.run import run_pipeline
 
     def failing(predictor):
         raise NumericalError("injected: torch.export failed")
 
-    monkeypatch.setattr(export_module, "pt2_bytes", failing)
-    small = {**SMALL, "train": {"max_iter": 5}, "simulate": {"duration_s": 0.5, "warmup_s": 0.1}}
+    monkeypatch.setattr(importlib.import_module("bemlearn.export.export_run"), "pt2_bytes", failing)   # the workers inherit it
+    small = {**SMALL, "collect": {"n_trials": 2, "duration_s": 2.0, "workers": 1}, "dataset": {"n_points": 80},
+             "train": {"max_iter": 5}, "evaluate": {"duration_s": 1.0, "design_points": 16, "n_references": 1},
+             "simulate": {"duration_s": 0.5, "warmup_s": 0.1}}
     out = tmp_path / "run"
     with pytest.raises(NumericalError, match="injected: torch.export failed"):
         run_pipeline(resolve_pipeline_config(small), out, progress=False, jobs=2)
