@@ -24,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import tempfile
+from collections.abc import Callable
 from concurrent.futures import Executor, Future
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -98,11 +99,11 @@ class RunOverlap(contextlib.AbstractContextManager):
 
             self.loops.update(start_loops(pool, self.config, self.out, sources=("model", "zero"), predictor=self.predictor))
 
-    def hook(self, robot: BalanceRobot | None):
+    def hook(self, robot: BalanceRobot | None) -> Callable[[Path], None] | None:
         """The ``on_checkpoint`` of :func:`~bemlearn.pipeline.train.train_run` (``None`` when nothing overlaps).
 
-        It exports and checks the TorchScript predictor here, then starts the ``.pt2`` export and (with a
-        robot) the learned closed loop in workers.  A failed export is kept for :meth:`export` to raise,
+        It serializes and checks the TorchScript predictor here (in memory), then starts the ``.pt2`` export
+        and (with a robot) the learned closed loop in workers.  A failed export is kept for :meth:`export` to raise,
         so that the run records it at its export stage, not as a training failure.
         """
         pool = self._open(robot)
