@@ -174,7 +174,7 @@ def check_free_space(sizes: Mapping[str | os.PathLike[str], int], *, margin: int
                                      f"free on the disk of {probe} (no space left on device); nothing was written")
 
 
-def atomic_write_files(files: Mapping[str | os.PathLike[str], bytes]) -> list[Path]:
+def atomic_write_files(files: Mapping[str, bytes] | Mapping[Path, bytes] | Mapping[str | os.PathLike[str], bytes]) -> list[Path]:
     """Write several files all or none: room is checked (:func:`check_free_space`), every temporary
     is written and synced (one :func:`atomic_path` per file), and only then are they renamed over
     their targets; returns the paths.

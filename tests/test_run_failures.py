@@ -86,15 +86,20 @@ def test_a_data_only_run_with_a_model_completes(data, tmp_path, capsys):
     assert finding["reason"] in (out / "report.md").read_text()
 
 
-def test_a_failure_after_training_keeps_the_trained_artifacts(data, tmp_path, monkeypatch, capsys, caplog):
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_a_failure_after_training_keeps_the_trained_artifacts(jobs, data, tmp_path, monkeypatch, capsys, caplog):
+    """The export fails: in the export stage (``--jobs 1``) or beside the evaluation, where it is recorded as
+    the export stage's failure all the same (``--jobs 2``: bemlearn.pipeline.overlap)."""
     import importlib
 
     def fail(*args, **kwargs):
         raise CheckpointError("export: injected failure")
 
-    monkeypatch.setattr(importlib.import_module("bemlearn.export.export_run"), "export_run", fail)
+    module = importlib.import_module("bemlearn.export.export_run")
+    monkeypatch.setattr(module, "export_run", fail)     # the export stage of a serial run
+    monkeypatch.setattr(module, "export_files", fail)   # the export checked beside the evaluation
     out = tmp_path / "new" / "run"
-    assert main(["run", str(_config(tmp_path, data)), "--out", str(out), "--no-progress"]) == 2
+    assert main(["run", str(_config(tmp_path, data)), "--out", str(out), "--no-progress", "--jobs", jobs]) == 2
     assert "injected failure" in capsys.readouterr().err
     assert f"failed at stage 'export' (CheckpointError: export: injected failure); {out} keeps what it produced" in caplog.text
     for name in ("checkpoint.pt", "config.yaml", "config_resolved.json", "metrics.json"):
@@ -108,6 +113,7 @@ def test_a_failure_after_training_keeps_the_trained_artifacts(data, tmp_path, mo
 
     load_checkpoint(out)   # the trained checkpoint is whole
     assert not [p for p in out.iterdir() if p.name.startswith(".bemlearn-")]
+    assert not (out / "bem_predictor.pt").exists() and not (out / "bem_predictor.pt2").exists()
 
 
 def test_a_bug_in_the_evaluation_after_the_fit_keeps_the_checkpoint(data, tmp_path, monkeypatch, capsys):

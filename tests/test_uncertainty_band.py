@@ -102,6 +102,22 @@ def test_mean_gradient_matches_finite_differences():
         torch.testing.assert_close(g[:, i], fd, rtol=1e-6, atol=1e-12)
 
 
+def test_mean_gradient_in_blocks_equals_all_rows_at_once():
+    """Rows across three blocks (GRADIENT_BLOCK each) give the bits of eq. (N2) computed on all rows at once,
+    written out here as the dense ``(B, M, d)`` sum; and agree with finite differences (above) row by row."""
+    from bemlearn.models.input_noise import GRADIENT_BLOCK, mean_gradient_from_row
+
+    state = _state()
+    x = _x(state, 2 * GRADIENT_BLOCK + 77, seed=4)
+    k = state.kernel_row(x)
+    diff = (state.normalize(x)[:, None, :] - state.Z[None, :, :]) / state.lengthscale   # every row at once
+    dense = state.y_std * (-((k * state.alpha)[:, :, None] * diff).sum(1) / state.lengthscale) / state.x_std
+    blocked = mean_gradient_from_row(state, x, k)
+    assert blocked.shape == dense.shape == (x.shape[0], state.dim)
+    assert torch.equal(blocked, dense)
+    assert mean_gradient_from_row(state, x[:0], k[:0]).shape == (0, state.dim)
+
+
 @pytest.mark.parametrize("n_inputs", [3, 5])
 def test_band_reference_matches_autograd_formula(n_inputs):
     state = _state()

@@ -27,6 +27,8 @@ def add_parser(sub) -> None:
     p.add_argument("--strict", action="store_true",
                    help="exit non-zero (4) for a degraded verdict too (default: 0 for ok and degraded, 3 for unusable)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
+    _add_jobs(p, "the model and zero closed loops run beside collection and training, the learned loop and the .pt2 "
+                 "export beside the evaluation of the trained GP")
     p.set_defaults(func=_run)
     s = sub.add_parser(
         "simulate",
@@ -41,7 +43,21 @@ def add_parser(sub) -> None:
     s.add_argument("--force", action="store_true", help="replace an existing OUT/simulate folder's files")
     s.add_argument("--gif", action="store_true", help="also render OUT/simulate/<source>.gif (offscreen: picks a working OpenGL backend by itself, EGL first)")
     s.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
+    _add_jobs(s, "the closed loops of the sources run at once (not with --gif)")
     s.set_defaults(func=_simulate)
+
+
+def _add_jobs(parser, what: str) -> None:
+    parser.add_argument("--jobs", type=int, metavar="N",
+                        help=f"worker processes: {what}; 1 runs everything in order in one process; the results are the "
+                        "same (default: the usable CPUs, at most 4)")
+
+
+def _jobs(args) -> int:
+    """``--jobs``, checked (a positive integer), or its default."""
+    from bemlearn.pipeline.workers import check_jobs, default_jobs
+
+    return default_jobs() if args.jobs is None else check_jobs(args.jobs, where="--jobs")
 
 
 def _run(args) -> int:
@@ -49,6 +65,7 @@ def _run(args) -> int:
     from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.preflight import preflight
 
+    jobs = _jobs(args)
     checked = preflight(config=args.config, device=args.device)  # strict parse and model-derived values, before any folder exists
     raw, resolved = checked.raw, checked.resolved
     app = None
@@ -69,7 +86,7 @@ def _run(args) -> int:
             from bemlearn.pipeline.run import run_pipeline
 
             assert resolved is not None  # resolved above when no application runs
-            result = run_pipeline(resolved, claimed, device=args.device, progress=not args.no_progress)
+            result = run_pipeline(resolved, claimed, device=args.device, progress=not args.no_progress, jobs=jobs)
             out, verdict = result.out, result.verdict
     print((out / "report.md").read_text())
     print(f"\nrun folder: {out}")
@@ -98,6 +115,7 @@ def _simulate(args) -> int:
     from bemlearn.pipeline.preflight import preflight
     from bemlearn.pipeline.simulate import simulate_stage
 
+    args.jobs = _jobs(args)
     cfg = preflight(config=args.config, out_dir=args.out or Path("runs"), outputs=[args.out / "simulate"] if args.out else [],
                     force=args.force).pipeline_config()
     if cfg.robot is None:
@@ -121,7 +139,8 @@ def _simulate(args) -> int:
 def _simulate_into(args, cfg, simulate_stage) -> int:
     """The closed loop of ``cfg`` into ``args.out`` (checked by :func:`_simulate`)."""
     sources = tuple(args.source or [cfg.simulate.bem_source])
-    res = simulate_stage(cfg, args.out, predictor=args.predictor, sources=sources, progress=not args.no_progress, gif=args.gif)
+    res = simulate_stage(cfg, args.out, predictor=args.predictor, sources=sources, progress=not args.no_progress, gif=args.gif,
+                         jobs=args.jobs)
     print(f"{'source':<10}{'fell':>6}{'duration s':>12}{'RMSE q_a':>10}{'max|u|':>8}{'×real time':>12}")
     from bemlearn.pipeline.report import ZERO_BASELINE_NOTE, ZERO_SOURCE
 

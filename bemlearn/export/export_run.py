@@ -22,14 +22,14 @@ from typing import Literal
 from bemlearn.errors import ArgumentError
 from bemlearn.export.aoti import aoti_bytes, load_aoti_predictor
 from bemlearn.export.bem_predictor import BEMPredictor
-from bemlearn.export.checkpoint import load_checkpoint
+from bemlearn.export.checkpoint import Checkpoint, load_checkpoint
 from bemlearn.export.pt2 import load_pt2_predictor, pt2_bytes
 from bemlearn.export.staleness import file_sha256
 from bemlearn.export.torchscript import load_torchscript, torchscript_bytes
 from bemlearn.export.verify import verification_cases, verify_predictor
 from bemlearn.files import atomic_write_files, check_outputs, check_writable
 
-__all__ = ["export_run", "export_targets", "ExportFormat", "DEFAULT_NAME", "AOTI_NAME"]
+__all__ = ["export_run", "export_files", "write_exported", "export_targets", "ExportFormat", "DEFAULT_NAME", "AOTI_NAME"]
 
 log = logging.getLogger(__name__)
 
@@ -87,6 +87,43 @@ def export_run(
     """
     paths = export_targets(run_dir_or_file, out=out, fmt=fmt)
     ckpt = load_checkpoint(run_dir_or_file)
+    _check_targets(paths, force)
+    return write_exported(_serialized(ckpt, paths, fmt, verify=verify), force=force)
+
+
+def _check_targets(paths: list[Path], force: bool) -> None:
+    check_outputs(paths, force, what="export")
+    for folder in {p.parent for p in paths}:
+        check_writable(folder, what="export")
+
+
+def write_exported(files: dict[Path, bytes], *, force: bool = True) -> list[Path]:
+    """Write the checked predictor files of :func:`export_files` (all or none, room checked first); the paths.
+
+    ``force=False`` raises :class:`~bemlearn.errors.OutputExistsError` for a file that exists.
+    """
+    _check_targets(list(files), force)
+    written = atomic_write_files(files)
+    for path in written:
+        log.info("wrote BEM predictor %s", path)
+    return written
+
+
+def export_files(run_dir_or_file: str | os.PathLike[str], *, out: str | os.PathLike[str] | None = None,
+                 fmt: ExportFormat = "torchscript", verify: bool = True) -> dict[Path, bytes]:
+    """The files :func:`export_run` would write, serialized and checked in memory: ``{path: bytes}``.
+
+    Nothing is written: a run exports its predictors this way beside its evaluation (the ``.pt2`` in a
+    worker process) and writes them with :func:`write_exported` when it reaches its export stage.
+    Arguments as :func:`export_run`'s.
+    """
+    paths = export_targets(run_dir_or_file, out=out, fmt=fmt)
+    return _serialized(load_checkpoint(run_dir_or_file), paths, fmt, verify=verify)
+
+
+def _serialized(ckpt: Checkpoint, paths: list[Path], fmt: ExportFormat, *, verify: bool) -> dict[Path, bytes]:
+    """Each of ``paths`` (:func:`export_targets` of ``fmt``) serialized from checkpoint ``ckpt`` and, with
+    ``verify``, loaded back from its bytes and checked against the dense posterior."""
     state = ckpt.predictor_state
     meta = ckpt.metadata
     meta = dataclasses.replace(meta, extra={**meta.extra, "checkpoint_sha256": file_sha256(ckpt.path)})
@@ -94,19 +131,13 @@ def export_run(
     kinds = {"torchscript": ["torchscript"], "pt2": ["pt2"], "both": ["torchscript", "pt2"], "aoti": ["aoti"]}[fmt]
     tools = {"torchscript": (torchscript_bytes, load_torchscript), "pt2": (pt2_bytes, load_pt2_predictor),
              "aoti": (aoti_bytes, load_aoti_predictor)}
-    targets = [(p, *tools[kind]) for p, kind in zip(paths, kinds)]
-    check_outputs(paths, force, what="export")
-    for folder in {p.parent for p in paths}:
-        check_writable(folder, what="export")
-    files: dict[str | os.PathLike[str], bytes] = {}
+    files: dict[Path, bytes] = {}
     cases = verification_cases(state) if verify else ()   # the dense references, computed once for every file
-    for path, serialize, load in targets:   # serialized and checked in memory: nothing is written unless all pass
+    for path, kind in zip(paths, kinds):   # serialized and checked in memory: nothing is written unless all pass
+        serialize, load = tools[kind]
         data = serialize(predictor)
         if verify:
             dm, ds = verify_predictor(load(data, where=path), state, where=str(path), cases=cases)
             log.info("%s: max |Δmean| %.2g rad, max rel |Δvar| %.2g vs the dense posterior", path, dm, ds)
         files[path] = data
-    written = atomic_write_files(files)   # room checked first; all files or none
-    for path in written:
-        log.info("wrote BEM predictor %s", path)
-    return written
+    return files

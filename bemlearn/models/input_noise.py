@@ -32,7 +32,7 @@ import torch
 
 from bemlearn.models.predictor_state import PredictorState
 
-__all__ = ["estimator_noise_gains", "estimator_noise_gains3", "mean_gradient", "mean_gradient_from_row", "propagated_variance", "quantization_input_std", "savgol_noise_std"]
+__all__ = ["GRADIENT_BLOCK", "estimator_noise_gains", "estimator_noise_gains3", "mean_gradient", "mean_gradient_from_row", "propagated_variance", "quantization_input_std", "savgol_noise_std"]
 
 
 def mean_gradient(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
@@ -40,13 +40,25 @@ def mean_gradient(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
     return mean_gradient_from_row(state, x, state.kernel_row(x.to(torch.float64)))
 
 
+#: Rows of x per block of :func:`mean_gradient_from_row`: its ``(rows, M, d)`` difference tensor stays a few MB.
+GRADIENT_BLOCK = 512
+
+
 def mean_gradient_from_row(state: PredictorState, x: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
     """:func:`mean_gradient` from the kernel row k_Z(x̃) ``(B, M)`` at ``x (B, d)`` that the caller already holds
-    (:meth:`~bemlearn.models.predictor_state.PredictorState.reference_terms`)."""
+    (:meth:`~bemlearn.models.predictor_state.PredictorState.reference_terms`).
+
+    Computed in blocks of :data:`GRADIENT_BLOCK` rows (the same numbers as all rows at once: each row's sum
+    over the M inducing points is its own), so that B rows need ``GRADIENT_BLOCK × M × d`` doubles, not ``B × M × d``.
+    """
     x = x.to(torch.float64)
-    diff = (state.normalize(x)[:, None, :] - state.Z[None, :, :]) / state.lengthscale   # (B, M, d)
+    xn = state.normalize(x)
     ak = k * state.alpha                                                     # (B, M)
-    g = -(ak[:, :, None] * diff).sum(1) / state.lengthscale                  # ∂μ̃/∂x̃
+    g = torch.empty(xn.shape, dtype=torch.float64, device=xn.device)
+    for i in range(0, xn.shape[0], GRADIENT_BLOCK):
+        rows = slice(i, i + GRADIENT_BLOCK)
+        diff = (xn[rows, None, :] - state.Z[None, :, :]) / state.lengthscale  # (rows, M, d)
+        g[rows] = -(ak[rows, :, None] * diff).sum(1) / state.lengthscale     # ∂μ̃/∂x̃
     return state.y_std * g / state.x_std
 
 

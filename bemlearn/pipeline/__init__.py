@@ -15,6 +15,7 @@ if TYPE_CHECKING:  # imported on first use: bemlearn._lazy
     from bemlearn.pipeline.results import CollectResult, DataSummary, LoopResult, RunResult, SimulateResult, TrainResult
     from bemlearn.pipeline.run import run_pipeline
     from bemlearn.pipeline.train import train_run
+    from bemlearn.pipeline.workers import default_jobs, worker_pool
 
 __all__ = [
     "reliability_table",
@@ -46,6 +47,8 @@ __all__ = [
     "run_pipeline",
     "run_truth_robot",
     "train_run",
+    "default_jobs",
+    "worker_pool",
 ]
 
 __getattr__, __dir__ = lazy_namespace(__name__, __file__)

@@ -41,24 +41,36 @@ log = logging.getLogger(__name__)
 
 
 def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | None = None, *,
-                 device: str | None = None, progress: bool = True) -> RunResult:
+                 device: str | None = None, progress: bool = True, jobs: int = 1) -> RunResult:
     """Run every stage of ``config`` into ``out_dir`` (default: a new ``runs/<robot or data stem>-<timestamp>``,
     :func:`~bemlearn.files.new_run_dir`).
 
     The stages hand their typed results to each other in memory (:mod:`bemlearn.pipeline.results`): the
     robot is loaded once, the collected data go to training as they are, and ``metrics.json`` is written
     once with the verdict judged once.
+
+    ``jobs``: worker processes for the work that can overlap the serial stages (the closed loops, the
+    ``.pt2`` export: :mod:`bemlearn.pipeline.overlap`); ``1`` runs every stage in order in this process.
+    The results do not depend on it.
     """
+    from bemlearn.pipeline.overlap import RunOverlap
+
+    resolved = config if isinstance(config, ResolvedConfig) else resolve_pipeline_config(_as_dict(config))
+    out = Path(out_dir) if out_dir else new_run_dir(Path(resolved.config.robot or resolved.config.data or "run").stem)
+    with RunOverlap(resolved.config, out, jobs=jobs) as overlap:
+        return _run_stages(resolved, out, overlap, device=device, progress=progress)
+
+
+def _run_stages(resolved: ResolvedConfig, out: Path, overlap, *, device: str | None, progress: bool) -> RunResult:
+    """The stages of :func:`run_pipeline`, with the work ``overlap`` (a :class:`~bemlearn.pipeline.overlap.RunOverlap`)
+    runs beside them."""
     from bemlearn.data.trajectory_io import ground_truth_path, read_trajectory, write_trajectory
-    from bemlearn.export.export_run import export_run
     from bemlearn.pipeline.report import write_report
     from bemlearn.pipeline.simulate import simulate_stage
     from bemlearn.pipeline.train import train_run
     from bemlearn.sim.collect import collect
 
-    resolved = config if isinstance(config, ResolvedConfig) else resolve_pipeline_config(_as_dict(config))
     cfg = resolved.config
-    out = Path(out_dir) if out_dir else new_run_dir(Path(cfg.robot or cfg.data or "run").stem)
     out.mkdir(parents=True, exist_ok=True)
     started_ns = time.time_ns()
     save_yaml(cfg, out / "config.yaml")
@@ -80,6 +92,7 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
             stop = [c for c in feasibility if not c["passed"] and c["severity"] == "unusable"]
             if stop:
                 return _stop_after_preflight(out, cfg, resolved, feasibility, t0)
+        overlap.start_model_loops(robot)   # they need no training: beside collection and training (jobs > 1)
     collected: CollectResult | None = None
     if cfg.data is None:
         log.info("[1/%d] collecting excitation data", stages)
@@ -87,6 +100,7 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
         try:
             data, truth = collect(cfg.robot, cfg.collect, progress=progress)
         except DataError as exc:   # e.g. every excitation trial fell at once: a finding about the robot, not a crash
+            overlap.cancel()
             return _stop_after_collect(out, cfg, resolved, feasibility, exc, t0)
         data_path = write_trajectory(data, out / "data.npz")
         write_trajectory(truth, ground_truth_path(data_path))
@@ -100,7 +114,8 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
     log.info("[2/%d] training the BEM GP", stages)
     t_train = time.time_ns()
     try:
-        train = train_run(cfg, data_path, out, device=device, progress=progress, trajectory=data, loaded=loaded, part_of_run=True)
+        train = train_run(cfg, data_path, out, device=device, progress=progress, trajectory=data, loaded=loaded, part_of_run=True,
+                          on_checkpoint=overlap.hook(loaded[0] if loaded else None))
     except Exception as exc:
         _train_failed(out, exc, summary.as_dict(), collected=cfg.data is None, since_ns=t_train, started_ns=started_ns)
         raise
@@ -109,11 +124,11 @@ def run_pipeline(config: PipelineConfig | ResolvedConfig, out_dir: str | Path | 
     sim: SimulateResult | None = None
     try:   # the checkpoint exists: a failure from here on keeps the folder, and metrics.json says where it stopped
         log.info("[3/%d] exporting the predictor", stages)
-        files = export_run(out, fmt="both")
+        files = overlap.export()      # export_run(out, fmt="both"), or the overlapped export's files
         if cfg.robot:
             stage = "simulate"
             log.info("[4/%d] closed-loop simulation", stages)
-            sim = simulate_stage(cfg, out, predictor=out / "bem_predictor.pt", progress=progress, robot=train.robot)
+            sim = simulate_stage(cfg, out, predictor=overlap.predictor, progress=progress, robot=train.robot, started=overlap.loops)
             metrics.closed_loop = {src: LoopMetrics.from_dict(loop) for src, loop in sim.summary().items()}
         stage = "verdict"
         metrics.data = DataInfo.from_dict(summary.as_dict())

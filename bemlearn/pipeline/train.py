@@ -24,6 +24,7 @@ import dataclasses
 import json
 import logging
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -69,6 +70,7 @@ def train_run(
     trajectory: Trajectory | None = None,
     loaded: tuple[BalanceRobot, RobotRef] | None = None,
     part_of_run: bool = False,
+    on_checkpoint: Callable[[Path], None] | None = None,
 ) -> TrainResult:
     """Train the BEM GP of ``config`` on ``data_path`` into ``out_dir``.
 
@@ -83,6 +85,10 @@ def train_run(
         loaded: ``(robot, ref)`` of ``config.robot`` when the caller has loaded it already.
         part_of_run: the caller (``bemlearn run``) writes ``config.yaml``, ``metrics.json`` and the
             verdict from every stage's results; on failure training still records what it kept.
+        on_checkpoint: called with the path of ``checkpoint.pt`` once it is written (not after Ctrl-C),
+            before the evaluation of the trained GP: a run starts its export and learned closed loop
+            there, beside the evaluation.  An exception it raises fails training; a caller that wants
+            the failure reported as its own stage catches it (:func:`~bemlearn.pipeline.run.run_pipeline`).
     """
     previous = torch.get_num_threads()
     if threads is not None:
@@ -91,13 +97,13 @@ def train_run(
         torch.set_num_threads(threads)
     try:
         return _train_run(config, data_path, out_dir, device=device, resume=resume, progress=progress, trajectory=trajectory,
-                          loaded=loaded, part_of_run=part_of_run)
+                          loaded=loaded, part_of_run=part_of_run, on_checkpoint=on_checkpoint)
     finally:
         torch.set_num_threads(previous)
 
 
 def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, progress, trajectory, loaded,
-               part_of_run) -> TrainResult:
+               part_of_run, on_checkpoint) -> TrainResult:
     from torch.utils.tensorboard import SummaryWriter
 
     from bemlearn.pipeline.gp_stage import CheckpointProvenance, fit_bem_gp
@@ -147,6 +153,8 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         writer.close()
         atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float))
         raise KeyboardInterrupt
+    if on_checkpoint is not None:
+        on_checkpoint(stage.checkpoint)
     try:   # the checkpoint exists: a failure from here on keeps it, and metrics.json says where the run stopped
         evaluate_trained(stage, train, val, traj, truth_robot, config.evaluate, gp_cfg, units, out, writer, metrics)
     except Exception as exc:

@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 else:
     torch = lazy_module("torch")
 
-__all__ = ["BEMResult", "solve_bem", "find_roots"]
+__all__ = ["BEMResult", "solve_bem", "find_roots", "hinge_basis"]
 
 _EPS = sys.float_info.epsilon  # float64 machine epsilon, as torch.finfo(torch.float64).eps
 
@@ -109,6 +109,7 @@ def find_roots(
     xtol: float = 1e-14,
     ftol: float = 1e-10,
     max_iter: int = 100,
+    basis: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """Find, per problem, the root of ``fun`` in ``[lo, hi]`` nearest ``nominal`` (module docstring), in NumPy.
 
@@ -123,6 +124,13 @@ def find_roots(
         xtol: absolute tolerance on the root.
         ftol: a returned root must satisfy |fun| ≤ ftol, else it is marked invalid.
         max_iter: refinement iteration cap.
+        basis: functions ``basis(x) -> (…, P)`` of which each problem's residual is known to be a linear
+            combination (:func:`hinge_basis`: Γ_0 of a hinge q_u, eq. 7).  The grid scan then evaluates
+            P nodes, fits the combination and reads the other nodes from it, checked against evaluations
+            halfway between the fit nodes and at the chosen cell's ends; a problem whose check fails, or whose
+            fitted residuals near ``nominal`` are too small to trust their signs, is scanned node by node.
+            It picks the cell the node-by-node scan picks, with the same residuals at its ends, so the
+            roots are the same.
 
     Returns:
         ``(root (B,), valid (B,) bool, |fun(root)| (B,), iterations)``: NaN root and residual where invalid.
@@ -133,7 +141,7 @@ def find_roots(
         raise ArgumentError(f"solve_bem: n_grid must be ≥ 3, got {n_grid}")
     nodes = np.linspace(lo, hi, n_grid)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        br = _bracket(fun, nodes, nominal, batch)
+        br = _bracket(fun, nodes, nominal, batch) if basis is None else _bracket_fitted(fun, nodes, nominal, batch, basis)
         exact = br.valid & (br.fa == 0)
         root = np.where(exact, br.a, np.nan)
         froot = np.where(exact, br.fa, np.nan)
@@ -167,6 +175,12 @@ class _Bracket:
 
 
 def _bracket(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.ndarray, nominal: float, batch: int) -> _Bracket:
+    """Scan the grid ``nodes`` for the sign-change cell nearest ``nominal`` (:func:`_scan` to the whole grid)."""
+    return _scan(call, nodes, nominal, batch)[0]
+
+
+def _scan(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.ndarray, nominal: float, batch: int, *,
+          windows: int | None = None) -> tuple[_Bracket, np.ndarray]:
     """Scan the grid ``nodes`` for the sign-change cell nearest ``nominal`` (a node where the residual is
     exactly zero counts as a root).
 
@@ -176,6 +190,9 @@ def _bracket(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.nda
     window of ``_HALF`` nodes either side takes a sign-change cell no farther than its edges; every other
     window one nearer than its edges, which is the cell the scan of the whole grid (and of the ``_HALF``
     window) would choose: the nearest, the leftmost of equally near ones.
+
+    ``windows``: stop after that many windows; returns the bracket and the problems still pending (their
+    nearest cell lies beyond the last window's edges).
     """
     n_grid = nodes.size
     a = np.full(batch, np.nan)
@@ -187,7 +204,9 @@ def _bracket(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.nda
     f_all = np.empty((batch, 0))   # residuals of the pending problems on nodes[p0 : p1 + 1]
     p0, p1 = k0, k0 - 1            # the nodes evaluated so far (none)
     half = 0
-    while half < n_grid:
+    passes = 0
+    while half < n_grid and (windows is None or passes < windows):
+        passes += 1
         half += max(1, half // 2)   # 1, 2, 3, 4, 6, 9, 13, …: few passes, at most half again the nodes needed
         i0, i1 = max(0, k0 - half), min(n_grid - 1, k0 + half)
         if i1 - i0 < 1 or pending.size == 0:
@@ -225,6 +244,97 @@ def _bracket(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.nda
             last_zero[pending] = f[:, -1] == 0
             break
         pending, f_all = pending[~found], f[~found]
+    else:
+        return _Bracket(a, b, fa, fb, valid, last_zero), pending
+    return _Bracket(a, b, fa, fb, valid, last_zero), np.arange(0)
+
+
+def hinge_basis(x: np.ndarray) -> np.ndarray:
+    """``(…, 5)``: 1, cos x, sin x, cos 2x, sin 2x of ``x (…)`` (rad).
+
+    Γ_0 (eq. 7) of a rigid multibody as a function of a hinge q_u, the other coordinates and the rates
+    fixed (q̇_u = q̈_u = 0), is a combination of these: in the frame of the body q_u turns, only the
+    parent's motion and gravity depend on q_u, through one rotation (affine in cos q_u, sin q_u); the
+    joint torque is at most quadratic in it (D_ua(q) q̈_a, the Coriolis and centrifugal terms) and gravity
+    linear.  Forces outside that form (a spring on q_u, fluid drag) fail :func:`find_roots`' check.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    return np.stack([np.ones_like(x), np.cos(x), np.sin(x), np.cos(2 * x), np.sin(2 * x)], axis=-1)
+
+
+#: :func:`_bracket_fitted`: the largest fit error at the checked nodes, relative to the largest |residual| fitted.
+_FIT_CHECK = 1e-8
+#: :func:`_bracket_fitted`: a fitted residual smaller than this (relative) near the chosen cell is not trusted.
+_FIT_MARGIN = 1e-6
+
+
+def _nearest_cell(f: np.ndarray, nodes: np.ndarray, nominal: float) -> tuple[np.ndarray, np.ndarray]:
+    """The whole-grid choice of :func:`_bracket` on residuals ``f (B, N)``: the cell index ``(B,)`` and its
+    distance to ``nominal`` ``(B,)`` (inf: no sign change)."""
+    fl, fr = f[:, :-1], f[:, 1:]
+    change = (np.sign(fl) * np.sign(fr) < 0) | (fl == 0)
+    xl, xr = nodes[:-1], nodes[1:]
+    dist = np.where(nominal < xl, xl - nominal, np.where(nominal > xr, nominal - xr, 0.0))
+    dist = np.where(change, dist[None, :], np.inf)
+    k = dist.argmin(axis=1)
+    return k, dist[np.arange(f.shape[0]), k]
+
+
+def _bracket_fitted(call: Callable[[np.ndarray, np.ndarray], np.ndarray], nodes: np.ndarray, nominal: float, batch: int,
+                    basis: Callable[[np.ndarray], np.ndarray]) -> _Bracket:
+    """:func:`_bracket` for residuals in the span of ``basis`` (:func:`find_roots`).
+
+    The first window (the nodes beside ``nominal``) is scanned as :func:`_bracket` does; each problem still
+    pending then costs P fitted and 4 checked nodes instead of the wider windows' nodes; the problems that
+    fail the checks are scanned node by node.
+    """
+    n_grid = nodes.size
+    V = basis(nodes)                                              # (N, P)
+    P = V.shape[1]
+    fit = np.unique(np.round(np.linspace(0, n_grid - 1, P)).astype(np.int64))
+    if P < 5 or n_grid < 2 * P + 3 or fit.size < P or not np.linalg.cond(V[fit]) < 1e8:   # P ≥ 5: four checks between fit nodes
+        return _bracket(call, nodes, nominal, batch)
+    br, pending = _scan(call, nodes, nominal, batch, windows=1)
+    a, b, fa, fb, valid, last_zero = (x.copy() for x in (br.a, br.b, br.fa, br.fb, br.valid, br.last_zero))
+    if pending.size == 0:
+        return br
+    W = V @ np.linalg.inv(V[fit])                                 # (N, P): residuals at every node from those at the fit nodes
+    n = pending.size
+    problems = np.arange(n)
+    F = np.asarray(call(np.broadcast_to(nodes[fit], (n, P)).copy(), pending), dtype=np.float64)   # (n, P)
+    f = F @ W.T                                                   # (n, N) fitted
+    known = np.zeros((n, n_grid), dtype=bool)
+    f[:, fit], known[:, fit] = F, True
+    scale = np.abs(F).max(axis=1)
+    k, d = _nearest_cell(f, nodes, nominal)
+    # checked: nodes halfway between the fit nodes (the two nearest nominal, the two others where no cell was
+    # chosen) and the chosen cell's ends (its residuals go to the refinement as evaluated)
+    mid = (fit[:-1] + fit[1:]) // 2
+    mid = mid[np.argsort(np.abs(nodes[mid] - nominal), kind="stable")]
+    found = np.isfinite(d)
+    check = np.stack([np.full(n, mid[0]), np.full(n, mid[1]), np.where(found, k, mid[2]), np.where(found, k + 1, mid[3])], axis=1)
+    T = np.asarray(call(nodes[check], pending), dtype=np.float64)                                   # (n, 4)
+    r = problems[:, None]
+    error = np.abs(T - f[r, check]).max(axis=1)
+    f[r, check], known[r, check] = T, True
+    k2, d2 = _nearest_cell(f, nodes, nominal)
+    # the signs that decide the choice: every node as near as the chosen cell (all of them without one)
+    spacing = float(np.max(np.diff(nodes)))
+    near = np.abs(nodes[None, :] - nominal) <= np.where(found, d, np.inf)[:, None] + spacing
+    doubtful = near & ~known & ~(np.abs(f) > _FIT_MARGIN * scale[:, None])
+    same = (np.isfinite(d2) == found) & (~found | ((k2 == k) & (d2 == d)))   # the checked nodes kept the choice
+    ok = np.isfinite(scale) & (scale > 0) & (error <= _FIT_CHECK * scale) & ~doubtful.any(axis=1) & same
+    got = problems[ok & found]
+    rows = pending[got]
+    a[rows], b[rows], fa[rows], fb[rows] = nodes[k[got]], nodes[k[got] + 1], f[got, k[got]], f[got, k[got] + 1]
+    valid[rows] = True
+    none = problems[ok & ~found]
+    last_zero[pending[none]] = f[none, -1] == 0
+    rest = pending[~ok]
+    if rest.size:   # node by node, as without a basis
+        br = _bracket(lambda x, rows: call(x, rest[rows]), nodes, nominal, rest.size)
+        a[rest], b[rest], fa[rest], fb[rest] = br.a, br.b, br.fa, br.fb
+        valid[rest], last_zero[rest] = br.valid, br.last_zero
     return _Bracket(a, b, fa, fb, valid, last_zero)
 
 

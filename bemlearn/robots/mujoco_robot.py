@@ -544,6 +544,15 @@ class MujocoRobot(Robot):
         f = self._inverse_joint(to_joint(q), to_joint(qd), to_joint(qdd))
         return np.array([(Tinv.T @ row)[u] for row in f])
 
+    def _bem_basis(self) -> Callable[[np.ndarray], np.ndarray] | None:
+        """:func:`~bemlearn.robots.bem.hinge_basis` when q_u is a hinge in joint coordinates (Γ_0 is a combination of
+        1, cos, sin of q_u and 2 q_u there; checked per problem by the scan), else None."""
+        if self.identity_coordinates and self.coordinate_kinds[self.unactuated_index] == "hinge":
+            from bemlearn.robots.bem import hinge_basis
+
+            return hinge_basis
+        return None
+
     def _bem_residual(self, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
         """Γ_0 through :meth:`gamma_rows` for :meth:`bem` when the coordinates are the joints (T = I: the same
         numbers as :meth:`gamma0`, whose coordinate maps then only multiply by ones); None otherwise."""

@@ -244,7 +244,8 @@ class Robot(abc.ABC):
         if residual is None:
             result = solve_bem(fun, B, lo=lo, hi=hi, nominal=self.qu_nominal, n_grid=n_grid)
         else:
-            qu, valid, res, it = find_roots(residual, B, lo=lo, hi=hi, nominal=self.qu_nominal, n_grid=n_grid)
+            qu, valid, res, it = find_roots(residual, B, lo=lo, hi=hi, nominal=self.qu_nominal, n_grid=n_grid,
+                                            basis=self._bem_basis())
             result = BEMResult(qu=torch.from_numpy(qu), valid=torch.from_numpy(valid), residual=torch.from_numpy(res), iterations=it)
         if on_missing == "raise" and not bool(result.valid.all()):
             i = int((~result.valid).nonzero()[0])
@@ -259,6 +260,11 @@ class Robot(abc.ABC):
     def _bem_residual(self, qa: np.ndarray, qad: np.ndarray, qadd: np.ndarray) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
         """Γ_0 in NumPy for :meth:`bem` (``fun(x (R, K), rows (R,)) -> (R, K)``, :func:`~bemlearn.robots.bem.find_roots`)
         when an implementation evaluates it with the numbers of :meth:`gamma0`; None: :meth:`bem` calls :meth:`gamma0`."""
+        return None
+
+    def _bem_basis(self) -> Callable[[np.ndarray], np.ndarray] | None:
+        """Functions of q_u whose combination :meth:`_bem_residual`'s Γ_0 is, for its grid scan
+        (:func:`~bemlearn.robots.bem.find_roots`'s ``basis``); None: the scan evaluates every node it needs."""
         return None
 
     # ---- helpers ---------------------------------------------------------------------

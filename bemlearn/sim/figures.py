@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["plot_run", "run_figure"]
+__all__ = ["plot_run", "run_figure", "run_png"]
 
 
 def plot_run(result, path: str | Path, *, model_bem: np.ndarray | None = None, band: tuple[np.ndarray, np.ndarray] | None = None,
@@ -30,17 +30,26 @@ def plot_run(result, path: str | Path, *, model_bem: np.ndarray | None = None, b
         indices: their columns in ``result.q``.
         input_label: axis label of the actuator command (with its unit).
     """
-    import matplotlib.pyplot as plt
+    from bemlearn.files import atomic_write_bytes
 
-    from bemlearn.files import atomic_path
+    return atomic_write_bytes(path, run_png(result, model_bem=model_bem, band=band, lemma=lemma, joint_names=joint_names,
+                                            units=units, indices=indices, input_label=input_label))
+
+
+def run_png(result, *, model_bem: np.ndarray | None = None, band: tuple[np.ndarray, np.ndarray] | None = None,
+            lemma: dict[str, np.ndarray] | None = None, joint_names=("q_a", "q_u"), units=("rad", "rad"),
+            indices=(0, 1), input_label: str = "u") -> bytes:
+    """The PNG bytes of :func:`plot_run`'s figure (110 dpi): a worker process returns them to its parent."""
+    import io
+
+    import matplotlib.pyplot as plt
 
     fig = run_figure(result, model_bem=model_bem, band=band, lemma=lemma, joint_names=joint_names, units=units,
                      indices=indices, input_label=input_label)
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)
-    return path
+    return buf.getvalue()
 
 
 def run_figure(result, *, model_bem: np.ndarray | None = None, band: tuple[np.ndarray, np.ndarray] | None = None,

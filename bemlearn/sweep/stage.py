@@ -221,7 +221,7 @@ def _write_configs(resolved, out: Path) -> None:
 def _execute_run(resolved, out: Path, cpus: int) -> None:
     from bemlearn.pipeline.run import run_pipeline
 
-    run_pipeline(_with_workers(resolved, cpus), out, progress=False)
+    run_pipeline(_with_workers(resolved, cpus), out, progress=False, jobs=cpus)   # the cell's cores: its closed loops at once
 
 
 def _execute_train(resolved, out: Path, cpus: int) -> None:
@@ -247,7 +247,7 @@ def _execute_simulate(resolved, out: Path, cpus: int) -> None:
 
     _write_configs(resolved, out)
     cfg = resolved.config
-    simulate_stage(cfg, out, sources=(cfg.simulate.bem_source,), progress=False)
+    simulate_stage(cfg, out, sources=(cfg.simulate.bem_source,), progress=False, jobs=cpus)
 
 
 def core_stages() -> dict[str, SweepStage]:
