@@ -18,6 +18,12 @@ def pytest_configure(config):
     The pipeline's own heavy stages run on one thread for the same reason (``train_run(threads=1)``).
     """
     torch.set_num_threads(1)
+    # A shell without job control starts a background command (`cmd &`, `nohup cmd &`) with SIGINT ignored, and
+    # every process it starts inherits that: the Ctrl-C tests (tests/test_interrupts.py, tests/test_signals.py)
+    # would then test an ignored signal. The suite tests bemlearn's handling of a delivered SIGINT, so it
+    # restores Python's own handler (subprocesses the tests start then get SIGINT's default action too).
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture(autouse=True)

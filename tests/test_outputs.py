@@ -187,7 +187,9 @@ def test_a_failed_run_force_keeps_the_new_checkpoint_without_the_old_report(trai
 
     import importlib
 
-    monkeypatch.setattr(importlib.import_module("bemlearn.export.export_run"), "export_run", fail)
+    module = importlib.import_module("bemlearn.export.export_run")
+    monkeypatch.setattr(module, "export_run", fail)      # the export stage of a serial run (--jobs 1)
+    monkeypatch.setattr(module, "export_files", fail)    # the export checked beside the evaluation (bemlearn.pipeline.overlap)
     cfg = _small_config(tmp_path, "run.yaml", data=str(DATA))   # train on the shipped data: no collection
     assert main(["run", str(cfg), "--out", str(copy), "--force", "--no-progress"]) == 2
     assert "injected failure" in capsys.readouterr().err and f"{copy} keeps what it produced" in caplog.text
