@@ -32,7 +32,8 @@ def compare_predictor(predictor_path: str | Path, xml: str, truth: dict, *, n_qu
     ``band_coverage`` is the share of the oracle BEM inside the exported ±2σ band (the predictor's ``forward``: mean and
     calibrated σ), which judges a run's ``band`` reason.
 
-    Returns: ``{"rmse", "max_abs", "gain", "intercept", "n_queries", "learned_at_rest", "band_coverage"}`` (rad).
+    Returns: ``{"rmse", "max_abs", "gain", "intercept", "n_queries", "learned_at_rest_minus_upright", "band_coverage"}``
+    (rad; ``band_coverage`` a share).
     """
     import torch
 
