@@ -227,7 +227,7 @@ def write_results(out: Path, rows: list[dict], table: list[dict], md: str, *, se
     from bemlearn.files import atomic_write_files
 
     cols = ["name", "topology", *FEATURES, "qu_upright", "holdable", "verdict", "right", "false_ok", "rmse", "max_abs", "gain",
-            "learned_at_rest_minus_upright", "balanced_at_upright", "bem_right", "reason_true", "first_check", "first_reason", "hold_reason",
+            "learned_at_rest_minus_upright", "band_coverage", "balanced_at_upright", "bem_right", "reason_true", "first_check", "first_reason", "hold_reason",
             "balance_note", "exit_code", "wall_s", "commit"]
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=cols, extrasaction="ignore")
