@@ -6,9 +6,7 @@ The BEM is an exact GP with fixed hyperparameters fitted to the analytic Furuta'
 (eq. 5) on 300 random states: quick to build, independent of the training pipeline.
 """
 
-import importlib.util
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +20,7 @@ from bemlearn.export.c_export import write_files
 from bemlearn.models.predictor_state import PredictorState
 from bemlearn.robots import load
 from bemlearn.sim.closed_loop import simulate
+from tests.file_module import load_file_module
 
 pytestmark = pytest.mark.skipif(find_cc() is None, reason="no C compiler (cc, gcc, clang or $CC) on PATH")
 
@@ -30,11 +29,7 @@ F64 = torch.float64
 
 
 def _example():
-    spec = importlib.util.spec_from_file_location("simulate_c_eic", EXAMPLE)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod      # its dataclasses look their module up by name
-    spec.loader.exec_module(mod)
-    return mod
+    return load_file_module(EXAMPLE, "simulate_c_eic", register=True)   # its dataclasses look their module up by name
 
 
 def _furuta_bem_gp(n: int = 300, seed: int = 0) -> tuple[PredictorState, PredictorMetadata]:

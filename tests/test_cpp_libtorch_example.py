@@ -3,10 +3,8 @@ the wheel's libtorch give Python's numbers (slow: compiling and linking against 
 ~30 s; `bemlearn export --format aoti` compiles six methods, 1-2 min)."""
 
 import dataclasses
-import importlib.util
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -16,6 +14,7 @@ from bemlearn.bench.predict_bench import synthetic_posterior
 from bemlearn.cli.main import main
 from bemlearn.export import BEMPredictor, load_torchscript, save_torchscript, verify_predictor, write_checkpoint
 from bemlearn.export.aoti import load_aoti_predictor
+from tests.file_module import load_file_module
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "cpp_libtorch" / "build.py"
 
@@ -31,11 +30,7 @@ def exe(tmp_path_factory):
 
 
 def _build(out):
-    spec = importlib.util.spec_from_file_location("cpp_libtorch_build", EXAMPLE)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod
-    spec.loader.exec_module(mod)
-    return mod.build(out)
+    return load_file_module(EXAMPLE, "cpp_libtorch_build", register=True).build(out)
 
 
 def _banded_posterior():

@@ -1,17 +1,15 @@
 """scripts/diff_metrics.py names every key two metrics.json files disagree on, at the printed digit and exactly."""
 
-import importlib.util
 import json
 from pathlib import Path
+
+from tests.file_module import load_file_module
 
 SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "diff_metrics.py"
 
 
 def _module():
-    spec = importlib.util.spec_from_file_location("diff_metrics", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_file_module(SCRIPT)
 
 
 def _write(folder: Path, doc: dict) -> Path:

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.file_module import load_file_module
+
 ROOT = Path(__file__).resolve().parents[1]
 HAVE_DOCS = importlib.util.find_spec("mkdocs") is not None and importlib.util.find_spec("mkdocstrings") is not None
 
@@ -92,9 +94,7 @@ def test_the_role_extension_resolves_relative_names():
     ``~`` targets become optional autorefs; an unknown name stays plain code."""
     import griffe
 
-    spec = importlib.util.spec_from_file_location("griffe_sphinx_roles", ROOT / "scripts" / "griffe_sphinx_roles.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_file_module(ROOT / "scripts" / "griffe_sphinx_roles.py")
     code = {"__init__.py": "", "sub.py": (
         'def helper():\n    """Help."""\n\n\n'
         'class Thing:\n    """Uses :func:`helper`, :meth:`go`, :func:`~pkg.sub.helper`, :mod:`pkg.sub` and :func:`nowhere`."""\n\n'

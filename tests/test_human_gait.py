@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import os
 from pathlib import Path
 
@@ -18,6 +17,7 @@ from bemlearn.apps.biped.human_gait import (
     format_csv,
     load_human_gait,
 )
+from tests.file_module import load_file_module
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED_SHA256 = "30ebdb42d975a412ac4ab029ccc3a56b0583a2b29652c26c092744a35480e34a"
@@ -42,9 +42,7 @@ def test_conversion_reproduces_the_shipped_file(tmp_path):
     if src is None:
         pytest.skip("GaitAnalysisToolKit 0.2.0 source not available: set BEMLEARN_GAT_SOURCE to its rawdata.txt or "
                     "sdist (pip download --no-deps -d /tmp/gat gaitanalysistoolkit==0.2.0)")
-    spec = importlib.util.spec_from_file_location("convert_human_gait", ROOT / "scripts" / "convert_human_gait.py")
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
+    script = load_file_module(ROOT / "scripts" / "convert_human_gait.py")
     out = tmp_path / "hg.csv"
     assert script.main(["--source", str(src), "--out", str(out)]) == 0
     assert out.read_bytes() == HUMAN_GAIT_CSV.read_bytes()

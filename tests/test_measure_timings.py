@@ -1,16 +1,14 @@
 """scripts/measure_timings.py writes the README's timings with the machine they were measured on."""
 
-import importlib.util
 from pathlib import Path
+
+from tests.file_module import load_file_module
 
 SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "measure_timings.py"
 
 
 def _module():
-    spec = importlib.util.spec_from_file_location("measure_timings", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_file_module(SCRIPT)
 
 
 def test_table_states_the_machine_and_every_run():
