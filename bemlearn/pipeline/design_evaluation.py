@@ -112,7 +112,7 @@ def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_poi
         # extents went (fam0_053: yaw to 1.55 rad and 4.6 rad/s of 1.89 and 5.6; ok by its own box, RMSE 0.011 by
         # the oracle's)
         from bemlearn.robots.mujoco_robot import MujocoRobot
-        from bemlearn.robots.scales import qa_limited, velocity_stiffening_speed
+        from bemlearn.robots.scales import instability_rate, qa_limited, velocity_stiffening_speed
         from bemlearn.sim.collect import SWEEP_SPAN
 
         kinds = tuple(getattr(robot, "coordinate_kinds", ()))
@@ -128,8 +128,6 @@ def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_poi
             # and the accelerations of a motion on the balance's own time scale that reaches that speed, λ·v_j (the
             # same extent as a flat joint's in the family oracle): fam0_017's yaw was checked to 9.2 rad/s² of λ·v =
             # 29; ok by its own box (max 0.039 rad), max 0.055 by the oracle's
-            from bemlearn.robots.scales import instability_rate
-
             A = np.where(swept & np.isfinite(v), np.maximum(A, instability_rate(robot) * vf), A)
     k = max(4, int(math.ceil(math.log2(max(n_points, 16)))))
     u = qmc.Sobol(3 * m, scramble=True, seed=seed).random_base2(k) * 2.0 - 1.0
