@@ -380,6 +380,10 @@ class Lemma1Info(_Record):
     r_learned_vs_model_delta_gamma: float | None = None
     r_learned_vs_hdot: float | None = None
     model_gap: float | None = None
+    hdot_coefficient: float | None = None
+    damping_coefficient: float | None = None
+    r_model_damping: float | None = None
+    damping_qu: float | None = None
 
 
 @dataclass(kw_only=True)
