@@ -182,6 +182,7 @@ class DesignRegionInfo(_Record):
     bound: float | None = None
     box: dict[str, dict[str, float]] | None = None
     coverage_2sigma_band: float | None = None
+    worst: dict[str, Any] | None = None
 
 
 @dataclass(kw_only=True)
@@ -438,6 +439,7 @@ class RunMetrics(_Record):
     fit: FitInfo | None = field(default=None, metadata=_one(FitInfo))
     units: dict[str, str] | None = None
     unactuated: str | None = None
+    actuated: list[str] | None = None
     output_unit: str | None = None
     n_train: int | None = None
     dataset: DatasetInfo | None = field(default=None, metadata=_one(DatasetInfo))
