@@ -585,7 +585,13 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     :data:`EIC_SEARCH_TRIES` fastest-decaying are run in MuJoCo, and of those that bring the robot back the one
     with the smallest residual motion over the last second is kept (dry friction leaves a limit cycle whose size
     the linear decay rate does not rank: measured on a two-link arm with joint friction, the fastest-decaying
-    pair circled at ±0.08 rad while ω_u = 6 λ, ω_u/ω_a = 40 settled within 0.001 rad); if none does, the
+    pair circled at ±0.08 rad while ω_u = 6 λ, ω_u/ω_a = 40 settled within 0.001 rad).  If none does and the
+    robot has dry friction, the gains tried (the first choice too) that hold it in the smallest stick-slip cycle
+    of that friction around a balanced pole (:func:`_friction_cycle`: q_u at its BEM, inside the design region,
+    the same loop without the friction recovering; :func:`_friction_cycle_gains`): a two-link arm with a pole
+    whose BEM moves with both joint angles (its external loop confined to ω_a ≈ 1 rad/s by the stable ridge) and
+    0.024–0.038 N·m of static friction sticks off rest by up to 0.1 rad with the pole upright over it, q_u
+    (relative to the forearm) off nominal by as much, for every gain of the grid.  Otherwise the
     fastest-decaying one (the model check ``eic_recovery`` then says the robot cannot be balanced by the EIC).
 
     With ``reference`` (the closed-loop reference the run will play, :func:`closed_loop_reference`'s fields) a
