@@ -235,3 +235,69 @@ def test_a_trial_derivation_is_reused_for_the_same_model_and_not_for_another(mon
         with pytest.warns(DesignWarning, match="no sampled-stable EIC gains"):
             derive.eic_gains(acrobot, arate)
         assert len(calls) == k                                            # each time: the warning is issued again
+
+
+def _arm_with_friction(friction: float) -> MujocoRobot:
+    """A two-link arm (motors) with a passive pole on top, upright at 0; ``friction``: the arm joints' ``frictionloss``, N·m."""
+    xml = f"""<mujoco model="arm_pole_friction">
+<compiler angle="radian"/>
+<option timestep="0.001" gravity="0 0 -9.81"/>
+<default><geom contype="0" conaffinity="0"/>
+<default class="drive"><joint damping="0.04" frictionloss="{friction}" armature="0.01"/></default></default>
+<worldbody>
+<body name="upper"><joint name="shoulder" type="hinge" axis="0 1 0" class="drive" range="-1.4 1.4"/>
+<geom type="capsule" fromto="0 0 0 0 0 0.2" size="0.015" mass="0.4"/>
+<body name="fore" pos="0 0 0.2"><joint name="elbow" type="hinge" axis="0 1 0" class="drive" range="-1.1 1.1"/>
+<geom type="capsule" fromto="0 0 0 0 0 0.18" size="0.012" mass="0.5"/>
+<body name="pole" pos="0 0 0.18"><joint name="pole" type="hinge" axis="0 1 0" damping="0.001"/>
+<geom type="capsule" fromto="0 0 0 0 0 0.6" size="0.01" mass="0.12"/></body></body></body>
+</worldbody>
+<actuator><motor name="shoulder_act" joint="shoulder" ctrlrange="-2 2"/><motor name="elbow_act" joint="elbow" ctrlrange="-1.5 1.5"/></actuator>
+</mujoco>"""
+    return MujocoRobot.from_xml_string(xml, name=f"arm_pole_friction_{friction:g}")
+
+
+def test_dry_friction_stick_slip_around_a_balanced_pole_is_held_not_a_failed_recovery():
+    """A two-link arm with a pole whose BEM moves with both joint angles (s_p = −1, −1) and 0.08 N·m of dry
+    friction on both arm joints: the EIC (no friction term, eq. 3) leaves a stick-slip cycle, the arm stuck off
+    rest with the pole upright over it, so q_u (relative to the forearm) stays off nominal by about the arm's
+    offset.  No gain the search tries brings q_u back within d/4 of nominal; the derived gains must hold it in
+    that cycle and the model check ``eic_recovery`` must pass them (before: it failed them and the run stopped
+    as if the robot could not be balanced).  Checked independently: the pole's absolute angle
+    (shoulder + elbow + pole, parallel axes) stays within 0.01 rad of upright over the last second while q_u and
+    the shoulder are ≈ 0.09 off, and the same gains without the friction bring q_u back within d/4."""
+    robot = _arm_with_friction(0.08)
+    rate = derive.control_rate(robot).value
+    d = derive.design_region(robot).value
+    wc = derive.closed_loop_sensor(robot, rate).value["velocity_cutoff"]
+    np.testing.assert_allclose(derive.bem_slopes(robot)[0], [-1.0, -1.0], atol=1e-6)
+    gains = derive.eic_gains(robot, rate)
+    assert "stick-slip" in gains.note
+    ok, how = derive.eic_recovery(robot, gains.value, rate, qu0=d / 4, velocity_cutoff=wc)
+    assert ok, how
+    nominal_ok, _, tail = derive._recovery_run(robot, gains.value, rate, qu0=d / 4, velocity_cutoff=wc)
+    assert not nominal_ok and d / 4 < tail <= d
+    res = derive._recovery_sim(robot, gains.value, rate, qu0=d / 4, velocity_cutoff=wc, duration_s=3.0)
+    last = res.t >= res.t[-1] - 1.0
+    assert not res.fell
+    assert np.max(np.abs(res.q[last].sum(axis=1))) < 0.01        # the pole's absolute angle: upright
+    assert np.max(np.abs(res.q[last, 0])) > d / 4                # the shoulder stuck off rest
+    smooth = _arm_with_friction(0.0)
+    ok0, how0, tail0 = derive._recovery_run(smooth, gains.value, rate, qu0=d / 4, velocity_cutoff=wc)
+    assert ok0 and tail0 <= d / 4, how0
+
+
+def test_a_loop_off_its_bem_with_dry_friction_is_not_held():
+    """The same arm and friction with the fastest continuous gains (ω_u ≈ 3.2 λ, ω_u/ω_a ≈ 12): q_u ends off
+    nominal *and* off its BEM (the pole is not balanced over a stuck arm), so the friction does not excuse it."""
+    from bemlearn.control.eic_linear import eic_fastest_gains
+
+    robot = _arm_with_friction(0.08)
+    rate = derive.control_rate(robot).value
+    d = derive.design_region(robot).value
+    wc = derive.closed_loop_sensor(robot, rate).value["velocity_cutoff"]
+    lam = instability_rate(robot)
+    w_u, w_a, _ = eic_fastest_gains(robot, lam, 2 * math.pi * rate.rate_hz / 20)
+    gains = EICGains(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u)
+    ok, how = derive.eic_recovery(robot, gains, rate, qu0=d / 4, velocity_cutoff=wc)
+    assert not ok and "no stick-slip cycle" in how, how

@@ -585,7 +585,13 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     :data:`EIC_SEARCH_TRIES` fastest-decaying are run in MuJoCo, and of those that bring the robot back the one
     with the smallest residual motion over the last second is kept (dry friction leaves a limit cycle whose size
     the linear decay rate does not rank: measured on a two-link arm with joint friction, the fastest-decaying
-    pair circled at ±0.08 rad while ω_u = 6 λ, ω_u/ω_a = 40 settled within 0.001 rad); if none does, the
+    pair circled at ±0.08 rad while ω_u = 6 λ, ω_u/ω_a = 40 settled within 0.001 rad).  If none does and the
+    robot has dry friction, the gains tried (the first choice too) that hold it in the smallest stick-slip cycle
+    of that friction around a balanced pole (:func:`_friction_cycle`: q_u at its BEM, inside the design region,
+    the same loop without the friction recovering; :func:`_friction_cycle_gains`): a two-link arm with a pole
+    whose BEM moves with both joint angles (its external loop confined to ω_a ≈ 1 rad/s by the stable ridge) and
+    0.024–0.038 N·m of static friction sticks off rest by up to 0.1 rad with the pole upright over it, q_u
+    (relative to the forearm) off nominal by as much, for every gain of the grid.  Otherwise the
     fastest-decaying one (the model check ``eic_recovery`` then says the robot cannot be balanced by the EIC).
 
     With ``reference`` (the closed-loop reference the run will play, :func:`closed_loop_reference`'s fields) a
@@ -675,8 +681,11 @@ def _eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, veloci
         else:
             why = (f"the loop sampled at {rate.rate_hz:g} Hz with its velocity filter (ω_c = {wc:.3g} rad/s) grows at "
                    f"{-loop.decay_rate:.3g} 1/s with them")
+    unsettled = []   # (tail, label, gains) of the loops that stayed up but left q_u off nominal: see the end
     if candidate:
-        ok, how, _ = _recovery_run(robot, g, rate, qu0=e0, velocity_cutoff=wc)
+        ok, how, tail = _recovery_run(robot, g, rate, qu0=e0, velocity_cutoff=wc)
+        if not ok and math.isfinite(tail):
+            unsettled.append((tail, f"the first choice ({note})", g))
         if ok:
             held_ref, how_ref, _ = _reference_run(robot, g, rate, reference, velocity_cutoff=wc)
             if held_ref:
@@ -695,12 +704,19 @@ def _eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, veloci
             if lp.spectral_radius < 1.0:
                 stable.append((lp.decay_rate, wl, ratio, gg))
     if not stable:
+        cycles = _friction_cycle_gains(robot, unsettled, rate, reference, qu0=e0, velocity_cutoff=wc)
+        if cycles is not None:
+            label, gg, how = cycles
+            return Derived(gg, f"{label}: {why}, and no gain of the grid makes the sampled loop stable; they hold the robot "
+                               f"in a stick-slip cycle of the joints' dry friction: {how}")
         warn(DesignWarning, log, "%s: no EIC gains of the grid make the sampled loop stable at upright", robot.name)
         return Derived(g, note + f"; {why}, and no gain of the grid (ω_u = 1.2–8 λ, ω_u/ω_a = 3–60) makes the sampled loop stable")
     stable.sort(key=lambda c: -c[0])
     tried, held, recovered = [], [], []
     for decay, wl, ratio, gg in stable[:EIC_SEARCH_TRIES]:
         ok, how, tail = _recovery_run(robot, gg, rate, qu0=e0, velocity_cutoff=wc)
+        if not ok and math.isfinite(tail):
+            unsettled.append((tail, f"ω_u = {wl:g} λ (λ = {lam:.3g} 1/s), ω_a = ω_u/{ratio:g}, critically damped", gg))
         if ok:
             recovered.append((tail, decay, wl, ratio, gg, how))
             held_ref, how_ref, _ = _reference_run(robot, gg, rate, reference, velocity_cutoff=wc)
@@ -718,6 +734,12 @@ def _eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, veloci
                            f"fails: {why}; of the {len(tried)} fastest-decaying sampled-stable gains of the grid, {len(held)} bring "
                            f"the robot back in MuJoCo, and these leave the smallest residual motion (max |q_u − nominal| "
                            f"{tail:.3g} over the last second; decay {decay:.3g} 1/s; {how})")
+    cycles = _friction_cycle_gains(robot, unsettled, rate, reference, qu0=e0, velocity_cutoff=wc)
+    if cycles is not None:
+        label, gg, how = cycles
+        return Derived(gg, f"{label}: none of the gains tried brings q_u back within {e0:.3g} of nominal (the first choice: {why}; "
+                           f"the grid: " + "; ".join(tried) + f"); these hold the robot in the smallest stick-slip cycle of "
+                           f"the joints' dry friction: {how}")
     decay, wl, ratio, gg = stable[0]
     warn(DesignWarning, log, "%s: no sampled-stable EIC gains bring the robot back from a %.3g q_u error in MuJoCo", robot.name, e0)
     return Derived(gg, f"ω_u = {wl:g} λ (λ = {lam:.3g} 1/s), ω_a = ω_u/{ratio:g}, critically damped, the fastest decaying "
@@ -729,6 +751,30 @@ def _eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, veloci
 EIC_SEARCH_TRIES = 8
 
 
+def _friction_cycle_gains(robot, unsettled: list, rate: RateChoice, reference: dict | None, *, qu0: float,
+                          velocity_cutoff: float):
+    """The last resort of :func:`eic_gains` when no gain tried brings q_u back within ``qu0`` of nominal: of the
+    ``unsettled`` loops (``(tail, label, gains)``: stayed up, q_u up to ``tail`` off nominal over the last
+    second), those that hold the robot in a stick-slip cycle of its dry friction (:func:`_friction_cycle`), the
+    smallest cycle first, the first that also holds the closed-loop reference (:func:`_reference_run`), else the
+    smallest.  Returns ``(label, gains, what happened)`` or ``None`` (no such loop, or no dry friction)."""
+    if not unsettled or not np.any(robot.model.dof_frictionloss > 0):
+        return None
+    found = []
+    for _tail, label, gains in sorted(unsettled, key=lambda c: c[0]):
+        ok, how, _ = _recovery_run(robot, gains, rate, qu0=qu0, velocity_cutoff=velocity_cutoff, friction_cycle=True)
+        if not ok:
+            continue
+        held_ref, how_ref, _ = _reference_run(robot, gains, rate, reference, velocity_cutoff=velocity_cutoff)
+        if held_ref:
+            return label, gains, how + (f"; {how_ref}" if how_ref else "")
+        found.append((label, gains, f"{how}, but {how_ref}"))
+    if found:
+        warn(DesignWarning, log, "%s: no EIC gains tried hold the closed-loop reference in MuJoCo", robot.name)
+        return found[0]
+    return None
+
+
 def eic_recovery(robot, gains, rate: RateChoice, *, qu0: float, velocity_cutoff: float, duration_s: float = 3.0) -> tuple[bool, str]:
     """Whether the EIC loop with the model BEM brings ``robot`` back in MuJoCo from a q_u error ``qu0`` at rest.
 
@@ -737,17 +783,19 @@ def eic_recovery(robot, gains, rate: RateChoice, *, qu0: float, velocity_cutoff:
     clipping the ``forcerange``), the reference at rest, for ``duration_s``: it recovers when q_u never leaves the
     fall window (:func:`fall_window`) and stays within ``qu0`` of nominal over the last second (not only at its
     end: with dry friction the loop can circle in a limit cycle larger than the start error, which a single end
-    sample can miss — measured on a two-link arm: ends 0.042 from nominal, circling at ±0.22).  Returns
-    ``(recovers, what happened)``.
+    sample can miss — measured on a two-link arm: ends 0.042 from nominal, circling at ±0.22).
+
+    A robot with dry friction (``frictionloss``) also passes when the loop holds it in a stick-slip cycle the
+    friction makes (:func:`_friction_cycle`): the pole balanced at its BEM, inside the design region, and the
+    same loop without the dry friction recovering.  Returns ``(recovers, what happened)``.
     """
-    ok, how, _ = _recovery_run(robot, gains, rate, qu0=qu0, velocity_cutoff=velocity_cutoff, duration_s=duration_s)
+    ok, how, _ = _recovery_run(robot, gains, rate, qu0=qu0, velocity_cutoff=velocity_cutoff, duration_s=duration_s,
+                               friction_cycle=True)
     return ok, how
 
 
-def _recovery_run(robot, gains, rate: RateChoice, *, qu0: float, velocity_cutoff: float,
-                  duration_s: float = 3.0) -> tuple[bool, str, float]:
-    """:func:`eic_recovery`, also returning the residual motion: max |q_u − nominal| over the last second
-    (``inf`` when the loop fell)."""
+def _recovery_sim(robot, gains, rate: RateChoice, *, qu0: float, velocity_cutoff: float, duration_s: float):
+    """The closed loop of :func:`eic_recovery` (a :class:`~bemlearn.sim.closed_loop.SimResult`)."""
     from bemlearn.data.sensors import SensorConfig
     from bemlearn.sim.closed_loop import ReferenceConfig, SimulateConfig, simulate
 
@@ -755,7 +803,15 @@ def _recovery_run(robot, gains, rate: RateChoice, *, qu0: float, velocity_cutoff
     cfg = SimulateConfig(duration_s=duration_s, rate_hz=rate.rate_hz, bem_source="model", reference=ReferenceConfig((0.0,), (0.0,), (0.0,), 0.0),
                          gains=gains, sensor=SensorConfig(**_encoder(robot), velocity_cutoff=velocity_cutoff),
                          initial_qu=qu0, fall_window=fw, warmup_s=0.0, physics_timestep=rate.timestep if rate.timestep_changed else None)
-    res = simulate(robot, cfg, progress=False)
+    return simulate(robot, cfg, progress=False)
+
+
+def _recovery_run(robot, gains, rate: RateChoice, *, qu0: float, velocity_cutoff: float,
+                  duration_s: float = 3.0, friction_cycle: bool = False) -> tuple[bool, str, float]:
+    """:func:`eic_recovery`, also returning the residual motion: max |q_u − nominal| over the last second
+    (``inf`` when the loop fell).  The stick-slip cycle of dry friction (:func:`_friction_cycle`) counts as a
+    recovery only with ``friction_cycle``."""
+    res = _recovery_sim(robot, gains, rate, qu0=qu0, velocity_cutoff=velocity_cutoff, duration_s=duration_s)
     iu, ia = robot.unactuated_index, list(robot.actuated_index)
     if res.fell:
         span = np.max(np.abs(res.q[:, ia]), axis=0) if len(res.t) else np.zeros(len(ia))
@@ -767,10 +823,60 @@ def _recovery_run(robot, gains, rate: RateChoice, *, qu0: float, velocity_cutoff
     tail = float(dev[res.t >= res.t[-1] - 1.0].max())
     end = float(dev[-1])
     if tail > qu0:
-        return False, (f"q_u is still up to {tail:.3g} from nominal in the last second of {duration_s:g} s from a {qu0:.3g} error "
-                       f"(ends {end:.3g})"), tail
+        how = (f"q_u is still up to {tail:.3g} from nominal in the last second of {duration_s:g} s from a {qu0:.3g} error "
+               f"(ends {end:.3g})")
+        if friction_cycle:
+            held, why = _friction_cycle(robot, gains, rate, res, qu0=qu0, velocity_cutoff=velocity_cutoff, duration_s=duration_s)
+            if held:
+                return True, f"{how}, {why}", tail
+            if why:
+                how += f"; {why}"
+        return False, how, tail
     return True, (f"from a {qu0:.3g} error q_u stays within {tail:.3g} of nominal over the last second of {duration_s:g} s "
                   f"(ends {end:.3g}), peak command {res.metrics['u_max']:.3g} ctrl"), tail
+
+
+def _friction_cycle(robot, gains, rate: RateChoice, res, *, qu0: float, velocity_cutoff: float,
+                    duration_s: float) -> tuple[bool, str]:
+    """Whether the recovery run ``res`` (not fallen, q_u not back within ``qu0`` of nominal) is the stick-slip
+    cycle of the joints' dry friction around a balanced pole: over its last second
+
+        |q_u − q_u^e| ≤ qu0   (q_u^e the EIC's own BEM value each tick: the pole is at its balance)
+        |q_u − nominal| ≤ d   (inside the design region, :func:`design_region`)
+
+    and the same loop on the robot with every ``frictionloss`` set to 0 recovers (:func:`_recovery_run`): the
+    residual is the friction's.  Why: the EIC does not compensate dry friction (eq. 3), and with two actuated
+    joints whose BEM moves with their angles its external loop must stay slow (a narrow stable ridge,
+    :func:`~bemlearn.control.eic_linear.eic_fastest_gains`), so its pull on a stuck arm breaks the friction
+    only once the arm is well off rest; the arm sticks, the pole leans out along its BEM, the arm slips to the
+    other side.  Measured on a two-link arm with a pole (ω_a ≈ 1 rad/s, static friction 0.024–0.038 N·m):
+    over 12 s the cycle on q_u was ±0.011, 0.026, 0.050, 0.099, 0.18 rad for 0, ¼, ½, 1, 2 × the file's
+    friction, the pole's absolute angle within 0.02 rad of upright throughout.  Returns
+    ``(a friction cycle, what it is)``; ``(False, "")`` without dry friction.
+    """
+    import copy
+
+    if not np.any(robot.model.dof_frictionloss > 0):
+        return False, ""
+    from bemlearn.robots.mujoco_robot import MujocoRobot
+
+    iu = robot.unactuated_index
+    last = res.t >= res.t[-1] - 1.0
+    balance = float(np.max(np.abs(res.q[last, iu] - res.qu_e[last])))
+    dev = float(np.max(np.abs(res.q[last, iu] - robot.qu_nominal)))
+    d = design_region(robot).value
+    if balance > qu0 or dev > d:
+        return False, (f"with the dry friction it is no stick-slip cycle around a balanced pole (over the last second "
+                       f"|q_u − BEM| up to {balance:.3g}, |q_u − nominal| up to {dev:.3g}; design region ±{d:.3g})")
+    model = copy.deepcopy(robot.model)
+    model.dof_frictionloss[:] = 0.0
+    smooth = MujocoRobot(model, name=robot.name, source=robot.source)
+    ok0, how0, _ = _recovery_run(smooth, gains, rate, qu0=qu0, velocity_cutoff=velocity_cutoff, duration_s=duration_s)
+    if not ok0:
+        return False, f"without the dry friction it does not recover either ({how0})"
+    return True, (f"a stick-slip cycle of the joints' dry friction (frictionloss) around a balanced pole: q_u within "
+                  f"{balance:.3g} of the BEM over the last second, inside the design region (±{d:.3g}); without the dry "
+                  f"friction the same loop {how0}")
 
 
 def _reference_run(robot, gains, rate: RateChoice, reference: dict | None, *, velocity_cutoff: float) -> tuple[bool, str, float]:

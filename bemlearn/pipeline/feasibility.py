@@ -19,7 +19,9 @@ Four checks, each a number with a limit, from the robot's model and the resolved
 * **eic_recovery** (when ``eic`` passes) — the closed loop itself in MuJoCo with the model BEM, the sensors
   and every actuator limit, from a d/4 error of q_u at rest (:func:`~bemlearn.pipeline.derive.eic_recovery`):
   failing means the basin of the EIC at upright is smaller than the errors the robot starts from (an
-  acrobot's elbow swings to its stop from a 0.05 rad error).
+  acrobot's elbow swings to its stop from a 0.05 rad error).  A robot with dry friction also passes when the
+  loop holds it in the friction's stick-slip cycle around a balanced pole (q_u at its BEM, inside the design
+  region, and the same loop without the friction recovering: ``derive._friction_cycle``).
 * **excitation** — the peak ``ctrl`` and actuator force of the excitation LQR (``collect.gains``, when derived)
   for a d/4 error of q_u, as a multiple of the ctrlrange and forcerange (:func:`~bemlearn.control.lqr.discrete_lqr`):
   above 1 the excitation saturates and trials fall.
