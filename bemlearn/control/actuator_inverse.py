@@ -7,7 +7,8 @@ For a joint-transmission actuator i with gear g_i on joint j(i) (``general``/``m
     gain_i = a0_i + a1_i · l_i + a2_i · l̇_i          (gaintype fixed: a1 = a2 = 0)
 
 and the generalized force Σ_i B_{:,i} f_i, B = T⁻ᵀ B_j (:attr:`MujocoRobot.input_matrix`).
-Given the actuated generalized force τ_a (m,) the actuator forces are f = B_a⁺ τ_a and
+Given the actuated generalized force τ_a (m,) the actuator forces are f = B_a⁺ τ_a (the least-norm split when
+several actuators drive one coordinate, :mod:`bemlearn.robots.actuation`) and
 
     ctrl_i = (f_i − b0_i − b1_i l_i − b2_i l̇_i) / gain_i,
 
@@ -54,7 +55,7 @@ class MujocoActuatorInverse:
                 raise RobotModelError(f"{robot.source}: actuator {name!r} needs gaintype fixed/affine and biastype none/affine")
         self.Tinv = robot.Tinv_np
         self.identity = bool(robot.identity_coordinates)   # T = I: the map would only multiply by ones
-        self.B_pinv = np.linalg.pinv(robot.input_matrix_np[list(robot.actuated_index)])  # (nu, m)
+        self.B_pinv = robot.actuation.force_split  # (nu, m) B_a⁺: the least-norm split over a coordinate's actuators
         self.gear = model.actuator_gear[:, 0].copy()
         self.joint_dof = np.array([int(model.jnt_dofadr[model.actuator_trnid[i, 0]]) for i in range(model.nu)], dtype=np.int64)
         self.dof_col = {int(a): k for k, a in enumerate(robot._dadr)}

@@ -422,11 +422,12 @@ def actuator_effort(robot, inv, q: np.ndarray, qdd: np.ndarray) -> float:
     tau_a = (D @ qdd + h)[list(robot.actuated_index)]
     ctrl = inv.command(tau_a, q, np.zeros(robot.n), clip=False)
     force = inv.B_pinv @ tau_a
-    model = robot.model
+    from bemlearn.robots.actuation import force_limits
+
     out = float(np.max(np.abs(ctrl) / inv.limit)) if inv.limited.any() else 0.0
-    flim = model.actuator_forcelimited.astype(bool)
+    fmax = force_limits(robot.model, getattr(robot, "traction_limits", None))   # forcerange, actuatorfrcrange, a wheel's grip
+    flim = np.isfinite(fmax)
     if flim.any():
-        fmax = np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1]))
         out = max(out, float(np.max(np.abs(force[flim]) / fmax[flim])))
     return out
 
@@ -815,9 +816,9 @@ def _eic_peak(robot, w_u: float, e0: float) -> float:
     force = inv.B_pinv @ tau
     raw = force / inv.gainprm[:, 0]
     umax = np.where(inv.limited, inv.limit, np.inf)
-    model = robot.model
-    fmax = np.where(model.actuator_forcelimited.astype(bool),
-                    np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1])), np.inf)
+    from bemlearn.robots.actuation import force_limits
+
+    fmax = force_limits(robot.model, getattr(robot, "traction_limits", None))
     return float(max(np.max(np.abs(raw) / umax), np.max(np.abs(force) / fmax)))
 
 

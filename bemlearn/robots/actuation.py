@@ -1,0 +1,146 @@
+"""One command per actuated coordinate: the actuators that drive the same coordinate commanded together.
+
+The reduced input matrix B = Sᵀ B_j (``(n, nu)``, :attr:`MujocoRobot.input_matrix_np`) maps the actuator
+forces f to generalized forces; its actuated rows B_a (``(m, nu)``) say which coordinate each actuator drives.
+The excitation, the LQR and the EIC give one command per actuated coordinate (u has m entries).
+
+* nu = m: the commands are the actuators' own ``ctrl`` (W = I), whatever B_a (a declared coordinate map may
+  spread one actuator over several coordinates; B_a is then inverted as a whole).
+* nu > m: the actuators must form a *grouping*: each actuator drives exactly one actuated coordinate c (one
+  non-zero entry in its column of B_a) and each coordinate has at least one actuator, the group I_c.  The group
+  is one virtual actuator with command v_c, in the ``ctrl`` units of its first actuator k_c:
+
+      f_{I_c} = b_c⁺ τ_c = b_cᵀ τ_c / |b_c|²   (b_c = B_a[c, I_c]: the least-norm split of a coordinate force)   (A1)
+      ctrl_i = W_ic v_c,   W_ic = (b_ci / g_i) / (b_{c k_c} / g_{k_c})                                      (A2)
+
+  with g_i = ∂f_i/∂ctrl_i the actuator's gain at rest: the ``ctrl`` part of each member's force is then its
+  least-norm share of the coordinate force (two like wheel motors on opposite hinge axes: W = (1, −1)).
+  The limits of the group are what its members deliver together: |v_c| ≤ min_i ctrl_limit_i / |W_ic| (the most
+  restrictive member binds), and each member's force limit on its own share.
+* otherwise (an actuator on several coordinates with nu > m, or fewer actuators than coordinates): refused,
+  with a one-line reason (:func:`actuator_groups`).
+
+Force limits (:func:`force_limits`): an actuator's ``forcerange``, the ``actuatorfrcrange`` of the joint it
+drives (MuJoCo clamps the joint's actuator force gear·f to it; counted as |f| ≤ range/|gear| when the actuator
+is the joint's only one), and for a wheel its grip μ N r_eff / |gear| (beyond it the wheel slips and the rolling
+model no longer holds: :attr:`~bemlearn.robots.mujoco_robot.MujocoRobot.traction_limits`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+__all__ = ["ActuatorGroups", "actuator_groups", "force_limits"]
+
+#: Entries of B_a below this fraction of its largest are zero.
+_ZERO = 1e-12
+
+
+@dataclass(frozen=True)
+class ActuatorGroups:
+    """The map from one command per actuated coordinate to the actuators' ``ctrl`` (module docstring).
+
+    Attributes:
+        W: ``(nu, m)`` ctrl = W v (A2); the identity when nu = m.
+        force_split: ``(nu, m)`` f = B_a⁺ τ_a, the least-norm actuator forces of actuated generalized forces (A1).
+        members: per command, the actuator indices it drives (its first is the one whose ``ctrl`` it is).
+        names: ``(m,)`` a name per command: the actuator's own, or its members' joined by ``+``.
+        grouped: True when some command drives more than one actuator.
+        actuator_names: ``(nu,)`` the actuators' names.
+    """
+
+    W: np.ndarray
+    force_split: np.ndarray
+    members: tuple[tuple[int, ...], ...]
+    names: tuple[str, ...]
+    grouped: bool
+    actuator_names: tuple[str, ...]
+
+    def ctrl(self, v: np.ndarray) -> np.ndarray:
+        """``v (m,)`` commands → ``ctrl (nu,)`` (A2)."""
+        return self.W @ v
+
+    def command_of(self, ctrl: np.ndarray) -> np.ndarray:
+        """``ctrl (nu,)`` → ``(m,)`` the command each group's first actuator received (the inverse of :meth:`ctrl`
+        on its range)."""
+        return np.asarray(ctrl, dtype=np.float64)[[g[0] for g in self.members]]
+
+    def command_limits(self, ctrl_limit: np.ndarray) -> np.ndarray:
+        """``(m,)`` |v_c| ≤ min_{i ∈ I_c} ctrl_limit_i / |W_ic| for per-actuator limits ``ctrl_limit (nu,)``
+        (``inf`` where unlimited): the most restrictive member binds."""
+        with np.errstate(divide="ignore"):
+            per = np.where(np.abs(self.W) > 0, np.asarray(ctrl_limit, dtype=np.float64)[:, None] / np.abs(self.W), np.inf)
+        return per.min(axis=0)
+
+    def describe(self, coordinate_names: tuple[str, ...]) -> str:
+        """``wheel ← motor_l (×1) + motor_r (×−1)`` per grouped coordinate; ``""`` when nothing is grouped."""
+        if not self.grouped:
+            return ""
+        parts = []
+        for c, (members, cname) in enumerate(zip(self.members, coordinate_names)):
+            parts.append(f"{cname} ← " + " + ".join(f"{self.actuator_names[i]} (×{self.W[i, c]:.4g})" for i in members))
+        return ("one command per actuated coordinate, in its first actuator's ctrl units (each member's least-norm share): "
+                + "; ".join(parts))
+
+
+def actuator_groups(Ba: np.ndarray, gains: np.ndarray, names: tuple[str, ...],
+                    coordinate_names: tuple[str, ...]) -> ActuatorGroups | str:
+    """The :class:`ActuatorGroups` of the actuated input rows ``Ba (m, nu)`` (module docstring), or why there is none.
+
+    Args:
+        Ba: ``(m, nu)`` the actuated rows of B (generalized force per unit actuator force).
+        gains: ``(nu,)`` g_i = ∂f_i/∂ctrl_i at rest (``gainprm[0]``).
+        names: ``(nu,)`` actuator names.  coordinate_names: ``(m,)`` the actuated coordinates' names.
+
+    Returns:
+        the groups, or a one-line reason naming the actuators and coordinates.
+    """
+    Ba = np.asarray(Ba, dtype=np.float64)
+    m, nu = Ba.shape
+    split = np.linalg.pinv(Ba)
+    if nu == m:
+        return ActuatorGroups(np.eye(m), split, tuple((i,) for i in range(m)), tuple(names), False, tuple(names))
+    if nu < m:
+        return (f"{nu} actuators {list(names)} drive {m} actuated coordinates {list(coordinate_names)}; "
+                "every actuated coordinate needs its own actuator")
+    nz = np.abs(Ba) > _ZERO * max(float(np.abs(Ba).max(initial=0.0)), 1e-300)
+    for i in range(nu):
+        if int(nz[:, i].sum()) != 1:
+            on = [coordinate_names[c] for c in np.flatnonzero(nz[:, i])]
+            return (f"actuator {names[i]!r} drives {len(on)} actuated coordinates {on}; with {nu} actuators for {m} coordinates "
+                    "each actuator must drive exactly one (the actuators of a coordinate are commanded together)")
+    W = np.zeros((nu, m))
+    members = []
+    for c in range(m):
+        group = tuple(int(i) for i in np.flatnonzero(nz[c]))
+        if not group:
+            return f"no actuator drives the actuated coordinate {coordinate_names[c]!r}"
+        dead = [names[i] for i in group if not abs(gains[i]) > 0]
+        if dead:
+            return f"actuators {dead} have zero gain (gainprm[0] = 0): their ctrl moves nothing"
+        share = np.array([split[i, c] / gains[i] for i in group])
+        W[list(group), c] = share / share[0]
+        members.append(group)
+    out_names = tuple("+".join(names[i] for i in g) for g in members)
+    return ActuatorGroups(W, split, tuple(members), out_names, any(len(g) > 1 for g in members), tuple(names))
+
+
+def force_limits(model: mujoco.MjModel, traction: np.ndarray | None = None) -> np.ndarray:
+    """``(nu,)`` |f_i| limits of the actuators, N·m or N at the actuator (``inf`` where none): ``forcerange``,
+    for the only actuator on its joint the joint's ``actuatorfrcrange`` / |gear| (module docstring), and
+    ``traction (nu,)`` when given (a wheel's grip, :attr:`MujocoRobot.traction_limits`)."""
+    out = np.where(model.actuator_forcelimited.astype(bool),
+                   np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1])), np.inf)
+    joint_of = [int(model.actuator_trnid[i, 0]) for i in range(model.nu)]
+    limited = np.asarray(getattr(model, "jnt_actfrclimited", np.zeros(model.njnt)), dtype=bool)
+    for i, j in enumerate(joint_of):
+        if int(model.actuator_trntype[i]) != int(mujoco.mjtTrn.mjTRN_JOINT) or not limited[j] or joint_of.count(j) != 1:
+            continue
+        gear = abs(float(model.actuator_gear[i, 0]))
+        if gear > 0:
+            lim = max(abs(float(model.jnt_actfrcrange[j, 0])), abs(float(model.jnt_actfrcrange[j, 1])))
+            out[i] = min(out[i], lim / gear)
+    return out if traction is None else np.minimum(out, traction)
