@@ -39,6 +39,7 @@ Sign convention of collect: u = K e, e = [q − q_t, q̇ − q̇_t], so K = −K
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass
@@ -230,6 +231,8 @@ class ActuatorLimits:
         binding: per command, ``"ctrlrange"``, ``"forcerange"`` or ``"none"``: which limit sets u_max.
         W: ``(nu, m)`` ctrl = W v (the identity with one actuator per coordinate).
         ctrl_limit: ``(nu,)`` each actuator's half ``ctrlrange`` width (``inf`` where unlimited).
+        hold: ``(nu,)`` φ_i (eq. A3 of :mod:`bemlearn.robots.actuation`) when the command is held over a tick: the
+            force limits bound the tick's mean force, the first instant's / φ (``None``: the force now).
     """
 
     u_max: np.ndarray
@@ -240,6 +243,7 @@ class ActuatorLimits:
     binding: tuple[str, ...]
     W: np.ndarray
     ctrl_limit: np.ndarray
+    hold: np.ndarray | None = None
 
     @property
     def force_gain(self) -> np.ndarray:
@@ -250,6 +254,8 @@ class ActuatorLimits:
         """max over actuators of |ctrl| / ctrl limit and |f(x, u)| / f_max for commands ``u (m,)``, ``x (2n,)``."""
         ctrl = self.W @ u
         f = self.gain * ctrl + self.f_state @ x
+        if self.hold is not None:
+            f = f / self.hold
         return float(max(np.max(np.abs(ctrl) / self.ctrl_limit, initial=0.0), np.max(np.abs(f) / self.f_max, initial=0.0)))
 
 
@@ -300,7 +306,7 @@ def _lqr_scaled(robot: MujocoRobot, A: np.ndarray, B: np.ndarray, Q0: np.ndarray
     response from every start stays within the limits (ctrl only unless ``force``); at most 12 times."""
     from scipy.linalg import solve_discrete_are
 
-    u_ref = np.where(np.isfinite(limits.u_ctrl), limits.u_ctrl, limits.u_max)   # where ctrl is unlimited: the force's bound, else Bryson's 1
+    u_ref = np.where(np.isfinite(limits.u_ctrl), limits.u_ctrl, 1.0)   # Bryson's 1 where ctrl is unlimited, as its weight
     scale = 1.0
     for _ in range(13):
         R = scale * R0
@@ -384,7 +390,10 @@ def discrete_lqr(
     A, B, N, h = linearize(robot, rate_hz=rate_hz, timestep=timestep)
     B = B @ robot.actuation.W   # one command per actuated coordinate (ctrl = W u)
     xmax, umax, _ = bryson_scales(robot, design_qu=design_qu)
-    limits = actuator_limits(robot)
+    from bemlearn.robots.actuation import hold_factors, servo_relaxation
+
+    # held over a tick of 1/rate: the force limits bound the mean force (a servo faster than the tick, eq. A3)
+    limits = dataclasses.replace(actuator_limits(robot), hold=hold_factors(servo_relaxation(robot), 1.0 / rate_hz))
     notes = []
     if np.any(robot.model.dof_frictionloss > 0):
         notes.append("linearised without dry friction (frictionloss: a joint at rest sticks and finite differences see no input)")
@@ -405,7 +414,7 @@ def discrete_lqr(
     # weighs the actuator force f = G u + F x against its forcerange (a servo's force depends on the state: the
     # cross term S = Fᵀ R_f G) and checks every start's linear response against all limits.
     G, F = limits.force_gain, limits.f_state
-    Ru = np.diag(1.0 / np.where(np.isfinite(limits.u_ctrl), limits.u_ctrl, limits.u_max) ** 2)
+    Ru = np.diag(1.0 / np.where(np.isfinite(limits.u_ctrl), limits.u_ctrl, 1.0) ** 2)
     first = _lqr_scaled(robot, A, B, Q0, Ru, None, None, [qu_start], steps, limits, force=False)
     starts = [qu_start, *qa_starts]
     K, Q, R, peak, scale = first

@@ -20,6 +20,18 @@ The excitation, the LQR and the EIC give one command per actuated coordinate (u 
 * otherwise (an actuator on several coordinates with nu > m, or fewer actuators than coordinates): refused,
   with a one-line reason (:func:`actuator_groups`).
 
+A servo held over a control tick (:func:`servo_relaxation`, :func:`hold_factors`).  An actuator whose force falls
+with its joint's rate (affine bias b2 < 0: a velocity servo, a motor's back-EMF) drives its coordinate a toward
+its set point at the rate κ = −(D⁻¹)_aa Σ_k B_ak b2_k g_k (T⁻¹)_{j(k) a} (1/s: the coordinate's own mobility at
+upright, the other coordinates free, times the group's velocity feedback).  Held over a tick Δt its force decays
+as e^{−κt}: the tick's mean force is the first instant's divided by
+
+    φ = κΔt / (1 − e^{−κΔt})   (φ → 1 for a slow servo, κΔt for one far faster than the tick)           (A3)
+
+so a command meant to deliver a mean force f over the tick starts at φ f (:class:`MujocoActuatorInverse` with
+``hold_s``), and a limit is on the mean force (a servo faster than the tick that hits its ``forcerange`` or its
+wheel's grip reaches its set point later in the same tick: the impulse it can deliver is the limit × Δt).
+
 Force limits (:func:`force_limits`): an actuator's ``forcerange``, the ``actuatorfrcrange`` of the joint it
 drives (MuJoCo clamps the joint's actuator force gear·f to it; counted as |f| ≤ range/|gear| when the actuator
 is the joint's only one), and for a wheel its grip μ N r_eff / |gear| (beyond it the wheel slips and the rolling
@@ -33,7 +45,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-__all__ = ["ActuatorGroups", "actuator_groups", "force_limits"]
+__all__ = ["ActuatorGroups", "actuator_groups", "force_limits", "hold_factors", "servo_relaxation"]
 
 #: Entries of B_a below this fraction of its largest are zero.
 _ZERO = 1e-12
@@ -144,3 +156,37 @@ def force_limits(model: mujoco.MjModel, traction: np.ndarray | None = None) -> n
             lim = max(abs(float(model.jnt_actfrcrange[j, 0])), abs(float(model.jnt_actfrcrange[j, 1])))
             out[i] = min(out[i], lim / gear)
     return out if traction is None else np.minimum(out, traction)
+
+
+def servo_relaxation(robot) -> np.ndarray:
+    """``(nu,)`` κ_i, 1/s: how fast actuator i's velocity feedback (affine b2 < 0) drives its coordinate to its set
+    point at upright (module docstring, A3); 0 for an actuator without velocity feedback or on no single coordinate."""
+    model = robot.model
+    n = robot.n
+    q = np.zeros(n)
+    q[robot.unactuated_index] = robot.qu_nominal
+    D = robot.terms(q, np.zeros(n))[0]
+    mobility = np.diag(np.linalg.inv(D))
+    affine = model.actuator_biastype == int(mujoco.mjtBias.mjBIAS_AFFINE)
+    b2 = np.where(affine, model.actuator_biasprm[:, 2], 0.0)
+    dof_col = {int(a): k for k, a in enumerate(robot._dadr)}
+    B = robot.input_matrix_np
+    feedback = np.zeros(n)   # ∂τ_a/∂q̇_a of each coordinate's servos
+    coord = np.full(model.nu, -1)
+    for i in range(model.nu):
+        col = dof_col.get(int(model.jnt_dofadr[model.actuator_trnid[i, 0]]))
+        on = [a for a in robot.actuated_index if abs(B[a, i]) > 0]
+        if col is None or len(on) != 1:
+            continue
+        a = on[0]
+        coord[i] = a
+        feedback[a] += B[a, i] * b2[i] * float(model.actuator_gear[i, 0]) * robot.Tinv_np[col, a]
+    return np.array([max(0.0, -mobility[a] * feedback[a]) if a >= 0 else 0.0 for a in coord])
+
+
+def hold_factors(kappa: np.ndarray, dt: float) -> np.ndarray:
+    """``(nu,)`` φ = κΔt / (1 − e^{−κΔt}) (A3) of relaxation rates ``kappa (nu,)`` (1/s) over a tick ``dt`` (s)."""
+    x = np.asarray(kappa, dtype=np.float64) * float(dt)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.where(x > 1e-9, x / -np.expm1(-np.maximum(x, 1e-300)), 1.0 + 0.5 * x)
+    return out
