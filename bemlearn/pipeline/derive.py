@@ -136,6 +136,8 @@ def excitation_gains(robot, rate: RateChoice) -> Derived:
             f"{''.join('; ' + n for n in res.notes)}; closed-loop spectral radius "
             f"{res.spectral_radius:.4f}; per-trial gain scale U{scale}: the widest of ±40/20/10 % with ≥ 95 % of 400 "
             f"random per-gain scalings stable ({100 * frac:.0f} %), else none")
+    if (grouping := robot.actuation.describe(tuple(robot.actuated_names))):
+        note += f"; {grouping}"
     return Derived({"gains": gains, "gain_scale": scale}, note)
 
 
