@@ -366,14 +366,23 @@ class MujocoRobot(Robot):
     def coordinate_limits(self) -> tuple[tuple[float, float] | None, ...]:
         """Per coordinate, ``(lo, hi)`` in its unit, or ``None`` where it is unlimited (or not one joint).
 
-        A coordinate that is one MJCF joint takes the joint's range; a freedom that depends on it alone
+        A coordinate that is one MJCF joint takes the joint's range (a free body's wheel angle θ: every wheel's
+        range divided by its sign s_k; its pitch: ``None``); a freedom that depends on it alone
         by rolling (q_d = s·q_i, :mod:`bemlearn.robots.rolling`) adds its own range divided by s (a base
         slide of ±2 m limits a wheel of r_eff = 0.1525 m to ±13.1 rad).  A model-declared map
         (``bemlearn_coordinates``) gives ``None`` for every coordinate.
         """
+        model = self.model
+        if self.floating is not None:   # θ is the first wheel's hinge angle, each wheel turning s_k θ; the pitch is free
+            lo, hi = -math.inf, math.inf
+            for j, sk in zip(self.floating.wheels, self.floating.signs):
+                if model.jnt_limited[j]:
+                    a, b = sorted((float(model.jnt_range[j, 0] / sk), float(model.jnt_range[j, 1] / sk)))
+                    lo, hi = max(lo, a), min(hi, b)
+            wheel = (lo, hi) if math.isfinite(lo) or math.isfinite(hi) else None
+            return tuple(wheel if k != self.unactuated_index else None for k in range(self.n))
         if self.coordinate_joints is None:
             return (None,) * self.n
-        model = self.model
         out: list[tuple[float, float] | None] = []
         for k, j in enumerate(self.coordinate_joints):
             lo, hi = (float(model.jnt_range[j, 0]), float(model.jnt_range[j, 1])) if model.jnt_limited[j] else (-math.inf, math.inf)
