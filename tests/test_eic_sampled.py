@@ -55,29 +55,28 @@ def test_tick_loop_predicts_the_closed_loop_simulation(name):
     assert loop.spectral_radius < 1
 
 
-def test_held_velocity_servo_pendubot_sampled_loop_and_recovery(tmp_path):
-    """Family robot (0, 33), a pendubot with a velocity servo (κ = 140 1/s against a 4.2 ms tick: φ = 1.32, eq. A3 of
-    bemlearn.robots.actuation).  Before the actuator inverse counted the servo's relaxation within the tick (A4), the
-    rule's gains made the sampled loop grow (spectral radius > 1) and the robot fall; with it the rule's sampled loop
-    decays (0.993 per tick), the continuous model agrees it is stable, and the derived gains bring the robot back
-    from a d/4 error in MuJoCo."""
+def test_velocity_filter_lag_destabilises_a_pendubot_the_continuous_model_calls_stable(tmp_path):
+    """Family robot (0, 33), a pendubot with a velocity servo: with the rule's gains the continuous linearisation
+    is stable but the sampled loop with its velocity filter grows, and the closed loop falls in MuJoCo; the derived
+    gains (the search) make the sampled loop decay and the robot recover from a d/4 error.  (With the
+    family's 4096-count encoder the rule's loop falls in the pipeline's closed loop at 1.3 s, docs/family.md.)"""
     from bemlearn.bench.family.generator import generate_robot
-    from bemlearn.robots.actuation import hold_factors, servo_relaxation
 
     xml, _ = generate_robot(0, 33, hold_check=False)
     path = tmp_path / "fam0_033.xml"
     path.write_text(xml)
     robot = MujocoRobot.from_xml(path)
     rate = derive.control_rate(robot).value
-    kappa = servo_relaxation(robot)
-    x = kappa[0] / rate.rate_hz
-    assert hold_factors(kappa, 1 / rate.rate_hz)[0] == pytest.approx(x / (1 - math.exp(-x)), rel=1e-12)
     wc = derive.closed_loop_sensor(robot, rate).value["velocity_cutoff"]
     w_u = 2.2 * instability_rate(robot)
     rule = EICGains(kp_a=(w_u / 7) ** 2, kd_a=2 * w_u / 7, kp_u=w_u**2, kd_u=2 * w_u)
     assert eic_linear_abscissa(robot, rule) < -1.0
-    assert 0.98 < eic_tick_loop(robot, rule, rate_hz=rate.rate_hz, velocity_cutoff=wc).spectral_radius < 1.0
+    assert eic_tick_loop(robot, rule, rate_hz=rate.rate_hz, velocity_cutoff=wc).spectral_radius > 1.0
+    res = _sim(robot, rule, rate, qu0=0.01, cutoff=wc, counts=0, seconds=5.0)
+    last = np.abs(res.q[res.t > 4.0, robot.unactuated_index] - robot.qu_nominal)
+    assert res.fell or np.max(last) > 3 * 0.01     # grows (e^{0.49·5} ≈ 11 in the linearisation)
     derived = derive.eic_gains(robot, rate)
+    assert derived.value.kp_u != pytest.approx(rule.kp_u)
     assert eic_tick_loop(robot, derived.value, rate_hz=rate.rate_hz, velocity_cutoff=wc).spectral_radius < 1.0
     ok, how = derive.eic_recovery(robot, derived.value, rate, qu0=0.05, velocity_cutoff=wc)
     assert ok, how

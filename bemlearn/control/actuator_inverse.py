@@ -47,8 +47,8 @@ class MujocoActuatorInverse:
     Args:
         robot: a :class:`~bemlearn.robots.MujocoRobot` (its model, coordinate map and B).
         hold_s: the control tick, s, when the command is held over it: f is then the tick's mean force, and an
-            actuator with velocity feedback (a velocity servo, back-EMF) starts at φ f (eq. A3 of
-            :mod:`bemlearn.robots.actuation`; φ → 1 for one slower than the tick).  ``None``: f is the force now.
+            actuator with velocity feedback (a velocity servo, back-EMF) that settles within the tick (φ ≥ 2, eq. A5
+            of :mod:`bemlearn.robots.actuation`) starts at φ f (A3); the others keep f now.  ``None``: f is the force now.
 
     Raises:
         ValueError: an actuator with dynamics (``dyntype`` ≠ none) or a gain/bias type
@@ -77,10 +77,11 @@ class MujocoActuatorInverse:
         self.limited = model.actuator_ctrllimited.astype(bool)
         self.limit = np.where(self.limited, np.maximum(np.abs(self.lo), np.abs(self.hi)), np.inf)
         self.hold = np.ones(model.nu)
-        if hold_s is not None:   # the command is held over a tick: a servo's first-instant force φ × the mean (A3)
-            from bemlearn.robots.actuation import hold_factors, servo_relaxation
+        if hold_s is not None:   # the command is held over a tick: a fast servo's first-instant force φ × the mean (A3, A5)
+            from bemlearn.robots.actuation import held_servo_factors
 
-            self.hold = hold_factors(servo_relaxation(robot), hold_s)
+            if (phi := held_servo_factors(robot, hold_s)) is not None:
+                self.hold = phi
         self._robot = robot if bool(np.any(self.hold != 1.0)) else None
         self._ia = list(robot.actuated_index)
 

@@ -344,7 +344,7 @@ def holds_in_mujoco(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, timest
     N = max(1, int(round(1.0 / (rate_hz * float(model.opt.timestep)))))
     lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
     limited = model.actuator_ctrllimited.astype(bool)
-    T, W = robot.T_np, robot.actuation.W
+    T, groups = robot.T_np, robot.actuation
     nominal = np.zeros(n)
     nominal[iu] = robot.qu_nominal
     ticks = int(math.ceil(check_s * rate_hz))
@@ -356,7 +356,7 @@ def holds_in_mujoco(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, timest
             qd = T @ data.qvel[robot._dadr]
             if not abs(q[iu] - robot.qu_nominal) <= 4 * qu0:
                 return False, f"it leaves |q_u − nominal| ≤ {4 * qu0:.3g} from start {k} in MuJoCo"
-            u = W @ (K @ np.concatenate([q - nominal, qd]))
+            u = groups.ctrl(K @ np.concatenate([q - nominal, qd]))
             data.ctrl[:] = np.where(limited, np.clip(u, lo, hi), u)
             for _ in range(N):
                 mujoco.mj_step(model, data)
@@ -388,12 +388,13 @@ def discrete_lqr(
         check_s: duration of the check, s.
     """
     A, B, N, h = linearize(robot, rate_hz=rate_hz, timestep=timestep)
-    B = B @ robot.actuation.W   # one command per actuated coordinate (ctrl = W u)
+    if robot.actuation.grouped:
+        B = B @ robot.actuation.W   # one command per actuated coordinate (ctrl = W u)
     xmax, umax, _ = bryson_scales(robot, design_qu=design_qu)
-    from bemlearn.robots.actuation import hold_factors, servo_relaxation
+    from bemlearn.robots.actuation import held_servo_factors
 
-    # held over a tick of 1/rate: the force limits bound the mean force (a servo faster than the tick, eq. A3)
-    limits = dataclasses.replace(actuator_limits(robot), hold=hold_factors(servo_relaxation(robot), 1.0 / rate_hz))
+    # held over a tick of 1/rate: the force limits bound the mean force (a servo that settles within the tick, A3, A5)
+    limits = dataclasses.replace(actuator_limits(robot), hold=held_servo_factors(robot, 1.0 / rate_hz))
     notes = []
     if np.any(robot.model.dof_frictionloss > 0):
         notes.append("linearised without dry friction (frictionloss: a joint at rest sticks and finite differences see no input)")
@@ -453,7 +454,7 @@ class GainSchedule:
     Attributes:
         coords: indices into the actuated coordinates (0 … m−1) that are scheduled.
         grids: per scheduled coordinate the poses ``(points,)``, its unit, increasing.
-        deltas: per scheduled coordinate ΔK ``(points, nu, 2n)`` (collect's convention u = K e).
+        deltas: per scheduled coordinate ΔK ``(points, m, 2n)`` (collect's convention u = K e).
         periodic: per scheduled coordinate whether it wraps (an unlimited hinge).
         rho_fixed: per scheduled coordinate the worst spectral radius of the fixed gains over its grid (≥ 1: why it is
             scheduled).
@@ -468,7 +469,7 @@ class GainSchedule:
     rho_scheduled: tuple[float, ...]
 
     def delta(self, qa: np.ndarray) -> np.ndarray:
-        """ΔK ``(nu, 2n)`` at the actuated pose ``qa (m,)`` (joint units)."""
+        """ΔK ``(m, 2n)`` at the actuated pose ``qa (m,)`` (joint units)."""
         out = np.zeros(self.deltas[0].shape[1:])
         for i, g, d, per in zip(self.coords, self.grids, self.deltas, self.periodic):
             q = float(qa[i])
@@ -512,7 +513,7 @@ _SCHEDULES: dict = {}
 
 def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, timestep: float | None, extents: np.ndarray,
                        design_qu: float, qu0: float, qa0: float | None, points: int = 49) -> GainSchedule | None:
-    """Which actuated coordinates' pose makes the fixed gains ``K (nu, 2n)`` (collect's convention) fail, and the gains
+    """Which actuated coordinates' pose makes the fixed gains ``K (m, 2n)`` (collect's convention) fail, and the gains
     scheduled over them (:class:`GainSchedule`).
 
     Coordinate j is scheduled when u = K e does not stabilise the tick map linearised at some pose of j alone within
@@ -540,6 +541,8 @@ def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, tim
             at = np.zeros(m)
             at[j] = q
             A, B, _, _ = linearize(robot, rate_hz=rate_hz, timestep=timestep, at=at)
+            if robot.actuation.grouped:
+                B = B @ robot.actuation.W   # one command per actuated coordinate (ctrl = W u)
             maps.append((A, B))
             rho = max(rho, float(np.max(np.abs(np.linalg.eigvals(A + B @ K)))))
         if rho >= 1.0:

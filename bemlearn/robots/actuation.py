@@ -32,6 +32,20 @@ so a command meant to deliver a mean force f over the tick starts at φ f (:clas
 ``hold_s``), and a limit is on the mean force (a servo faster than the tick that hits its ``forcerange`` or its
 wheel's grip reaches its set point later in the same tick: the impulse it can deliver is the limit × Δt).
 
+When the correction is made (:func:`held_servo_factors`).  A command computed for the force now and held over the
+tick delivers the mean force f/φ: the loop through that actuator (the EIC's actuated feedback and its feedforward)
+runs at gain 1/φ.  A loop with the classical gain margin of 2 (6 dB) stays stable and keeps its form down to half
+its gain, and the EIC's gains are moreover checked on MuJoCo's own tick map, which holds the servo's relaxation
+(:func:`~bemlearn.control.eic_linear.eic_tick_loop`, :func:`~bemlearn.pipeline.derive.eic_recovery`).  So the
+held force is corrected only where it would deliver less than half the force asked for,
+
+    φ ≥ 2   ⇔   κΔt ≥ 1.594   (the servo's time constant 1/κ at most 0.63 Δt: it settles within the tick)      (A5)
+
+and an actuator below it keeps the force-now inverse and its limits unchanged.  Measured (control rate derived by
+``derive.control_rate``): the 64 seed-0 family robots reach φ = 1.35 at most with one actuated coordinate
+(a velocity-servo pendubot, κΔt = 0.64) and 1.82 on any (a two-link arm's velocity servo, κΔt = 1.35), none
+selected; the public two-wheeled ``balance_robot``'s wheel velocity servos have κΔt = 30.3 (φ = 30.3).
+
 Force limits (:func:`force_limits`): an actuator's ``forcerange``, the ``actuatorfrcrange`` of the joint it
 drives (MuJoCo clamps the joint's actuator force gear·f to it; counted as |f| ≤ range/|gear| when the actuator
 is the joint's only one), and for a wheel its grip μ N r_eff / |gear| (beyond it the wheel slips and the rolling
@@ -45,7 +59,11 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-__all__ = ["ActuatorGroups", "actuator_groups", "force_limits", "hold_factors", "servo_relaxation"]
+__all__ = ["HOLD_CORRECTION_MIN", "ActuatorGroups", "actuator_groups", "force_limits", "held_servo_factors", "hold_factors",
+           "servo_relaxation"]
+
+#: φ (A3) from which a held servo's mean force is corrected (A5): the uncorrected loop would run below half its gain.
+HOLD_CORRECTION_MIN = 2.0
 
 #: Entries of B_a below this fraction of its largest are zero.
 _ZERO = 1e-12
@@ -72,8 +90,8 @@ class ActuatorGroups:
     actuator_names: tuple[str, ...]
 
     def ctrl(self, v: np.ndarray) -> np.ndarray:
-        """``v (m,)`` commands → ``ctrl (nu,)`` (A2)."""
-        return self.W @ v
+        """``v (m,)`` commands → ``ctrl (nu,)`` (A2); ``v`` itself with one actuator per coordinate (W = I)."""
+        return self.W @ v if self.grouped else np.asarray(v, dtype=np.float64)
 
     def command_of(self, ctrl: np.ndarray) -> np.ndarray:
         """``ctrl (nu,)`` → ``(m,)`` the command each group's first actuator received (the inverse of :meth:`ctrl`
@@ -190,3 +208,13 @@ def hold_factors(kappa: np.ndarray, dt: float) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         out = np.where(x > 1e-9, x / -np.expm1(-np.maximum(x, 1e-300)), 1.0 + 0.5 * x)
     return out
+
+
+def held_servo_factors(robot, dt: float) -> np.ndarray | None:
+    """``(nu,)`` φ_i (A3) of the actuators whose held force is corrected over a tick ``dt`` (s), φ_i ≥ 2 (A5), and 1
+    for the others; ``None`` where no actuator is (the force-now inverse and limits, unchanged)."""
+    phi = hold_factors(servo_relaxation(robot), dt)
+    selected = phi >= HOLD_CORRECTION_MIN
+    if not bool(np.any(selected)):
+        return None
+    return np.where(selected, phi, 1.0)
