@@ -154,7 +154,7 @@ def _robust_gain_scale(A: np.ndarray, B: np.ndarray, K: np.ndarray, *, rate_hz: 
         nothing) names the wider ranges the filtered loop refused.
     """
     rng = np.random.default_rng(0)
-    refused = []
+    refused: list[tuple[float, float]] = []
     n = A.shape[0] // 2
     for w in (0.4, 0.2, 0.1):
         s = rng.uniform(1 - w, 1 + w, size=(draws, *K.shape))
