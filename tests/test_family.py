@@ -223,12 +223,13 @@ def _predictor_file(tmp_path, xml, truth, *, scale=1.0, offset=0.0, n=300):
 
 
 def test_compare_predictor_scores_a_right_and_two_wrong_learned_bems(tmp_path):
-    from bemlearn.bench.family.score import compare_predictor
+    from bemlearn.bench.family.score import N_QUERIES, compare_predictor
 
     xml, truth = generate_robot(0, 6, hold_check=False)  # a cart-pole whose upright is not at 0 (geometry)
     assert truth["features"]["upright_at"] == "other"
     right = compare_predictor(_predictor_file(tmp_path, xml, truth), xml, truth)
-    assert right["rmse"] < 2e-3 and abs(right["gain"] - 1) < 0.02 and right["n_queries"] == 400
+    assert right["rmse"] < 2e-3 and abs(right["gain"] - 1) < 0.02 and right["n_queries"] == N_QUERIES
+    assert math.isnan(right["probe_error"])
     assert 0.0 <= right["band_coverage"] <= 1.0
     flat = compare_predictor(_predictor_file(tmp_path, xml, truth, scale=0.5), xml, truth)
     assert abs(flat["gain"] - 0.5) < 0.02 and flat["rmse"] > 0.02
@@ -237,6 +238,36 @@ def test_compare_predictor_scores_a_right_and_two_wrong_learned_bems(tmp_path):
     assert turned["rmse"] < 2e-3
     hanging = compare_predictor(_predictor_file(tmp_path, xml, truth, offset=math.pi), xml, truth)
     assert hanging["rmse"] > 3.0
+
+
+def test_the_runs_worst_point_is_one_more_query_moved_into_the_oracles_box(tmp_path):
+    """The run's own worst design-region point (here 10× the box's velocity, a slide rate a cart-pole's BEM does not
+    depend on, and 10× its position span) is clipped into the
+    oracle's box and scored there: its error is |learned − oracle| at the clipped motion, computed independently."""
+    import torch
+
+    from bemlearn.bench.family.score import N_QUERIES, compare_predictor
+    from bemlearn.export.torchscript import load_torchscript
+
+    xml, truth = generate_robot(0, 6, hold_check=False)
+    pred = _predictor_file(tmp_path, xml, truth, scale=0.5)
+    o = Oracle(xml, truth["qu_upright"])
+    sc = o.scales()
+    joint = truth["actuated_joints"][0]
+    x0e = [0.7 * sc["acc"][0], -10 * sc["vel"][0], 10 * sc["pos"][0][1]]
+    got = compare_predictor(pred, xml, truth, n_queries=64, probe={"names": [joint], "x0e": x0e})
+    assert got["n_queries"] == 65
+    qa, qd, qdd = o.clip_to_box(np.array([x0e[2]]), np.array([x0e[1]]), np.array([x0e[0]]))
+    assert qdd[0] == x0e[0] and qd[0] == pytest.approx(-sc["vel"][0], rel=1e-12) and qa[0] == pytest.approx(sc["pos"][0][1], rel=1e-12)
+    want = o.bem(qa[None], qd[None], qdd[None])[0]
+    with torch.no_grad():
+        learned = float(load_torchscript(pred).bem_mean(torch.tensor([[qdd[0], qd[0], qa[0]]], dtype=torch.float64))[0])
+    assert got["probe_error"] == pytest.approx(abs(learned - want), abs=1e-12)
+    assert got["probe_error"] > 0.05          # the half-gain BEM where the acceleration tilts the pole by ~0.14 rad
+    # a probe naming other joints is not scored
+    other = compare_predictor(pred, xml, truth, n_queries=64, probe={"names": ["elsewhere"], "x0e": x0e})
+    assert other["n_queries"] == 64 and math.isnan(other["probe_error"])
+    assert N_QUERIES == 4096
 
 
 def test_balance_and_reason_judgements_and_the_table():

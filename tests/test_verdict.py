@@ -60,6 +60,23 @@ def _design(gain=1.0, rmse=0.001, mx=0.004, cov=1.0, bound=0.2):
     ({**_design(), "closed_loop": {"predictor": {"fell": False, "diverged": False, "qu_dev_max": 0.29}}}, "ok", None),
     ({"closed_loop": {"predictor": {"fell": False, "diverged": False, "lemma1": {"r_learned_vs_model_delta_gamma": -0.79, "r_learned_vs_hdot": -0.79}}}},
      "degraded", "lemma1"),
+    # only the damping part b_u q̇_u^e is off (r = 1 with the model's), and its error moves q_u along the reference by
+    # |b − 1| · damping_qu = 3.9 × 5.8e-7 rad, below the held-out q_u error: a note (a pendubot's elbow, b_u 1.3e-4)
+    ({"data_heldout": {"rmse": 8.4e-4}, "closed_loop": {"predictor": {"fell": False, "diverged": False, "lemma1": {
+        "r_learned_vs_model_delta_gamma": 0.88, "r_learned_vs_hdot": 0.94, "hdot_coefficient": 0.999,
+        "damping_coefficient": -2.89, "r_model_damping": 0.99999, "damping_qu": 5.8e-7}}}}, "ok", "lemma1"),
+    # the same damping error where it moves q_u by more than the held-out error: the map contradicts Lemma 1
+    ({"data_heldout": {"rmse": 2e-6}, "closed_loop": {"predictor": {"fell": False, "diverged": False, "lemma1": {
+        "r_learned_vs_model_delta_gamma": 0.88, "r_learned_vs_hdot": 0.94, "hdot_coefficient": 0.999,
+        "damping_coefficient": -2.89, "r_model_damping": 0.99999, "damping_qu": 5.8e-7}}}}, "degraded", "lemma1"),
+    # Ḣ_u itself off (the damping part cannot explain it): degraded however small the damping
+    ({"data_heldout": {"rmse": 8.4e-4}, "closed_loop": {"predictor": {"fell": False, "diverged": False, "lemma1": {
+        "r_learned_vs_model_delta_gamma": 0.5, "r_learned_vs_hdot": 0.5, "hdot_coefficient": 0.4,
+        "damping_coefficient": 1.0, "r_model_damping": 0.5, "damping_qu": 5.8e-7}}}}, "degraded", "lemma1"),
+    # no held-out error to compare with: degraded
+    ({"closed_loop": {"predictor": {"fell": False, "diverged": False, "lemma1": {
+        "r_learned_vs_model_delta_gamma": 0.88, "r_learned_vs_hdot": 0.94, "hdot_coefficient": 0.999,
+        "damping_coefficient": -2.89, "r_model_damping": 0.99999, "damping_qu": 5.8e-7}}}}, "degraded", "lemma1"),
     ({"dataset": {"derivative_choice": {"qdd_noise_fraction": {"pole": 0.07}}}}, "degraded", "derivatives"),
     ({"feasibility": [{"name": "eic", "passed": False, "severity": "unusable", "text": "unstable"}]}, "unusable", "model:eic"),
 ])
@@ -172,3 +189,18 @@ def test_run_of_a_robot_that_cannot_be_balanced_stops_after_the_model_checks(tmp
     assert p.stdout.strip().splitlines()[-1].startswith("Verdict: unusable")
     assert not (out / "data.npz").exists() and not (out / "checkpoint.pt").exists()
     assert math.isfinite(metrics["feasibility"][0]["value"])
+
+
+def test_lemma1_split_recovers_the_coefficients_of_its_two_parts():
+    """ΔΓ_learned = a Ḣ_u + b (b_u q̇_u^e) + c, with Ḣ_u ∝ −ω² sin and the damping part ∝ cos (quadrature): the split
+    returns a, b exactly; damping_qu = std(damping) / |Γ_q|; with the damping replaced by the model's, r = 1."""
+    from bemlearn.pipeline.lemma import _split
+
+    t = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    hdot, damping = -4.0 * np.sin(t) + 0.5 * np.sin(3 * t), 0.3 * np.cos(t)
+    a, b, r_md, dqu = _split(0.97 * hdot - 2.5 * damping + 1e-3, hdot, damping, gamma_q=0.6)
+    assert abs(a - 0.97) < 1e-12 and abs(b + 2.5) < 1e-12
+    assert abs(dqu - np.std(damping) / 0.6) < 1e-15
+    assert r_md == pytest.approx(np.corrcoef(0.97 * hdot + damping, hdot + damping)[0, 1], abs=1e-12)
+    a0, b0, r0, d0 = _split(1.1 * hdot, hdot, np.zeros_like(t), gamma_q=0.6)     # no damping on q_u
+    assert abs(a0 - 1.1) < 1e-12 and math.isnan(b0) and math.isnan(r0) and d0 == 0.0

@@ -20,6 +20,15 @@ the public two-wheeler r = 0.37 there, 0.998 along (0.1971, 0.3942) Hz).  :func:
 keeps a reference the nodes resolve (f_max T ≤ N / 16: at least 16 nodes per cycle of the fastest
 component, its harmonics to the 8th resolved) and otherwise takes the commensurate frequencies it
 was written from, f_k = (p_k/q_k) f_min (small integers, within the written digits' rounding).
+
+The learned ΔΓ is also split by least squares over the model's two parts,
+
+    ΔΓ_learned ≈ a Ḣ_u + b (b_u q̇_u^e),
+
+a = b = 1 where the learned map reproduces both.  The damping part rests on the map's slope in q̇_u
+alone, which balanced data often do not fix (q̇_u moves in lockstep with q̇_a); its size in q_u along
+the reference, std(b_u q̇_u^e) / |Γ_q| with Γ_q = −D_uu / (∂f/∂q̈_u), says whether a wrong b could be
+seen at all at the learned map's accuracy (the verdict compares it with the held-out error).
 """
 
 from __future__ import annotations
@@ -61,6 +70,14 @@ class LearnedLemma1:
         r: Pearson correlation of ``delta_gamma_learned`` with Ḣ_u + b_u q̇_u^e (the model's ΔΓ).
         r_hdot: its correlation with Ḣ_u alone.
         model_gap: max |ΔΓ − Ḣ_u − b_u q̇_u^e| of the model side.
+        hdot_coefficient: a of the split (module docstring).
+        damping_coefficient: b of the split; NaN where the model's damping part is zero along the
+            reference (no passive damping on q_u).
+        r_model_damping: the correlation with the model's ΔΓ once the learned damping part is
+            replaced by the model's (``delta_gamma_learned − (b − 1) b_u q̇_u^e``); equals ``r`` when
+            b is NaN.
+        damping_qu: std(b_u q̇_u^e) / |Γ_q| along the reference, in q_u's unit: how far the damping
+            part moves q_u (0 without damping).
     """
 
     t: np.ndarray
@@ -71,6 +88,10 @@ class LearnedLemma1:
     r: float
     r_hdot: float
     model_gap: float
+    hdot_coefficient: float = float("nan")
+    damping_coefficient: float = float("nan")
+    r_model_damping: float = float("nan")
+    damping_qu: float = 0.0
 
 
 def learned_lemma1(bem_fn: Callable[[np.ndarray], np.ndarray], full_fn: Callable[[np.ndarray], np.ndarray], robot: BalanceRobot,
@@ -110,8 +131,27 @@ def learned_lemma1(bem_fn: Callable[[np.ndarray], np.ndarray], full_fn: Callable
     target = L.hdot + L.damping
     r = float(np.corrcoef(dg_learned, target)[0, 1])
     r_hdot = float(np.corrcoef(dg_learned, L.hdot)[0, 1])
+    a, b, r_md, damping_qu = _split(dg_learned, L.hdot, L.damping, gamma_q=float(np.median(np.abs(duu / dfdqdd))))
     return LearnedLemma1(t=L.t, hdot=L.hdot, damping=L.damping, delta_gamma_model=L.delta_gamma, delta_gamma_learned=dg_learned,
-                         r=r, r_hdot=r_hdot, model_gap=float(np.abs(L.gap).max()))
+                         r=r, r_hdot=r_hdot, model_gap=float(np.abs(L.gap).max()), hdot_coefficient=a, damping_coefficient=b,
+                         r_model_damping=r_md if math.isfinite(r_md) else r, damping_qu=damping_qu)
+
+
+def _split(dg: np.ndarray, hdot: np.ndarray, damping: np.ndarray, *, gamma_q: float) -> tuple[float, float, float, float]:
+    """``(a, b, r_model_damping, damping_qu)`` of ΔΓ_learned ≈ a Ḣ_u + b (b_u q̇_u^e) (module docstring).
+
+    The damping part counts only where it is above rounding next to Ḣ_u (``1e-9`` of its spread).
+    """
+    scale = float(np.std(hdot)) + float(np.std(damping))
+    has_damping = float(np.std(damping)) > 1e-9 * scale
+    damping_qu = float(np.std(damping)) / gamma_q if has_damping and gamma_q > 0 else 0.0
+    if not has_damping:
+        a = float(np.linalg.lstsq(np.stack([hdot, np.ones_like(hdot)], 1), dg, rcond=None)[0][0])
+        return a, math.nan, math.nan, damping_qu
+    coef = np.linalg.lstsq(np.stack([hdot, damping, np.ones_like(hdot)], 1), dg, rcond=None)[0]
+    a, b = float(coef[0]), float(coef[1])
+    r_md = float(np.corrcoef(dg - (b - 1.0) * damping, hdot + damping)[0, 1])
+    return a, b, r_md, damping_qu
 
 
 def lemma1_reference(reference: CompositeSinusoid, *, n_nodes: int = 256) -> tuple[CompositeSinusoid, str]:

@@ -315,7 +315,10 @@ def _closed_loop_lines(sim: Mapping[str, LoopMetrics], data: DataInfo, train: Ru
     if lem is not None:
         lines += ["", f"Lemma 1 along the reference: model-based max |ΔΓ − Ḣ_u − b_u q̇_u^e| = {_f(lem.model_gap, '.1e')}; "
                   f"learned ΔΓ vs Ḣ_u correlation r = {_f(lem.r_learned_vs_hdot, '.4f')} (vs the model's ΔΓ: "
-                  f"{_f(lem.r_learned_vs_model_delta_gamma, '.4f')})."]
+                  f"{_f(lem.r_learned_vs_model_delta_gamma, '.4f')})"
+                  + (f"; split ΔΓ_learned ≈ {_f(lem.hdot_coefficient, '.3g')} Ḣ_u + ({_f(lem.damping_coefficient, '.3g')}) b_u q̇_u^e, "
+                     f"the damping part moving q_u by {_f(lem.damping_qu, '.2g')} along the reference"
+                     if _finite(lem.damping_coefficient) else "") + "."]
     if ZERO_SOURCE in sim:
         lines += ["", f"The {ZERO_SOURCE} BEM (q_u^e = 0, no BEM at all) is the baseline of the paper's Fig. 2: it is expected "
                   "to fall or diverge, and its failure is not a failure of the run."]

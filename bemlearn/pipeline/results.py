@@ -102,15 +102,22 @@ class TrainResult:
 
 @dataclass(frozen=True)
 class Lemma1Check:
-    """Lemma 1 (eq. 10) along the closed loop of the learned BEM: correlations of the learned ΔΓ."""
+    """Lemma 1 (eq. 10) along the closed loop of the learned BEM: correlations of the learned ΔΓ and its split
+    a Ḣ_u + b (b_u q̇_u^e) (:class:`~bemlearn.pipeline.lemma.LearnedLemma1`)."""
 
     r_learned_vs_model_delta_gamma: float
     r_learned_vs_hdot: float
     model_gap: float
+    hdot_coefficient: float = float("nan")
+    damping_coefficient: float = float("nan")
+    r_model_damping: float = float("nan")
+    damping_qu: float = 0.0
 
     def as_dict(self) -> dict[str, float]:
         return {"r_learned_vs_model_delta_gamma": self.r_learned_vs_model_delta_gamma,
-                "r_learned_vs_hdot": self.r_learned_vs_hdot, "model_gap": self.model_gap}
+                "r_learned_vs_hdot": self.r_learned_vs_hdot, "model_gap": self.model_gap,
+                "hdot_coefficient": self.hdot_coefficient, "damping_coefficient": self.damping_coefficient,
+                "r_model_damping": self.r_model_damping, "damping_qu": self.damping_qu}
 
 
 #: The entries of a loop that a run's ``metrics.json`` keeps under ``closed_loop.<source>``.

@@ -182,6 +182,7 @@ class DesignRegionInfo(_Record):
     bound: float | None = None
     box: dict[str, dict[str, float]] | None = None
     coverage_2sigma_band: float | None = None
+    worst: dict[str, Any] | None = None
 
 
 @dataclass(kw_only=True)
@@ -380,6 +381,10 @@ class Lemma1Info(_Record):
     r_learned_vs_model_delta_gamma: float | None = None
     r_learned_vs_hdot: float | None = None
     model_gap: float | None = None
+    hdot_coefficient: float | None = None
+    damping_coefficient: float | None = None
+    r_model_damping: float | None = None
+    damping_qu: float | None = None
 
 
 @dataclass(kw_only=True)
@@ -434,6 +439,7 @@ class RunMetrics(_Record):
     fit: FitInfo | None = field(default=None, metadata=_one(FitInfo))
     units: dict[str, str] | None = None
     unactuated: str | None = None
+    actuated: list[str] | None = None
     output_unit: str | None = None
     n_train: int | None = None
     dataset: DatasetInfo | None = field(default=None, metadata=_one(DatasetInfo))

@@ -382,6 +382,15 @@ class Oracle:
         qa, qd, qdd, q = (np.concatenate([r[i] for r in rows])[:n] for i in range(4))
         return {"qa": qa, "qda": qd, "qdda": qdd, "bem": q}
 
+    def clip_to_box(self, qa: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The actuated motion ``(qa, qd, qdd)`` (each (m,)) moved into the box :meth:`design_queries` draws from:
+        each position into its span, each velocity within ±``vel``, each acceleration within ±1.3 ``acc``."""
+        sc = self.scales()
+        lo = np.array([p[0] for p in sc["pos"]])
+        hi = np.array([p[1] for p in sc["pos"]])
+        vel, acc = np.asarray(sc["vel"]), 1.3 * np.asarray(sc["acc"])
+        return np.clip(qa, lo, hi), np.clip(qd, -vel, vel), np.clip(qdd, -acc, acc)
+
     # ---- holding ------------------------------------------------------------------------------------------
     def deliverable(self, i: int, L: float, Ldot: float) -> tuple[float, float]:
         """Generalized-force interval actuator ``i`` delivers at actuator length ``L``, velocity ``Ldot``

@@ -22,10 +22,20 @@ BALANCE_TOL = 0.3
 FEATURES = ("actuator_kind", "friction", "m", "upright_at", "zero_by", "angle")
 
 
-def compare_predictor(predictor_path: str | Path, xml: str, truth: dict, *, n_queries: int = 400, seed: int = 0) -> dict:
+#: design-region queries of the oracle per robot: as many as the run's own check draws (``design_grid``'s 4096 Sobol
+#: points), so that the two maxima, each a lower bound of the region's sup, are estimated with the same power
+N_QUERIES = 4096
+
+
+def compare_predictor(predictor_path: str | Path, xml: str, truth: dict, *, n_queries: int = N_QUERIES, seed: int = 0,
+                      probe: Mapping[str, Any] | None = None) -> dict:
     """Learned BEM (the run's exported predictor, loaded with bemlearn's loader) vs the oracle's on design-region queries.
 
     Queries: :meth:`Oracle.design_queries` (q̇_u = q̈_u = 0 by construction of the BEM; |q_u^e − q_u*| ≤ 0.2).
+    ``probe``: the run's own worst design-region point (``{"names": actuated names, "x0e": [q̈_a, q̇_a, q_a]}``, from
+    ``metrics.json`` ``bem_design_region.worst``).  Moved into the oracle's box (:meth:`Oracle.clip_to_box`) and kept
+    where the oracle's BEM there is within the bound, it is one more query: the run's claim about its largest error is
+    checked where the oracle's random queries may not have looked (``probe_error``: the error there, NaN if not kept).
     Errors are wrapped into (−π, π] (a predictor on another 2π sheet is not penalised for it).  ``gain`` is the
     least-squares slope (with intercept) of learned − q_u* on oracle − q_u*.
 
@@ -43,6 +53,9 @@ def compare_predictor(predictor_path: str | Path, xml: str, truth: dict, *, n_qu
 
     oracle = Oracle(xml, qu_upright=truth["qu_upright"])
     q = oracle.design_queries(n_queries, seed=seed)
+    n_random = len(q["bem"])
+    if probe is not None:
+        q = _with_probe(oracle, q, probe, truth["actuated_joints"])
     module = load_torchscript(predictor_path)
     meta = json.loads(module.metadata())
     names = list(meta["actuated_names"])
@@ -62,7 +75,27 @@ def compare_predictor(predictor_path: str | Path, xml: str, truth: dict, *, n_qu
     gain, icpt = (np.polyfit(xo, yl, 1) if xo.size > 2 and np.ptp(xo) > 0 else (float("nan"), float("nan")))
     return {"rmse": float(np.sqrt(np.mean(err**2))), "max_abs": float(np.abs(err).max()), "gain": float(gain),
             "intercept": float(icpt), "n_queries": int(err.size), "learned_at_rest_minus_upright": float(wrap_angle(at_rest - qs)),
-            "band_coverage": float(np.mean(np.abs(err) <= 2 * band)) if err.size else float("nan")}
+            "band_coverage": float(np.mean(np.abs(err) <= 2 * band)) if err.size else float("nan"),
+            "probe_error": float(abs(err[-1])) if err.size > n_random else float("nan")}
+
+
+def _with_probe(oracle: Any, q: dict, probe: Mapping[str, Any], joints: list[str]) -> dict:
+    """``q`` with the run's worst point appended (:func:`compare_predictor`), in the oracle's joint order."""
+    from bemlearn.bench.family.oracle import DESIGN_BOUND
+
+    names = list(probe["names"])
+    x = np.asarray(probe["x0e"], dtype=np.float64)
+    m = len(joints)
+    if sorted(names) != sorted(joints) or x.shape != (3 * m,):
+        return q
+    order = [names.index(j) for j in joints]
+    qdd, qd, qa = (x[k * m:(k + 1) * m][order] for k in range(3))
+    qa, qd, qdd = oracle.clip_to_box(qa, qd, qdd)
+    bem = oracle.bem(qa[None], qd[None], qdd[None])
+    if not (np.isfinite(bem[0]) and abs(bem[0] - oracle.qu_star) <= DESIGN_BOUND):
+        return q
+    return {"qa": np.vstack([q["qa"], qa]), "qda": np.vstack([q["qda"], qd]), "qdda": np.vstack([q["qdda"], qdd]),
+            "bem": np.concatenate([q["bem"], bem])}
 
 
 def balanced_at_upright(metrics: RunMetrics | Mapping[str, Any], qu_upright: float) -> tuple[bool | None, str]:
@@ -172,7 +205,10 @@ def score_run(run_dir: Path, xml: str, truth: dict, record: dict) -> dict:
     row.update({"rmse": None, "max_abs": None, "gain": None, "learned_at_rest_minus_upright": None, "band_coverage": None})
     if pred.is_file():
         try:
-            row.update(compare_predictor(pred, xml, truth))
+            worst = (metrics.bem_design_region.worst if metrics.bem_design_region else None) or {}
+            x0e = worst.get("x0e")
+            probe = {"names": list(metrics.actuated), "x0e": list(x0e)} if x0e is not None and metrics.actuated else None
+            row.update(compare_predictor(pred, xml, truth, probe=probe))
         except Exception as exc:  # noqa: BLE001 - recorded: a predictor the bench cannot score is a finding, not a crash
             row["compare_error"] = f"{type(exc).__name__}: {exc}"
     bal, why = balanced_at_upright(metrics, truth["qu_upright"])
