@@ -118,8 +118,10 @@ def control_rate(robot, *, preferred_hz: float = 200.0, min_hz: float = 100.0, f
     return Derived(RateChoice(rate, N, fine_timestep, True), note)
 
 
-def excitation_gains(robot, rate: RateChoice) -> Derived:
-    """Excitation feedback u = K e (collect's convention) by discrete LQR (:mod:`bemlearn.control.lqr`).
+def excitation_gains(robot, rate: RateChoice, *, velocity_cutoff: float | None = None) -> Derived:
+    """Excitation feedback u = K e (collect's convention) by discrete LQR (:mod:`bemlearn.control.lqr`); its
+    per-trial gain scale is checked with the collection's velocity filter, cutoff ``velocity_cutoff`` (rad/s;
+    default :func:`sensor`'s).
 
     Returns:
         ``Derived({"gains": tuple (m·2n,), "gain_scale": (0.6, 1.4)}, note)``.
@@ -130,7 +132,7 @@ def excitation_gains(robot, rate: RateChoice) -> Derived:
     qa0 = initial_ranges(robot).value["initial_qa"][1]
     res = discrete_lqr(robot, rate_hz=rate.rate_hz, timestep=rate.timestep, design_qu=d, qu0=0.25 * d, qa0=qa0)
     gains = tuple(float(f"{k:.6g}") for k in res.K.ravel())
-    wc = float(sensor(robot, rate).value["velocity_cutoff"])   # the collection's velocity filter: the trials run with it
+    wc = float(_velocity_cutoff(robot, rate) if velocity_cutoff is None else velocity_cutoff)   # the collection's filter: the trials run with it
     scale, frac, filtered = _robust_gain_scale(res.A, res.B, res.K, rate_hz=rate.rate_hz, velocity_cutoff=wc)
     note = (f"discrete LQR of mjd_transitionFD at {rate.rate_hz:g} Hz, Bryson weights (|q_u| ≤ {d:g}, joint ranges, ctrlrange, "
             f"forcerange{'' if res.r_scale == 1 else f'; R × {res.r_scale:g} to stay within them'})"
@@ -533,12 +535,16 @@ def sensor(robot, rate: RateChoice) -> Derived:
     Returns:
         ``Derived(dict of SensorConfig fields, note)``.
     """
-    lam = instability_rate(robot)
-    wc = float(np.clip(10 * lam, 50.0, 0.2 * 2 * math.pi * rate.rate_hz))
+    wc = _velocity_cutoff(robot, rate)
     slide = "slide" in getattr(robot, "coordinate_kinds", ())   # the measured coordinates (a rolling slide is not one)
     out = {**_encoder(robot), "velocity_cutoff": wc}
     note = f"hinges 4096 counts/rev{', slides 2.5e-5 m/count' if slide else ''} (defaults, not from the model); velocity filter {wc:.3g} rad/s = clip(10 λ, 50, 0.2·2π·rate)"
     return Derived(out, note)
+
+
+def _velocity_cutoff(robot, rate: RateChoice) -> float:
+    """The collection's velocity filter cutoff ω_c = clip(10 λ, 50, 0.2 · 2π · rate), rad/s (:func:`sensor`)."""
+    return float(np.clip(10 * instability_rate(robot), 50.0, 0.2 * 2 * math.pi * rate.rate_hz))
 
 
 def _encoder(robot) -> dict:
