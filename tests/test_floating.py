@@ -205,17 +205,30 @@ def test_the_plant_reads_and_writes_the_coordinates(robot):
     np.testing.assert_allclose(robot.T_np @ plant.data.qvel, qd0, atol=1e-12)
 
 
-def test_the_pipeline_refuses_two_motors_on_one_coordinate(tmp_path, capsys):
+def test_two_motors_on_one_coordinate_are_commanded_together(capsys):
+    """The LQR of the two-wheeler has one command for its wheel coordinate, reaching the motors as (1, −1)
+    (bemlearn.robots.actuation; the grouping's closed forms are in tests/test_actuation.py)."""
     from bemlearn.cli import main
+
+    assert main(["robot", "lqr", str(TWO)]) == 0
+    out = capsys.readouterr().out
+    assert "left_spin ← left_motor (×1) + right_motor (×-1)" in out
+    assert "left_motor+right_motor" in out
+
+
+def test_the_pipeline_refuses_a_motor_on_two_coordinates(tmp_path):
+    """Three motors for two actuated coordinates, one of them on both (a declared coordinate map): no grouping."""
     from bemlearn.errors import ConfigError
     from bemlearn.pipeline.resolve import resolve_pipeline_config
+    from tests.test_actuation import _SPREAD
 
+    xml = tmp_path / "spread.xml"
+    xml.write_text(_SPREAD)
     cfg = tmp_path / "c.yaml"
-    cfg.write_text(f"robot: {TWO}\n")
-    with pytest.raises(ConfigError, match=r"2 actuators \['left_motor', 'right_motor'\] drive 1 actuated coordinate"):
+    cfg.write_text(f"robot: {xml}\n")
+    with pytest.raises(ConfigError, match=r"actuator 'c' drives 2 actuated coordinates \['upper', 'absolute'\]") as info:
         resolve_pipeline_config(cfg)
-    assert main(["robot", "lqr", str(TWO)]) == 2
-    assert "one actuator per actuated coordinate" in capsys.readouterr().err
+    assert "\n" not in str(info.value)
 
 
 def _generated(rng: np.random.Generator) -> tuple[str, dict[str, float]]:

@@ -178,10 +178,13 @@ def _lqr(args) -> int:
     for note in res.notes:
         print(f"note       {note}")
     width = max(len(c) for c in cols) + 2
-    names = [robot.model.actuator(i).name or f"u{i}" for i in range(robot.model.nu)]
-    print(f"{'':<12}" + "".join(f"{c:>{width}}" for c in cols))
+    names = list(robot.actuation.names)
+    if (grouping := robot.actuation.describe(tuple(robot.actuated_names))):
+        print(f"commands   {grouping}")
+    lw = max(12, *(len(nm) + 2 for nm in names))
+    print(f"{'':<{lw}}" + "".join(f"{c:>{width}}" for c in cols))
     for name, row in zip(names, res.K):
-        print(f"{name:<12}" + "".join(f"{v:>{width}.6g}" for v in row))
+        print(f"{name:<{lw}}" + "".join(f"{v:>{width}.6g}" for v in row))
     print(f"closed-loop spectral radius {res.spectral_radius:.6f}; peak effort (|ctrl|/ctrlrange, |force|/forcerange) "
           f"for a {0.25 * d:g} q_u error: {res.u_peak:.2f}")
     return 0

@@ -113,7 +113,7 @@ class EICTickLoop:
         return float(-math.log(max(self.spectral_radius, 1e-300)) * self.rate_hz)
 
 
-def eic_controller_jacobian(robot: MujocoRobot, gains, *, eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+def eic_controller_jacobian(robot: MujocoRobot, gains, *, eps: float = 1e-6, rate_hz: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """∂u/∂y and ∂u/∂v ``(nu, n)`` each, of the EIC controller (:class:`~bemlearn.control.eic.EICController`
     with the model BEM of ``robot`` and a reference at rest) at upright, by central differences of the
     controller itself (``ctrl`` per rad or m, per rad/s or m/s)."""
@@ -124,7 +124,8 @@ def eic_controller_jacobian(robot: MujocoRobot, gains, *, eps: float = 1e-6) -> 
 
     n, m = robot.n, robot.m
     ref = CompositeSinusoid(((0.0,),) * m, ((0.0,),) * m, ((0.0,),) * m, (0.0,) * m)
-    ctrl = EICController(robot, ModelBEM(robot), ref, MujocoActuatorInverse(robot), gains)
+    inverse = MujocoActuatorInverse(robot, hold_s=None if rate_hz is None else 1.0 / rate_hz)   # held over the tick, as it runs
+    ctrl = EICController(robot, ModelBEM(robot), ref, inverse, gains)
     y0 = np.zeros(n)
     y0[robot.unactuated_index] = robot.qu_nominal
     v0 = np.zeros(n)
@@ -158,7 +159,7 @@ def eic_tick_loop(robot: MujocoRobot, gains, *, rate_hz: float, velocity_cutoff:
 
     n = robot.n
     A, B = plant if plant is not None else linearize(robot, rate_hz=rate_hz, timestep=timestep)[:2]
-    Ky, Kv = eic_controller_jacobian(robot, gains)
+    Ky, Kv = eic_controller_jacobian(robot, gains, rate_hz=rate_hz)
     dt = 1.0 / rate_hz
     a = (2 - velocity_cutoff * dt) / (2 + velocity_cutoff * dt)
     b = 2 * velocity_cutoff / (2 + velocity_cutoff * dt)

@@ -7,7 +7,9 @@ input is, linearised at x* = [q_a = 0, q_u = q_u,nominal, q̇ = 0], u = 0,
 
 where (A, B) is one physics step's Jacobian from ``mujoco.mjd_transitionFD`` (joint state
 [q_j, q̇_j], inputs in actuator ``ctrl`` units; an RK4 model is linearised with its
-integrator set to Euler, which ``mjd_transitionFD`` supports).  In the robot's coordinates q = T q_j the
+integrator set to Euler, which ``mjd_transitionFD`` supports).  The design's input is one command per actuated
+coordinate, ctrl = W u (:mod:`bemlearn.robots.actuation`: the actuators of a coordinate commanded together;
+W = I with one actuator per coordinate), so its input matrix is B_N W and its limits are the group's.  In the robot's coordinates q = T q_j the
 state is S x_j, S = diag(T, T).  The gain minimises Σ δxᵀQδx + uᵀR_u u (+ fᵀR_f f, below; ``scipy.linalg.solve_discrete_are``)
 with Bryson's rule Q = diag(1/x_max²),
 x_max from the design region (|q_u − nominal| ≤ 0.2 rad or less if the joint range is
@@ -37,6 +39,7 @@ Sign convention of collect: u = K e, e = [q − q_t, q̇ − q̇_t], so K = −K
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass
@@ -61,10 +64,10 @@ class LQRResult:
     """A discrete LQR design (module docstring).
 
     Attributes:
-        K: ``(nu, 2n)`` gains for u = K e, e = [q − q_t, q̇ − q̇_t] in the robot's coordinates
-            (ctrl units per rad or m, per rad/s or m/s).
+        K: ``(m, 2n)`` gains for u = K e, e = [q − q_t, q̇ − q̇_t] in the robot's coordinates
+            (command units per rad or m, per rad/s or m/s; ctrl = W u, :mod:`bemlearn.robots.actuation`).
         A: ``(2n, 2n)`` the tick map's state matrix in coordinates.
-        B: ``(2n, nu)`` its input matrix.
+        B: ``(2n, m)`` its input matrix per command (B_N W).
         Q: the state weight used.
         R: the input weight used.
         rate_hz: control rate.
@@ -214,17 +217,22 @@ def bryson_scales(robot: MujocoRobot, *, design_qu: float = 0.2) -> tuple[np.nda
 
 @dataclass(frozen=True)
 class ActuatorLimits:
-    """What each actuator may be asked for, linearised at rest (module docstring).
+    """What each command (one per actuated coordinate, :mod:`bemlearn.robots.actuation`) may be asked for,
+    linearised at rest (module docstring).  The command v (m,) reaches the actuators as ctrl = W v.
 
     Attributes:
-        u_max: ``(nu,)`` ctrl units: half the ``ctrlrange`` width, and at most |f_max / gain| where the force is
-            limited (1 where neither is).
-        u_ctrl: ``(nu,)`` half the ``ctrlrange`` width (``inf`` where unlimited).
-        f_max: ``(nu,)`` force limit (``forcerange``), ``inf`` where unlimited.
+        u_max: ``(m,)`` command units: the smallest of its actuators' half ``ctrlrange`` widths and |f_max / gain|
+            (each divided by |W_ic|: the most restrictive member binds; 1 where none is limited).
+        u_ctrl: ``(m,)`` the same from the ``ctrlrange`` alone (``inf`` where unlimited).
+        f_max: ``(nu,)`` force limit (``forcerange``, joint ``actuatorfrcrange``), ``inf`` where unlimited.
         gain: ``(nu,)`` ∂f/∂ctrl at rest.
         f_state: ``(nu, 2n)`` ∂f/∂x at rest for x = [q, q̇] in the robot's coordinates (bias terms b1·l + b2·l̇,
             l = gear·q_j).
-        binding: per actuator, ``"ctrlrange"``, ``"forcerange"`` or ``"none"``: which limit sets u_max.
+        binding: per command, ``"ctrlrange"``, ``"forcerange"`` or ``"none"``: which limit sets u_max.
+        W: ``(nu, m)`` ctrl = W v (the identity with one actuator per coordinate).
+        ctrl_limit: ``(nu,)`` each actuator's half ``ctrlrange`` width (``inf`` where unlimited).
+        hold: ``(nu,)`` φ_i (eq. A3 of :mod:`bemlearn.robots.actuation`) when the command is held over a tick: the
+            force limits bound the tick's mean force, the first instant's / φ (``None``: the force now).
     """
 
     u_max: np.ndarray
@@ -233,22 +241,35 @@ class ActuatorLimits:
     gain: np.ndarray
     f_state: np.ndarray
     binding: tuple[str, ...]
+    W: np.ndarray
+    ctrl_limit: np.ndarray
+    hold: np.ndarray | None = None
+
+    @property
+    def force_gain(self) -> np.ndarray:
+        """``(nu, m)`` ∂f/∂v = diag(gain) W."""
+        return self.gain[:, None] * self.W
 
     def peak(self, u: np.ndarray, x: np.ndarray) -> float:
-        """max over actuators of |ctrl| / ctrl limit and |f(x, u)| / f_max for ``u (nu,)``, ``x (2n,)``."""
-        f = self.gain * u + self.f_state @ x
-        return float(max(np.max(np.abs(u) / self.u_ctrl, initial=0.0), np.max(np.abs(f) / self.f_max, initial=0.0)))
+        """max over actuators of |ctrl| / ctrl limit and |f(x, u)| / f_max for commands ``u (m,)``, ``x (2n,)``."""
+        ctrl = self.W @ u
+        f = self.gain * ctrl + self.f_state @ x
+        if self.hold is not None:
+            f = f / self.hold
+        return float(max(np.max(np.abs(ctrl) / self.ctrl_limit, initial=0.0), np.max(np.abs(f) / self.f_max, initial=0.0)))
 
 
 def actuator_limits(robot: MujocoRobot) -> ActuatorLimits:
-    """The :class:`ActuatorLimits` of ``robot``'s actuators (joint transmissions; gain and bias read from the model)."""
+    """The :class:`ActuatorLimits` of ``robot``'s commands (joint transmissions; gain and bias read from the model)."""
+    from bemlearn.robots.actuation import force_limits
+
     model = robot.model
     nu, n = model.nu, robot.n
+    groups = robot.actuation
     lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
     ulim = model.actuator_ctrllimited.astype(bool)
-    u_ctrl = np.where(ulim, 0.5 * (hi - lo), np.inf)
-    flim = model.actuator_forcelimited.astype(bool)
-    f_max = np.where(flim, np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1])), np.inf)
+    ctrl_limit = np.where(ulim, 0.5 * (hi - lo), np.inf)
+    f_max = force_limits(model, robot.traction_limits)
     gain = model.actuator_gainprm[:, 0].astype(np.float64).copy()
     affine_bias = model.actuator_biastype == int(mujoco.mjtBias.mjBIAS_AFFINE)
     b1 = np.where(affine_bias, model.actuator_biasprm[:, 1], 0.0)
@@ -263,11 +284,13 @@ def actuator_limits(robot: MujocoRobot) -> ActuatorLimits:
             continue
         f_state[i, :n] = b1[i] * gear * Tinv[col]
         f_state[i, n:] = b2[i] * gear * Tinv[col]
-    by_force = np.where(np.abs(gain) > 0, f_max / np.maximum(np.abs(gain), 1e-300), np.inf)
+    by_force_ctrl = np.where(np.abs(gain) > 0, f_max / np.maximum(np.abs(gain), 1e-300), np.inf)
+    u_ctrl = groups.command_limits(ctrl_limit)
+    by_force = groups.command_limits(by_force_ctrl)
     u_max = np.minimum(u_ctrl, by_force)
     binding = tuple("none" if not np.isfinite(um) else ("forcerange" if bf < uc else "ctrlrange")
                     for um, bf, uc in zip(u_max, by_force, u_ctrl))
-    return ActuatorLimits(np.where(np.isfinite(u_max), u_max, 1.0), u_ctrl, f_max, gain, f_state, binding)
+    return ActuatorLimits(np.where(np.isfinite(u_max), u_max, 1.0), u_ctrl, f_max, gain, f_state, binding, groups.W, ctrl_limit)
 
 
 def _limited_actuated(robot: MujocoRobot) -> np.ndarray:
@@ -312,7 +335,7 @@ def _lqr_scaled(robot: MujocoRobot, A: np.ndarray, B: np.ndarray, Q0: np.ndarray
 
 def holds_in_mujoco(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, timestep: float | None, starts: list[np.ndarray],
                     check_s: float, qu0: float) -> tuple[bool, str]:
-    """Whether u = K e (collect's convention, ctrl clipped to ``ctrlrange``, forces to ``forcerange`` by MuJoCo)
+    """Whether u = K e (collect's convention, ``K (m, 2n)``; ctrl = W u clipped to ``ctrlrange``, forces to ``forcerange`` by MuJoCo)
     brings the robot back in MuJoCo itself from each start ``(2n,)`` (deviation from upright, coordinates): at the
     end |q_u − nominal| ≤ qu0/2 and |q̇_u| small, never beyond 4·qu0 on the way.  Returns ``(holds, why not)``."""
     model = _model_copy(robot.model, timestep)
@@ -321,7 +344,7 @@ def holds_in_mujoco(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, timest
     N = max(1, int(round(1.0 / (rate_hz * float(model.opt.timestep)))))
     lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
     limited = model.actuator_ctrllimited.astype(bool)
-    T = robot.T_np
+    T, groups = robot.T_np, robot.actuation
     nominal = np.zeros(n)
     nominal[iu] = robot.qu_nominal
     ticks = int(math.ceil(check_s * rate_hz))
@@ -333,7 +356,7 @@ def holds_in_mujoco(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, timest
             qd = T @ data.qvel[robot._dadr]
             if not abs(q[iu] - robot.qu_nominal) <= 4 * qu0:
                 return False, f"it leaves |q_u − nominal| ≤ {4 * qu0:.3g} from start {k} in MuJoCo"
-            u = K @ np.concatenate([q - nominal, qd])
+            u = groups.ctrl(K @ np.concatenate([q - nominal, qd]))
             data.ctrl[:] = np.where(limited, np.clip(u, lo, hi), u)
             for _ in range(N):
                 mujoco.mj_step(model, data)
@@ -365,12 +388,17 @@ def discrete_lqr(
         check_s: duration of the check, s.
     """
     A, B, N, h = linearize(robot, rate_hz=rate_hz, timestep=timestep)
+    if robot.actuation.grouped:
+        B = B @ robot.actuation.W   # one command per actuated coordinate (ctrl = W u)
     xmax, umax, _ = bryson_scales(robot, design_qu=design_qu)
-    limits = actuator_limits(robot)
+    from bemlearn.robots.actuation import held_servo_factors
+
+    # held over a tick of 1/rate: the force limits bound the mean force (a servo that settles within the tick, A3, A5)
+    limits = dataclasses.replace(actuator_limits(robot), hold=held_servo_factors(robot, 1.0 / rate_hz))
     notes = []
     if np.any(robot.model.dof_frictionloss > 0):
         notes.append("linearised without dry friction (frictionloss: a joint at rest sticks and finite differences see no input)")
-    forced = [robot.model.actuator(i).name or f"#{i}" for i, b in enumerate(limits.binding) if b == "forcerange"]
+    forced = [robot.actuation.names[i] for i, b in enumerate(limits.binding) if b == "forcerange"]
     if forced:
         notes.append(f"forcerange binds before ctrlrange on {', '.join(forced)}")
     Q0 = np.diag(1.0 / xmax**2)
@@ -386,7 +414,7 @@ def discrete_lqr(
     # itself, with every limit clipped, brings the robot back from each start; else the second design also
     # weighs the actuator force f = G u + F x against its forcerange (a servo's force depends on the state: the
     # cross term S = Fᵀ R_f G) and checks every start's linear response against all limits.
-    G, F = np.diag(limits.gain), limits.f_state
+    G, F = limits.force_gain, limits.f_state
     Ru = np.diag(1.0 / np.where(np.isfinite(limits.u_ctrl), limits.u_ctrl, 1.0) ** 2)
     first = _lqr_scaled(robot, A, B, Q0, Ru, None, None, [qu_start], steps, limits, force=False)
     starts = [qu_start, *qa_starts]
@@ -396,8 +424,9 @@ def discrete_lqr(
     if not holds:
         Ru2 = np.diag(np.where(np.isfinite(limits.u_ctrl), 1.0 / limits.u_ctrl**2, 0.0))
         Rf = np.diag(np.where(np.isfinite(limits.f_max), 1.0 / limits.f_max**2, 0.0))
-        Ru2 += np.diag(np.where(np.isfinite(limits.u_ctrl) | np.isfinite(limits.f_max), 0.0, 1.0 / umax**2))
-        second = _lqr_scaled(robot, A, B, Q0, Ru2 + G @ Rf @ G, F.T @ Rf @ F, F.T @ Rf @ G, starts, steps, limits, force=True)
+        force_limited = (np.isfinite(limits.f_max)[:, None] & (np.abs(G) > 0)).any(axis=0)   # (m,): a member's force is limited
+        Ru2 += np.diag(np.where(np.isfinite(limits.u_ctrl) | force_limited, 0.0, 1.0 / umax**2))
+        second = _lqr_scaled(robot, A, B, Q0, Ru2 + G.T @ Rf @ G, F.T @ Rf @ F, F.T @ Rf @ G, starts, steps, limits, force=True)
         holds2, why2 = holds_in_mujoco(robot, -second[0], rate_hz=rate_hz, timestep=timestep, starts=starts, check_s=check_s, qu0=qu0)
         if holds2:
             K, Q, R, peak, scale = second
@@ -425,7 +454,7 @@ class GainSchedule:
     Attributes:
         coords: indices into the actuated coordinates (0 … m−1) that are scheduled.
         grids: per scheduled coordinate the poses ``(points,)``, its unit, increasing.
-        deltas: per scheduled coordinate ΔK ``(points, nu, 2n)`` (collect's convention u = K e).
+        deltas: per scheduled coordinate ΔK ``(points, m, 2n)`` (collect's convention u = K e).
         periodic: per scheduled coordinate whether it wraps (an unlimited hinge).
         rho_fixed: per scheduled coordinate the worst spectral radius of the fixed gains over its grid (≥ 1: why it is
             scheduled).
@@ -440,7 +469,7 @@ class GainSchedule:
     rho_scheduled: tuple[float, ...]
 
     def delta(self, qa: np.ndarray) -> np.ndarray:
-        """ΔK ``(nu, 2n)`` at the actuated pose ``qa (m,)`` (joint units)."""
+        """ΔK ``(m, 2n)`` at the actuated pose ``qa (m,)`` (joint units)."""
         out = np.zeros(self.deltas[0].shape[1:])
         for i, g, d, per in zip(self.coords, self.grids, self.deltas, self.periodic):
             q = float(qa[i])
@@ -484,7 +513,7 @@ _SCHEDULES: dict = {}
 
 def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, timestep: float | None, extents: np.ndarray,
                        design_qu: float, qu0: float, qa0: float | None, points: int = 49) -> GainSchedule | None:
-    """Which actuated coordinates' pose makes the fixed gains ``K (nu, 2n)`` (collect's convention) fail, and the gains
+    """Which actuated coordinates' pose makes the fixed gains ``K (m, 2n)`` (collect's convention) fail, and the gains
     scheduled over them (:class:`GainSchedule`).
 
     Coordinate j is scheduled when u = K e does not stabilise the tick map linearised at some pose of j alone within
@@ -512,6 +541,8 @@ def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, tim
             at = np.zeros(m)
             at[j] = q
             A, B, _, _ = linearize(robot, rate_hz=rate_hz, timestep=timestep, at=at)
+            if robot.actuation.grouped:
+                B = B @ robot.actuation.W   # one command per actuated coordinate (ctrl = W u)
             maps.append((A, B))
             rho = max(rho, float(np.max(np.abs(np.linalg.eigvals(A + B @ K)))))
         if rho >= 1.0:

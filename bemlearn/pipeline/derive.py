@@ -118,8 +118,10 @@ def control_rate(robot, *, preferred_hz: float = 200.0, min_hz: float = 100.0, f
     return Derived(RateChoice(rate, N, fine_timestep, True), note)
 
 
-def excitation_gains(robot, rate: RateChoice) -> Derived:
-    """Excitation feedback u = K e (collect's convention) by discrete LQR (:mod:`bemlearn.control.lqr`).
+def excitation_gains(robot, rate: RateChoice, *, velocity_cutoff: float | None = None) -> Derived:
+    """Excitation feedback u = K e (collect's convention) by discrete LQR (:mod:`bemlearn.control.lqr`); its
+    per-trial gain scale is checked with the collection's velocity filter, cutoff ``velocity_cutoff`` (rad/s;
+    default :func:`sensor`'s).
 
     Returns:
         ``Derived({"gains": tuple (m·2n,), "gain_scale": (0.6, 1.4)}, note)``.
@@ -130,26 +132,70 @@ def excitation_gains(robot, rate: RateChoice) -> Derived:
     qa0 = initial_ranges(robot).value["initial_qa"][1]
     res = discrete_lqr(robot, rate_hz=rate.rate_hz, timestep=rate.timestep, design_qu=d, qu0=0.25 * d, qa0=qa0)
     gains = tuple(float(f"{k:.6g}") for k in res.K.ravel())
-    scale, frac = _robust_gain_scale(res.A, res.B, res.K)
+    wc = float(_velocity_cutoff(robot, rate) if velocity_cutoff is None else velocity_cutoff)   # the collection's filter: the trials run with it
+    scale, frac, filtered = _robust_gain_scale(res.A, res.B, res.K, rate_hz=rate.rate_hz, velocity_cutoff=wc)
     note = (f"discrete LQR of mjd_transitionFD at {rate.rate_hz:g} Hz, Bryson weights (|q_u| ≤ {d:g}, joint ranges, ctrlrange, "
             f"forcerange{'' if res.r_scale == 1 else f'; R × {res.r_scale:g} to stay within them'})"
             f"{''.join('; ' + n for n in res.notes)}; closed-loop spectral radius "
             f"{res.spectral_radius:.4f}; per-trial gain scale U{scale}: the widest of ±40/20/10 % with ≥ 95 % of 400 "
-            f"random per-gain scalings stable ({100 * frac:.0f} %), else none")
+            f"random per-gain scalings stable ({100 * frac:.0f} %), else none{filtered}")
+    if (grouping := robot.actuation.describe(tuple(robot.actuated_names))):
+        note += f"; {grouping}"
     return Derived({"gains": gains, "gain_scale": scale}, note)
 
 
-def _robust_gain_scale(A: np.ndarray, B: np.ndarray, K: np.ndarray, *, draws: int = 400) -> tuple[tuple[float, float], float]:
+def _robust_gain_scale(A: np.ndarray, B: np.ndarray, K: np.ndarray, *, rate_hz: float, velocity_cutoff: float,
+                       draws: int = 400) -> tuple[tuple[float, float], float, str]:
     """The widest per-gain scale range U(1 − w, 1 + w), w ∈ {0.4, 0.2, 0.1, 0}, for which at least
-    95 % of random scalings keep the linear tick map stable (spectral radius < 1)."""
+    95 % of random scalings keep the linear tick map stable (spectral radius < 1), and keep it stable too as
+    the trials run it, with the rates from the collection's velocity filter (:func:`filtered_feedback_radius`):
+    the filter's lag can make a scaling that the exact-state map calls stable grow.
+
+    Returns:
+        ``((1 − w, 1 + w), fraction stable (exact state), note)``: the note (``""`` when the filter changed
+        nothing) names the wider ranges the filtered loop refused.
+    """
     rng = np.random.default_rng(0)
+    refused: list[tuple[float, float]] = []
+    n = A.shape[0] // 2
     for w in (0.4, 0.2, 0.1):
         s = rng.uniform(1 - w, 1 + w, size=(draws, *K.shape))
         rho = np.array([np.max(np.abs(np.linalg.eigvals(A + B @ (K * si)))) for si in s])
         frac = float(np.mean(rho < 1.0))
         if frac >= 0.95:
-            return (1 - w, 1 + w), frac
-    return (1.0, 1.0), 1.0
+            frac_f = float(np.mean([filtered_feedback_radius(A, B, K * si, n=n, rate_hz=rate_hz, velocity_cutoff=velocity_cutoff) < 1.0
+                                    for si in s]))
+            if frac_f >= 0.95:
+                return (1 - w, 1 + w), frac, _refused_note(refused, velocity_cutoff)
+            refused.append((w, frac_f))
+    return (1.0, 1.0), 1.0, _refused_note(refused, velocity_cutoff)
+
+
+def _refused_note(refused: list[tuple[float, float]], wc: float) -> str:
+    if not refused:
+        return ""
+    return ("; with the collection's velocity filter (ω_c = " + f"{wc:.3g} rad/s) " +
+            ", ".join(f"±{100 * w:.0f} % keeps only {100 * f:.0f} %" for w, f in refused) + " of them stable")
+
+
+def filtered_feedback_radius(A: np.ndarray, B: np.ndarray, K: np.ndarray, *, n: int, rate_hz: float, velocity_cutoff: float) -> float:
+    """Spectral radius of the tick map ``A (2n, 2n)``, ``B (2n, m)`` under u_k = K_q y_k + K_v v_k (``K (m, 2n)``,
+    collect's u = K e) with y_k = q_k and v_k = a v_{k−1} + b (y_k − y_{k−1}) the Tustin velocity filter of
+    :class:`~bemlearn.data.sensors.FilteredDifferentiator` (a = (2 − ω_c Δt)/(2 + ω_c Δt), b = 2ω_c/(2 + ω_c Δt)):
+    the state [x_k, v_{k−1}, y_{k−1}] as in :func:`~bemlearn.control.eic_linear.eic_tick_loop`."""
+    dt = 1.0 / rate_hz
+    a = (2 - velocity_cutoff * dt) / (2 + velocity_cutoff * dt)
+    b = 2 * velocity_cutoff / (2 + velocity_cutoff * dt)
+    C = np.hstack([np.eye(n), np.zeros((n, n))])
+    Z = np.zeros((n, n))
+    Vz = np.hstack([b * C, a * np.eye(n), -b * np.eye(n)])
+    Kz = K[:, :n] @ np.hstack([C, Z, Z]) + K[:, n:] @ Vz
+    M = np.zeros((4 * n, 4 * n))
+    M[: 2 * n, : 2 * n] = A
+    M[: 2 * n] += B @ Kz
+    M[2 * n : 3 * n] = Vz
+    M[3 * n :, : 2 * n] = C
+    return float(np.max(np.abs(np.linalg.eigvals(M))))
 
 
 def _frequency_band(robot, rate: RateChoice) -> tuple[float, float, float]:
@@ -422,11 +468,12 @@ def actuator_effort(robot, inv, q: np.ndarray, qdd: np.ndarray) -> float:
     tau_a = (D @ qdd + h)[list(robot.actuated_index)]
     ctrl = inv.command(tau_a, q, np.zeros(robot.n), clip=False)
     force = inv.B_pinv @ tau_a
-    model = robot.model
+    from bemlearn.robots.actuation import force_limits
+
     out = float(np.max(np.abs(ctrl) / inv.limit)) if inv.limited.any() else 0.0
-    flim = model.actuator_forcelimited.astype(bool)
+    fmax = force_limits(robot.model, getattr(robot, "traction_limits", None))   # forcerange, actuatorfrcrange, a wheel's grip
+    flim = np.isfinite(fmax)
     if flim.any():
-        fmax = np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1]))
         out = max(out, float(np.max(np.abs(force[flim]) / fmax[flim])))
     return out
 
@@ -488,12 +535,16 @@ def sensor(robot, rate: RateChoice) -> Derived:
     Returns:
         ``Derived(dict of SensorConfig fields, note)``.
     """
-    lam = instability_rate(robot)
-    wc = float(np.clip(10 * lam, 50.0, 0.2 * 2 * math.pi * rate.rate_hz))
+    wc = _velocity_cutoff(robot, rate)
     slide = "slide" in getattr(robot, "coordinate_kinds", ())   # the measured coordinates (a rolling slide is not one)
     out = {**_encoder(robot), "velocity_cutoff": wc}
     note = f"hinges 4096 counts/rev{', slides 2.5e-5 m/count' if slide else ''} (defaults, not from the model); velocity filter {wc:.3g} rad/s = clip(10 λ, 50, 0.2·2π·rate)"
     return Derived(out, note)
+
+
+def _velocity_cutoff(robot, rate: RateChoice) -> float:
+    """The collection's velocity filter cutoff ω_c = clip(10 λ, 50, 0.2 · 2π · rate), rad/s (:func:`sensor`)."""
+    return float(np.clip(10 * instability_rate(robot), 50.0, 0.2 * 2 * math.pi * rate.rate_hz))
 
 
 def _encoder(robot) -> dict:
@@ -921,9 +972,9 @@ def _eic_peak(robot, w_u: float, e0: float) -> float:
     force = inv.B_pinv @ tau
     raw = force / inv.gainprm[:, 0]
     umax = np.where(inv.limited, inv.limit, np.inf)
-    model = robot.model
-    fmax = np.where(model.actuator_forcelimited.astype(bool),
-                    np.maximum(np.abs(model.actuator_forcerange[:, 0]), np.abs(model.actuator_forcerange[:, 1])), np.inf)
+    from bemlearn.robots.actuation import force_limits
+
+    fmax = force_limits(robot.model, getattr(robot, "traction_limits", None))
     return float(max(np.max(np.abs(raw) / umax), np.max(np.abs(force) / fmax)))
 
 

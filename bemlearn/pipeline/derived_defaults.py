@@ -137,7 +137,8 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
     _leaves("collect.rate_hz", rc.rate_hz, crate.note, out)
     _leaves("collect.physics_timestep", rc.timestep if rc.timestep_changed else None, crate.note, out)
     if wanted("collect", ("gains", "gain_scale")):
-        gains = derive.excitation_gains(robot, rc)
+        wc_collect = config.collect.sensor.velocity_cutoff if _given(given, "collect.sensor.velocity_cutoff") else None
+        gains = derive.excitation_gains(robot, rc, velocity_cutoff=wc_collect)   # its gain scale is checked with the trials' filter
         _leaves("collect.gains", gains.value["gains"], gains.note, out)
         _leaves("collect.gain_scale", gains.value["gain_scale"], gains.note, out)
     _leaves("collect.fall_window", fw.value, fw.note, out)

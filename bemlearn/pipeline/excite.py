@@ -141,9 +141,14 @@ def excitation_schedule(config, *, n_sines: int = N_SINES, seed: int = 0) -> dic
         q0 = np.zeros(robot.n)
         q0[robot.unactuated_index] = robot.qu_nominal
         D = robot.terms(q0, np.zeros(robot.n))[0]
-        gear = np.abs(model.actuator_gear[:, 0])
-        u_per_acc = np.array([D[j, j] for j in robot.actuated_index]) / np.maximum(gear[:robot.m], 1e-300)
-        u_room = np.where(model.actuator_ctrllimited[:robot.m].astype(bool), 0.25 * (hi - lo)[:robot.m], np.inf)
+        groups = robot.actuation   # one command per actuated coordinate, ctrl = W u (bemlearn.robots.actuation)
+        if groups.grouped:   # a group's command reaches its coordinate through every member
+            per_command = np.abs(robot.input_matrix_np[list(robot.actuated_index)] * groups.W.T).sum(axis=1)   # (m,) τ_c per unit u_c
+            u_room = 0.5 * groups.command_limits(np.where(model.actuator_ctrllimited.astype(bool), 0.5 * (hi - lo), np.inf))
+        else:   # one actuator per coordinate: its gear
+            per_command = np.abs(model.actuator_gear[:robot.m, 0])
+            u_room = np.where(model.actuator_ctrllimited[:robot.m].astype(bool), 0.25 * (hi - lo)[:robot.m], np.inf)
+        u_per_acc = np.array([D[j, j] for j in robot.actuated_index]) / np.maximum(per_command, 1e-300)
         trials, rate = 12, float(config.collect.rate_hz or 500.0)
         if data is not None:
             a_tot = np.where(np.isfinite(a_tot), a_tot, 4.0 * data["qdd_std"])

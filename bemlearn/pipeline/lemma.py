@@ -10,6 +10,17 @@ the BEM's own rates q̇_u^e, q̈_u^e and x_0^e zeros (eq. 14).  The GP also give
 built from GP quantities only; it is scaled by the nominal D_uu for N·m.  The model-based
 side (:func:`bemlearn.robots.zero_dynamics.lemma1`) gives ΔΓ and Ḣ_u exactly.
 
+Both sides sample one period T of the reference at N nodes and take q̇_u^e, q̈_u^e by spectral
+derivatives, exact for the harmonics k/T with |k| < N/2.  A reference whose frequencies are not
+commensurate to the digits they are written with has a period of the least common multiple: the
+derived closed-loop reference (0.2, 0.4)·λ/2π written to 4 significant digits, e.g. (0.1971,
+0.3941) Hz, repeats after T = 1/gcd = 10⁴ s, and 256 nodes over it are 39 s apart, 8 periods of its
+fastest component: the derivatives, ΔΓ and the correlation are then of an aliased sequence (on
+the public two-wheeler r = 0.37 there, 0.998 along (0.1971, 0.3942) Hz).  :func:`lemma1_reference`
+keeps a reference the nodes resolve (f_max T ≤ N / 16: at least 16 nodes per cycle of the fastest
+component, its harmonics to the 8th resolved) and otherwise takes the commensurate frequencies it
+was written from, f_k = (p_k/q_k) f_min (small integers, within the written digits' rounding).
+
 The learned ΔΓ is also split by least squares over the model's two parts,
 
     ΔΓ_learned ≈ a Ḣ_u + b (b_u q̇_u^e),
@@ -25,6 +36,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 import torch
@@ -33,7 +45,14 @@ from bemlearn.robots.protocol import BalanceRobot
 from bemlearn.robots.reference import CompositeSinusoid
 from bemlearn.robots.zero_dynamics import lemma1, spectral_derivative
 
-__all__ = ["LearnedLemma1", "learned_lemma1"]
+__all__ = ["LearnedLemma1", "learned_lemma1", "lemma1_reference", "NODES_PER_CYCLE"]
+
+#: Nodes per cycle of a reference's fastest component below which its sampled period is aliased (module docstring).
+NODES_PER_CYCLE = 16
+#: The relative error within which a frequency ratio is a small fraction (4 significant digits round by ≤ 5e-4 each).
+_RATIO_TOL = 1e-3
+#: The largest denominator of a frequency ratio taken as commensurate.
+_RATIO_DEN = 12
 
 
 @dataclass(frozen=True, eq=False)
@@ -133,3 +152,42 @@ def _split(dg: np.ndarray, hdot: np.ndarray, damping: np.ndarray, *, gamma_q: fl
     a, b = float(coef[0]), float(coef[1])
     r_md = float(np.corrcoef(dg - (b - 1.0) * damping, hdot + damping)[0, 1])
     return a, b, r_md, damping_qu
+
+
+def lemma1_reference(reference: CompositeSinusoid, *, n_nodes: int = 256) -> tuple[CompositeSinusoid, str]:
+    """The reference along which Lemma 1 is checked with ``n_nodes`` samples of one period (module docstring).
+
+    ``reference`` itself when f_max T ≤ n_nodes / :data:`NODES_PER_CYCLE`; otherwise each row's frequencies
+    f_k' = (p_k/q_k) f_min with p_k/q_k the fraction of denominator ≤ 12 nearest f_k/f_min, when every one is within
+    1e-3 of it (the ratios the reference was derived with, (0.2, 0.4)·λ/2π → 2) and the result is resolved; else
+    ``reference`` (the caller's check is then of an aliased sequence, and the note says so).
+
+    Returns:
+        ``(reference, note)``: the note is ``""`` when ``reference`` is returned resolved, else one sentence.
+    """
+    def resolved(ref: CompositeSinusoid) -> bool:
+        f_max = max((abs(f) for row in ref.frequencies for f in row), default=0.0)
+        return math.isfinite(ref.period) and f_max * ref.period <= n_nodes / NODES_PER_CYCLE
+
+    if resolved(reference):
+        return reference, ""
+    rows = []
+    for row in reference.frequencies:
+        f_min = min((abs(f) for f in row if f != 0), default=0.0)
+        snapped = []
+        for f in row:
+            if f == 0 or f_min == 0:
+                snapped.append(float(f))
+                continue
+            ratio = Fraction(abs(f) / f_min).limit_denominator(_RATIO_DEN)
+            if abs(float(ratio) * f_min - abs(f)) > _RATIO_TOL * abs(f):
+                return reference, (f"its frequencies {list(row)} Hz are not near small-integer ratios: one period "
+                                   f"({reference.period:.4g} s) is aliased at {n_nodes} nodes")
+            snapped.append(math.copysign(float(ratio) * f_min, f))
+        rows.append(tuple(snapped))
+    out = CompositeSinusoid(reference.amplitudes, tuple(rows), reference.phases, reference.offsets)
+    if not resolved(out):
+        return reference, f"one period ({reference.period:.4g} s) is aliased at {n_nodes} nodes"
+    return out, (f"along the commensurate frequencies {[list(r) for r in rows]} Hz (the reference's "
+                 f"{[list(r) for r in reference.frequencies]} Hz repeat only after {reference.period:.4g} s, which "
+                 f"{n_nodes} nodes alias)")

@@ -218,7 +218,8 @@ def load_pipeline_config(path: str | Path) -> PipelineConfig:
 
 
 def _check_actuators(robot: Any, source: str) -> None:
-    """One actuator per actuated coordinate (``MujocoRobot.actuator_mismatch``).
+    """One command per actuated coordinate reaches the actuators: one actuator each, or the actuators of each
+    coordinate commanded together (``MujocoRobot.actuator_mismatch``, :mod:`bemlearn.robots.actuation`).
 
     Raises:
         ConfigError: naming the actuators and the coordinates.

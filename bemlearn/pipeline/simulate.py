@@ -181,8 +181,11 @@ def _run_loop(robot: BalanceRobot, nominal: BalanceRobot, config: PipelineConfig
         inside = float(np.mean(np.abs(mean - model_bem) <= 2 * std)) if len(x) else float("nan")
         ref = cfg.reference.build(mm)
         if np.isfinite(ref.period):
-            from bemlearn.pipeline.lemma import learned_lemma1
+            from bemlearn.pipeline.lemma import learned_lemma1, lemma1_reference
 
+            ref, how = lemma1_reference(ref)   # one period its nodes resolve (written frequencies can repeat only after 1e4 s)
+            if how:
+                log.info("simulate: Lemma 1 checked %s", how)
             L = learned_lemma1(pred, pred.full, nominal, ref)
             check = Lemma1Check(L.r, L.r_hdot, L.model_gap, L.hdot_coefficient, L.damping_coefficient, L.r_model_damping,
                                 L.damping_qu)

@@ -46,6 +46,7 @@ import numpy as np
 from bemlearn._lazy import lazy_module
 from bemlearn.errors import MissingFileError, RobotModelError
 from bemlearn.robots._mujoco_compat import full_mass_matrix, make_mass_matrix
+from bemlearn.robots.actuation import ActuatorGroups, actuator_groups
 from bemlearn.robots.floating import FloatingRolling, find_floating
 from bemlearn.robots.robot import Robot, as_batch
 from bemlearn.robots.rolling import RollingMap, find_rolling
@@ -292,15 +293,68 @@ class MujocoRobot(Robot):
         if model.neq:
             warn(RobotModelWarning, log, "%s: equality constraints are ignored by the robot dynamics", where)
 
+    @functools.cached_property
+    def _actuation(self) -> ActuatorGroups | str:
+        names = tuple(self.model.actuator(i).name or f"u{i}" for i in range(self.model.nu))
+        gains = np.asarray(self.model.actuator_gainprm[:, 0], dtype=np.float64)
+        return actuator_groups(self.input_matrix_np[list(self.actuated_index)], gains, names, tuple(self.actuated_names))
+
+    @property
+    def actuation(self) -> ActuatorGroups:
+        """One command per actuated coordinate → the actuators' ``ctrl`` (:mod:`bemlearn.robots.actuation`).
+
+        Raises:
+            RobotModelError: the actuators are not one per coordinate and not a grouping (:meth:`actuator_mismatch`).
+        """
+        out = self._actuation
+        if isinstance(out, str):
+            raise RobotModelError(f"{self.source}: {out}")
+        return out
+
+    @functools.cached_property
+    def traction_limits(self) -> np.ndarray:
+        """``(nu,)`` |f_i| an actuator may apply before its wheel slips, at the actuator (``inf`` where it turns no
+        wheel): |gear_i f_i| ≤ μ N r_eff, the wheel's contact friction μ times its normal load N at the pose of rest
+        (``mj_contactForce`` of its contacts with zero ctrl) times its rolling radius (wheel inertia left out).
+        The rolling model (no slip) holds only within it.  A free body on wheels (:mod:`bemlearn.robots.floating`);
+        ``inf`` for every other robot."""
+        model = self.model
+        out = np.full(model.nu, np.inf)
+        if self.floating is None:
+            return out
+        data = mujoco.MjData(model)
+        data.qpos[:] = self.floating.qpos_ground
+        mujoco.mj_forward(model, data)
+        radius = {c.wheel_joint: c.radius for c in self.floating.contacts}
+        force = np.zeros(6)
+        load: dict[int, float] = {}
+        mu: dict[int, float] = {}
+        for k in range(data.ncon):
+            con = data.contact[k]
+            for g in (int(con.geom1), int(con.geom2)):
+                body = int(model.geom_bodyid[g])
+                joints = [j for j in self.floating.wheels if int(model.jnt_bodyid[j]) == body]
+                if not joints:
+                    continue
+                mujoco.mj_contactForce(model, data, k, force)
+                load[joints[0]] = load.get(joints[0], 0.0) + abs(float(force[0]))
+                mu[joints[0]] = min(mu.get(joints[0], np.inf), float(con.friction[0]))
+        for i in range(model.nu):
+            j = int(model.actuator_trnid[i, 0])
+            name = model.joint(j).name or f"joint{j}"
+            gear = abs(float(model.actuator_gear[i, 0]))
+            if j in load and name in radius and gear > 0:
+                out[i] = mu[j] * load[j] * radius[name] / gear
+        return out
+
     def actuator_mismatch(self) -> str | None:
         """Why the excitation, the EIC and their LQR cannot command this robot, or ``None``: they give one
-        actuator per actuated coordinate (u has m entries), which a robot whose actuators outnumber its
-        actuated coordinates (two wheel motors driving one wheel coordinate) does not have."""
-        if self.model.nu == self.m:
+        command per actuated coordinate (u has m entries), which reaches the actuators when there is one per
+        coordinate or when the actuators of each coordinate can be commanded together (:mod:`bemlearn.robots.actuation`)."""
+        out = self._actuation
+        if not isinstance(out, str):
             return None
-        acts = [self.model.actuator(i).name or f"#{i}" for i in range(self.model.nu)]
-        return (f"{self.source}: {self.model.nu} actuators {acts} drive {self.m} actuated coordinate(s) {list(self.actuated_names)}; "
-                "the excitation, the EIC and their LQR need one actuator per actuated coordinate (not supported yet; "
+        return (f"{self.source}: {out} (the excitation, the EIC and their LQR give one command per actuated coordinate; "
                 "`bemlearn robot info` and `bemlearn robot bem` work on it)")
 
     def _qu_unit(self) -> str:
@@ -312,14 +366,23 @@ class MujocoRobot(Robot):
     def coordinate_limits(self) -> tuple[tuple[float, float] | None, ...]:
         """Per coordinate, ``(lo, hi)`` in its unit, or ``None`` where it is unlimited (or not one joint).
 
-        A coordinate that is one MJCF joint takes the joint's range; a freedom that depends on it alone
+        A coordinate that is one MJCF joint takes the joint's range (a free body's wheel angle θ: every wheel's
+        range divided by its sign s_k; its pitch: ``None``); a freedom that depends on it alone
         by rolling (q_d = s·q_i, :mod:`bemlearn.robots.rolling`) adds its own range divided by s (a base
         slide of ±2 m limits a wheel of r_eff = 0.1525 m to ±13.1 rad).  A model-declared map
         (``bemlearn_coordinates``) gives ``None`` for every coordinate.
         """
+        model = self.model
+        if self.floating is not None:   # θ is the first wheel's hinge angle, each wheel turning s_k θ; the pitch is free
+            lo, hi = -math.inf, math.inf
+            for j, sk in zip(self.floating.wheels, self.floating.signs):
+                if model.jnt_limited[j]:
+                    a, b = sorted((float(model.jnt_range[j, 0] / sk), float(model.jnt_range[j, 1] / sk)))
+                    lo, hi = max(lo, a), min(hi, b)
+            wheel = (lo, hi) if math.isfinite(lo) or math.isfinite(hi) else None
+            return tuple(wheel if k != self.unactuated_index else None for k in range(self.n))
         if self.coordinate_joints is None:
             return (None,) * self.n
-        model = self.model
         out: list[tuple[float, float] | None] = []
         for k, j in enumerate(self.coordinate_joints):
             lo, hi = (float(model.jnt_range[j, 0]), float(model.jnt_range[j, 1])) if model.jnt_limited[j] else (-math.inf, math.inf)

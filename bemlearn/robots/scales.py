@@ -153,8 +153,8 @@ def qa_half_ranges(robot: BalanceRobot) -> np.ndarray:
 
 def qa_limited(robot: MujocoRobot) -> np.ndarray:
     """``(m,)`` bool: which actuated coordinates have limits (all, when the model declares a coordinate map:
-    their ranges are unknown and treated as limited)."""
-    if robot.coordinate_joints is None:
+    their ranges are unknown and treated as limited; a free body's wheel angle is its wheels' hinge angle)."""
+    if robot.coordinate_joints is None and getattr(robot, "floating", None) is None:   # a free body's wheel angle is a hinge's angle
         return np.ones(robot.m, dtype=bool)
     limits = robot.coordinate_limits
     return np.array([limits[j] is not None for j in robot.actuated_index], dtype=bool)

@@ -228,10 +228,10 @@ def _simulate(plant: BalanceRobot, config: SimulateConfig, *, progress: bool, re
     nominal = nominal_robot(plant, config.nominal)
     bem = _Timed(make_bem_source(config.bem_source, robot=nominal, predictor=config.predictor))
     ref = reference if reference is not None else config.reference.build(plant.m)
-    actuator = MujocoActuatorInverse(plant)
+    assert config.rate_hz is not None  # complete_section derives it
+    actuator = MujocoActuatorInverse(plant, hold_s=1.0 / config.rate_hz)   # the command is held over the tick
     ctrl = EICController(nominal, bem, ref, actuator, config.gains, rate_hz=config.rate_hz)
     model = plant.model
-    assert config.rate_hz is not None  # complete_section derives it
     sensed = SensedPlant(plant, rate_hz=config.rate_hz, sensor=config.sensor, rng=np.random.default_rng(config.seed), where="simulate",
                          timestep=config.physics_timestep)
     dt = sensed.dt

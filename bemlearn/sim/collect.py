@@ -4,6 +4,9 @@ Each trial runs the paper's excitation controller
 
     u = kᵀ e,   e = [q − q_t, q̂̇ − q̇_t]   (joint order, q_t = [q_a,t, q_u,nominal])
 
+(u: one command per actuated coordinate, reaching the actuators as ctrl = W u, :mod:`bemlearn.robots.actuation`;
+the log holds u, each coordinate's command as its first actuator received it)
+
 around a reference q_a,t(t) that is a random sum of sines, at the control rate (400 Hz
 for the Furuta) with the input held between ticks and clipped to the actuator range
 (±10 V).  The controller sees only what a rig sees: quantized encoder angles and a
@@ -209,6 +212,7 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
     plant.reset(q0, qd0)
     lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
     limited = model.actuator_ctrllimited.astype(bool)
+    groups = robot.actuation   # one command per actuated coordinate: ctrl = W u
     n_ticks = int(round(config.duration_s * config.rate_hz))
     rec = {k: np.empty((n_ticks, w)) for k, w in (("q_meas", n), ("u", m), ("q", n), ("qd", n), ("qdd", n))}
     failed = False
@@ -222,15 +226,16 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
         y, v = plant.measure(q_true)
         q_ref, qd_ref, qdd_ref = _reference_state(t, comps, traj, ia, iu, n, robot.qu_nominal, pose, stiff_v)
         Kt = K if schedule is None else (K0 + schedule.delta(y[ia])) * K_scale
-        u = Kt @ np.concatenate([y - q_ref, v - qd_ref])
+        ctrl = groups.ctrl(Kt @ np.concatenate([y - q_ref, v - qd_ref]))
         if inverse is not None:
             D, h = robot.terms(q_ref, qd_ref)
-            u = u + inverse.command((D @ qdd_ref + h)[ia], q_ref, qd_ref, clip=False)
-        u = np.where(limited, np.clip(u, lo, hi), u)
-        if not np.all(np.isfinite(u)):  # diverged state: never hand MuJoCo a non-finite ctrl
+            ctrl = ctrl + inverse.command((D @ qdd_ref + h)[ia], q_ref, qd_ref, clip=False)
+        ctrl = np.where(limited, np.clip(ctrl, lo, hi), ctrl)
+        if not np.all(np.isfinite(ctrl)):  # diverged state: never hand MuJoCo a non-finite ctrl
             failed, k = True, tick
             break
-        qd, qdd = plant.apply(u)
+        u = groups.command_of(ctrl)   # the logged input: each coordinate's command (its first actuator's ctrl)
+        qd, qdd = plant.apply(ctrl)
         rec["q_meas"][tick], rec["u"][tick], rec["q"][tick], rec["qd"][tick], rec["qdd"][tick] = y, u, q_true, qd, qdd
     times = np.arange(k) * dt
     return TrialResult(trial_id, failed, times, *(rec[name][:k] for name in ("q_meas", "u", "q", "qd", "qdd")))
@@ -451,12 +456,11 @@ def collect(robot_name: str, config: CollectConfig, *, progress: bool = True) ->
     log.info("collect: %d trials, %d fell, %d samples", len(kept), n_failed, sum(r.t.size for r in kept))
     cat = lambda name: np.concatenate([getattr(r, name) for r in kept])  # noqa: E731
     trial = np.concatenate([np.full(r.t.size, r.trial_id, dtype=np.int64) for r in kept])
-    model = robot.model
     meta = TrajectoryMeta(
         robot=robot.name,
         joint_names=robot.joint_names,
         unactuated=robot.unactuated_name,
-        actuator_names=tuple(model.actuator(i).name or f"u{i}" for i in range(model.nu)),
+        actuator_names=robot.actuation.names,
         sample_rate_hz=config.rate_hz,
         trial_failed={r.trial_id: r.failed for r in kept},
         units={"t": "s", "q": q_unit_label(robot.coordinate_kinds), "u": config.input_units},
