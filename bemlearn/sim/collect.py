@@ -22,8 +22,9 @@ does not depend on the number of worker processes.
 Where the fixed gains do not hold the linearisation at a pose the reference reaches (a turntable's yaw turns the
 pole's plane away from the slide that balanced it at 0), the gains are scheduled over that coordinate
 (:func:`_gain_schedule`, :func:`~bemlearn.control.lqr.pose_gain_schedule`: u = (K + ΔK(q̂_a)) ∘ scale, the measured
-pose in the tick); an unlimited hinge whose extent is a half turn also sweeps it (:func:`_sweep_components`).  Every
-other robot's trials are unchanged, draw for draw.
+pose in the tick); an unlimited hinge whose extent is a half turn also sweeps it (:func:`_sweep_components`), at rates
+to which that balance holds turning (:func:`~bemlearn.control.lqr.turning_rate_limit`).  Every other robot's trials are
+unchanged, draw for draw.
 """
 
 from __future__ import annotations
@@ -240,7 +241,9 @@ def _gain_schedule(robot: MujocoRobot, config: CollectConfig, K: np.ndarray):
     """The excitation balance scheduled over the actuated pose (:func:`~bemlearn.control.lqr.pose_gain_schedule`), or
     ``None`` where the fixed gains ``K (m, 2n)`` stabilise the linearisation at every pose the reference reaches (each
     coordinate's ``excursion`` extent, or with the paper's excitation n_max × the top amplitude).  The design is the
-    derived one's: |q_u| ≤ d (:func:`~bemlearn.robots.scales.design_bound`), a d/4 q_u start, the ``initial_qa`` start."""
+    derived one's: |q_u| ≤ d (:func:`~bemlearn.robots.scales.design_bound`), a d/4 q_u start, the ``initial_qa`` start.
+    With ``excursion``, an unlimited hinge's rates to √(a_j P_j) are checked too: the schedule's ``turn_rate``, the rate
+    to which it holds turning steadily (a trial's ``duration_s`` the horizon), bounds the sweep (:func:`_sweep_components`)."""
     from bemlearn.control.lqr import pose_gain_schedule
     from bemlearn.robots.scales import design_bound
 
@@ -329,7 +332,7 @@ def _sweep_components(robot: MujocoRobot, config: CollectConfig, rng: np.random.
     With the excitation's gain ``schedule`` (:func:`_gain_schedule`): the sweep's peak rate is also bounded by the
     largest steady rate at which the balance, scheduled over the pose at rest, still holds turning
     (:func:`~bemlearn.control.lqr.turning_rate_limit`, ``GainSchedule.turn_rate``): Ω ~ U(0.5, 1) min(√(a_j A_s),
-    Ω_hold).  Turning at ψ̇ turns the pole's plane under the slides' loop; on ``fam0_029`` (Ω_hold 1.8 rad/s of the
+    Ω_hold).  Turning at ψ̇ turns the pole's plane under the slides' loop; on ``fam0_029`` (Ω_hold 1.73 rad/s of the
     5.7 √(a P)) 17 of 24 trials fell at the full rate, with the slides running off their references while the weak yaw
     servo followed its own."""
     if not config.excursion or pose is None:
