@@ -202,3 +202,138 @@ def test_sigma_bounded_by_a_turning_pose_only_where_its_products_carry_the_label
     assert 0.8 * bound <= turning.sigma_s <= bound
     plain = choose_sigma(_turntable_log(4.0, with_products=False), qu_window=None)   # the yaw turns, the label ignores it
     assert "yaw" not in plain.note and plain.sigma_s > 1.5 * turning.sigma_s
+
+
+# The same turntable with position servos on the slides (the family's turntables with weak yaw servos, fam0_017, 029,
+# 035, have them): turning steadily, the balance scheduled over the pose at rest loses the slides beyond a rate.
+SERVO_SLIDES = (TURNTABLE.replace('<motor name="x_act" joint="x" ctrlrange="-20 20"/>', '<position name="x_act" joint="x" kp="200" ctrlrange="-1 1"/>')
+                .replace('<motor name="y_act" joint="y" ctrlrange="-20 20"/>', '<position name="y_act" joint="y" kp="200" ctrlrange="-1 1"/>'))
+
+
+@pytest.fixture(scope="module")
+def servo_turntable(tmp_path_factory):
+    path = tmp_path_factory.mktemp("tt") / "servo_turntable.xml"
+    path.write_text(SERVO_SLIDES)
+    robot = load(str(path))
+    K0 = discrete_lqr(robot, rate_hz=RATE, design_qu=0.2, qu0=0.05, qa0=0.05).K
+    sched = pose_gain_schedule(robot, K0, rate_hz=RATE, timestep=None, extents=np.array([0.3, 0.3, math.pi]),
+                               design_qu=0.2, qu0=0.05, qa0=0.05)
+    assert sched is not None and sched.coords == (2,) and sched.periodic == (True,)
+    return robot, K0, sched
+
+
+def _spin(robot, K0: np.ndarray, sched, rate: float, seconds: float, tilt: float = 0.02) -> float:
+    """MuJoCo itself (nonlinear, the file's integrator): the yaw commanded to turn steadily at ``rate`` with the pole
+    upright, u = (K0 + ΔK(ψ)) e + the model's inverse along the turn, from a ``tilt`` off upright; the largest |x|, |y|,
+    |ψ − rate·t|, |q_u − q_u*| over the last second (or 1 where it passed 1 before the end)."""
+    import mujoco
+
+    from bemlearn.control.actuator_inverse import MujocoActuatorInverse
+
+    model, data = robot.model, mujoco.MjData(robot.model)
+    inverse = MujocoActuatorInverse(robot)
+    iu, ia, n = robot.unactuated_index, list(robot.actuated_index), robot.n
+    q = np.zeros(n)
+    q[iu] = robot.qu_nominal + tilt
+    qd = np.zeros(n)
+    qd[ia[2]] = rate
+    data.qpos[:], data.qvel[:] = robot.state_to_mujoco(q, qd)
+    mujoco.mj_forward(model, data)
+    steps = int(round(1.0 / (RATE * model.opt.timestep)))
+    ticks = int(seconds * RATE)
+    last = 0.0
+    for k in range(ticks):
+        q_ref, qd_ref = np.zeros(n), np.zeros(n)
+        q_ref[iu] = robot.qu_nominal
+        q_ref[ia[2]], qd_ref[ia[2]] = rate * k / RATE, rate
+        q = robot.coordinates_of(data.qpos)
+        qd = robot.T_np @ data.qvel
+        dev = float(np.max(np.abs(np.r_[q[ia[:2]], q[ia[2]] - q_ref[ia[2]], q[iu] - robot.qu_nominal])))
+        if dev > 1.0:
+            return 1.0
+        if k >= ticks - int(RATE):
+            last = max(last, dev)
+        bias = np.asarray(robot.terms(q_ref, qd_ref)[1], dtype=np.float64)
+        u = (K0 + sched.delta(q[ia])) @ np.concatenate([q - q_ref, qd - qd_ref])
+        data.ctrl[:] = u + inverse.command(bias[ia], q_ref, qd_ref, clip=False)
+        for _ in range(steps):
+            mujoco.mj_step(model, data)
+    return last
+
+
+def test_turning_rate_the_pose_schedule_holds_is_where_steady_turning_grows_in_mujoco(servo_turntable):
+    """turning_rate_limit (the Floquet exponent of the linearised loop over a turn) against MuJoCo itself: turning at
+    0.6 × Ω_hold the tilt and the slides settle; at 1.6 × Ω_hold they grow (the robot falls or ends far off)."""
+    from bemlearn.control.lqr import turning_rate_limit
+
+    robot, K0, sched = servo_turntable
+    hold, growth = turning_rate_limit(robot, K0, 2, sched.grids[0], sched.deltas[0], 5.0, rate_hz=RATE, timestep=None,
+                                      horizon_s=20.0, levels=4, refine=3)
+    assert 1.0 < hold < 5.0 and growth > 1.0 / 20.0   # measured: 2.49 rad/s, 0.34 1/s at 5 rad/s (12 levels)
+    assert _spin(robot, K0, sched, 0.6 * hold, 12.0) < 0.02 / 4
+    assert _spin(robot, K0, sched, 1.6 * hold, 20.0) > 0.02 * 5
+
+
+def test_sweep_peak_rate_within_the_rate_the_balance_holds_turning(turntable, servo_turntable):
+    """The yaw sweep's peak rate A ω ~ U(0.5, 1) min(√(a P), Ω_hold) (before: U(0.5, 1) √(a P), beyond the rate at
+    which the pose-scheduled balance holds turning: fam0_029 lost 17 of 24 trials), drawn the same way (the same
+    draws from the trial's generator), and unchanged where the balance holds turning at √(a P)."""
+    import dataclasses
+
+    from bemlearn.sim.collect import CollectConfig, _pose_slopes, _sweep_components
+
+    _, _, sched = servo_turntable
+    ext = (0.3, 0.3, math.pi, 2.0, 2.0, 9.0)
+    v = math.sqrt(math.pi * 9.0)
+    pose = _pose_slopes(turntable, np.array(ext[:3]), 6.0)
+    held = dataclasses.replace(sched, turn_rate=(1.2,), growth=(0.3,))
+    free = dataclasses.replace(sched, turn_rate=(v,), growth=(-0.5,))
+    for seed in range(20):
+        rng_a, rng_b, rng_c = (np.random.default_rng(seed) for _ in range(3))
+        A, w, ph, keep = _sweep_components(turntable, CollectConfig(excursion=ext), rng_a, pose, held)[2]
+        A0, w0, ph0, _ = _sweep_components(turntable, CollectConfig(excursion=ext), rng_b, pose)[2]
+        assert pytest.approx(math.pi) == A and 0.6 <= A * w <= 1.2 * (1 + 1e-12) and ph == ph0   # bounded by Ω_hold
+        assert A * w == pytest.approx(A0 * w0 * 1.2 / v, rel=1e-12)   # the same draw, scaled to the bound
+        assert _sweep_components(turntable, CollectConfig(excursion=ext), rng_c, pose, free)[2] == (A0, w0, ph0, keep)
+        assert rng_a.bit_generator.state == rng_b.bit_generator.state == rng_c.bit_generator.state
+
+
+def test_a_pose_where_scipys_riccati_solver_fails_gets_the_recursions_gains(turntable, monkeypatch):
+    """SciPy's solve_discrete_are can fail ("very ill-conditioned") at a well-posed pose (fam0_035 at ψ = −2π/3); the
+    schedule then took the gains at rest there, which push the pole the wrong way two thirds of a turn on (its trials
+    fell at ψ ≈ −2.1).  Now the Riccati recursion's gains: the rest gains turned with the yaw (closed form, as above)."""
+    import scipy.linalg
+
+    robot = turntable
+    K0 = discrete_lqr(robot, rate_hz=RATE, design_qu=0.2, qu0=0.05, qa0=0.05).K
+    grid = np.linspace(-math.pi, math.pi, 49)
+    bad = float(grid[8])   # −2π/3
+    real = scipy.linalg.solve_discrete_are
+    iu = robot.unactuated_index
+    seen = []
+
+    def failing(A, B, Q, R, *args, **kwargs):
+        # the pole's row of B turns with the yaw: −(cos ψ, sin ψ) × the slide force's effect at rest
+        psi = math.atan2(-B[robot.n + iu, 1], -B[robot.n + iu, 0])
+        if abs(psi - bad) < 1e-3:
+            seen.append(psi)
+            raise ValueError("Reordering of (A, B) failed because the transformed matrix pair (A, B) would be too far "
+                             "from generalized Schur form; the problem is very ill-conditioned.")
+        return real(A, B, Q, R, *args, **kwargs)
+
+    monkeypatch.setattr(scipy.linalg, "solve_discrete_are", failing)
+    # (a y extent of its own: not the schedule cached by the test above)
+    sched = pose_gain_schedule(robot, K0, rate_hz=RATE, timestep=None, extents=np.array([0.3, 0.31, math.pi]),
+                               design_qu=0.2, qu0=0.05, qa0=0.05)
+    assert seen, "the failing pose was designed"
+    assert sched is not None and sched.rho_scheduled[0] < 1.0
+    scale = np.abs(K0).max()
+    np.testing.assert_allclose(K0 + sched.delta(np.array([0.0, 0.0, bad])), _turned(K0, bad, [0, 1], robot.n), atol=2e-4 * scale)
+    # the recursion against SciPy where SciPy succeeds
+    from bemlearn.control.lqr import riccati_iteration
+
+    A, B, _, _ = linearize(robot, rate_hz=RATE, at=np.array([0.0, 0.0, 0.4]))
+    Q, R = np.diag(np.linspace(1.0, 3.0, A.shape[0])), np.diag([0.5, 0.7, 2.0])
+    P = riccati_iteration(A, B, Q, R)
+    assert P is not None
+    np.testing.assert_allclose(P, real(A, B, Q, R), rtol=1e-7, atol=1e-9 * np.abs(P).max())

@@ -54,7 +54,7 @@ from bemlearn.warnings import DesignWarning, warn
 if TYPE_CHECKING:
     from bemlearn.robots.mujoco_robot import MujocoRobot
 
-__all__ = ["LQRResult", "ActuatorLimits", "GainSchedule", "actuator_limits", "holds_in_mujoco", "linearize", "discrete_lqr", "pose_gain_schedule", "upright_at"]
+__all__ = ["LQRResult", "ActuatorLimits", "GainSchedule", "actuator_limits", "holds_in_mujoco", "linearize", "discrete_lqr", "pose_gain_schedule", "riccati_iteration", "turning_rate_limit", "upright_at"]
 
 log = logging.getLogger(__name__)
 
@@ -96,7 +96,7 @@ class LQRResult:
 
 
 def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = None, eps: float = 1e-6,
-              at: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int, float]:
+              at: np.ndarray | None = None, at_rate: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int, float]:
     """Tick map (A_N, B_N) of ``robot`` (a MujocoRobot) in its coordinates at upright.
 
     Args:
@@ -105,6 +105,9 @@ def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = No
         at: ``(m,)`` actuated pose q_a (joint units; default 0): the linearisation is taken there, at rest, with q_u
             at the BEM of that pose (the root of Γ_0(q_u; q_a, 0, 0) nearest nominal, :func:`upright_at`) and the
             actuators commanded to hold it (their inverse, :class:`~bemlearn.control.actuator_inverse.MujocoActuatorInverse`).
+        at_rate: ``(m,)`` actuated rates q̇_a (joint units per s; default 0): the linearisation is taken moving at them
+            (q_u at ``at``'s BEM of rest, q̇_u = 0), the actuators commanded to keep q̈ = 0 there — a turntable
+            turning at ψ̇ with its pole upright, a motion the robot can keep.
 
     Returns:
         ``(A (2n, 2n), B (2n, nu), substeps, timestep)``.
@@ -134,14 +137,19 @@ def linearize(robot: MujocoRobot, *, rate_hz: float, timestep: float | None = No
     if at is not None:
         q0[list(robot.actuated_index)] = at
         q0[robot.unactuated_index] = upright_at(robot, np.asarray(at, dtype=np.float64))
-    data.qpos[:] = robot.state_to_mujoco(q0)[0]
-    if at is not None and np.any(at):
-        # held at rest there: the actuators' command that balances the pose's static forces (a servo's setpoint
-        # at the pose), else the linearisation is of a state accelerating away from it
+    qd0 = np.zeros(n)
+    if at_rate is not None:
+        qd0[list(robot.actuated_index)] = at_rate
+    data.qpos[:], qvel = robot.state_to_mujoco(q0, qd0)
+    if at_rate is not None:
+        data.qvel[:] = qvel
+    if (at is not None and np.any(at)) or (at_rate is not None and np.any(at_rate)):
+        # held at rest (or moving steadily) there: the actuators' command that balances the pose's static and velocity
+        # forces (a servo's setpoint at the pose), else the linearisation is of a state accelerating away from it
         from bemlearn.control.actuator_inverse import MujocoActuatorInverse
 
-        bias = np.asarray(robot.terms(q0, np.zeros(n))[1], dtype=np.float64)
-        data.ctrl[:] = MujocoActuatorInverse(robot).command(bias[list(robot.actuated_index)], q0, np.zeros(n), clip=False)
+        bias = np.asarray(robot.terms(q0, qd0)[1], dtype=np.float64)
+        data.ctrl[:] = MujocoActuatorInverse(robot).command(bias[list(robot.actuated_index)], q0, qd0, clip=False)
     mujoco.mj_forward(model, data)
     nx = 2 * model.nv + model.na
     A1 = np.zeros((nx, nx))
@@ -459,6 +467,9 @@ class GainSchedule:
         rho_fixed: per scheduled coordinate the worst spectral radius of the fixed gains over its grid (≥ 1: why it is
             scheduled).
         rho_scheduled: per scheduled coordinate the worst spectral radius of the scheduled gains over its grid.
+        turn_rate: per scheduled coordinate (a periodic one whose rates were given) the largest steady rate (its unit
+            per s) at which the scheduled loop turning over a whole turn decays (:func:`turning_rate_limit`), or
+            ``None``; ``growth`` the fastest growth (1/s) over a turn at the given rates.
     """
 
     coords: tuple[int, ...]
@@ -467,6 +478,8 @@ class GainSchedule:
     periodic: tuple[bool, ...]
     rho_fixed: tuple[float, ...]
     rho_scheduled: tuple[float, ...]
+    turn_rate: tuple[float | None, ...] | None = None
+    growth: tuple[float | None, ...] | None = None
 
     def delta(self, qa: np.ndarray) -> np.ndarray:
         """ΔK ``(m, 2n)`` at the actuated pose ``qa (m,)`` (joint units)."""
@@ -475,21 +488,30 @@ class GainSchedule:
             q = float(qa[i])
             if per:
                 q = (q + math.pi) % (2 * math.pi) - math.pi
-            if q <= g[0]:
-                out += d[0]
-            elif q >= g[-1]:
-                out += d[-1]
-            else:
-                k = int(np.searchsorted(g, q)) - 1
-                w = (q - g[k]) / (g[k + 1] - g[k])
-                out += (1.0 - w) * d[k] + w * d[k + 1]
+            k, w = _bracket(g, q)
+            out += (1.0 - w) * d[k] + w * d[k + 1]
         return out
 
     def describe(self, names: list[str]) -> str:
         """One line for messages: which coordinates are scheduled and why."""
+        turn = self.turn_rate or (None,) * len(self.coords)
+        growth = self.growth or (None,) * len(self.coords)
         return "; ".join(f"gains scheduled over {names[i]} ({len(g)} poses{', periodic' if per else ''}): the fixed gains' "
                          f"spectral radius reaches {rf:.3g} there, the scheduled {rs:.3g}"
-                         for i, g, per, rf, rs in zip(self.coords, self.grids, self.periodic, self.rho_fixed, self.rho_scheduled))
+                         + (f"; turning steadily they hold to {tr:.3g}/s (over a turn at the given rates the loop's "
+                            f"fastest growth is {gr:.3g} 1/s)" if tr is not None and gr is not None else "")
+                         for i, g, per, rf, rs, tr, gr in zip(self.coords, self.grids, self.periodic, self.rho_fixed,
+                                                              self.rho_scheduled, turn, growth))
+
+
+def _bracket(g: np.ndarray, q: float) -> tuple[int, float]:
+    """``(k, w)``: q between g[k] and g[k+1] at fraction w ∈ [0, 1] (held at the ends) of an increasing grid ``g``."""
+    if q <= g[0]:
+        return 0, 0.0
+    if q >= g[-1]:
+        return len(g) - 2, 1.0
+    k = int(np.searchsorted(g, q)) - 1
+    return k, float((q - g[k]) / (g[k + 1] - g[k]))
 
 
 def _pose_grid(robot: MujocoRobot, j: int, extent: float, points: int) -> tuple[np.ndarray, bool]:
@@ -511,8 +533,35 @@ def _pose_grid(robot: MujocoRobot, j: int, extent: float, points: int) -> tuple[
 _SCHEDULES: dict = {}
 
 
+def riccati_iteration(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, S: np.ndarray | None = None, *,
+                      tol: float = 1e-12, max_iter: int = 200_000) -> np.ndarray | None:
+    """The stabilising solution ``P (nx, nx)`` of the discrete algebraic Riccati equation by its recursion,
+
+        P ← Q + AᵀPA − (AᵀPB + S)(R + BᵀPB)⁻¹(BᵀPA + Sᵀ),   P₀ = Q,
+
+    which converges (at the rate ρ(A − BK)² per step) wherever (A, B) is stabilisable and the cost detectable — where
+    ``scipy.linalg.solve_discrete_are``'s Schur reordering fails as "very ill-conditioned" on a well-posed pair.
+    ``A (nx, nx)``, ``B (nx, nu)``, ``Q (nx, nx)``, ``R (nu, nu)``, ``S (nx, nu)`` the cross term.  ``None`` where it
+    does not settle to relative change ``tol`` in ``max_iter`` steps or its gain does not stabilise A − BK."""
+    Sx = S if S is not None else np.zeros(B.shape)
+    P = np.array(Q, dtype=np.float64)
+    for _ in range(max_iter):
+        G = A.T @ P @ B + Sx
+        P_next = Q + A.T @ P @ A - G @ np.linalg.solve(R + B.T @ P @ B, G.T)
+        P_next = 0.5 * (P_next + P_next.T)
+        if not np.all(np.isfinite(P_next)):
+            return None
+        done = float(np.max(np.abs(P_next - P))) <= tol * max(1.0, float(np.max(np.abs(P_next))))
+        P = P_next
+        if done:
+            K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A + Sx.T)
+            return P if float(np.max(np.abs(np.linalg.eigvals(A - B @ K)))) < 1.0 else None
+    return None
+
+
 def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, timestep: float | None, extents: np.ndarray,
-                       design_qu: float, qu0: float, qa0: float | None, points: int = 49) -> GainSchedule | None:
+                       design_qu: float, qu0: float, qa0: float | None, points: int = 49,
+                       rates: np.ndarray | None = None, horizon_s: float | None = None) -> GainSchedule | None:
     """Which actuated coordinates' pose makes the fixed gains ``K (m, 2n)`` (collect's convention) fail, and the gains
     scheduled over them (:class:`GainSchedule`).
 
@@ -523,13 +572,18 @@ def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, tim
     its Bryson weights, effort scale and, for design 2, force weights) is solved at each pose with the same weights
     (``scipy.linalg.solve_discrete_are``), and its change from rest is added to K.  ``None`` where no coordinate needs
     it (a cart's slides, whose linearisation does not change with the pose: the excitation is then unchanged).
+
+    ``rates (m,)`` (joint units per s) with ``horizon_s``: for a periodic coordinate (an unlimited hinge) that turns at up
+    to rates[j], the largest steady rate at which the scheduled loop grows over a turn by less than e per ``horizon_s``
+    (:func:`turning_rate_limit`: the schedule is designed at rest, and a turntable turning at ψ̇ turns the pole's plane
+    under the slides' loop).
     Cached per robot, gains, rate and extents.
     """
     from scipy.linalg import solve_discrete_are
 
     K = np.asarray(K, dtype=np.float64)
     key = (robot.name, robot.model.nq, K.tobytes(), float(rate_hz), timestep, tuple(float(x) for x in extents),
-           float(design_qu), float(qu0), qa0, points)
+           float(design_qu), float(qu0), qa0, points, None if rates is None else tuple(float(x) for x in rates), horizon_s)
     if key in _SCHEDULES:
         return _SCHEDULES[key]
     m = robot.m
@@ -556,8 +610,10 @@ def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, tim
     def design(A: np.ndarray, B: np.ndarray) -> np.ndarray | None:
         try:
             P = solve_discrete_are(A, B, Q, R, s=S)
-        except (np.linalg.LinAlgError, ValueError):
-            return None
+        except (np.linalg.LinAlgError, ValueError):   # SciPy's Schur reordering can fail at a well-posed pose
+            P = riccati_iteration(A, B, Q, R, S)
+            if P is None:
+                return None
         return -np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A + (S.T if S is not None else 0.0))
 
     K_rest = design(res.A, res.B)
@@ -565,12 +621,22 @@ def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, tim
         _SCHEDULES[key] = None
         return None
     coords, grids, deltas, periodics, rho_fixed, rho_sched = [], [], [], [], [], []
+    turn_rates: list = []
+    growths: list = []
     for j, grid, periodic, maps, rho in tables:
         d = np.zeros((len(grid), *K.shape))
         worst = 0.0
+        ok = np.zeros(len(grid), dtype=bool)
         for k, (A, B) in enumerate(maps):
             Kq = design(A, B)
-            d[k] = Kq - K_rest if Kq is not None else 0.0   # no stabilising design at that pose: the gains at rest
+            if Kq is not None:
+                d[k], ok[k] = Kq - K_rest, True
+        if ok.any() and not ok.all():   # no stabilising design at a pose: its neighbours' change, not the gains at rest
+            x = grid if not periodic else np.concatenate([grid[ok] - 2 * math.pi, grid[ok], grid[ok] + 2 * math.pi])
+            y = d[ok] if not periodic else np.concatenate([d[ok]] * 3)
+            flat = y.reshape(len(y), -1)
+            d[~ok] = np.stack([np.interp(grid[~ok], x, flat[:, c]) for c in range(flat.shape[1])], axis=1).reshape(-1, *K.shape)
+        for k, (A, B) in enumerate(maps):
             worst = max(worst, float(np.max(np.abs(np.linalg.eigvals(A + B @ (K + d[k]))))))
         coords.append(j)
         grids.append(grid)
@@ -578,7 +644,87 @@ def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, tim
         periodics.append(periodic)
         rho_fixed.append(rho)
         rho_sched.append(worst)
-    out = GainSchedule(tuple(coords), tuple(grids), tuple(deltas), tuple(periodics), tuple(rho_fixed), tuple(rho_sched))
+        limit = grow = None
+        if periodic and rates is not None and horizon_s is not None and float(rates[j]) > 0:
+            limit, grow = turning_rate_limit(robot, K, j, grid, d, float(rates[j]), rate_hz=rate_hz, timestep=timestep,
+                                             horizon_s=float(horizon_s))
+        turn_rates.append(limit)
+        growths.append(grow)
+    given = any(t is not None for t in turn_rates)
+    out = GainSchedule(tuple(coords), tuple(grids), tuple(deltas), tuple(periodics), tuple(rho_fixed), tuple(rho_sched),
+                       tuple(turn_rates) if given else None, tuple(growths) if given else None)
     log.info("%s: %s", robot.name, out.describe([robot.joint_names[i] for i in robot.actuated_index]))
     _SCHEDULES[key] = out
     return out
+
+
+def _turn(grid: np.ndarray, maps: list, rate: float, dt: float) -> tuple[np.ndarray, list]:
+    """One steady turn at ``rate`` (rad/s ≠ 0) in ticks of ``dt`` over a periodic pose ``grid`` [−π, π] with tick maps
+    ``maps`` [(A, B)] there: ``(poses (N,), [(A_k, B_k)])``, the maps linear between the grid poses."""
+    N = max(2, int(round(2 * math.pi / (abs(rate) * dt))))
+    poses = (-math.pi + rate * dt * np.arange(N) + math.pi) % (2 * math.pi) - math.pi
+    ticks = []
+    for q in poses:
+        k, w = _bracket(grid, float(q))
+        ticks.append(((1 - w) * maps[k][0] + w * maps[k + 1][0], (1 - w) * maps[k][1] + w * maps[k + 1][1]))
+    return poses, ticks
+
+
+def _turn_growth(ticks: list, gains: list, dt: float) -> float:
+    """The fastest growth (1/s) of x_{k+1} = (A_k + B_k K_k) x_k over a turn: log ρ(Π_k (A_k + B_k K_k)) / (N dt), the
+    Floquet exponent of the periodic loop."""
+    Phi = np.eye(ticks[0][0].shape[0])
+    for (A, B), Kk in zip(ticks, gains):
+        Phi = (A + B @ Kk) @ Phi
+    rho = float(np.max(np.abs(np.linalg.eigvals(Phi))))
+    return math.log(max(rho, 1e-300)) / (len(ticks) * dt)
+
+
+def turning_rate_limit(robot: MujocoRobot, K: np.ndarray, j: int, grid: np.ndarray, d: np.ndarray, rate_max: float, *,
+                       rate_hz: float, timestep: float | None, horizon_s: float, levels: int = 12,
+                       refine: int = 4) -> tuple[float, float]:
+    """How fast an unlimited hinge j may turn under the gains ``K (nu, 2n)`` scheduled over its pose (``d (points, nu,
+    2n)`` on the periodic ``grid``, :func:`pose_gain_schedule`): ``(Ω_hold, growth)``.
+
+    Turning steadily at Ω the robot keeps its pole upright (a motion it can keep); the tick map is linearised at each
+    grid pose moving at Ω (:func:`linearize`, ``at_rate``) and the loop x_{k+1} = (A_k + B_k K(ψ_k)) x_k over a whole
+    turn ψ_k = ψ_0 + Ω k/rate grows at its Floquet exponent (:func:`_turn_growth`).  Ω_hold is the largest rate (both
+    directions, from ±rate_max·i/levels, then ``refine`` bisections) up to which no turn grows faster than 1/horizon_s
+    (e-fold within a trial: a neutral mode, a yaw without position feedback, is not growth), ``rate_max`` where none
+    does; ``growth`` the fastest exponent (1/s) over the levels."""
+    dt = 1.0 / rate_hz
+
+    def growth(om: float) -> float:
+        maps = []
+        for q in grid:
+            at = np.zeros(robot.m)
+            at[j] = q
+            rate = np.zeros(robot.m)
+            rate[j] = om
+            A, B, _, _ = linearize(robot, rate_hz=rate_hz, timestep=timestep, at=at, at_rate=rate)
+            maps.append((A, B))
+        poses, ticks = _turn(grid, maps, om, dt)
+        gains = []
+        for q in poses:
+            k, w = _bracket(grid, float(q))
+            gains.append(K + (1 - w) * d[k] + w * d[k + 1])
+        return _turn_growth(ticks, gains, dt)
+
+    def worst(om: float) -> float:
+        return max(growth(om), growth(-om))
+
+    omegas = rate_max * np.arange(1, levels + 1) / levels
+    grows = [worst(float(om)) for om in omegas]
+    fastest = max(grows)
+    bad = [i for i, g in enumerate(grows) if g > 1.0 / horizon_s]
+    if not bad:
+        return float(rate_max), fastest
+    lo = float(omegas[bad[0] - 1]) if bad[0] > 0 else 0.0
+    hi = float(omegas[bad[0]])
+    for _ in range(refine):
+        mid = 0.5 * (lo + hi)
+        if worst(mid) > 1.0 / horizon_s:
+            hi = mid
+        else:
+            lo = mid
+    return lo, fastest

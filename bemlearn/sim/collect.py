@@ -25,8 +25,9 @@ does not depend on the number of worker processes.
 Where the fixed gains do not hold the linearisation at a pose the reference reaches (a turntable's yaw turns the
 pole's plane away from the slide that balanced it at 0), the gains are scheduled over that coordinate
 (:func:`_gain_schedule`, :func:`~bemlearn.control.lqr.pose_gain_schedule`: u = (K + ΔK(q̂_a)) ∘ scale, the measured
-pose in the tick); an unlimited hinge whose extent is a half turn also sweeps it (:func:`_sweep_components`).  Every
-other robot's trials are unchanged, draw for draw.
+pose in the tick); an unlimited hinge whose extent is a half turn also sweeps it (:func:`_sweep_components`), at rates
+to which that balance holds turning (:func:`~bemlearn.control.lqr.turning_rate_limit`).  Every other robot's trials are
+unchanged, draw for draw.
 """
 
 from __future__ import annotations
@@ -185,7 +186,7 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
     pose = None
     if config.reference_bem and config.excursion:
         pose = _pose_slopes(robot, np.asarray(config.excursion, dtype=np.float64)[:m], float(config.reference_bem[-1]))
-    sweep = _sweep_components(robot, config, rng, pose)
+    sweep = _sweep_components(robot, config, rng, pose, schedule)
     stiff_v = None
     if sweep is not None:
         from bemlearn.robots.scales import velocity_stiffening_speed
@@ -245,20 +246,25 @@ def _gain_schedule(robot: MujocoRobot, config: CollectConfig, K: np.ndarray):
     """The excitation balance scheduled over the actuated pose (:func:`~bemlearn.control.lqr.pose_gain_schedule`), or
     ``None`` where the fixed gains ``K (m, 2n)`` stabilise the linearisation at every pose the reference reaches (each
     coordinate's ``excursion`` extent, or with the paper's excitation n_max × the top amplitude).  The design is the
-    derived one's: |q_u| ≤ d (:func:`~bemlearn.robots.scales.design_bound`), a d/4 q_u start, the ``initial_qa`` start."""
+    derived one's: |q_u| ≤ d (:func:`~bemlearn.robots.scales.design_bound`), a d/4 q_u start, the ``initial_qa`` start.
+    With ``excursion``, an unlimited hinge's rates to √(a_j P_j) are checked too: the schedule's ``turn_rate``, the rate
+    to which it holds turning steadily (a trial's ``duration_s`` the horizon), bounds the sweep (:func:`_sweep_components`)."""
     from bemlearn.control.lqr import pose_gain_schedule
     from bemlearn.robots.scales import design_bound
 
     assert config.rate_hz is not None and config.n_sines is not None and config.amplitude is not None and config.initial_qa is not None
     m = robot.m
+    rates = None
     if config.excursion:
-        extents = np.asarray(config.excursion, dtype=np.float64)[:m]
+        ext = np.asarray(config.excursion, dtype=np.float64)
+        extents = ext[:m]
+        rates = np.sqrt(ext[:m] * ext[m:2 * m])   # the components' and a sweep's speed bound √(a P)
     else:
         extents = np.full(m, config.n_sines[1] * config.amplitude[1])
     d = design_bound(robot)
     qa0 = float(config.initial_qa[1]) or None
     return pose_gain_schedule(robot, K, rate_hz=config.rate_hz, timestep=config.physics_timestep, extents=extents,
-                              design_qu=d, qu0=d / 4, qa0=qa0)
+                              design_qu=d, qu0=d / 4, qa0=qa0, rates=rates, horizon_s=config.duration_s)
 
 
 def _trajectory_reference(reference_bem: tuple[float, ...] | None, comps: list, m: int) -> list | None:
@@ -315,7 +321,8 @@ def _reference_state(t: float, comps: list, traj: list | None, ia: list[int], iu
     return out[0], out[1], out[2]
 
 
-def _sweep_components(robot: MujocoRobot, config: CollectConfig, rng: np.random.Generator, pose: tuple | None) -> list | None:
+def _sweep_components(robot: MujocoRobot, config: CollectConfig, rng: np.random.Generator, pose: tuple | None,
+                      schedule=None) -> list | None:
     """Per actuated coordinate ``(A_s, ω_s, φ_s, keep)``: one more sine for a hinge whose pose turns the BEM's slopes
     (``pose``, :func:`_pose_slopes`: a turntable's yaw) over an ``excursion`` extent P_j ≥ :data:`SWEEP_SPAN`
     (A_s = 0 elsewhere): A_s = P_j (0.75 P_j on a limited joint, whose own sines are then halved, ``keep`` = 0.5, to
@@ -325,7 +332,14 @@ def _sweep_components(robot: MujocoRobot, config: CollectConfig, rng: np.random.
     (each ≤ P_j/√n_max) keep such a coordinate near its start — a turntable's yaw within ±1.9 rad and its rate below
     3.3 rad/s of the ±π and 5.6 rad/s its design region spans (measured on ``fam0_005``); the sweep visits the
     whole extent at rates up to that speed.  ``None`` (no draw from ``rng``) where no coordinate sweeps: every other
-    robot's trials are unchanged."""
+    robot's trials are unchanged.
+
+    With the excitation's gain ``schedule`` (:func:`_gain_schedule`): the sweep's peak rate is also bounded by the
+    largest steady rate at which the balance, scheduled over the pose at rest, still holds turning
+    (:func:`~bemlearn.control.lqr.turning_rate_limit`, ``GainSchedule.turn_rate``): Ω ~ U(0.5, 1) min(√(a_j A_s),
+    Ω_hold).  Turning at ψ̇ turns the pole's plane under the slides' loop; on ``fam0_029`` (Ω_hold 1.73 rad/s of the
+    5.7 √(a P)) 17 of 24 trials fell at the full rate, with the slides running off their references while the weak yaw
+    servo followed its own."""
     if not config.excursion or pose is None:
         return None
     from bemlearn.robots.scales import qa_limited
@@ -341,7 +355,12 @@ def _sweep_components(robot: MujocoRobot, config: CollectConfig, rng: np.random.
     if not any(turns):
         return None
     amp = np.where(limited, 0.75, 1.0) * ext[:m]
-    rate = rng.uniform(0.5, 1.0, size=m) * np.sqrt(amp * ext[m:2 * m])
+    top = np.sqrt(amp * ext[m:2 * m])
+    if schedule is not None and schedule.turn_rate is not None:
+        for i, hold in zip(schedule.coords, schedule.turn_rate):
+            if hold is not None:
+                top[i] = min(top[i], hold)
+    rate = rng.uniform(0.5, 1.0, size=m) * top
     phase = rng.uniform(0.0, 2 * math.pi, size=m)
     return [(float(amp[j]), float(rate[j] / amp[j]), float(phase[j]), 0.5 if limited[j] else 1.0) if turns[j]
             else (0.0, 0.0, 0.0, 1.0) for j in range(m)]
