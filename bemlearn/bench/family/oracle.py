@@ -363,16 +363,14 @@ class Oracle:
     def design_queries(self, n: int, seed: int = 0, *, bound: float = DESIGN_BOUND) -> dict:
         """``n`` actuated motions drawn uniformly in the oracle's box (:meth:`scales`), kept where
         |q_u^e − q_u*| ≤ ``bound``; returns ``{"qa", "qda", "qdda"}`` (n', m) and ``"bem"`` (n',)."""
-        sc = self.scales()
+        lo, hi, vel, acc = self._box()
         rng = np.random.default_rng(seed)
         got = 0
         rows = []
         for _ in range(20):
-            lo = np.array([p[0] for p in sc["pos"]])
-            hi = np.array([p[1] for p in sc["pos"]])
             qa = lo + (hi - lo) * rng.random((n, self.m))
-            qd = np.asarray(sc["vel"]) * (2 * rng.random((n, self.m)) - 1)
-            qdd = np.asarray(sc["acc"]) * 1.3 * (2 * rng.random((n, self.m)) - 1)
+            qd = vel * (2 * rng.random((n, self.m)) - 1)
+            qdd = acc * (2 * rng.random((n, self.m)) - 1)
             q = self.bem(qa, qd, qdd)
             ok = np.isfinite(q) & (np.abs(q - self.qu_star) <= bound)
             rows.append((qa[ok], qd[ok], qdd[ok], q[ok]))
@@ -385,11 +383,16 @@ class Oracle:
     def clip_to_box(self, qa: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The actuated motion ``(qa, qd, qdd)`` (each (m,)) moved into the box :meth:`design_queries` draws from:
         each position into its span, each velocity within ±``vel``, each acceleration within ±1.3 ``acc``."""
+        lo, hi, vel, acc = self._box()
+        return np.clip(qa, lo, hi), np.clip(qd, -vel, vel), np.clip(qdd, -acc, acc)
+
+    def _box(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The design queries' box from :meth:`scales`: ``(lo, hi)`` positions, velocity half-widths ``vel`` and
+        acceleration half-widths 1.3 ``acc`` (each (m,))."""
         sc = self.scales()
         lo = np.array([p[0] for p in sc["pos"]])
         hi = np.array([p[1] for p in sc["pos"]])
-        vel, acc = np.asarray(sc["vel"]), 1.3 * np.asarray(sc["acc"])
-        return np.clip(qa, lo, hi), np.clip(qd, -vel, vel), np.clip(qdd, -acc, acc)
+        return lo, hi, np.asarray(sc["vel"], dtype=np.float64), 1.3 * np.asarray(sc["acc"], dtype=np.float64)
 
     # ---- holding ------------------------------------------------------------------------------------------
     def deliverable(self, i: int, L: float, Ldot: float) -> tuple[float, float]:
