@@ -122,6 +122,8 @@ class Lemma1Check:
 
 #: The entries of a loop that a run's ``metrics.json`` keeps under ``closed_loop.<source>``.
 _SUMMARY = ("fell", "diverged", "tracking_rmse", "tracking_max", "qu_max", "qu_dev_max", "u_max", "duration_s")
+#: The learned-vs-model BEM entries along a loop (``predictor`` only), kept in both files when present.
+_VS_MODEL = ("bem_vs_model_rmse", "bem_vs_model_max", "bem_inside_2sigma")
 
 
 @dataclass(frozen=True)
@@ -142,6 +144,7 @@ class LoopResult:
         metrics: every figure of the loop as ``simulate/metrics.json`` stores it (the fields above, the
             per-tick timings, rejected BEM values and commands).
         bem_vs_model_rmse: the learned BEM against the model's at the loop's BEM inputs (``predictor`` only).
+        bem_vs_model_max: the largest |learned − model BEM| there (``predictor`` only).
         bem_inside_2sigma: the share of the model BEM inside the learned ±2σ band there (``predictor`` only).
         lemma1: Lemma 1 along the loop (``predictor`` with a periodic reference only).
     """
@@ -160,21 +163,23 @@ class LoopResult:
     bem_vs_model_rmse: float | None = None
     bem_inside_2sigma: float | None = None
     lemma1: Lemma1Check | None = None
+    bem_vs_model_max: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """The entry of ``simulate/metrics.json``."""
         out = {**self.metrics, "diverged": self.diverged}
-        if self.bem_vs_model_rmse is not None:
-            out["bem_vs_model_rmse"] = self.bem_vs_model_rmse
-        if self.bem_inside_2sigma is not None:
-            out["bem_inside_2sigma"] = self.bem_inside_2sigma
+        out.update(self._vs_model())
         if self.lemma1 is not None:
             out["lemma1"] = self.lemma1.as_dict()
         return out
 
+    def _vs_model(self) -> dict[str, float]:
+        return {k: v for k in _VS_MODEL if (v := getattr(self, k)) is not None}
+
     def summary(self) -> dict[str, Any]:
         """The entry of a run's ``metrics.json`` under ``closed_loop.<source>``."""
         out: dict[str, Any] = {k: getattr(self, k) for k in _SUMMARY}
+        out.update(self._vs_model())
         if self.lemma1 is not None:
             out["lemma1"] = self.lemma1.as_dict()
         return out

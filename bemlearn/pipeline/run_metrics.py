@@ -403,6 +403,7 @@ class LoopMetrics(_Record):
     real_time_factor: float | None = None
     bem_rejected: int | None = None
     bem_vs_model_rmse: float | None = None
+    bem_vs_model_max: float | None = None
     bem_inside_2sigma: float | None = None
     lemma1: Lemma1Info | None = field(default=None, metadata=_one(Lemma1Info))
 

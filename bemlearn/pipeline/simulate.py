@@ -162,7 +162,7 @@ def _run_loop(robot: BalanceRobot, nominal: BalanceRobot, config: PipelineConfig
     # drifting arm: for m = 1 the external loop acts only through the BEM) has diverged
     span = float(np.abs(res.qa_ref).max()) if len(res.qa_ref) else 0.0
     diverged = bool(not res.fell and span > 0 and np.isfinite(m["tracking_max"]) and m["tracking_max"] > 2 * span)
-    vs_model = inside = None
+    vs_model = vs_model_max = inside = None
     check = None
     # model-based BEM of the nominal robot at the loop's BEM inputs (eq. 9), for comparison
     x = torch.from_numpy(res.bem_x)
@@ -178,6 +178,7 @@ def _run_loop(robot: BalanceRobot, nominal: BalanceRobot, config: PipelineConfig
         mean, std = pred.mean_std(res.bem_x) if len(x) else (np.zeros(0), np.zeros(0))
         band = (mean, std)
         vs_model = float(np.sqrt(np.nanmean((mean - model_bem) ** 2))) if len(x) else float("nan")
+        vs_model_max = float(np.nanmax(np.abs(mean - model_bem))) if len(x) else float("nan")
         inside = float(np.mean(np.abs(mean - model_bem) <= 2 * std)) if len(x) else float("nan")
         ref = cfg.reference.build(mm)
         if np.isfinite(ref.period):
@@ -201,5 +202,5 @@ def _run_loop(robot: BalanceRobot, nominal: BalanceRobot, config: PipelineConfig
         render_gif(cast(MujocoRobot, robot), res.q, out / f"{src}.gif", rate_hz=scfg.rate_hz)
     loop = LoopResult(src, bool(res.fell), diverged, float(m["duration_s"]), float(m["tracking_rmse"]), float(m["tracking_max"]),
                       float(m["qu_max"]), float(m["qu_dev_max"]), float(m["u_max"]), float(m["real_time_factor"]), m, vs_model,
-                      inside, check)
+                      inside, check, vs_model_max)
     return LoopOutput(loop, png)

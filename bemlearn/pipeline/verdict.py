@@ -273,18 +273,28 @@ def _check_heldout(m: RunMetrics, notes: _Notes) -> None:
                       "±2σ: the GP is overconfident away from its training trials")
 
 
-#: A learned-BEM loop whose tracking RMSE is within this factor of the model BEM's loop tracks "like the model".
-TRACKS_LIKE_MODEL = 1.2
+def _bem_right_along_loop(m: RunMetrics, p: LoopMetrics, mdl: LoopMetrics) -> bool:
+    """Both loops stayed up and left the reference, and along the learned loop's own BEM inputs the learned BEM is
+    within the design region's targets of the model BEM (RMSE ≤ :data:`RMSE_OF_BOUND` d, max ≤ :data:`MAX_OF_BOUND` d,
+    d the design bound): the EIC's tracking on this robot, not the learned BEM, is what falls short.
 
-
-def _tracks_like_the_model(p: LoopMetrics, mdl: LoopMetrics) -> bool:
-    """Both loops stayed up and left the reference, and the learned BEM's tracks within :data:`TRACKS_LIKE_MODEL` × the
-    model BEM's RMSE: the EIC's tracking, not the learned BEM, is what falls short (measured: a two-link arm with joint
-    friction circles at twice its reference's peak with either BEM, RMSE 0.0354 learned vs 0.0357 model)."""
+    The loops' tracking figures are not compared: where the EIC cannot track the reference with the exact BEM, the
+    tracking error of a loop is sensitive to any small change of its BEM (measured: a two-link arm with a pole whose
+    learned BEM is within 0.0035 rad of the model's along its loop, 100 % inside its ±2σ band, tracks with RMSE 0.091
+    against the model BEM loop's 0.072; a two-link arm with joint friction: 0.0354 learned vs 0.0357 model)."""
     if not (mdl.diverged and not mdl.fell):
         return False
-    a, b = p.tracking_rmse, mdl.tracking_rmse
-    return a is not None and b is not None and _finite(a) and _finite(b) and a <= TRACKS_LIKE_MODEL * b
+    d = float(m.bem_design_region.bound or math.nan) if m.bem_design_region else math.nan
+    rmse, mx = p.bem_vs_model_rmse, p.bem_vs_model_max
+    return (_finite(d) and _finite(rmse) and _finite(mx)
+            and rmse <= RMSE_OF_BOUND * d and mx <= MAX_OF_BOUND * d)  # type: ignore[operator]  # _finite
+
+
+def _off_along_loop(p: LoopMetrics) -> str:
+    if _finite(p.bem_vs_model_rmse) and _finite(p.bem_vs_model_max):
+        return (f" (so did the model BEM's; along the loop the learned BEM is off the model's by RMSE "
+                f"{p.bem_vs_model_rmse:.3g}, max {p.bem_vs_model_max:.3g}: beyond the design region's targets)")
+    return " (so did the model BEM's; the learned BEM along the loop was not compared with the model's)"
 
 
 def _check_closed_loop(m: RunMetrics, notes: _Notes) -> None:
@@ -297,17 +307,17 @@ def _check_closed_loop(m: RunMetrics, notes: _Notes) -> None:
         dur = p.duration_s if p.duration_s is not None else math.nan
         notes.add("unusable", "closed_loop", f"the closed loop with the learned BEM fell at {dur:.2f} s"
                   + (" (so did the model BEM's: the EIC cannot balance this robot with these gains)" if mdl.fell else ""))
-    elif p.diverged and not _tracks_like_the_model(p, mdl):
+    elif p.diverged and not _bem_right_along_loop(m, p, mdl):
         stable = bool(m.equilibrium and m.equilibrium.stable_without_control)
         notes.add("degraded", "closed_loop", "the closed loop with the learned BEM " + ("kept q_u near its stable equilibrium"
                   if stable else "stayed up") + " but its actuated joints left the reference"
-                  + (" (so did the model BEM's, less: the learned BEM's loop tracks worse)" if mdl.diverged else ""))
+                  + (_off_along_loop(p) if mdl.diverged and not mdl.fell else ""))
     else:
         if p.diverged:
             notes.add("note", "closed_loop", f"the EIC with these gains tracks this reference poorly with the model BEM too "
                       f"(tracking max {p.tracking_max:.3g} learned, {mdl.tracking_max:.3g} model, over twice the reference's "
                       f"peak): a limit of the controller on this robot (for example dry friction's limit cycle), not of the learned "
-                      f"BEM, whose loop tracks as the model BEM's does")
+                      f"BEM, which stays within {p.bem_vs_model_max:.3g} {m.unit()} of the model BEM along its loop")
         raw_bound = m.bem_design_region.bound if m.bem_design_region else None
         bound = float(raw_bound) if _finite(raw_bound) else math.nan  # type: ignore[arg-type]
         dev = float(p.qu_dev_max) if _finite(p.qu_dev_max) else math.nan  # type: ignore[arg-type]
