@@ -36,7 +36,7 @@ def _fit_and_eval(ds, gp_cfg, config, *, threads: int) -> dict:
     finally:
         torch.set_num_threads(previous)
     st = predictor_state(model, lik, x_mean=tr.x_mean, x_std=tr.x_std, y_mean=tr.y_mean, y_std=tr.y_std, input_names=tr.input_names, n_train=len(tr))
-    robot = load(config.robot)
+    robot = load(config.robot, coordinates=config.coordinates)
     ev = evaluate_bem(st, robot, held_out_references(config.evaluate, robot.m), duration_s=config.evaluate.duration_s, rate_hz=config.evaluate.rate_hz)
     return {"kind": gp_cfg.kind, "n_train": len(tr), "threads": threads, "seconds": seconds, "steps": res.steps,
             "stop_reason": res.stop_reason, "rmse": ev.rmse, "max_abs": ev.max_abs,

@@ -129,7 +129,7 @@ def run_derivatives_bench(config, data_path: str | Path, *, with_gp: bool = True
         from bemlearn.pipeline.design_evaluation import design_grid
         from bemlearn.robots import load
 
-        robot = load(config.robot)
+        robot = load(config.robot, coordinates=config.coordinates)
         grid_points = design_grid(robot, config.evaluate, n_points=config.evaluate.design_points or 4096, seed=config.evaluate.seed)
     rows = []
     base_rows = None

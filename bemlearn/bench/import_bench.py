@@ -109,7 +109,7 @@ def bench_model_free_accuracy(
     from bemlearn.robots import load
 
     style = style or RigLogStyle()
-    robot = load(config.robot)  # the model the simulator data came from: the reference of the comparison
+    robot = load(config.robot, coordinates=config.coordinates)  # the model the simulator data came from: the reference of the comparison
     ecfg = config.evaluate
     with tempfile.TemporaryDirectory() as tmp:
         paths = write_rig_logs(source, Path(tmp), style)

@@ -166,7 +166,7 @@ def run_case(case: BenchCase, *, progress=print) -> dict:
     fit_s = time.perf_counter() - t0
     state = predictor_state(model, lik, x_mean=tr.x_mean, x_std=tr.x_std, y_mean=tr.y_mean, y_std=tr.y_std,
                             input_names=tr.input_names, n_train=len(tr))
-    x, q = reference_queries(load(cfg.robot), case.evaluation)
+    x, q = reference_queries(load(cfg.robot, coordinates=cfg.coordinates), case.evaluation)
     mean, lat = (v.numpy() for v in state.predict_reference(x))
     e = mean - q
     rmse = float(np.sqrt(np.mean(e**2)))
@@ -272,7 +272,7 @@ def run_seed_sweep(case: BenchCase, seeds, *, progress=print) -> list[dict]:
     traj = read_trajectory(case.data_path, robot=cfg.robot)
     from bemlearn.robots import load
 
-    robot = load(cfg.robot)
+    robot = load(cfg.robot, coordinates=cfg.coordinates)
     ev_cfg = case.evaluation
     rows = []
     for seed in seeds:

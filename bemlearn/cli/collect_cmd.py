@@ -51,7 +51,7 @@ def run(args) -> int:
     with claim_outputs(args.out.parent if args.out else None, entries=names, default_name="collect", force=args.force,
                        what="collect") as folder:   # the data file and its ground truth: both or neither
         args.out = folder / target.name
-        data, truth = collect(cfg.robot, ccfg, progress=not args.no_progress)
+        data, truth = collect(cfg.robot, ccfg, progress=not args.no_progress, coordinates=cfg.coordinates)
         write_trajectory(data, args.out)
         gt = write_trajectory(truth, ground_truth_path(args.out))
     n_failed = sum(data.meta.trial_failed.values())

@@ -11,23 +11,23 @@ def add_parser(sub) -> None:
     ls = rs.add_parser("list", help="the registered robot names (from the installed applications)")
     ls.set_defaults(func=_list)
     info = rs.add_parser("info", help="joints, partition and admissible BEM range of a robot")
-    info.add_argument("robot", help="shipped robot name or MJCF path")
+    info.add_argument("robot", help="registry name, MJCF path, or a run config (.yaml: its robot and coordinates block)")
     info.set_defaults(func=_info)
     bem = rs.add_parser("bem", help="model-based BEM q_u^e for given actuated q_a, q̇_a, q̈_a (eq. 6–9)")
-    bem.add_argument("robot", help="registry name or MJCF path")
+    bem.add_argument("robot", help="registry name, MJCF path, or a run config (.yaml: its robot and coordinates block)")
     bem.add_argument("--qa", type=float, nargs="+", required=True, help="actuated coordinates, in their joints' units (rad for a hinge, m for a slide)")
     bem.add_argument("--qad", type=float, nargs="+", required=True, help="actuated rates (rad/s or m/s)")
     bem.add_argument("--qadd", type=float, nargs="+", required=True, help="actuated accelerations (rad/s² or m/s²)")
     bem.set_defaults(func=_bem)
     lem = rs.add_parser("lemma1", help="Lemma 1 on any robot: ΔΓ vs Ḣ_u and max |q_u^d − q_u^e| for composite sinusoids")
-    lem.add_argument("robot", help="registry name or MJCF path")
+    lem.add_argument("robot", help="registry name, MJCF path, or a run config (.yaml: its robot and coordinates block)")
     lem.add_argument("--rtol", type=float, default=1e-6,
                      help="fail (exit 1) when max|ΔΓ − Ḣ_u − b_u q̇_u^e| / max|ΔΓ| exceeds this (default 1e-6)")
     lem.add_argument("--fixed-references", action="store_true",
                      help="four fixed references (amplitudes 0.1–0.5, in the actuated joints' unit) instead of references scaled to the robot")
     lem.set_defaults(func=_lemma1)
     lqr = rs.add_parser("lqr", help="discrete LQR excitation gains of MuJoCo's linearisation at upright (u = K e)")
-    lqr.add_argument("robot", help="shipped robot name or MJCF path")
+    lqr.add_argument("robot", help="registry name, MJCF path, or a run config (.yaml: its robot and coordinates block)")
     lqr.add_argument("--rate", type=float, default=None, help="control rate, Hz (default: derived, ≥ 100 Hz, whole physics steps)")
     lqr.set_defaults(func=_lqr)
     from bemlearn.applications import applications
@@ -48,11 +48,32 @@ def _list(args) -> int:
     return 0
 
 
-def _info(args) -> int:
+def _resolve(arg: str):
+    """``(robot, ref)`` of a registry name, an MJCF path, or a run config (``.yaml``: its ``robot:`` or ``model:``
+    with its ``coordinates:`` block)."""
+    from pathlib import Path
+
     from bemlearn.robots import resolve_robot
+
+    path = Path(arg)
+    if path.suffix.lower() in (".yaml", ".yml"):
+        from bemlearn.config import config_folder, is_relative_path, load_yaml
+        from bemlearn.errors import ConfigError
+
+        raw = load_yaml(path)
+        name = raw.get("robot") or raw.get("model")
+        if not isinstance(name, str) or not name:
+            raise ConfigError(f"{path}: expected 'robot:' (or 'model:') naming a robot, got {name!r}")
+        if is_relative_path(name):
+            name = str(config_folder(path) / name)
+        return resolve_robot(name, coordinates=raw.get("coordinates"))
+    return resolve_robot(arg)
+
+
+def _info(args) -> int:
     from bemlearn.units import joint_unit
 
-    r, ref = resolve_robot(args.robot)
+    r, ref = _resolve(args.robot)
     kinds = dict(zip(r.joint_names, r.coordinate_kinds))
     show = lambda names: ", ".join(f"{n} ({kinds[n]}, {joint_unit(kinds[n])})" for n in names)  # noqa: E731
     unit = joint_unit(kinds[r.unactuated_name])
@@ -86,9 +107,8 @@ def _info(args) -> int:
 def _bem(args) -> int:
     import torch
 
-    from bemlearn.robots import load
 
-    r = load(args.robot)
+    r = _resolve(args.robot)[0]
     t = lambda v: torch.tensor([v], dtype=torch.float64)  # noqa: E731
     res = r.bem(t(args.qa), t(args.qad), t(args.qadd))
     if not bool(res.valid[0]):
@@ -104,11 +124,10 @@ def _bem(args) -> int:
 def _lemma1(args) -> int:
     import numpy as np
 
-    from bemlearn.robots import load
     from bemlearn.robots.reference import CompositeSinusoid
     from bemlearn.robots.zero_dynamics import lemma1, lemma1_relative_gap, scaled_references
 
-    robot = load(args.robot)
+    robot = _resolve(args.robot)[0]
     if args.fixed_references:
         refs = {
             "0.3 sin(π t) + 0.2 sin(2π t + 0.7)": CompositeSinusoid.single([0.3, 0.2], [0.5, 1.0], [0.0, 0.7]),
@@ -153,9 +172,9 @@ def _lqr(args) -> int:
     from bemlearn.control.lqr import discrete_lqr
     from bemlearn.errors import RobotModelError
     from bemlearn.pipeline.derive import control_rate, design_region, initial_ranges, input_units
-    from bemlearn.robots import MujocoRobot, load
+    from bemlearn.robots import MujocoRobot
 
-    robot = load(args.robot)
+    robot = _resolve(args.robot)[0]
     if not isinstance(robot, MujocoRobot):
         raise RobotModelError(f"robot lqr: {args.robot!r} has no MuJoCo model to linearize; give an MJCF robot")
     if (why := robot.actuator_mismatch()) is not None:

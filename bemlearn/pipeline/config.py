@@ -29,6 +29,7 @@ from bemlearn.data.dataset import DatasetConfig
 from bemlearn.errors import ConfigError
 from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.pipeline.evaluation import EvaluationConfig
+from bemlearn.robots.coordinates import CoordinatesConfig
 from bemlearn.sim.closed_loop import SimulateConfig
 from bemlearn.sim.collect import CollectConfig
 
@@ -66,11 +67,15 @@ class PipelineConfig:
         model: model-free runs only: a registry name or MJCF path whose model-based BEM the learned one
             is compared with (nothing is compared without it). It derives the ``evaluate`` references
             (as for ``robot:``) and weighs a torque logged on the unactuated joint against its gravity.
+        coordinates: the balance coordinates of the MJCF given by ``robot:`` (or ``model:``), declared beside the
+            file where its zero-config reading is ambiguous or wrong (:mod:`bemlearn.robots.coordinates`: the rolling
+            joints, the upright, the BEM bracket, a linear map of the joints); ``null`` reads them from the model.
     """
 
     robot: str | None = None
     data: str | None = None
     model: str | None = None
+    coordinates: CoordinatesConfig | None = None
     collect: CollectConfig = field(default_factory=CollectConfig)
     dataset: DatasetConfig = field(default_factory=DatasetConfig)
     train: GPConfig = field(default_factory=GPConfig)
@@ -81,6 +86,9 @@ class PipelineConfig:
         if self.robot is None and self.data is None:
             raise ConfigError("the config names neither 'robot:' (a registry name or an MJCF path) nor 'data:' "
                              "(a trajectory file); a config needs at least one of them")
+        if self.coordinates is not None and self.robot is None and self.model is None:
+            raise ConfigError("'coordinates:' declares the coordinates of the MJCF given by 'robot:' (or 'model:'); the config "
+                             "names neither")
         if self.model is not None and self.robot is not None:
             raise ConfigError("'model:' is for model-free runs (data: without robot:); with 'robot:' the robot's own "
                              "model is the ground truth")

@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import re
+import types
 import typing
 
 from bemlearn.config import LIMITS
@@ -118,6 +119,8 @@ def _rows(cls, prefix: str, rows: list[str], sections: list[tuple[str, type]]) -
         if isinstance(tp, type) and dataclasses.is_dataclass(tp):
             sections.append((key, tp))
             continue
+        if (optional := _optional_dataclass(tp)) is not None:   # an optional section: its row, then its keys
+            sections.append((key, optional))
         derived = "derived" if key in DERIVED_KEYS else ""
         desc = _ROLE.sub(r"`\g<target>`", docs.get(f.name, "")).replace("|", "\\|")
         limit = LIMITS.get(cls, {}).get(f.name)
@@ -125,6 +128,12 @@ def _rows(cls, prefix: str, rows: list[str], sections: list[tuple[str, type]]) -
                                                                  f"≥ {limit.min_len} entries" if limit.min_len else "") if b)
         kind = _type_name(tp).replace('|', 'or') + (f" ({bounds})" if bounds else "")
         rows.append(f"| `{key}` | {kind} | {_default(f)} | {derived} | {desc} |")
+
+
+def _optional_dataclass(tp) -> type | None:
+    args = typing.get_args(tp) if typing.get_origin(tp) in (typing.Union, types.UnionType) else ()
+    found = [a for a in args if isinstance(a, type) and dataclasses.is_dataclass(a)]
+    return found[0] if len(found) == 1 and type(None) in args else None
 
 
 #: A Sphinx role of a docstring (``:mod:`x```): a code span on this Markdown page.

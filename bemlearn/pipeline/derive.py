@@ -921,7 +921,7 @@ def _friction_cycle(robot, gains, rate: RateChoice, res, *, qu0: float, velocity
                        f"|q_u − BEM| up to {balance:.3g}, |q_u − nominal| up to {dev:.3g}; design region ±{d:.3g})")
     model = copy.deepcopy(robot.model)
     model.dof_frictionloss[:] = 0.0
-    smooth = MujocoRobot(model, name=robot.name, source=robot.source)
+    smooth = MujocoRobot(model, name=robot.name, source=robot.source, coordinates=robot.coordinates)
     ok0, how0, _ = _recovery_run(smooth, gains, rate, qu0=qu0, velocity_cutoff=velocity_cutoff, duration_s=duration_s)
     if not ok0:
         return False, f"without the dry friction it does not recover either ({how0})"

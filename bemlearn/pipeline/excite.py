@@ -110,7 +110,7 @@ def excitation_schedule(config, *, n_sines: int = N_SINES, seed: int = 0) -> dic
 
     robot: MujocoRobot | None = None
     if config.robot:
-        loaded = load(config.robot)
+        loaded = load(config.robot, coordinates=config.coordinates)
         if not isinstance(loaded, MujocoRobot):
             raise ConfigError(f"bemlearn excite: robot {config.robot!r} has no MuJoCo model (its actuator limits are needed)")
         robot = loaded

@@ -107,8 +107,9 @@ def check_config(path: str | os.PathLike[str], data: dict[str, Any]) -> Resolved
     return resolve_pipeline_config(data, source=str(path))   # ``data``: read once, its paths already relative to its folder
 
 
-def check_robot(name: Any, *, where: str = "robot") -> None:
-    """Load the robot named ``name`` (registry name or MJCF path); errors name ``where``.
+def check_robot(name: Any, *, where: str = "robot", coordinates: Any = None) -> None:
+    """Load the robot named ``name`` (registry name or MJCF path; ``coordinates``: the config's ``coordinates:``
+    block, a mapping); errors name ``where``.
 
     Raises:
         ConfigError: not a string, an unknown name, or a missing / unreadable MJCF file.
@@ -125,7 +126,7 @@ def check_robot(name: Any, *, where: str = "robot") -> None:
         if not path.is_file():
             raise ConfigError(f"{where}: MJCF file {name} not found")
     try:
-        load(name)
+        load(name, coordinates=coordinates if isinstance(coordinates, dict) else None)
     except (BemlearnError, OSError) as exc:
         raise ConfigError(f"{where}: cannot load robot {name!r}: {exc}") from exc
 
@@ -196,7 +197,7 @@ def preflight(
         check_data_file(data)
     if config is not None:
         if robot and "robot" in cfg:
-            check_robot(cfg["robot"], where=f"{config}: robot")
+            check_robot(cfg["robot"], where=f"{config}: robot", coordinates=cfg.get("coordinates"))
         resolved = check_config(config, cfg)
     log.debug("preflight passed")
     return Preflight(config, cfg, resolved)

@@ -146,9 +146,10 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
         from bemlearn.robots import load
 
         memo = _MEMO.get()
-        robot_key = ("robot", _robot_key(parsed.robot))
+        robot_key = ("robot", _robot_key(parsed.robot), repr(parsed.coordinates))
         try:
-            robot = memo[robot_key] if memo is not None and robot_key in memo else load(parsed.robot)
+            robot = (memo[robot_key] if memo is not None and robot_key in memo
+                     else load(parsed.robot, coordinates=parsed.coordinates))
         except (BemlearnError, OSError) as exc:
             raise ConfigError(f"{source}: robot: {str(exc).removeprefix('robot: ')}") from exc
         _check_actuators(robot, source)
@@ -172,7 +173,7 @@ def resolve_pipeline_config(config: str | Path | Mapping[str, Any], *, derive: b
         from bemlearn.robots import load
 
         try:
-            model = load(parsed.model)
+            model = load(parsed.model, coordinates=parsed.coordinates)
         except (BemlearnError, OSError) as exc:
             raise ConfigError(f"{source}: model: {exc}") from exc
         for key, (value, note) in derive_model_values(model, parsed, given).items():

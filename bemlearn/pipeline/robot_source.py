@@ -24,8 +24,8 @@ def run_robot(config, loaded=None):
     (:func:`~bemlearn.robots.resolve_robot`; a run loads its robot once).
     """
     if config.robot is not None:
-        robot, ref = loaded if loaded is not None else resolve_robot(config.robot)
+        robot, ref = loaded if loaded is not None else resolve_robot(config.robot, coordinates=config.coordinates)
         return robot, ref, robot
-    truth = resolve_robot(config.model)[0] if config.model else None
+    truth = resolve_robot(config.model, coordinates=config.coordinates)[0] if config.model else None
     return None, RobotRef(name="data", mjcf=None, sha256=None, registry=None), truth
 

@@ -84,7 +84,7 @@ def _run_stages(resolved: ResolvedConfig, out: Path, overlap, *, device: str | N
         from bemlearn.pipeline.feasibility import equilibrium_stiffness, model_feasibility
         from bemlearn.robots import MujocoRobot, resolve_robot
 
-        loaded = resolve_robot(cfg.robot)
+        loaded = resolve_robot(cfg.robot, coordinates=cfg.coordinates)
         robot = loaded[0]
         equilibrium = equilibrium_stiffness(robot)      # a stable equilibrium is never reported as balanced
         if isinstance(robot, MujocoRobot):
@@ -98,7 +98,7 @@ def _run_stages(resolved: ResolvedConfig, out: Path, overlap, *, device: str | N
         log.info("[1/%d] collecting excitation data", stages)
         assert cfg.robot is not None  # PipelineConfig needs robot or data
         try:
-            data, truth = collect(cfg.robot, cfg.collect, progress=progress)
+            data, truth = collect(cfg.robot, cfg.collect, progress=progress, coordinates=cfg.coordinates)
         except DataError as exc:   # e.g. every excitation trial fell at once: a finding about the robot, not a crash
             overlap.cancel()
             return _stop_after_collect(out, cfg, resolved, feasibility, exc, t0)

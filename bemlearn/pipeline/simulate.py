@@ -81,7 +81,7 @@ def simulate_stage(config: PipelineConfig, out_dir: str | Path, *, predictor: st
     out.mkdir(parents=True, exist_ok=True)
     predictor = predictor or config.simulate.predictor
     assert config.robot is not None and config.simulate.rate_hz is not None  # a robot run, completed by complete_section
-    robot = robot if robot is not None else load(str(config.robot))   # the callers check that the config names a robot
+    robot = robot if robot is not None else load(str(config.robot), coordinates=config.coordinates)   # the callers check that the config names a robot
     futures: dict[str, Future[LoopOutput]] = {src: f for src, f in (started or {}).items() if src in sources}
     todo = tuple(src for src in sources if src not in futures)
     with contextlib.ExitStack() as stack:

@@ -24,6 +24,7 @@ import select
 import signal
 import threading
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from pathlib import Path
 
 import mujoco
@@ -100,9 +101,13 @@ def _size(path: Path) -> int:
         return 0
 
 
-def compile_mjcf(path: str | os.PathLike[str]) -> mujoco.MjModel:
+def compile_mjcf(path: str | os.PathLike[str], custom: Mapping[str, list[float] | str] | None = None) -> mujoco.MjModel:
     """``mujoco.MjModel.from_xml_path(path)``, after :func:`check_finite_attributes`; in a child process
     for a large file (module docstring), so that SIGINT / SIGTERM are not held up by the compiler.
+
+    ``custom``: ``<custom>`` elements declared beside the file (a config's ``coordinates:`` block,
+    :func:`bemlearn.robots.coordinates.custom_entries`), replacing the file's elements of the same name;
+    the model is then compiled through ``mujoco.MjSpec``.
 
     Raises:
         RobotModelError: non-finite attributes, or MuJoCo cannot compile the model.
@@ -110,20 +115,31 @@ def compile_mjcf(path: str | os.PathLike[str]) -> mujoco.MjModel:
     """
     path = Path(path)
     check_finite_attributes(path)
+    custom = dict(custom or {})
     if (_size(path) < CHILD_COMPILE_BYTES or not hasattr(os, "fork")
             or threading.current_thread() is not threading.main_thread()):
-        return _compile(path)
-    return _compile_in_child(path)
+        return _compile(path, custom)
+    return _compile_in_child(path, custom)
 
 
-def _compile(path: Path) -> mujoco.MjModel:
-    try:
+def _build(path: Path, custom: Mapping[str, list[float] | str]) -> mujoco.MjModel:
+    if not custom:
         return mujoco.MjModel.from_xml_path(str(path))
+    from bemlearn.robots.coordinates import apply_custom
+
+    spec = mujoco.MjSpec.from_file(str(path))
+    apply_custom(spec, custom)
+    return spec.compile()
+
+
+def _compile(path: Path, custom: Mapping[str, list[float] | str]) -> mujoco.MjModel:
+    try:
+        return _build(path, custom)
     except ValueError as exc:
         raise RobotModelError(f"{path}: MuJoCo could not load the model: {exc}") from exc
 
 
-def _compile_in_child(path: Path) -> mujoco.MjModel:
+def _compile_in_child(path: Path, custom: Mapping[str, list[float] | str]) -> mujoco.MjModel:
     from bemlearn.child_processes import die_with_parent
     from bemlearn.interrupts import check_interrupt
 
@@ -138,7 +154,7 @@ def _compile_in_child(path: Path) -> mujoco.MjModel:
                 signal.signal(sig, signal.SIG_DFL)
             die_with_parent(parent)
             try:
-                payload = pickle.dumps(("model", mujoco.MjModel.from_xml_path(str(path))))
+                payload = pickle.dumps(("model", _build(path, custom)))
             except ValueError as exc:
                 payload = pickle.dumps(("error", str(exc)))
             with os.fdopen(write_fd, "wb") as fh:

@@ -18,7 +18,11 @@ torso angle as its unactuated coordinate:
       <text name="bemlearn_coordinate_names" data="q1 q2 ..."/>
       <numeric name="bemlearn_qu_range" data="-1.5708 1.5708"/> <!-- optional -->
       <numeric name="bemlearn_qu_nominal" data="0"/>            <!-- optional -->
+      <text name="bemlearn_rolling_dependent" data="x"/>        <!-- optional, rolling below -->
     </custom>
+
+A run's config may declare the same elements in a ``coordinates:`` block instead
+(:mod:`bemlearn.robots.coordinates`), leaving the file as it is.
 
 With q_j = T⁻¹ q, the dynamics transform as D = T⁻ᵀ D_j T⁻¹, C q̇ + G = T⁻ᵀ (C q̇ + G)_j,
 τ_p = T⁻ᵀ τ_p,j and B = T⁻ᵀ B_j (T constant, so no extra velocity terms).
@@ -29,6 +33,7 @@ dependent (:mod:`bemlearn.robots.rolling`): the coordinates are the other joints
 constant ``(n_j, n)`` map S (x = r_eff θ), and the dynamics transform with S in the place of T⁻¹:
 D = Sᵀ D_j S, h = Sᵀ h_j, B = Sᵀ B_j (eq. R4 there: the hard no-slip constraint's KKT system with
 the constraint force projected out).  T is then the ``(n, n_j)`` selection of the independent joints.
+Where more than one choice of dependent joints fits, ``bemlearn_rolling_dependent`` names it.
 """
 
 from __future__ import annotations
@@ -36,9 +41,9 @@ from __future__ import annotations
 import functools
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
@@ -55,6 +60,8 @@ from bemlearn.warnings import RobotModelWarning, warn
 
 if TYPE_CHECKING:
     import torch
+
+    from bemlearn.robots.coordinates import CoordinatesConfig
 else:
     torch = lazy_module("torch")
 
@@ -164,10 +171,13 @@ class MujocoRobot(Robot):
         input_matrix_np: ``(n, nu)`` B = T⁻ᵀ B_j as a NumPy array (:attr:`input_matrix` in torch).
     """
 
-    def __init__(self, model: mujoco.MjModel, *, name: str | None = None, source: str | None = None) -> None:
+    def __init__(self, model: mujoco.MjModel, *, name: str | None = None, source: str | None = None,
+                 coordinates: Mapping[str, Any] | None = None) -> None:
         self.model = model
         self.data = mujoco.MjData(model)
         self.source = source or "<MjModel>"
+        #: the config's ``coordinates:`` block the model was compiled with (:meth:`from_xml`), as a mapping
+        self.coordinates: dict[str, Any] | None = dict(coordinates) if coordinates else None
         self.name = name or model.names[: model.names.find(b"\0")].decode() or "robot"
         where = f"{self.source}"
         _unlimit_unbounded_joints(model, where)
@@ -274,7 +284,9 @@ class MujocoRobot(Robot):
         self.upright_search = self._search_upright(rng)
         if nom is not None:
             self.qu_nominal = float(nom[0])
-            self.qu_nominal_note = f"{self.qu_nominal:g}: declared by the model (custom numeric bemlearn_qu_nominal)"
+            self.qu_nominal_note = (f"{self.qu_nominal:g}: declared by the config (coordinates: qu_nominal)"
+                                    if self.coordinates and "qu_nominal" in self.coordinates
+                                    else f"{self.qu_nominal:g}: declared by the model (custom numeric bemlearn_qu_nominal)")
         elif self.upright_search.upright is not None:
             self.qu_nominal = float(self.upright_search.upright.qu)
             self.qu_nominal_note = self.upright_search.describe(self._qu_unit())
@@ -428,14 +440,19 @@ class MujocoRobot(Robot):
         return self._coordinate_kinds
 
     @classmethod
-    def from_xml(cls, path: str | Path, *, name: str | None = None) -> MujocoRobot:
+    def from_xml(cls, path: str | Path, *, name: str | None = None,
+                 coordinates: CoordinatesConfig | Mapping[str, Any] | None = None) -> MujocoRobot:
+        """The robot of the MJCF file at ``path``; ``coordinates`` (a config's ``coordinates:`` block,
+        :mod:`bemlearn.robots.coordinates`) declares its coordinates beside the file."""
         path = Path(path)
         if not path.is_file():
             raise MissingFileError(f"{path}: MJCF file not found")
+        from bemlearn.robots.coordinates import coordinates_mapping, custom_entries
         from bemlearn.robots.mjcf_compile import compile_mjcf
 
-        model = compile_mjcf(path)   # non-finite attributes refused; large files compiled where a signal can stop them
-        return cls(model, name=name or path.stem, source=str(path))
+        # non-finite attributes refused; large files compiled where a signal can stop them
+        model = compile_mjcf(path, custom_entries(coordinates))
+        return cls(model, name=name or path.stem, source=str(path), coordinates=coordinates_mapping(coordinates))
 
     @classmethod
     def from_xml_string(cls, xml: str, *, name: str | None = None) -> MujocoRobot:

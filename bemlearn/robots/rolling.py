@@ -188,6 +188,15 @@ def _positions(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray) -> 
     mujoco.mj_fwdPosition(model, data)
 
 
+def _declared_dependent(model: mujoco.MjModel) -> list[str] | None:
+    """The joints ``<text name="bemlearn_rolling_dependent">`` names (the config's ``coordinates.rolling_dependent``)."""
+    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, "bemlearn_rolling_dependent")
+    if i < 0:
+        return None
+    start, size = int(model.text_adr[i]), int(model.text_size[i])
+    return bytes(model.text_data[start : start + size]).split(b"\0")[0].decode().split()
+
+
 def find_rolling(model: mujoco.MjModel, undriven: Sequence[int], *, where: str) -> RollingMap | None:
     """The rolling map (R2) of ``model`` at its reference pose ``qpos0``, or ``None`` when no rolling
     contact makes all but one of the ``undriven`` joints dependent.
@@ -229,13 +238,27 @@ def find_rolling(model: mujoco.MjModel, undriven: Sequence[int], *, where: str) 
             choices.append(dep)
     if not choices:
         return None
+    declared = _declared_dependent(model)
+    if declared is not None:   # the model or the config's coordinates block names the choice
+        names = {_joint_name(model, j): j for j in range(model.njnt)}
+        unknown = [n for n in declared if n not in names]
+        if unknown:
+            raise RobotModelError(f"{where}: rolling_dependent names {unknown}, which are not joints of the model; its joints "
+                                  f"are {sorted(names)}")
+        pick = tuple(sorted(names[n] for n in declared))
+        if pick not in choices:
+            options = " or ".join("(" + ", ".join(_joint_name(model, j) for j in c) + ")" for c in choices)
+            raise RobotModelError(f"{where}: rolling_dependent {list(declared)} cannot be the joints that roll with the wheels: "
+                                  f"the rolling contacts determine {r} of the joints without an actuator, as {options}")
+        choices = [pick]
     if len(choices) > 1:   # a chassis that translates only by rolling: prefer the one choice made of slides alone
         slides = [c for c in choices if all(int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_SLIDE) for j in c)]
         choices = slides if len(slides) == 1 else choices
     if len(choices) > 1:
         options = " or ".join("(" + ", ".join(_joint_name(model, j) for j in c) + ")" for c in choices)
         raise RobotModelError(f"{where}: rolling contacts make {r} of the joints without an actuator dependent, but which "
-                              f"is ambiguous: {options}")
+                              f"is ambiguous: {options}; name them in the config (coordinates: rolling_dependent: [...]) or "
+                              "in the MJCF (<custom><text name=\"bemlearn_rolling_dependent\" data=\"...\"/></custom>)")
     dep = choices[0]
     indep = tuple(j for j in range(model.njnt) if j not in dep)
     S = np.zeros((model.nv, len(indep)))

@@ -13,8 +13,9 @@ not to recompute it from geoms.  Joint ranges of slides are scaled by s_L too.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -78,8 +79,13 @@ def scaled_model(source: str | Path | mujoco.MjSpec, **scales) -> mujoco.MjModel
     return scaled_spec(source, **scales).compile()
 
 
-def scaled_robot(path: str | Path, *, name: str | None = None, **scales):
-    """A :class:`~bemlearn.robots.MujocoRobot` of the scaled model of the MJCF at ``path``."""
+def scaled_robot(path: str | Path, *, name: str | None = None, coordinates: Mapping[str, Any] | None = None, **scales):
+    """A :class:`~bemlearn.robots.MujocoRobot` of the scaled model of the MJCF at ``path``; ``coordinates``: the
+    config's ``coordinates:`` block the unscaled robot was loaded with (:mod:`bemlearn.robots.coordinates`)."""
+    from bemlearn.robots.coordinates import apply_custom, coordinates_mapping, custom_entries
     from bemlearn.robots.mujoco_robot import MujocoRobot
 
-    return MujocoRobot(scaled_model(path, **scales), name=name or Path(path).stem, source=f"{path} (scaled {scales})")
+    spec = mujoco.MjSpec.from_file(str(path))
+    apply_custom(spec, custom_entries(coordinates))
+    return MujocoRobot(scaled_model(spec, **scales), name=name or Path(path).stem, source=f"{path} (scaled {scales})",
+                       coordinates=coordinates_mapping(coordinates))

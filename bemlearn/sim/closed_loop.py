@@ -168,7 +168,8 @@ def nominal_robot(robot: BalanceRobot, nominal: NominalConfig) -> BalanceRobot:
         return robot
     if not isinstance(robot, MujocoRobot):
         raise ConfigError(f"simulate.nominal: parameter mismatch needs an MJCF robot, {robot.name!r} is {type(robot).__name__}")
-    return scaled_robot(robot.source, name=robot.name, mass_scale=nominal.mass_scale, length_scale=nominal.length_scale, bodies=nominal.bodies)
+    return scaled_robot(robot.source, name=robot.name, coordinates=robot.coordinates, mass_scale=nominal.mass_scale,
+                        length_scale=nominal.length_scale, bodies=nominal.bodies)
 
 
 class _Timed:

@@ -36,9 +36,10 @@ import dataclasses
 import logging
 import math
 import os
+from collections.abc import Mapping
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
@@ -49,6 +50,7 @@ from bemlearn.config import to_dict
 from bemlearn.data.sensors import SensorConfig
 from bemlearn.data.trajectory import Trajectory, TrajectoryMeta
 from bemlearn.errors import ConfigError, DataError, RobotModelError
+from bemlearn.robots.coordinates import CoordinatesConfig, coordinates_mapping
 from bemlearn.units import q_unit_label
 from bemlearn.warnings import DataWarning, warn
 
@@ -143,10 +145,10 @@ class TrialResult:
     qdd: np.ndarray
 
 
-def _robot_and_model(robot_name: str):
+def _robot_and_model(robot_name: str, coordinates: Mapping[str, Any] | None = None):
     from bemlearn.robots import MujocoRobot, load
 
-    robot = load(robot_name)
+    robot = load(robot_name, coordinates=coordinates)
     if not isinstance(robot, MujocoRobot):
         raise RobotModelError(f"collect: robot {robot_name!r} has no MuJoCo model to simulate; give an MJCF robot (a registry name or a path to an .xml file)")
     return robot
@@ -410,12 +412,12 @@ def _pose_slopes(robot: MujocoRobot, extents: np.ndarray, lam: float, *, points:
 _WORKER_ROBOT = None
 
 
-def _worker_init(robot_name: str, parent_pid: int) -> None:
+def _worker_init(robot_name: str, parent_pid: int, coordinates: Mapping[str, Any] | None = None) -> None:
     global _WORKER_ROBOT
     from bemlearn.child_processes import die_with_parent
 
     die_with_parent(parent_pid)  # ends with the parent whatever ends it (SIGTERM, kill -9); ignores Ctrl-C
-    _WORKER_ROBOT = _robot_and_model(robot_name)
+    _WORKER_ROBOT = _robot_and_model(robot_name, coordinates)
 
 
 def _worker_run(args) -> TrialResult:
@@ -424,15 +426,20 @@ def _worker_run(args) -> TrialResult:
     return simulate_trial(_WORKER_ROBOT, config, trial_id, seq)
 
 
-def collect(robot_name: str, config: CollectConfig, *, progress: bool = True) -> tuple[Trajectory, Trajectory]:
+def collect(robot_name: str, config: CollectConfig, *, progress: bool = True,
+            coordinates: CoordinatesConfig | Mapping[str, Any] | None = None) -> tuple[Trajectory, Trajectory]:
     """Run all trials; return ``(data, ground_truth)`` trajectories.
+
+    ``robot_name``: a registry name or MJCF path; ``coordinates``: the config's ``coordinates:`` block for an
+    MJCF path (:mod:`bemlearn.robots.coordinates`).
 
     ``data`` holds what a rig logs (quantized angles, inputs, trial outcome); ``ground_truth``
     the same rows with the simulator's true q, q̇, q̈.  Trials shorter than 10 samples
     (a fall right at the start) are dropped and counted in the log and in
     ``meta.extra["dropped_trials"]``.
     """
-    robot = _robot_and_model(robot_name)
+    coords = coordinates_mapping(coordinates)
+    robot = _robot_and_model(robot_name, coords)
     unset = [f.name for f in dataclasses.fields(config) if getattr(config, f.name) is None and f.name != "physics_timestep"]
     if unset:
         raise ConfigError(f"collect: {unset} not set; derive them from the model with "
@@ -452,7 +459,7 @@ def collect(robot_name: str, config: CollectConfig, *, progress: bool = True) ->
         import multiprocessing as mp
 
         ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
-        pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init, initargs=(robot_name, os.getpid()))
+        pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init, initargs=(robot_name, os.getpid(), coords))
         try:
             for res in pool.map(_worker_run, jobs, chunksize=1):
                 results.append(res)

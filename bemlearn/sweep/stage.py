@@ -234,7 +234,7 @@ def _execute_train(resolved, out: Path, cpus: int) -> None:
         from bemlearn.data.trajectory_io import ground_truth_path, write_trajectory
         from bemlearn.sim.collect import collect
 
-        data, truth = collect(cfg.robot, cfg.collect, progress=False)
+        data, truth = collect(cfg.robot, cfg.collect, progress=False, coordinates=cfg.coordinates)
         data_path = write_trajectory(data, out / "data.npz")
         write_trajectory(truth, ground_truth_path(data_path))
     else:
