@@ -134,6 +134,18 @@ def test_without_the_drift_term_the_turn_is_lost(bem):
     assert bem.roll(0.1, 3.0) == pytest.approx(ref, abs=1e-9)
 
 
+def test_one_soft_contact_forward_misses_the_turn(bem):
+    """The roll acceleration of one soft-contact ``mj_forward`` (tyres pressed in until they hold the frame,
+    the hard model's turning velocities) has its root at 0.31°, not the turn's 5.61°: the soft contact relaxes
+    the contacts' tangential velocity (J q̈ ≈ 0) and has no J̇ q̇."""
+    from bemlearn.apps.bikebot.soft_contact import soft_contact_roll, soft_contact_roll_accel
+
+    soft = soft_contact_roll(bem, 0.1, 3.0)
+    assert abs(math.degrees(soft - steady_turn_roll(P, 3.0, 0.1))) > 4.0
+    phi_dd, depths = soft_contact_roll_accel(bem, soft, 0.1, 3.0)
+    assert abs(phi_dd) < 1e-6 and np.all((depths > 1e-4) & (depths < 1e-3))     # pressed in by a fraction of a mm
+
+
 def test_a_turn_needs_steer():
     with pytest.raises(ArgumentError, match="δ ≠ 0"):
         steady_turn_roll(P, 3.0, 0.0)

@@ -136,14 +136,16 @@ class BikebotBem:
         fromto = np.zeros(6)
         return np.array([mujoco.mj_geomDistance(self.model, d, self.floor, g, 1.0, fromto) for g in self.tyres])
 
-    def pose(self, phi: float, delta: float, *, tol: float = 1e-13) -> np.ndarray:
-        """``(n_q,)`` qpos at roll ``phi`` and steer ``delta`` (rad) with both tyres ``depth`` into the floor.
+    def pose(self, phi: float, delta: float, *, depths: tuple[float, float] | None = None,
+             tol: float = 1e-13) -> np.ndarray:
+        """``(n_q,)`` qpos at roll ``phi`` and steer ``delta`` (rad) with both tyres ``depth`` into the floor
+        (or the rear and front tyre ``depths``, m).
 
         Raises:
             NumericalError: Newton's method on (pitch, height) does not converge in 50 steps.
         """
         x = np.array([0.0, self.rear_radius])
-        target = -self.depth
+        target = -np.array(depths if depths is not None else (self.depth, self.depth))
 
         def resid(x: np.ndarray) -> np.ndarray:
             return self._distances(self._qpos(phi, delta, float(x[0]), float(x[1]))) - target
@@ -159,7 +161,7 @@ class BikebotBem:
 
     # -- velocities and accelerations -------------------------------------------------------------------------
 
-    def _frame_axes(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def frame_axes(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(R ``(3, 3)``, [ẑ e₁ e₂] ``(3, 3)``) of the frame at ``qpos``."""
         flat = np.zeros(9)
         mujoco.mju_quat2Mat(flat, qpos[3:7])
@@ -177,7 +179,7 @@ class BikebotBem:
         if len(found) != 2:
             raise NumericalError(f"BikebotBem.state: {len(found)} tyre contacts at roll {phi:g}, steer {delta:g} "
                                  "(expected one per tyre)")
-        R, E = self._frame_axes(qpos)
+        R, E = self.frame_axes(qpos)
         roll_row = np.zeros(m.nv)
         roll_row[3:6] = np.linalg.inv(E)[1] @ R
         rows = [tangential, normal, np.eye(m.nv)[[self.dof_rear, self.dof_steer]], roll_row[None]]
@@ -187,14 +189,17 @@ class BikebotBem:
             raise NumericalError(f"BikebotBem.state: {A.shape[0]} velocity conditions for {m.nv} velocities")
         return BikeState(qpos=qpos, qvel=np.linalg.solve(A, rhs))
 
-    def roll_acceleration(self, state: BikeState, qacc: np.ndarray) -> float:
-        """φ̈ (rad/s²) from MuJoCo's ``qacc`` ``(n_v,)`` at ``state`` by (E2)."""
-        R, E = self._frame_axes(state.qpos)
-        omega = R @ state.qvel[3:6]
-        psi_d, phi_d, theta_d = np.linalg.solve(E, omega)
+    def euler_accelerations(self, state: BikeState, qacc: np.ndarray) -> np.ndarray:
+        """``(3,)`` (ψ̈, φ̈, θ̈) (rad/s²) of the frame from MuJoCo's ``qacc`` ``(n_v,)`` at ``state``, by (E2)."""
+        R, E = self.frame_axes(state.qpos)
+        psi_d, phi_d, theta_d = np.linalg.solve(E, R @ state.qvel[3:6])
         zhat, e1, e2 = E.T
         alpha = R @ qacc[3:6] - phi_d * psi_d * np.cross(zhat, e1) - theta_d * np.cross(psi_d * zhat + phi_d * e1, e2)
-        return float(np.linalg.solve(E, alpha)[1])
+        return np.linalg.solve(E, alpha)
+
+    def roll_acceleration(self, state: BikeState, qacc: np.ndarray) -> float:
+        """φ̈ (rad/s²) from MuJoCo's ``qacc`` ``(n_v,)`` at ``state`` by (E2)."""
+        return float(self.euler_accelerations(state, qacc)[1])
 
     def accelerations(self, state: BikeState, *, delta_acc: float = 0.0, v_dot: float = 0.0,
                       drift: bool = True) -> tuple[np.ndarray, np.ndarray]:

@@ -9,7 +9,9 @@ For each speed v and steer δ of the grid (δ̇ = δ̈ = v̇ = 0) :func:`run_bik
 * φ_naive = atan(v² tan δ / (g w));
 * φ_nodrift: the same KKT root without the J̇ q̇ term (what a constraint without its drift term gives:
   the rolling's curvature, hence the centripetal acceleration, is lost), searched over 1e-3 ≤ |φ| ≤ 1.5 rad
-  on the side of sgn δ.
+  on the side of sgn δ;
+* φ_soft (``soft_contact``): the root of the roll acceleration read from one soft-contact ``mj_forward`` per roll
+  (:mod:`bemlearn.apps.bikebot.soft_contact`).
 
 Also runnable as ``python -m bemlearn.apps.bikebot.bench``.
 """
@@ -40,6 +42,7 @@ class BikebotBemRow:
         delta: steer, rad.
         model, reference, naive: φ_model, φ_ref, φ_naive, rad.
         no_drift: φ_nodrift, rad (``nan`` where no root is bracketed).
+        soft: φ_soft, rad (``nan`` where not asked or not found).
     """
 
     v: float
@@ -48,24 +51,31 @@ class BikebotBemRow:
     reference: float
     naive: float
     no_drift: float
+    soft: float = math.nan
 
 
-def run_bikebot_bem_bench(speeds=SPEEDS, steers=STEERS, *, no_drift: bool = True) -> list[BikebotBemRow]:
-    """The grid's rows (module docstring); about 0.2 s per point, twice that with ``no_drift``."""
+def run_bikebot_bem_bench(speeds=SPEEDS, steers=STEERS, *, no_drift: bool = True,
+                          soft_contact: bool = False) -> list[BikebotBemRow]:
+    """The grid's rows (module docstring); about 0.2 s per point, twice that with ``no_drift``, 0.5 s more
+    with ``soft_contact``."""
     from bemlearn.apps.bikebot.bem import BikebotBem
     from bemlearn.apps.bikebot.model import BikeParameters
+    from bemlearn.apps.bikebot.soft_contact import soft_contact_roll
     from bemlearn.apps.bikebot.steady_turn import naive_roll, steady_turn_roll
 
     p, bem = BikeParameters(), BikebotBem()
     rows = []
     for v in speeds:
         for delta in steers:
-            nd = math.nan
+            nd = soft = math.nan
             if no_drift:
                 with contextlib.suppress(NumericalError):
                     nd = bem.roll(delta, v, drift=False, bracket=(math.copysign(1e-3, delta), math.copysign(1.5, delta)))
+            if soft_contact:
+                with contextlib.suppress(NumericalError):
+                    soft = soft_contact_roll(bem, delta, v)
             rows.append(BikebotBemRow(v=v, delta=delta, model=bem.roll(delta, v), reference=steady_turn_roll(p, v, delta),
-                                      naive=naive_roll(p, v, delta), no_drift=nd))
+                                      naive=naive_roll(p, v, delta), no_drift=nd, soft=soft))
     return rows
 
 
@@ -73,10 +83,10 @@ def format_bikebot_bem_bench(rows: list[BikebotBemRow]) -> str:
     """A Markdown table of the rows (degrees) and the grid's maxima."""
     deg = math.degrees
     out = ["| v (m/s) | δ (rad) | φ model BEM (°) | φ reference (°) | model − reference (°) | naive − reference (°) | "
-           "without J̇q̇ (°) |", "|---|---|---|---|---|---|---|"]
+           "without J̇q̇ (°) | one soft-contact `mj_forward` (°) |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         out.append(f"| {r.v:g} | {r.delta:g} | {deg(r.model):.6f} | {deg(r.reference):.6f} | "
-                   f"{deg(r.model - r.reference):.1e} | {deg(r.naive - r.reference):+.3f} | {deg(r.no_drift):.3f} |")
+                   f"{deg(r.model - r.reference):.1e} | {deg(r.naive - r.reference):+.3f} | {_cell(r.no_drift)} | {_cell(r.soft)} |")
     err = max(abs(deg(r.model - r.reference)) for r in rows)
     naive = [abs(deg(r.naive - r.reference)) for r in rows]
     nd = [abs(deg(r.no_drift - r.reference)) for r in rows if not math.isnan(r.no_drift)]
@@ -86,9 +96,14 @@ def format_bikebot_bem_bench(rows: list[BikebotBemRow]) -> str:
     return "\n".join(out)
 
 
+def _cell(x: float) -> str:
+    return "—" if math.isnan(x) else f"{math.degrees(x):.3f}"
+
+
 def _bench(args: argparse.Namespace) -> int:
     print(format_bikebot_bem_bench(run_bikebot_bem_bench(tuple(args.speeds), tuple(args.steers),
-                                                         no_drift=not args.skip_no_drift)))
+                                                         no_drift=not args.skip_no_drift,
+                                                         soft_contact=args.soft_contact)))
     return 0
 
 
@@ -105,6 +120,8 @@ def _arguments(b: argparse.ArgumentParser) -> None:
     b.add_argument("--steers", type=float, nargs="+", default=list(STEERS), metavar="DELTA",
                    help="steering angles, rad (not 0)")
     b.add_argument("--skip-no-drift", action="store_true", help="leave out the root without J̇q̇")
+    b.add_argument("--soft-contact", action="store_true",
+                   help="add the root read from one soft-contact mj_forward per roll (about 0.5 s per point)")
 
 
 if __name__ == "__main__":
