@@ -104,7 +104,7 @@ def test_learned_bem_from_a_little_data():
 
 @pytest.mark.slow
 def test_learned_bem_meets_the_target():
-    """The issue's target: RMSE ≤ 0.01 rad on v ∈ {2 … 6} m/s, δ ∈ ±{0.05 … 0.2} rad (the bench's defaults:
+    """The target: RMSE ≤ 0.01 rad on v ∈ {2 … 6} m/s, δ ∈ ±{0.05 … 0.2} rad (the bench's defaults:
     8 rides of 60 s, 10 000 pairs, SGPR with 256 inducing points; measured 0.0027 rad, 2–3 min)."""
     from bemlearn.apps.bikebot.learn_bench import TARGET_RMSE, learned_bem_bench
 
@@ -114,11 +114,15 @@ def test_learned_bem_meets_the_target():
     assert 0.97 < sc.gain < 1.03
 
 
-def test_learned_bench_command_is_registered():
-    from bemlearn.cli import main
+@pytest.mark.parametrize("command", ["bikebot-learned", "bikebot-eic"])
+def test_bench_commands_are_registered(monkeypatch, command):
+    from bemlearn import applications
+    from bemlearn.apps.bikebot import APPLICATION
+    from bemlearn.cli.main import main
 
+    monkeypatch.setitem(applications._APPS, "bikebot", APPLICATION)
     with pytest.raises(SystemExit) as e:
-        main(["bench", "bikebot-learned", "--help"])
+        main(["bench", command, "--help"])
     assert e.value.code == 0
 
 

@@ -37,7 +37,7 @@ __all__ = ["INPUT_NAMES", "excitation_references", "excitation_rides", "ride_gp_
 #: The GP's input columns (units rad/s², rad/s², rad/s, rad/s, rad, rad/s², rad/s).
 INPUT_NAMES = ("steer_acc", "wheel_acc", "steer_rate", "wheel_rate", "steer", "roll_acc", "roll_rate")
 
-#: The issue's grid: v ∈ [2, 6] m/s, |δ| ≤ 0.2 rad (δ = 0 left out: running straight, φ_e = 0 by symmetry).
+#: The target's grid: v ∈ [2, 6] m/s, |δ| ≤ 0.2 rad (δ = 0 left out: running straight, φ_e = 0 by symmetry).
 GRID_SPEEDS = (2.0, 3.0, 4.0, 5.0, 6.0)
 GRID_STEERS = (-0.2, -0.15, -0.1, -0.05, 0.05, 0.1, 0.15, 0.2)
 

@@ -3,7 +3,7 @@
 Rides (:func:`~bemlearn.apps.bikebot.learn.excitation_rides`) → pairs (:func:`~bemlearn.apps.bikebot.learn.ride_gp_data`)
 → GP (:func:`~bemlearn.apps.bikebot.learn.fit_roll_gp`) → the learned BEM at φ̇ = φ̈ = 0, δ̇ = δ̈ = v̇ = 0 against
 :class:`~bemlearn.apps.bikebot.bem.BikebotBem` on v ∈ {2 … 6} m/s, δ ∈ ±{0.05, 0.1, 0.15, 0.2} rad: a table,
-the RMSE, the largest error and the gain, against the issue's target RMSE ≤ 0.01 rad.
+the RMSE, the largest error and the gain, against the target RMSE ≤ 0.01 rad.
 
 Also runnable as ``python -m bemlearn.apps.bikebot.learn_bench``.
 """
@@ -14,7 +14,7 @@ import argparse
 import math
 import time
 
-#: The issue's target on the learned-vs-model roll BEM RMSE over the grid, rad.
+#: The target on the learned-vs-model roll BEM RMSE over the grid, rad.
 TARGET_RMSE = 0.01
 
 
@@ -69,7 +69,7 @@ def _arguments(b: argparse.ArgumentParser) -> None:
     b.add_argument("--truth", action="store_true", help="train on the simulator's exact states (oracle)")
     b.add_argument("--cone", choices=("elliptic", "pyramidal"), default="elliptic", help="MuJoCo's friction cone in the rides")
     b.add_argument("--tyre-friction", type=float, default=None, help="tyres' friction coefficient in the rides (default the MJCF's, 1)")
-    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--seed", type=int, default=0, help="seed of the excitation, the sensors, the draw and the GP")
 
 
 def add_learned_bench(sub) -> None:
