@@ -13,6 +13,7 @@ import math
 import mujoco
 import numpy as np
 import pytest
+import torch
 
 from bemlearn.apps.bikebot.bem import BikebotBem
 from bemlearn.apps.bikebot.learn import excitation_rides, fit_roll_gp, ride_gp_data, score_learned_bem
@@ -90,6 +91,16 @@ def _learned(n_trials, duration, n_points, speeds, steers):
     assert not any(r.fell for r in rides)
     X, y, _ = ride_gp_data(rides, n_points=n_points)
     gp = fit_roll_gp(X, y, rear_radius=rides[0].extra["rear_radius"], config=GPConfig(kind="exact"))
+    # the EIC's per-tick evaluation (NumPy, the frozen posterior) is the GPyTorch posterior's mean
+    from bemlearn.apps.bikebot.eic import LearnedBem
+    from bemlearn.models.predict import predict
+
+    per_tick = LearnedBem(gp)
+    for d, v in ((0.1, 3.0), (-0.05, 5.5), (0.2, 2.0)):
+        X_e = np.array([[0.0, 0.0, 0.0, v / gp.rear_radius, d, 0.0, 0.0]])
+        mu, _ = predict(gp.model, gp.likelihood, gp.normalization.normalize_x(torch.as_tensor(X_e)))
+        assert per_tick(d, v) == pytest.approx(float(gp.normalization.denormalize_y(mu)[0]), abs=1e-5)
+        assert per_tick(d, v) == pytest.approx(float(gp.bem(np.array(d), np.array(v))), abs=1e-12)
     return score_learned_bem(gp, speeds, steers)
 
 

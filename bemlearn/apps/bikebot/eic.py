@@ -21,10 +21,10 @@ lean model (C2) of :mod:`~bemlearn.apps.bikebot.ride` standing in for D_uu, D_ua
 a correct BEM, δ_cmd = δ^d and the bicycle turns as the path asks; a wrong BEM leaves the steering to fight
 the lean and the external loop to make up for it (path error).
 
-**The BEMs** (:class:`BemTable`: both tabulated on the same (v, δ) grid and interpolated bilinearly — one model
-root costs 0.2 s and one GP prediction 0.25 s, too slow for a 200 Hz loop): ``"learned"``: a
-:class:`~bemlearn.apps.bikebot.learn.RollGP`'s mean at x_e; ``"model"``: :class:`~bemlearn.apps.bikebot.bem.BikebotBem`
-(φ_e(0) = 0 by the bicycle's mirror symmetry); ``"zero"``: φ_e = 0.
+**The BEMs**: ``"learned"``: a :class:`~bemlearn.apps.bikebot.learn.RollGP`'s mean at x_e, evaluated every tick
+(:class:`LearnedBem`: the frozen posterior's kernel row, about 20–160 µs); ``"model"``:
+:class:`~bemlearn.apps.bikebot.bem.BikebotBem` tabulated on a (v, δ) grid and interpolated bilinearly (:class:`BemTable`:
+one root costs 0.2 s, too slow for a 200 Hz loop; φ_e(0) = 0 by the bicycle's mirror symmetry); ``"zero"``: φ_e = 0.
 
 The position and heading are the simulator's (a rig's localisation is not modelled); δ, φ and the speed are the
 rig's quantised sensors of :func:`~bemlearn.apps.bikebot.ride.simulate_ride`.
@@ -40,7 +40,7 @@ import numpy as np
 
 from bemlearn.apps.bikebot.ride import RideLog, RideReference, lean_gains, simulate_ride
 
-__all__ = ["Path2D", "circle_path", "s_curve_path", "BemTable", "EicResult", "ride_eic"]
+__all__ = ["Path2D", "circle_path", "s_curve_path", "BemTable", "LearnedBem", "EicResult", "ride_eic"]
 
 
 @dataclass(frozen=True)
@@ -119,6 +119,33 @@ class BemTable:
         v = min(max(v, self.speeds[0]), self.speeds[-1])
         delta = min(max(delta, self.steers[0]), self.steers[-1])
         return float(self._interp([[v, delta]])[0])
+
+
+class LearnedBem:
+    """The learned roll BEM evaluated at every tick: a :class:`~bemlearn.apps.bikebot.learn.RollGP`'s frozen posterior
+    mean at x_e = [0, 0, 0, v/r_R, δ, 0, 0] (steady turn, φ̇ = φ̈ = 0),
+
+        φ_e = y_mean + y_std σ_f² Σ_j α_j exp(−½ ‖(x̃_e − z_j)/ℓ‖²),   x̃_e = (x_e − x_mean)/x_std     (eq. 11, 12)
+
+    in NumPy (one kernel row of M support points, tens of µs, no thread pool).  ``delta`` rad, ``v`` m/s → rad.
+    """
+
+    def __init__(self, gp) -> None:
+        st = gp.state
+        self.rear_radius = float(gp.rear_radius)
+        self._mean, self._std = st.x_mean.numpy(), st.x_std.numpy()
+        self._Zs = st.Z.numpy() / st.lengthscale.numpy()
+        self._ell = st.lengthscale.numpy()
+        self._w = float(st.outputscale) * st.alpha.numpy()
+        self._y = (float(st.y_mean), float(st.y_std))
+        self._x = np.zeros(len(self._mean))
+
+    def __call__(self, delta: float, v: float) -> float:
+        x = self._x
+        x[3], x[4] = v / self.rear_radius, delta
+        u = (x - self._mean) / self._std / self._ell
+        r2 = ((self._Zs - u) ** 2).sum(1)
+        return self._y[0] + self._y[1] * float(np.exp(-0.5 * r2) @ self._w)
 
 
 @dataclass

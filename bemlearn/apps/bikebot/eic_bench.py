@@ -1,7 +1,8 @@
 """EIC with the learned, the model and the zero roll BEM: ``bemlearn bench bikebot-eic``.
 
-Fits the learned roll BEM as ``bemlearn bench bikebot-learned`` does (its defaults), tabulates it and the model
-roll BEM on the same (v, δ) grid (:class:`~bemlearn.apps.bikebot.eic.BemTable`), then follows a 10 m circle and an S-curve (curvature
+Fits the learned roll BEM as ``bemlearn bench bikebot-learned`` does (its defaults), evaluated every tick
+(:class:`~bemlearn.apps.bikebot.eic.LearnedBem`), tabulates the model roll BEM on a (v, δ) grid
+(:class:`~bemlearn.apps.bikebot.eic.BemTable`), then follows a 10 m circle and an S-curve (curvature
 sin(2π s / 60 m) / 10 m) at 3 m/s for 60 s with each BEM in (P2) of :mod:`bemlearn.apps.bikebot.eic`, and prints
 the roll error against the BEM used and against the model BEM, and the path error, over t ≥ 10 s.
 
@@ -29,7 +30,7 @@ def eic_bench(*, speed: float = 3.0, duration: float = 60.0, radius: float = 10.
         learned: a fitted :class:`~bemlearn.apps.bikebot.learn.RollGP` (default: fitted with the learned bench's
             defaults).
     """
-    from bemlearn.apps.bikebot.eic import BemTable, circle_path, ride_eic, s_curve_path
+    from bemlearn.apps.bikebot.eic import BemTable, LearnedBem, circle_path, ride_eic, s_curve_path
     from bemlearn.apps.bikebot.learn_bench import learned_bem_bench
 
     t0 = time.perf_counter()
@@ -39,7 +40,7 @@ def eic_bench(*, speed: float = 3.0, duration: float = 60.0, radius: float = 10.
     st = np.array(TABLE_STEERS)
     speeds, steers = [speed - 0.5, speed, speed + 0.5], np.concatenate([-st[::-1], [0.0], st])
     table = BemTable.model(speeds, steers)
-    bems: dict[str, Callable[[float, float], float]] = {"learned": BemTable.learned(learned, speeds, steers),
+    bems: dict[str, Callable[[float, float], float]] = {"learned": LearnedBem(learned),
                                                         "model": table, "zero": lambda d, v: 0.0}
     length = speed * duration + 20.0
     paths = {f"circle R = {radius:g} m": circle_path(radius, length),

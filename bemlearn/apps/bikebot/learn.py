@@ -21,6 +21,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -145,13 +146,22 @@ class RollGP:
     fit: dict
 
     def mean(self, X: np.ndarray) -> np.ndarray:
-        """The GP mean of φ (rad) at ``X (B, 7)`` physical inputs."""
-        from bemlearn.models.predict import predict
+        """The GP mean of φ (rad) at ``X (B, 7)`` physical inputs, from the frozen posterior (:attr:`state`: one kernel
+        row and a dot product per point, as the exported predictor computes it)."""
+        x = torch.as_tensor(np.atleast_2d(np.asarray(X, dtype=np.float64)), dtype=torch.float64)
+        st = self.state
+        with torch.no_grad():   # μ = y_mean + y_std k_Z(x̃)ᵀ α (eq. 12's mean), the kernel row only
+            return (st.y_mean + st.y_std * (st.kernel_row(x) @ st.alpha)).numpy()
+
+    @functools.cached_property
+    def state(self):
+        """The frozen float64 posterior (:func:`bemlearn.models.freeze.predictor_state`) in physical units."""
+        from bemlearn.models.freeze import predictor_state
 
         nrm = self.normalization
-        x = nrm.normalize_x(torch.as_tensor(np.atleast_2d(X), dtype=torch.float64))   # type: ignore[attr-defined]
-        mu, _ = predict(self.model, self.likelihood, x)
-        return nrm.denormalize_y(mu).numpy()   # type: ignore[attr-defined]
+        return predictor_state(self.model, self.likelihood, x_mean=nrm.x_mean, x_std=nrm.x_std,
+                               y_mean=nrm.y_mean, y_std=nrm.y_std, input_names=INPUT_NAMES,
+                               n_train=int(self.fit["n_train"]))
 
     def bem(self, delta: np.ndarray, v: np.ndarray) -> np.ndarray:
         """The learned roll BEM (rad) at steer ``delta`` (rad) and speed ``v`` (m/s) (same shapes): the mean at
@@ -173,7 +183,7 @@ def fit_roll_gp(X: np.ndarray, y: np.ndarray, *, rear_radius: float, config: GPC
     nrm = Normalization.fit(x, yt, names=INPUT_NAMES)
     model, lik, res = train_gp(nrm.normalize_x(x), nrm.normalize_y(yt), config=config or GPConfig(), progress=progress)
     return RollGP(model=model, likelihood=lik, normalization=nrm, rear_radius=rear_radius,
-                  fit={"loss": float(res.loss), "seconds": float(res.seconds), "stop_reason": res.stop_reason,
+                  fit={"loss": float(res.loss), "seconds": float(res.seconds), "stop_reason": res.stop_reason, "n_train": len(yt),
                        "noise_std_rad": float(nrm.y_std * lik.noise.detach().sqrt().reshape(()))})
 
 
