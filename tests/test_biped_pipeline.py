@@ -271,3 +271,5 @@ def test_run_biped_pipeline_end_to_end(tmp_path):
     assert ("**Above the 0.02 rad target:**" in text) == bool(above)
     for g, v in above.items():
         assert f"{g} ({v:.3f} rad, `gp`)" in text
+    seg = m["learned"]["gp"]["dataset"]["segments"]    # the derivatives' segments are stated, counts and all
+    assert f"cut again at {seg['jumps']} velocity jumps" in text and f"{seg['rows_event_dropped']} samples whose window" in text
