@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 from pathlib import Path
 
@@ -125,7 +126,8 @@ def test_gp_data_rows_and_columns(walks):
     # estimated derivatives from the quantized angles: close to the truth in mid-step
     # (a 0.12 s window; the shipped 0.2 s one trades pointwise accuracy, 18-24 % here, for
     # a smaller Γ residual and a better learned BEM: see bemlearn.apps.biped.pipeline)
-    short = dataclasses.replace(cfg, derivatives="estimated", derivative_options={"window_s": 0.12, "polyorder": 3})
+    short = dataclasses.replace(cfg, derivatives="estimated", derivative_options={"window_s": 0.12, "polyorder": 3},
+                                jump_factor=None)   # whole steps: the same rows as the truth's
     Xe, _, _ = walking_gp_data(data, truth, short)
     X, _, _ = walking_gp_data(data, truth, dataclasses.replace(short, derivatives="truth"))   # same steps kept
     rms = lambda a: float(np.sqrt(np.mean(a**2)))  # noqa: E731
@@ -133,6 +135,38 @@ def test_gp_data_rows_and_columns(walks):
     np.testing.assert_allclose(Xe[:, 8:12], X[:, 8:12], atol=2e-3)  # quantized q_a (2π/4096 ≈ 1.5e-3 rad)
     with pytest.raises(ValueError, match="derivatives = truth needs the ground-truth"):
         walking_gp_data(data, None, cfg)
+
+
+def test_gp_data_estimates_within_segments_cut_at_velocity_jumps(walks):
+    """Steps are cut again at the detected jumps: a row is kept iff its whole Savitzky–Golay window lies
+    inside one segment (checked by an independent count), and the pool is the whole-step pool minus those rows."""
+    from bemlearn.apps.biped.data import segmented_states
+    from bemlearn.data.velocity_jumps import detect_velocity_jumps
+
+    _, data, truth, _ = walks
+    cfg = WalkDatasetConfig(n_points=10_000, skip_after_impact=6, skip_before_impact=4)
+    assert cfg.jump_factor is not None and cfg.segment_edges == "drop"
+    est = make_estimator(cfg.derivative, cfg.derivative_options)
+    w = est.min_samples(115.0)
+    half = w // 2
+    _, _, _, valid, rep = segmented_states(data, est, cfg)
+    step = data.quantization_steps()["q1"]
+    jumps = detect_velocity_jumps(data.q, 115.0, trial=data.trial, noise_std=step / 12**0.5, factor=cfg.jump_factor)
+    assert rep["jumps"] == jumps.count >= 1
+    expect = np.zeros(data.n_samples, dtype=bool)
+    for s in data.trial_slices():
+        cuts = [s.rows.start, *[int(j) for j in np.flatnonzero(jumps.starts[s.rows]) + s.rows.start], s.rows.stop]
+        for a, b in itertools.pairwise(cuts):
+            if b - a >= w:
+                lo = a + (half if a != s.rows.start else 0)         # Savitzky–Golay keeps one-sided rows at trial ends
+                hi = b - (half if b != s.rows.stop else 0)
+                expect[lo:hi] = True
+    np.testing.assert_array_equal(valid, expect)
+    _, _, plain = walking_gp_data(data, truth, dataclasses.replace(cfg, jump_factor=None))
+    _, _, seg = walking_gp_data(data, truth, cfg)
+    assert seg["segments"]["rows_event_dropped"] + seg["segments"]["rows_too_short"] >= plain["pool"] - seg["pool"] > 0
+    with pytest.raises(ConfigError, match="jump_factor"):
+        WalkDatasetConfig(jump_factor=0.0)
 
 
 def test_exported_predictor_is_the_biped_posterior(exported):
@@ -237,3 +271,5 @@ def test_run_biped_pipeline_end_to_end(tmp_path):
     assert ("**Above the 0.02 rad target:**" in text) == bool(above)
     for g, v in above.items():
         assert f"{g} ({v:.3f} rad, `gp`)" in text
+    seg = m["learned"]["gp"]["dataset"]["segments"]    # the derivatives' segments are stated, counts and all
+    assert f"cut again at {seg['jumps']} velocity jumps" in text and f"{seg['rows_event_dropped']} samples whose window" in text

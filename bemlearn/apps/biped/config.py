@@ -67,6 +67,12 @@ class WalkDatasetConfig:
             ``truth`` (the simulator's q, q̇, q̈: a diagnostic upper bound).
         derivative, derivative_options: estimator (:mod:`bemlearn.data.derivatives`).
         skip_after_impact, skip_before_impact: samples dropped at the start / end of each step.
+        jump_factor: the derivatives are estimated within segments: each step (the walker's foot
+            strikes end it) is further cut at the velocity jumps found in the measured angles
+            (a swing-foot scuff, a stall; :func:`~bemlearn.data.velocity_jumps.detect_velocity_jumps`,
+            threshold ``jump_factor`` robust scales), so that no window spans one; ``null``: steps only.
+        segment_edges: next to a jump, ``drop`` the samples whose window would be one-sided, or
+            keep them (``one-sided``); :mod:`bemlearn.data.segmented_derivatives`.
         qu_window: keep |q1| ≤ this, rad.
         n_points: training points drawn at random.
         seed: seed of the draw.
@@ -77,6 +83,8 @@ class WalkDatasetConfig:
     derivative_options: dict[str, Any] = field(default_factory=lambda: {"window_s": 0.2, "polyorder": 3})
     skip_after_impact: int = 16
     skip_before_impact: int = 12
+    jump_factor: float | None = 12.0
+    segment_edges: Literal["drop", "one-sided"] = "drop"
     qu_window: float = 0.5
     n_points: int = 1200
     seed: int = 0
@@ -88,6 +96,10 @@ class WalkDatasetConfig:
         if min(self.skip_after_impact, self.skip_before_impact) < 0 or self.n_points < 1 or not self.qu_window > 0:
             raise ConfigError(f"dataset: expected skips >= 0, n_points >= 1, qu_window > 0; got {self.skip_after_impact}, "
                              f"{self.skip_before_impact}, {self.n_points}, {self.qu_window}")
+        if self.jump_factor is not None and not self.jump_factor > 0:
+            raise ConfigError(f"dataset.jump_factor: expected a positive number or null, got {self.jump_factor!r}")
+        if self.segment_edges not in ("drop", "one-sided"):
+            raise ConfigError(f"dataset.segment_edges: expected 'drop' or 'one-sided', got {self.segment_edges!r}")
 
 
 @dataclass(frozen=True)

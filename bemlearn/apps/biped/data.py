@@ -18,7 +18,7 @@ from bemlearn.apps.biped.walker import WalkResult
 from bemlearn.data.trajectory import Trajectory
 from bemlearn.errors import ArgumentError, DataError
 
-__all__ = ["collect_walks", "concat_trajectories", "walks_trajectories", "walking_gp_data"]
+__all__ = ["collect_walks", "concat_trajectories", "walks_trajectories", "segmented_states", "walking_gp_data"]
 
 log = logging.getLogger(__name__)
 
@@ -81,6 +81,35 @@ def walks_trajectories(walks: list[WalkResult]) -> tuple[Trajectory, Trajectory]
     return concat_trajectories(list(measured)), concat_trajectories(list(truth))
 
 
+def segmented_states(data: Trajectory, est, config: WalkDatasetConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
+    """q, q̇, q̈ and their validity ``(T, ·)`` estimated within segments, and a report of what it cost.
+
+    The steps (trials, ended by the walker's foot strikes) are cut again wherever the measured
+    angles jump in velocity (:func:`~bemlearn.data.velocity_jumps.detect_velocity_jumps`, factor
+    ``config.jump_factor``, the encoder step as noise floor); the estimator then never smooths
+    across a jump (:func:`~bemlearn.data.segmented_derivatives.estimate_segmented`, edges
+    ``config.segment_edges``).
+    """
+    import math
+
+    from bemlearn.data.segmented_derivatives import estimate_segmented
+    from bemlearn.data.velocity_jumps import detect_velocity_jumps
+
+    assert config.jump_factor is not None
+    steps = data.quantization_steps()
+    noise = np.array([(steps.get(j) or 0.0) / math.sqrt(12.0) for j in data.meta.joint_names])
+    jumps = detect_velocity_jumps(data.q, data.meta.sample_rate_hz, trial=data.trial, noise_std=noise,
+                                  factor=config.jump_factor)
+    q, qd, qdd, valid, seg = estimate_segmented(data, est, events=jumps.starts, edges=config.segment_edges)
+    report = {"jumps": jumps.count, "jump_threshold_rad_s": [float(v) for v in jumps.threshold],
+              "jump_factor": jumps.factor, **seg.to_dict()}
+    log.info("walking_gp_data: %d velocity jumps inside the steps (threshold %s rad/s); %d segments, %d too short "
+             "(%d samples), %d samples next to a jump dropped, %d kept one-sided", jumps.count,
+             " / ".join(f"{v:.2g}" for v in jumps.threshold), seg.segments, seg.segments_too_short, seg.rows_too_short,
+             seg.rows_event_dropped, seg.rows_one_sided)
+    return q, qd, qdd, valid, report
+
+
 def walking_gp_data(data: Trajectory, truth: Trajectory | None, config: WalkDatasetConfig) -> tuple[np.ndarray, np.ndarray, dict]:
     """Training pairs of eq. (11) from walk trajectories (:mod:`bemlearn.apps.biped.pipeline`, step 2).
 
@@ -114,8 +143,10 @@ def walking_gp_data(data: Trajectory, truth: Trajectory | None, config: WalkData
         truth = truth.select_trials(keep)
         assert truth.qd is not None and truth.qdd is not None  # has_ground_truth
         q, qd, qdd = truth.q, truth.qd, truth.qdd
-    else:   # an estimator that smooths gives the smoothed q too (inputs and label alike, eq. G2)
+    elif config.jump_factor is None:   # an estimator that smooths gives the smoothed q too (eq. G2)
         q, qd, qdd, valid = estimate_states(data, est)
+    else:   # within segments: each step, cut again at the velocity jumps of the measured angles
+        q, qd, qdd, valid, report["segments"] = segmented_states(data, est, config)
     X = gp_inputs(q, qd, qdd, unactuated_index=0)
     rows = np.concatenate([np.arange(s.rows.start + config.skip_after_impact, s.rows.stop - config.skip_before_impact)
                            for s in data.trial_slices()])

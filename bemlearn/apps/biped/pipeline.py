@@ -8,7 +8,8 @@
    sensor model gives quantized angles at the control rate (115 Hz) → ``data.npz``
    (stance-relative q1..q5, one trial per step) and its ground truth ``data.truth.npz``.
 2. **dataset** (:func:`walking_gp_data`) — q̇, q̈ estimated per step from the quantized
-   angles; samples ``skip_after_impact`` … ``len − skip_before_impact`` of each step
+   angles, each step cut again at the velocity jumps the angles show (the touchdown's tail,
+   swing-foot scuffs; ``dataset.jump_factor``), so that no window spans one; samples ``skip_after_impact`` … ``len − skip_before_impact`` of each step
    (single support away from the impacts, where the pinned model of eq. 1 holds);
    x = [q̈_a, q̇_a, q_a, q̈_1, q̇_1] ∈ R^14, y = q1 (eq. 11); N drawn at random.
 3. **train** (:func:`train_walking_gp`) — the GP of eq. (11)–(12) → ``gp/checkpoint.pt``

@@ -80,6 +80,13 @@ def write_biped_report(out: str | Path, metrics: dict, config) -> Path:
     lines += ["", "`gp` is the sensor path (derivatives estimated from the quantized angles) and gives the exported "
               "predictor used below; `gp_oracle` (if present) uses the simulator's true q, q̇, q̈, a diagnostic of "
               "how much the derivative estimation costs.", ""]
+    seg = metrics["learned"].get("gp", {}).get("dataset", {}).get("segments")
+    if seg:
+        lines += [f"Derivatives estimated within segments: the steps were cut again at {seg['jumps']} velocity jumps of "
+                  f"the measured angles (threshold {seg['jump_factor']:g} robust scales, `dataset.jump_factor`); "
+                  f"{seg['segments_too_short']} segments shorter than the window ({seg['rows_too_short']} samples) and "
+                  f"{seg['rows_event_dropped']} samples whose window would reach a jump were left out, "
+                  f"{seg['rows_one_sided']} kept with one-sided windows.", ""]
     above = [f"{gait} ({h['rmse']:.3f} rad, `{name}`)" for name, L in metrics["learned"].items()
              for gait, h in L["heldout"].items() if h["rmse"] > 0.02]
     if above:
