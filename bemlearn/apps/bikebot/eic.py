@@ -22,7 +22,7 @@ a correct BEM, δ_cmd = δ^d and the bicycle turns as the path asks; a wrong BEM
 the lean and the external loop to make up for it (path error).
 
 **The BEMs**: ``"learned"``: a :class:`~bemlearn.apps.bikebot.learn.RollGP`'s mean at x_e, evaluated every tick
-(:class:`LearnedBem`: the frozen posterior's kernel row, about 20–160 µs); ``"model"``:
+(:class:`LearnedBem`: the frozen posterior's kernel row, about 0.2 ms); ``"model"``:
 :class:`~bemlearn.apps.bikebot.bem.BikebotBem` tabulated on a (v, δ) grid and interpolated bilinearly (:class:`BemTable`:
 one root costs 0.2 s, too slow for a 200 Hz loop; φ_e(0) = 0 by the bicycle's mirror symmetry); ``"zero"``: φ_e = 0.
 
@@ -37,6 +37,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
 from bemlearn.apps.bikebot.ride import RideLog, RideReference, lean_gains, simulate_ride
 
@@ -125,27 +126,22 @@ class LearnedBem:
     """The learned roll BEM evaluated at every tick: a :class:`~bemlearn.apps.bikebot.learn.RollGP`'s frozen posterior
     mean at x_e = [0, 0, 0, v/r_R, δ, 0, 0] (steady turn, φ̇ = φ̈ = 0),
 
-        φ_e = y_mean + y_std σ_f² Σ_j α_j exp(−½ ‖(x̃_e − z_j)/ℓ‖²),   x̃_e = (x_e − x_mean)/x_std     (eq. 11, 12)
+        φ_e = y_mean + y_std k_Z(x̃_e)ᵀ α,   x̃_e = (x_e − x_mean)/x_std     (eq. 11, 12)
 
-    in NumPy (one kernel row of M support points, tens of µs, no thread pool).  ``delta`` rad, ``v`` m/s → rad.
+    one kernel row of M support points (:meth:`~bemlearn.models.predictor_state.PredictorState.kernel_row`; about
+    0.2 ms on one torch thread, which :func:`ride_eic` sets).  ``delta`` rad, ``v`` m/s → rad.
     """
 
     def __init__(self, gp) -> None:
-        st = gp.state
+        self.state = gp.state
         self.rear_radius = float(gp.rear_radius)
-        self._mean, self._std = st.x_mean.numpy(), st.x_std.numpy()
-        self._Zs = st.Z.numpy() / st.lengthscale.numpy()
-        self._ell = st.lengthscale.numpy()
-        self._w = float(st.outputscale) * st.alpha.numpy()
-        self._y = (float(st.y_mean), float(st.y_std))
-        self._x = np.zeros(len(self._mean))
+        self._x = torch.zeros(1, self.state.dim, dtype=torch.float64)
 
     def __call__(self, delta: float, v: float) -> float:
-        x = self._x
-        x[3], x[4] = v / self.rear_radius, delta
-        u = (x - self._mean) / self._std / self._ell
-        r2 = ((self._Zs - u) ** 2).sum(1)
-        return self._y[0] + self._y[1] * float(np.exp(-0.5 * r2) @ self._w)
+        st, x = self.state, self._x
+        x[0, 3], x[0, 4] = v / self.rear_radius, delta
+        with torch.no_grad():
+            return float(st.y_mean + st.y_std * (st.kernel_row(x) @ st.alpha)[0])
 
 
 @dataclass
@@ -219,7 +215,14 @@ def ride_eic(path: Path2D, bem: Callable[[float, float], float], duration_s: flo
         trace["ey"].append(e_y)
         return d_des + k_phi * (s["roll"] - phi_e) + k_rate * s["roll_rate"]
 
-    log = simulate_ride(RideReference(speed=speed), duration_s, steer_command=steer, **ride_kwargs)
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)   # one BEM query per tick: a thread pool only waits (as bemlearn.sim.closed_loop does)
+    try:
+        log = simulate_ride(RideReference(speed=speed), duration_s, steer_command=steer, **ride_kwargs)
+    finally:
+        torch.set_num_threads(threads)
     n = len(log.t)
     phi_e, phi_m, ey = (np.asarray(trace[k][:n]) for k in ("bem", "model", "ey"))
     keep = log.t >= settle_s
