@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
+import sys
 from dataclasses import dataclass
 
 from bemlearn.errors import NumericalError
@@ -127,4 +128,4 @@ def _arguments(b: argparse.ArgumentParser) -> None:
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     _arguments(parser)
-    raise SystemExit(_bench(parser.parse_args()))
+    sys.exit(_bench(parser.parse_args()))

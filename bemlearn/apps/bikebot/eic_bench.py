@@ -13,10 +13,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 from collections.abc import Callable
-
-import numpy as np
 
 #: The model BEM table's steers, rad (mirrored; 0 by symmetry) and speeds, m/s.
 TABLE_STEERS = (0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.15, 0.2, 0.25, 0.3)
@@ -30,6 +29,8 @@ def eic_bench(*, speed: float = 3.0, duration: float = 60.0, radius: float = 10.
         learned: a fitted :class:`~bemlearn.apps.bikebot.learn.RollGP` (default: fitted with the learned bench's
             defaults).
     """
+    import numpy as np
+
     from bemlearn.apps.bikebot.eic import BemTable, LearnedBem, circle_path, ride_eic, s_curve_path
     from bemlearn.apps.bikebot.learn_bench import learned_bem_bench
 
@@ -93,4 +94,4 @@ def add_eic_bench(sub) -> None:
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     _arguments(parser)
-    raise SystemExit(run(parser.parse_args()))
+    sys.exit(run(parser.parse_args()))

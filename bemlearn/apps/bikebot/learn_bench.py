@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 
 #: The target on the learned-vs-model roll BEM RMSE over the grid, rad.
@@ -34,7 +35,7 @@ def learned_bem_bench(*, trials: int = 8, duration: float = 60.0, n_points: int 
     gp = fit_roll_gp(X, y, rear_radius=rides[0].extra["rear_radius"], config=cfg)
     t2 = time.perf_counter()
     rep.update(rides_s=t1 - t0, fit_s=t2 - t1, rate_hz=rides[0].sample_rate_hz, tyre_friction=rides[0].extra["tyre_friction"],
-               noise_std_rad=gp.fit["noise_std_rad"])
+               noise_std_rad=gp.fit["noise_std_rad"], n_inducing=gp.state.n_support if gp.state.sparse else None)
     return score_learned_bem(gp), rep, gp
 
 
@@ -45,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"rides: {rep['rides']} × {args.duration:g} s at {rep['rate_hz']:g} Hz, {args.cone} cone, tyre friction "
           f"{rep['tyre_friction']:g}, fell {rep['fell']}; pool {rep['pool']}, N = {rep['n_train']} "
           f"({'exact states' if args.truth else rep['estimator']}); {args.kind} GP"
-          + (f" (M = {args.inducing})" if args.kind != "exact" else "")
+          + (f" (M = {rep['n_inducing']})" if rep.get("n_inducing") else "")
           + f"; rides {rep['rides_s']:.0f} s, fit {rep['fit_s']:.0f} s; σ_0 = {rep['noise_std_rad']:.2e} rad")
     print()
     print("| v (m/s) | δ (rad) | φ model BEM (rad) | φ learned (rad) | learned − model (rad) |")
@@ -83,4 +84,4 @@ def add_learned_bench(sub) -> None:
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     _arguments(parser)
-    raise SystemExit(run(parser.parse_args()))
+    sys.exit(run(parser.parse_args()))

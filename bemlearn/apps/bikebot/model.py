@@ -33,6 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bemlearn.errors import ArgumentError
+
 __all__ = ["BikeParameters", "bikebot_mjcf"]
 
 
@@ -78,7 +80,7 @@ class BikeParameters:
         elif body == "fork":
             ixx, iyy, izz, ixz = self.fork_inertia
         else:
-            raise ValueError(f"BikeParameters.inertia: unknown body {body!r}")
+            raise ArgumentError(f"BikeParameters.inertia: unknown body {body!r}; expected one of frame, fork, rear_wheel, front_wheel")
         # benchmark's [[ixx, 0, ixz], [0, iyy, 0], [ixz, 0, izz]] under diag(1, -1, -1): I_xz changes sign
         return np.array([[ixx, 0.0, -ixz], [0.0, iyy, 0.0], [-ixz, 0.0, izz]])
 
