@@ -56,7 +56,8 @@ def test_subsets_are_scored_like_the_pipeline(small, tmp_path):
     for r in result.subsets:
         assert r.rmse["default"] == _pipeline_rmse(small, tmp_path, collect_seed=small.collect.seed, dataset_seed=r.seed)
     text = format_biped_bem_bench(result)
-    assert "| 0 | 60 |" in text and "default: RMSE min" in text and "target <= 0.02 rad" in text
+    assert "| 0 | 60 |" in text and "default: RMSE min" in text and "target: median <= 0.02 rad" in text
+    assert "every fit <= 0.02 rad" in text
 
 
 def test_collect_seeds_refit_on_each_set_of_walks(small, tmp_path):

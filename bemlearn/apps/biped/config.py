@@ -65,7 +65,8 @@ class WalkDatasetConfig:
     Attributes:
         derivatives: ``estimated`` (q̇, q̈ from the quantized angles: the sensor path) or
             ``truth`` (the simulator's q, q̇, q̈: a diagnostic upper bound).
-        derivative, derivative_options: estimator (:mod:`bemlearn.data.derivatives`).
+        derivative, derivative_options: estimator (:mod:`bemlearn.data.derivatives`); Savitzky–Golay over 0.25 s
+            with ``jump_factor`` 8, chosen by the learned-BEM error over 12 bench fits (docs/biped.md).
         skip_after_impact, skip_before_impact: samples dropped at the start / end of each step.
         jump_factor: the derivatives are estimated within segments: each step (the walker's foot
             strikes end it) is further cut at the velocity jumps found in the measured angles
@@ -80,10 +81,10 @@ class WalkDatasetConfig:
 
     derivatives: Literal["estimated", "truth"] = "estimated"
     derivative: str = "savgol"
-    derivative_options: dict[str, Any] = field(default_factory=lambda: {"window_s": 0.2, "polyorder": 3})
+    derivative_options: dict[str, Any] = field(default_factory=lambda: {"window_s": 0.25, "polyorder": 3})
     skip_after_impact: int = 16
     skip_before_impact: int = 12
-    jump_factor: float | None = 12.0
+    jump_factor: float | None = 8.0
     segment_edges: Literal["drop", "one-sided"] = "drop"
     qu_window: float = 0.5
     n_points: int = 1200
