@@ -57,15 +57,14 @@ def _resolve(arg: str):
 
     path = Path(arg)
     if path.suffix.lower() in (".yaml", ".yml"):
-        from bemlearn.config import config_folder, is_relative_path, load_yaml
+        from bemlearn.config import config_folder, load_yaml, rebase_paths
         from bemlearn.errors import ConfigError
+        from bemlearn.pipeline.config import PATH_KEYS
 
-        raw = load_yaml(path)
+        raw = rebase_paths(load_yaml(path), PATH_KEYS, config_folder(path))   # relative to the config's folder
         name = raw.get("robot") or raw.get("model")
         if not isinstance(name, str) or not name:
             raise ConfigError(f"{path}: expected 'robot:' (or 'model:') naming a robot, got {name!r}")
-        if is_relative_path(name):
-            name = str(config_folder(path) / name)
         return resolve_robot(name, coordinates=raw.get("coordinates"))
     return resolve_robot(arg)
 

@@ -38,8 +38,9 @@ from bemlearn.errors import ConfigError
 
 if TYPE_CHECKING:
     import mujoco
+    import numpy as np
 
-__all__ = ["CoordinatesConfig", "apply_custom", "coordinates_mapping", "custom_entries"]
+__all__ = ["CoordinatesConfig", "apply_custom", "coordinates_mapping", "custom_entries", "declared_numeric", "declared_text"]
 
 
 @dataclass(frozen=True)
@@ -124,6 +125,29 @@ def custom_entries(coordinates: CoordinatesConfig | Mapping[str, Any] | None) ->
     if c.rolling_dependent is not None:
         out["bemlearn_rolling_dependent"] = " ".join(c.rolling_dependent)
     return out
+
+
+def declared_numeric(model: mujoco.MjModel, name: str) -> np.ndarray | None:
+    """The numbers of the model's ``<numeric name=...>`` (from its file or a ``coordinates:`` block), or ``None``."""
+    import mujoco
+    import numpy as np
+
+    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, name)
+    if i < 0:
+        return None
+    start, size = int(model.numeric_adr[i]), int(model.numeric_size[i])
+    return np.array(model.numeric_data[start : start + size], dtype=np.float64)
+
+
+def declared_text(model: mujoco.MjModel, name: str) -> str | None:
+    """The text of the model's ``<text name=...>`` (from its file or a ``coordinates:`` block), or ``None``."""
+    import mujoco
+
+    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, name)
+    if i < 0:
+        return None
+    start, size = int(model.text_adr[i]), int(model.text_size[i])
+    return bytes(model.text_data[start : start + size]).split(b"\0")[0].decode()
 
 
 def apply_custom(spec: mujoco.MjSpec, entries: Mapping[str, list[float] | str]) -> None:

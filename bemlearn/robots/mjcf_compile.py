@@ -31,7 +31,7 @@ import mujoco
 
 from bemlearn.errors import RobotModelError
 
-__all__ = ["compile_mjcf", "check_finite_attributes", "NUMERIC_ATTRIBUTES", "CHILD_COMPILE_BYTES"]
+__all__ = ["compile_mjcf", "declared_spec", "check_finite_attributes", "NUMERIC_ATTRIBUTES", "CHILD_COMPILE_BYTES"]
 
 #: MJCF files at least this large (bytes, includes counted) compile in a child process.
 CHILD_COMPILE_BYTES = 256 * 1024
@@ -122,14 +122,18 @@ def compile_mjcf(path: str | os.PathLike[str], custom: Mapping[str, list[float] 
     return _compile_in_child(path, custom)
 
 
-def _build(path: Path, custom: Mapping[str, list[float] | str]) -> mujoco.MjModel:
-    if not custom:
-        return mujoco.MjModel.from_xml_path(str(path))
+def declared_spec(path: str | os.PathLike[str], custom: Mapping[str, list[float] | str]) -> mujoco.MjSpec:
+    """``mujoco.MjSpec`` of the MJCF at ``path`` with the ``<custom>`` elements ``custom`` declared
+    (:func:`bemlearn.robots.coordinates.apply_custom`)."""
     from bemlearn.robots.coordinates import apply_custom
 
     spec = mujoco.MjSpec.from_file(str(path))
     apply_custom(spec, custom)
-    return spec.compile()
+    return spec
+
+
+def _build(path: Path, custom: Mapping[str, list[float] | str]) -> mujoco.MjModel:
+    return declared_spec(path, custom).compile() if custom else mujoco.MjModel.from_xml_path(str(path))
 
 
 def _compile(path: Path, custom: Mapping[str, list[float] | str]) -> mujoco.MjModel:

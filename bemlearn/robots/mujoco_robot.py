@@ -52,6 +52,7 @@ from bemlearn._lazy import lazy_module
 from bemlearn.errors import MissingFileError, RobotModelError
 from bemlearn.robots._mujoco_compat import full_mass_matrix, make_mass_matrix
 from bemlearn.robots.actuation import ActuatorGroups, actuator_groups
+from bemlearn.robots.coordinates import declared_numeric, declared_text
 from bemlearn.robots.floating import FloatingRolling, find_floating
 from bemlearn.robots.robot import Robot, as_batch
 from bemlearn.robots.rolling import RollingMap, find_rolling
@@ -75,22 +76,6 @@ _JOINT_KIND = {
     int(mujoco.mjtJoint.mjJNT_BALL): "ball",
     int(mujoco.mjtJoint.mjJNT_FREE): "free",
 }
-
-
-def _custom_numeric(model: mujoco.MjModel, name: str) -> np.ndarray | None:
-    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, name)
-    if i < 0:
-        return None
-    start, size = int(model.numeric_adr[i]), int(model.numeric_size[i])
-    return np.array(model.numeric_data[start : start + size], dtype=np.float64)
-
-
-def _custom_text(model: mujoco.MjModel, name: str) -> str | None:
-    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, name)
-    if i < 0:
-        return None
-    start, size = int(model.text_adr[i]), int(model.text_size[i])
-    return bytes(model.text_data[start : start + size]).split(b"\0")[0].decode()
 
 
 #: MjModel arrays that must be finite, with the MJCF attribute they come from.
@@ -215,7 +200,7 @@ class MujocoRobot(Robot):
             j = int(model.actuator_trnid[i, 0])
             Bj[dof_to_joint[int(model.jnt_dofadr[j])], i] = model.actuator_gear[i, 0]
         # coordinate map
-        T = _custom_numeric(model, "bemlearn_coordinates")
+        T = declared_numeric(model, "bemlearn_coordinates")
         self.rolling: RollingMap | None = None
         if self.floating is not None:
             T = self.floating.T
@@ -242,7 +227,7 @@ class MujocoRobot(Robot):
             self.Tinv_np = np.linalg.inv(self.T_np)
             self.coordinate_joints = tuple(range(n)) if bool(np.allclose(self.T_np, np.eye(n))) else None
         nc = self.T_np.shape[0]
-        coord_names = _custom_text(model, "bemlearn_coordinate_names")
+        coord_names = declared_text(model, "bemlearn_coordinate_names")
         if self.floating is not None:
             self.joint_names = (names[self.floating.wheels[0]], f"{self.floating.body}_pitch")
         elif coord_names:
@@ -272,8 +257,8 @@ class MujocoRobot(Robot):
         else:
             raise RobotModelError(f"{where}: 'bemlearn_coordinates' mixes hinge and slide joints; their units would not be defined")
         # admissible range and nominal value of q_u
-        rng = _custom_numeric(model, "bemlearn_qu_range")
-        nom = _custom_numeric(model, "bemlearn_qu_nominal")
+        rng = declared_numeric(model, "bemlearn_qu_range")
+        nom = declared_numeric(model, "bemlearn_qu_nominal")
         self._M = np.zeros((model.nv, model.nv))
         self._vec = np.zeros(model.nv)
         # hinge/slide joints only: nq = nv = n; in model order (the usual case) a row loads as a slice

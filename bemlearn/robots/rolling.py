@@ -52,6 +52,7 @@ import numpy as np
 
 from bemlearn.errors import NumericalError, RobotModelError
 from bemlearn.robots._mujoco_compat import full_mass_matrix
+from bemlearn.robots.coordinates import declared_text
 
 __all__ = ["RollingContact", "RollingMap", "find_rolling", "rolling_rows", "wheel_geoms", "kkt_acceleration"]
 
@@ -188,15 +189,6 @@ def _positions(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray) -> 
     mujoco.mj_fwdPosition(model, data)
 
 
-def _declared_dependent(model: mujoco.MjModel) -> list[str] | None:
-    """The joints ``<text name="bemlearn_rolling_dependent">`` names (the config's ``coordinates.rolling_dependent``)."""
-    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, "bemlearn_rolling_dependent")
-    if i < 0:
-        return None
-    start, size = int(model.text_adr[i]), int(model.text_size[i])
-    return bytes(model.text_data[start : start + size]).split(b"\0")[0].decode().split()
-
-
 def find_rolling(model: mujoco.MjModel, undriven: Sequence[int], *, where: str) -> RollingMap | None:
     """The rolling map (R2) of ``model`` at its reference pose ``qpos0``, or ``None`` when no rolling
     contact makes all but one of the ``undriven`` joints dependent.
@@ -238,7 +230,8 @@ def find_rolling(model: mujoco.MjModel, undriven: Sequence[int], *, where: str) 
             choices.append(dep)
     if not choices:
         return None
-    declared = _declared_dependent(model)
+    text = declared_text(model, "bemlearn_rolling_dependent")
+    declared = text.split() if text is not None else None
     if declared is not None:   # the model or the config's coordinates block names the choice
         names = {_joint_name(model, j): j for j in range(model.njnt)}
         unknown = [n for n in declared if n not in names]

@@ -82,10 +82,10 @@ def scaled_model(source: str | Path | mujoco.MjSpec, **scales) -> mujoco.MjModel
 def scaled_robot(path: str | Path, *, name: str | None = None, coordinates: Mapping[str, Any] | None = None, **scales):
     """A :class:`~bemlearn.robots.MujocoRobot` of the scaled model of the MJCF at ``path``; ``coordinates``: the
     config's ``coordinates:`` block the unscaled robot was loaded with (:mod:`bemlearn.robots.coordinates`)."""
-    from bemlearn.robots.coordinates import apply_custom, coordinates_mapping, custom_entries
+    from bemlearn.robots.coordinates import coordinates_mapping, custom_entries
+    from bemlearn.robots.mjcf_compile import declared_spec
     from bemlearn.robots.mujoco_robot import MujocoRobot
 
-    spec = mujoco.MjSpec.from_file(str(path))
-    apply_custom(spec, custom_entries(coordinates))
+    spec = declared_spec(path, custom_entries(coordinates))
     return MujocoRobot(scaled_model(spec, **scales), name=name or Path(path).stem, source=f"{path} (scaled {scales})",
                        coordinates=coordinates_mapping(coordinates))

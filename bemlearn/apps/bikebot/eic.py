@@ -133,15 +133,14 @@ class LearnedBem:
     """
 
     def __init__(self, gp) -> None:
-        self.state = gp.state
+        self.gp = gp
         self.rear_radius = float(gp.rear_radius)
-        self._x = torch.zeros(1, self.state.dim, dtype=torch.float64)
+        self._x = torch.zeros(1, gp.state.dim, dtype=torch.float64)
 
     def __call__(self, delta: float, v: float) -> float:
-        st, x = self.state, self._x
+        x = self._x
         x[0, 3], x[0, 4] = v / self.rear_radius, delta
-        with torch.no_grad():
-            return float(st.y_mean + st.y_std * (st.kernel_row(x) @ st.alpha)[0])
+        return float(self.gp.mean_of(x)[0])
 
 
 @dataclass

@@ -148,10 +148,13 @@ class RollGP:
     def mean(self, X: np.ndarray) -> np.ndarray:
         """The GP mean of φ (rad) at ``X (B, 7)`` physical inputs, from the frozen posterior (:attr:`state`: one kernel
         row and a dot product per point, as the exported predictor computes it)."""
-        x = torch.as_tensor(np.atleast_2d(np.asarray(X, dtype=np.float64)), dtype=torch.float64)
+        return self.mean_of(torch.as_tensor(np.atleast_2d(np.asarray(X, dtype=np.float64)), dtype=torch.float64)).numpy()
+
+    def mean_of(self, x: torch.Tensor) -> torch.Tensor:
+        """μ = y_mean + y_std k_Z(x̃)ᵀ α (eq. 12's mean, the kernel row only): ``(B,)`` rad at ``x (B, 7)`` physical."""
         st = self.state
-        with torch.no_grad():   # μ = y_mean + y_std k_Z(x̃)ᵀ α (eq. 12's mean), the kernel row only
-            return (st.y_mean + st.y_std * (st.kernel_row(x) @ st.alpha)).numpy()
+        with torch.no_grad():
+            return st.y_mean + st.y_std * (st.kernel_row(x) @ st.alpha)
 
     @functools.cached_property
     def state(self):
