@@ -13,28 +13,23 @@ import dataclasses
 import time
 from pathlib import Path
 
-import torch
-
 from bemlearn.bench.train_bench import peak_rss_mib
 from bemlearn.data import build_datasets, read_trajectory
 from bemlearn.fitting import train_gp
 from bemlearn.models import predictor_state
 from bemlearn.pipeline.evaluation import evaluate_bem, held_out_references
 from bemlearn.robots import load
+from bemlearn.threads import torch_threads
 
 __all__ = ["bench_bem_training"]
 
 
 def _fit_and_eval(ds, gp_cfg, config, *, threads: int) -> dict:
     tr = ds.train
-    previous = torch.get_num_threads()
-    torch.set_num_threads(threads)
-    try:
+    with torch_threads(threads):
         t0 = time.perf_counter()
         model, lik, res = train_gp(tr.x_normalized, tr.y_normalized, config=gp_cfg)
         seconds = time.perf_counter() - t0
-    finally:
-        torch.set_num_threads(previous)
     st = predictor_state(model, lik, x_mean=tr.x_mean, x_std=tr.x_std, y_mean=tr.y_mean, y_std=tr.y_std, input_names=tr.input_names, n_train=len(tr))
     robot = load(config.robot, coordinates=config.coordinates)
     ev = evaluate_bem(st, robot, held_out_references(config.evaluate, robot.m), duration_s=config.evaluate.duration_s, rate_hz=config.evaluate.rate_hz)

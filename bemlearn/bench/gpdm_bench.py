@@ -33,6 +33,7 @@ from bemlearn.bench.train_bench import peak_rss_mib
 from bemlearn.errors import ArgumentError
 from bemlearn.fitting.gpdm_fit import GPDMConfig, fit_gpdm
 from bemlearn.models.gpdm import compare_latents
+from bemlearn.threads import torch_threads
 
 __all__ = ["SyntheticGait", "synthetic_gait", "run_gpdm_bench", "main"]
 
@@ -130,23 +131,18 @@ def run_gpdm_bench(
         load average before and after, and the sizes.
     """
     data = synthetic_gait(n_seq=n_seq, steps=steps, n_joints=n_joints, seed=seed)
-    old_threads = torch.get_num_threads()
     load_before = os.getloadavg()[0]
-    try:
-        if threads is not None:
-            torch.set_num_threads(threads)
+    with torch_threads(threads):
         t0 = time.perf_counter()
         model = fit_gpdm(data.Q_list, config=config)
         seconds = time.perf_counter() - t0
-    finally:
-        torch.set_num_threads(old_threads)
     chi = torch.cat(data.chi_list)
     c = model.c
     return {
         "n_seq": n_seq,
         "steps": steps,
         "n_joints": n_joints,
-        "threads": threads if threads is not None else old_threads,
+        "threads": threads if threads is not None else torch.get_num_threads(),
         "fit_seconds": seconds,
         "cos_c": float((c @ data.c_true).abs() / (c.norm() * data.c_true.norm())),
         "corr_latent": abs(compare_latents(torch.cat(model.latents), chi).corr),

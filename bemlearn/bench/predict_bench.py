@@ -60,6 +60,7 @@ from bemlearn.export.pt2 import load_pt2_predictor, save_pt2
 from bemlearn.export.torchscript import load_torchscript, quiet_jit, save_torchscript
 from bemlearn.export.verify import verify_predictor
 from bemlearn.models.predictor_state import PredictorState
+from bemlearn.threads import torch_threads
 
 __all__ = ["Latency", "PredictBenchResult", "run_predict_bench", "format_predict_bench", "synthetic_posterior"]
 
@@ -248,9 +249,8 @@ def _interleaved(
 @contextlib.contextmanager
 def _threads(n: int) -> Iterator[list[str]]:
     """torch and (if threadpoolctl is installed) NumPy's BLAS limited to ``n`` threads."""
-    notes, old = [], torch.get_num_threads()
-    torch.set_num_threads(n)
-    try:
+    notes: list[str] = []
+    with torch_threads(n):
         try:
             from threadpoolctl import threadpool_limits
         except ImportError:
@@ -260,8 +260,6 @@ def _threads(n: int) -> Iterator[list[str]]:
             limiter = threadpool_limits(n)
         with limiter:
             yield notes
-    finally:
-        torch.set_num_threads(old)
 
 
 def _loadavg() -> str:

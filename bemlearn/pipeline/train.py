@@ -33,7 +33,7 @@ import torch
 from bemlearn.config import save_yaml
 from bemlearn.data import build_datasets, read_trajectory
 from bemlearn.data.validation import check_robot
-from bemlearn.errors import ArgumentError, EnvironmentProblem
+from bemlearn.errors import EnvironmentProblem
 from bemlearn.files import atomic_write_text, file_sha256
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.results import TrainResult
@@ -41,6 +41,7 @@ from bemlearn.pipeline.run_metrics import RunMetrics
 from bemlearn.pipeline.train_metrics import evaluate_trained
 from bemlearn.pipeline.uncertainty import calibrate_band
 from bemlearn.robots.protocol import BalanceRobot
+from bemlearn.threads import torch_threads
 from bemlearn.units import gp_input_units
 
 if TYPE_CHECKING:
@@ -90,16 +91,9 @@ def train_run(
             there, beside the evaluation.  An exception it raises fails training; a caller that wants
             the failure reported as its own stage catches it (:func:`~bemlearn.pipeline.run.run_pipeline`).
     """
-    previous = torch.get_num_threads()
-    if threads is not None:
-        if threads < 1:
-            raise ArgumentError(f"threads: expected a positive integer, got {threads}")
-        torch.set_num_threads(threads)
-    try:
+    with torch_threads(threads):
         return _train_run(config, data_path, out_dir, device=device, resume=resume, progress=progress, trajectory=trajectory,
                           loaded=loaded, part_of_run=part_of_run, on_checkpoint=on_checkpoint)
-    finally:
-        torch.set_num_threads(previous)
 
 
 def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, progress, trajectory, loaded,

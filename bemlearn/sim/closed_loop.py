@@ -32,6 +32,7 @@ from bemlearn.robots.mujoco_robot import MujocoRobot
 from bemlearn.robots.protocol import BalanceRobot
 from bemlearn.robots.reference import CompositeSinusoid
 from bemlearn.sim.plant import SensedPlant
+from bemlearn.threads import torch_threads
 
 if TYPE_CHECKING:
     import torch
@@ -208,12 +209,8 @@ def simulate(robot: BalanceRobot, config: SimulateConfig, *, progress: bool = Tr
     if config.bem_source != "predictor" and "torch" not in sys.modules:
         # the model and zero BEMs run on NumPy: a model check stays torch-free (importing torch takes seconds)
         return _simulate(robot, config, progress=progress, reference=reference)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    with torch_threads(1):
         return _simulate(robot, config, progress=progress, reference=reference)
-    finally:
-        torch.set_num_threads(threads)
 
 
 def _simulate(plant: BalanceRobot, config: SimulateConfig, *, progress: bool, reference) -> SimResult:

@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from bemlearn.sweep.cells import Cell
+from bemlearn.threads import torch_threads
 
 __all__ = ["CellJob", "CellOutcome", "run_cell", "read_outcome", "failed_outcome", "append_event",
            "cell_folder", "cell_lock", "MARKER"]
@@ -187,18 +188,17 @@ def _cell_environment(threads: int, seed: int) -> Iterator[None]:
     import numpy as np
     import torch
 
-    saved = (torch.get_num_threads(), torch.get_rng_state(), np.random.get_state(), random.getstate())
-    torch.set_num_threads(threads)
+    saved = (torch.get_rng_state(), np.random.get_state(), random.getstate())
     torch.manual_seed(seed)
     np.random.seed(seed)
     random.seed(seed)
     try:
-        yield
+        with torch_threads(threads):
+            yield
     finally:
-        torch.set_num_threads(saved[0])
-        torch.set_rng_state(saved[1])
-        np.random.set_state(saved[2])
-        random.setstate(saved[3])
+        torch.set_rng_state(saved[0])
+        np.random.set_state(saved[1])
+        random.setstate(saved[2])
 
 
 @contextlib.contextmanager

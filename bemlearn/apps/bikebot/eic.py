@@ -214,14 +214,10 @@ def ride_eic(path: Path2D, bem: Callable[[float, float], float], duration_s: flo
         trace["ey"].append(e_y)
         return d_des + k_phi * (s["roll"] - phi_e) + k_rate * s["roll_rate"]
 
-    import torch
+    from bemlearn.threads import torch_threads
 
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)   # one BEM query per tick: a thread pool only waits (as bemlearn.sim.closed_loop does)
-    try:
+    with torch_threads(1):   # one BEM query per tick: a thread pool only waits (as bemlearn.sim.closed_loop does)
         log = simulate_ride(RideReference(speed=speed), duration_s, steer_command=steer, **ride_kwargs)
-    finally:
-        torch.set_num_threads(threads)
     n = len(log.t)
     phi_e, phi_m, ey = (np.asarray(trace[k][:n]) for k in ("bem", "model", "ey"))
     keep = log.t >= settle_s

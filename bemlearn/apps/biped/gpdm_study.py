@@ -29,6 +29,7 @@ from bemlearn.apps.biped.figures import fig4, fig5
 from bemlearn.apps.biped.human_gait import HumanGaitConfig, human_step_profile, load_human_gait
 from bemlearn.errors import DataError
 from bemlearn.fitting.gpdm_fit import GPDMConfig
+from bemlearn.threads import torch_threads
 
 __all__ = ["fit_gpdm_logged", "human_gait_sequences", "latent_study", "PAPER_C_ROBOT", "PAPER_C_HUMAN"]
 
@@ -61,18 +62,15 @@ def fit_gpdm_logged(Q_list: list[np.ndarray], out_dir: str | Path, *, config: GP
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     writer = SummaryWriter(str(out / "tb"))
-    old = torch.get_num_threads()
     t0 = time.perf_counter()
     try:
-        if threads is not None:
-            torch.set_num_threads(threads)
         def log_metrics(step: int, m: dict[str, float]) -> None:
             for k, v in m.items():
                 writer.add_scalar(f"gpdm/{k}", v, step)
 
-        model = fit_gpdm(Q_list, config=config, progress=progress, callback=log_metrics)
+        with torch_threads(threads):
+            model = fit_gpdm(Q_list, config=config, progress=progress, callback=log_metrics)
     finally:
-        torch.set_num_threads(old)
         writer.close()
     seconds = time.perf_counter() - t0
     Q = np.concatenate(Q_list)
