@@ -90,11 +90,13 @@ def _info(args) -> int:
         print(f"rolling    {r.rolling.describe(r.model)}")
     if isinstance(r, MujocoRobot) and r.floating is not None:
         print(f"rolling    {r.floating.describe(r.model)}")
-    from bemlearn.robots.cyclic import cyclic_coordinates
+    from bemlearn.robots.cyclic import cyclic_coordinates, unbounded_cyclic
 
     cyclic = [name for name, c in zip(r.joint_names, cyclic_coordinates(r)) if c]
     if cyclic:
-        print(f"cyclic     {', '.join(cyclic)}: the dynamics (D, h of eq. 1) do not depend on {'its' if len(cyclic) == 1 else 'their'} position")
+        left = unbounded_cyclic(r)
+        print(f"cyclic     {', '.join(cyclic)}: the dynamics (D, h of eq. 1) do not depend on {'its' if len(cyclic) == 1 else 'their'} position"
+              + (f"; {', '.join(left)} without a joint range: left out of the GP inputs (dataset.cyclic)" if left else ""))
     from bemlearn.robots.scales import upright_stiffness
 
     stiffness = upright_stiffness(r)[0]

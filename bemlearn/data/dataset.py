@@ -73,6 +73,11 @@ class DatasetConfig:
         short_trials: ``"drop"`` (counted, logged) or ``"error"`` for trials shorter than
             the estimator needs.
         drop_edges: drop the samples at each trial end whose derivatives are one-sided.
+        cyclic: actuated joints whose *position* the GP leaves out of its inputs (ℓ = ∞; the column stays in x):
+            cyclic coordinates — the dynamics (D, h of eq. 1), hence the BEM, do not depend on them — without a
+            joint range, whose position runs on without bound in use (a wheel's or a free turntable's angle).
+            ``None``: derived from the robot's model (:func:`bemlearn.robots.cyclic.unbounded_cyclic`); none in a
+            model-free run.  ``[]``: keep every input.
     """
 
     derivative: str = "gaussian"
@@ -85,6 +90,7 @@ class DatasetConfig:
     include_failed: bool = True
     short_trials: Literal["drop", "error"] = "drop"
     drop_edges: bool = False
+    cyclic: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         self.estimator()  # validates the name and options

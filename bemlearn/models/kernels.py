@@ -15,7 +15,15 @@ from gpytorch.constraints import GreaterThan, Positive
 
 from bemlearn.errors import ArgumentError
 
-__all__ = ["ard_se_kernel", "gaussian_likelihood", "kernel_matrix", "se_cross_covariance", "se_gram", "se_kernel"]
+__all__ = ["LEFT_OUT_LENGTHSCALE", "ard_se_kernel", "gaussian_likelihood", "kernel_matrix", "se_cross_covariance", "se_gram",
+           "se_kernel"]
+
+#: ℓ_j of an input column the map does not depend on (a cyclic coordinate's position, docs/wheeled.md), in
+#: normalized units: for |Δ_j| < 10⁴ normalized units (a wheel's angle 10⁴ of its training spreads away) its term
+#: (Δ_j/ℓ_j)² < 10⁻³² of eq. (11) lies below half an ulp of any sum it joins that is not itself < 10⁻¹⁵ (where the
+#: kernel is 1 anyway), so the column drops out of k, μ and σ to the bit, while the input layout
+#: x = [q̈_a, q̇_a, q_a, q̈_u, q̇_u] of every predictor stays as it is.  1/ℓ and ℓ·x_std stay finite in float32.
+LEFT_OUT_LENGTHSCALE = 1e20
 
 
 def ard_se_kernel(dim: int, *, dtype: torch.dtype = torch.float64) -> gpytorch.kernels.ScaleKernel:

@@ -178,6 +178,14 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
     if wanted("simulate.sensor", _SENSOR):
         sen_sim = derive.closed_loop_sensor(robot, rs)
         _leaves("simulate.sensor", sen_sim.value, sen_sim.note, out)
+    if not _given(given, "dataset.cyclic"):
+        from bemlearn.robots.cyclic import unbounded_cyclic
+
+        left = unbounded_cyclic(robot)
+        _leaves("dataset.cyclic", left, (f"{', '.join(left)}: cyclic (D and h of eq. 1 do not depend on "
+                                         f"{'its' if len(left) == 1 else 'their'} position) and without a joint range: the "
+                                         "position is left out of the GP inputs" if left else
+                                         "no actuated coordinate is both cyclic and without a joint range"), out)
     return out
 
 

@@ -23,10 +23,12 @@ import torch
 
 from bemlearn._version import __version__
 from bemlearn.data.normalization import Normalization
+from bemlearn.errors import ArgumentError
 from bemlearn.export.checkpoint import load_checkpoint, write_checkpoint
 from bemlearn.fitting import build_gp, fit_gp, hyperparameter_metrics
 from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.models import predictor_state
+from bemlearn.models.kernels import LEFT_OUT_LENGTHSCALE
 from bemlearn.models.predictor_state import PredictorState
 from bemlearn.warnings import NumericalWarning, warn
 
@@ -45,7 +47,7 @@ class GPStageResult:
         likelihood: its fitted likelihood (eval mode).
         fit: ``loss``, ``steps``, ``seconds``, ``stop_reason`` of the fit.
         hyperparameters: :func:`~bemlearn.fitting.hyperparameter_metrics` (normalized units).
-        lengthscale_physical: per input column, the lengthscale in the column's own unit.
+        lengthscale_physical: per input column, the lengthscale in the column's own unit (``None`` for a column left out).
         interrupted: the fit was stopped by Ctrl-C (the checkpoint holds the parameters reached).
         checkpoint: the file written.
         calibration: the summary returned by ``calibrate`` (``None`` without it).
@@ -56,7 +58,7 @@ class GPStageResult:
     likelihood: Any
     fit: dict[str, Any]
     hyperparameters: dict[str, float]
-    lengthscale_physical: dict[str, float]
+    lengthscale_physical: dict[str, float | None]
     interrupted: bool
     checkpoint: Path
     calibration: dict | None = None
@@ -96,6 +98,7 @@ def fit_bem_gp(
     resume: bool = False,
     progress: bool = True,
     calibrate: Callable[[PredictorState], tuple[PredictorState, dict]] | None = None,
+    left_out: Sequence[str] = (),
 ) -> GPStageResult:
     """Fit the GP of eq. (11) on ``(x, y)`` and write ``out_dir/checkpoint.pt``.
 
@@ -114,6 +117,10 @@ def fit_bem_gp(
             written (the calibrated band of the exported std, :func:`~bemlearn.pipeline.uncertainty.calibrate_band`);
             its summary is stored in the checkpoint metadata (``extra.uncertainty``).  Skipped after Ctrl-C, so
             that the interrupted checkpoint is written within seconds (its std is then the latent one).
+        left_out: input columns the map does not depend on (the position of a cyclic coordinate without a joint
+            range: ``dataset.cyclic``): fitted as a constant column and frozen with ℓ_j =
+            :data:`~bemlearn.models.kernels.LEFT_OUT_LENGTHSCALE`, so that μ and σ ignore them at any value (the
+            predictor keeps the column; its physical lengthscale is recorded as ``None``).
 
     Ctrl-C during the fit keeps the parameters reached, writes the checkpoint (marked
     ``interrupted``) and returns with ``interrupted=True``; the caller decides what to do next.
@@ -122,10 +129,23 @@ def fit_bem_gp(
     names = tuple(input_names)
     dtype = config.torch_dtype
     xn, yn = normalization.normalize_x(x).to(dtype), normalization.normalize_y(y).to(dtype)
+    unknown = [n for n in left_out if n not in names]
+    if unknown:
+        raise ArgumentError(f"left_out: {unknown} are not input columns; the columns are {list(names)}")
+    left = [names.index(n) for n in left_out]
+    if left:   # the map does not depend on them: a constant column, then ℓ = ∞ (LEFT_OUT_LENGTHSCALE)
+        xn = xn.clone()
+        xn[:, left] = 0.0
+        log.info("GP inputs left out (ℓ = %g): %s", LEFT_OUT_LENGTHSCALE, ", ".join(left_out))
     model, lik = build_gp(xn, yn, config=config)
     if resume:
         _resume(model, lik, out)
     fit, interrupted = _fit(model, lik, xn, yn, config=config, writer=writer, names=names, progress=progress)
+    if left:
+        kernel: Any = model.covar_module   # a gpytorch ScaleKernel: nn.Module attributes are untyped
+        ls = kernel.base_kernel.lengthscale.detach().clone()
+        ls[..., left] = LEFT_OUT_LENGTHSCALE
+        kernel.base_kernel.lengthscale = ls
     model.eval()
     lik.eval()
     state = predictor_state(
@@ -141,7 +161,7 @@ def fit_bem_gp(
             log.warning("interrupted during the band calibration: writing the fitted checkpoint uncalibrated")
             interrupted = True
     hyp = hyperparameter_metrics(model, lik)
-    phys_ls = {n: float(state.lengthscale[j] * state.x_std[j]) for j, n in enumerate(names)}
+    phys_ls = {n: (None if n in left_out else float(state.lengthscale[j] * state.x_std[j])) for j, n in enumerate(names)}
     extra = {"interrupted": interrupted, "robot_ref": dict(provenance.robot), **dict(provenance.extra),
              **({"frozen_latent_check": latent_check} if latent_check is not None else {}),
              **({"uncertainty": calibration} if calibration is not None else {})}

@@ -33,7 +33,7 @@ import torch
 from bemlearn.config import save_yaml
 from bemlearn.data import build_datasets, read_trajectory
 from bemlearn.data.validation import check_robot
-from bemlearn.errors import EnvironmentProblem
+from bemlearn.errors import ConfigError, EnvironmentProblem
 from bemlearn.files import atomic_write_text, file_sha256
 from bemlearn.pipeline.config import PipelineConfig
 from bemlearn.pipeline.results import TrainResult
@@ -127,6 +127,7 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
     meta = traj.meta
     kinds = robot.coordinate_kinds if robot is not None else meta.joint_kinds  # model-free: as the file records them
     units = gp_input_units(names, meta.joint_names, kinds)
+    left_out = _left_out_columns(config.dataset.cyclic, meta.actuated_names)
     writer = SummaryWriter(str(out / "tb"))
     stage = fit_bem_gp(
         train.x, train.y, out, normalization=train.normalization, input_names=names, units=units, config=gp_cfg,
@@ -135,6 +136,7 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
                                         extra={"data_file": str(data_path), "dataset_report": ds.report}),
         writer=writer, resume=resume, progress=progress,
         calibrate=lambda st: calibrate_band(st, traj, ds.config, train_rows=train.row, seed=config.dataset.seed),  # std of eq. (B1)
+        left_out=left_out,
     )
     state = stage.state
     interrupted = stage.interrupted
@@ -165,3 +167,17 @@ def _train_run(config: PipelineConfig, data_path, out_dir, *, device, resume, pr
         typed.verdict = judge_run(typed)        # what training alone can tell
         atomic_write_text(out / "metrics.json", json.dumps(typed.as_dict(), indent=2, default=float))
     return TrainResult(typed, state, traj, robot)
+
+
+def _left_out_columns(cyclic: tuple[str, ...] | None, actuated: tuple[str, ...]) -> tuple[str, ...]:
+    """The GP input columns ``q_<joint>`` of ``dataset.cyclic`` (``None``: none).
+
+    Raises:
+        ConfigError: a name that is not an actuated joint of the data, naming the key and the joints.
+    """
+    if not cyclic:
+        return ()
+    bad = [j for j in cyclic if j not in actuated]
+    if bad:
+        raise ConfigError(f"dataset.cyclic: {bad} are not actuated joints of the data; expected names among {list(actuated)}")
+    return tuple(f"q_{j}" for j in cyclic)   # gp_input_names: one q_<joint> column per actuated joint

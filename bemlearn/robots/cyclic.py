@@ -9,6 +9,11 @@ with it:
 BEM (eq. 6–9) do not depend on q_i either: a BEM learned over x = [q̈_a, q̇_a, q_a, q̈_u, q̇_u]
 (eq. 11) need not take a cyclic q_a as an input.  :func:`cyclic_coordinates` tests the definition
 at a few seeded states (central differences of D and h in q_i, relative to their size).
+
+:func:`unbounded_cyclic` names the actuated ones the learned BEM leaves out of its inputs (``dataset.cyclic``):
+cyclic *and* without a joint range.  A bounded cyclic coordinate (a cart on its rail) stays within the range the
+data visit; an unbounded one (a wheel's angle, a free turntable's or arm's turn) runs on without bound while the
+robot is used, and as an input it would put every query beyond the training data after a few turns.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ import numpy as np
 
 from bemlearn.robots.protocol import ControlRobot
 
-__all__ = ["cyclic_coordinates"]
+__all__ = ["cyclic_coordinates", "unbounded_cyclic"]
 
 
 def cyclic_coordinates(robot: ControlRobot, *, n_states: int = 4, step: float = 0.37, rtol: float = 1e-9,
@@ -51,3 +56,19 @@ def cyclic_coordinates(robot: ControlRobot, *, n_states: int = 4, step: float = 
             if max(float(np.abs(D1 - D0).max()), float(np.abs(h1 - h0).max())) > rtol * scale:
                 cyclic[i] = False
     return tuple(bool(c) for c in cyclic)
+
+
+def unbounded_cyclic(robot: ControlRobot) -> tuple[str, ...]:
+    """The actuated coordinates that are cyclic (:func:`cyclic_coordinates`) and have no joint range, by name.
+
+    Only a :class:`~bemlearn.robots.MujocoRobot` declares ranges; any other robot gives ``()`` (nothing is known
+    to be unbounded).
+    """
+    from bemlearn.robots.mujoco_robot import MujocoRobot
+    from bemlearn.robots.scales import qa_limited
+
+    if not isinstance(robot, MujocoRobot):
+        return ()
+    cyclic = cyclic_coordinates(robot)
+    limited = qa_limited(robot)
+    return tuple(robot.joint_names[i] for j, i in enumerate(robot.actuated_index) if cyclic[i] and not limited[j])
