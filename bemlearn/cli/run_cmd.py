@@ -27,8 +27,8 @@ def add_parser(sub) -> None:
     p.add_argument("--strict", action="store_true",
                    help="exit non-zero (4) for a degraded verdict too (default: 0 for ok and degraded, 3 for unusable)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
-    _add_jobs(p, "the model and zero closed loops run beside collection and training, the learned loop and the .pt2 "
-                 "export beside the evaluation of the trained GP")
+    _add_jobs(p, "the derivation's excitation trials run side by side, the model and zero closed loops beside collection "
+                 "and training, the learned loop and the .pt2 export beside the evaluation of the trained GP")
     p.set_defaults(func=_run)
     s = sub.add_parser(
         "simulate",
@@ -64,9 +64,11 @@ def _run(args) -> int:
     from bemlearn.applications import get_application
     from bemlearn.outputs import claim_outputs
     from bemlearn.pipeline.preflight import preflight
+    from bemlearn.pipeline.workers import using_jobs
 
     jobs = _jobs(args)
-    checked = preflight(config=args.config, device=args.device)  # strict parse and model-derived values, before any folder exists
+    with using_jobs(jobs):   # the derivations' MuJoCo trials use as many workers as the run
+        checked = preflight(config=args.config, device=args.device)  # strict parse and model-derived values, before any folder exists
     raw, resolved = checked.raw, checked.resolved
     app = None
     if raw.get("application") is not None:  # a config of an application (e.g. the biped's): it runs its own stages

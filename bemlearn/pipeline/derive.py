@@ -312,10 +312,13 @@ def _per_model(fn: Callable[..., Derived], robot, *args: Any, **kwargs: Any) -> 
 
 
 def _excitation_amplitude_trials(robot, collect, *, trials: int, duration_s: float, halvings: int) -> Derived:
-    """:func:`excitation_amplitude_check`'s trials, run (``collect``'s seed, trial count and workers are not read)."""
-    import dataclasses
+    """:func:`excitation_amplitude_check`'s trials, run (``collect``'s seed, trial count and workers are not read).
 
-    from bemlearn.sim.collect import simulate_trial
+    The trials of one amplitude are independent (each plays its own seed), so they run in
+    :func:`~bemlearn.pipeline.workers.derivation_jobs` forked workers; the count of falls, hence the result, is the
+    same for any number of workers.
+    """
+    import dataclasses
 
     seqs = np.random.SeedSequence(EXCITATION_CHECK_SEED).spawn(trials)
     lo, hi = collect.amplitude
@@ -323,11 +326,40 @@ def _excitation_amplitude_trials(robot, collect, *, trials: int, duration_s: flo
     for k in range(halvings + 1):
         s = 0.5**k
         cfg = dataclasses.replace(collect, amplitude=(lo * s, hi * s), duration_s=min(duration_s, collect.duration_s))
-        fell = sum(simulate_trial(robot, cfg, i, sq).failed for i, sq in enumerate(seqs))
+        fell = sum(_trials_fell(robot, cfg, seqs))
         tried.append(f"{fell}/{trials} fall at A × {s:g}")
         if fell <= trials / 4:
             break
     return Derived(s, f"excitation trials in MuJoCo ({min(duration_s, collect.duration_s):g} s each): " + ", ".join(tried))
+
+
+#: The robot the forked workers of :func:`_trials_fell` inherit (set only while their pool is open).
+_TRIAL_ROBOT: list[Any] = []
+
+
+def _trial_fell(job: tuple[Any, int, Any]) -> bool:
+    """In a worker: whether trial ``job = (collect config, trial id, seed sequence)`` of the inherited robot fell."""
+    from bemlearn.sim.collect import simulate_trial
+
+    return bool(simulate_trial(_TRIAL_ROBOT[0], *job).failed)
+
+
+def _trials_fell(robot, collect, seqs) -> list[bool]:
+    """Per trial ``i`` of ``seqs``, whether :func:`~bemlearn.sim.collect.simulate_trial` ``(robot, collect, i, seqs[i])``
+    fell: in :func:`~bemlearn.pipeline.workers.derivation_jobs` forked workers (in order; serial for one job or
+    where fork is not offered)."""
+    from bemlearn.pipeline.workers import derivation_jobs, worker_pool
+    from bemlearn.sim.collect import simulate_trial
+
+    jobs = [(collect, i, sq) for i, sq in enumerate(seqs)]
+    _TRIAL_ROBOT[:] = [robot]
+    try:
+        with worker_pool(max(1, min(derivation_jobs(), len(jobs)))) as pool:
+            if pool is None:
+                return [bool(simulate_trial(robot, *job).failed) for job in jobs]
+            return list(pool.map(_trial_fell, jobs, chunksize=1))
+    finally:
+        _TRIAL_ROBOT.clear()
 
 
 def excitation_directions(robot, rate: RateChoice, signals: dict) -> Derived:

@@ -16,6 +16,7 @@ and the callers run serially.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import logging
 import os
 import sys
@@ -25,7 +26,8 @@ from typing import Any
 
 from bemlearn.errors import ArgumentError
 
-__all__ = ["MAX_JOBS", "check_jobs", "default_jobs", "fork_available", "stop_pool", "usable_cpus", "worker_pool"]
+__all__ = ["MAX_JOBS", "check_jobs", "default_jobs", "derivation_jobs", "fork_available", "stop_pool", "usable_cpus",
+           "using_jobs", "worker_pool"]
 
 log = logging.getLogger(__name__)
 
@@ -43,6 +45,29 @@ def usable_cpus() -> int:
 def default_jobs() -> int:
     """The default ``--jobs``: the usable CPUs, at most :data:`MAX_JOBS` (a run has no more to overlap)."""
     return min(usable_cpus(), MAX_JOBS)
+
+
+#: The workers the derivations that play MuJoCo trials may fork (the excitation amplitude check's trials):
+#: :func:`using_jobs` sets it for a block (``bemlearn run --jobs``); unset, :func:`usable_cpus`.
+_DERIVATION_JOBS: contextvars.ContextVar[int | None] = contextvars.ContextVar("bemlearn_derivation_jobs", default=None)
+
+
+def derivation_jobs() -> int:
+    """The worker processes a derivation's independent MuJoCo trials may use: the count :func:`using_jobs` set, else
+    :func:`usable_cpus` (a derivation's result never depends on it: each trial plays its own seed)."""
+    jobs = _DERIVATION_JOBS.get()
+    return usable_cpus() if jobs is None else jobs
+
+
+@contextlib.contextmanager
+def using_jobs(jobs: int) -> Iterator[None]:
+    """Within the block, :func:`derivation_jobs` is ``jobs`` (checked by :func:`check_jobs`): ``1`` keeps every
+    derivation in the calling process."""
+    token = _DERIVATION_JOBS.set(check_jobs(jobs))
+    try:
+        yield
+    finally:
+        _DERIVATION_JOBS.reset(token)
 
 
 def check_jobs(jobs: int, *, where: str = "--jobs") -> int:
