@@ -8,6 +8,8 @@ posteriors of the same draws; coverage of an arcsin-curved map that a too-long l
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -147,3 +149,28 @@ def test_resample_term_covers_the_arcsin_curvature_a_long_lengthscale_misses():
     assert np.mean([r[0] for r in w_fit]) >= 0.9 and np.median([r[2] for r in w_fit]) <= 1.3, w_fit
     assert all(r[1] >= r[0] for r in w_long + w_fit)   # the term only adds
 
+
+
+def test_sparse_support_deviation_is_the_mean_of_textbook_sgpr_weights():
+    """Support Z of 25 inducing points, 200 training rows of a 1000-row pool: ρ̄ = mean_r α(X_r) − α(X_0) with
+    α(X) = (K_ZZ + K_ZX K_XZ / σ_0²)⁻¹ K_ZX ỹ / σ_0² (Titsias 2009, textbook form), for the same 5 draws."""
+    from bemlearn.models.kernels import se_gram, se_kernel
+
+    g = torch.Generator().manual_seed(5)
+    Z = torch.randn(25, 5, generator=g, dtype=F64)
+    x = torch.randn(1000, 5, generator=g, dtype=F64)
+    y = _arcsin(x) + 0.01 * torch.randn(1000, generator=g, dtype=F64)
+    st = dataclasses.replace(_prior(2.0, n_train=200), kind="sgpr", Z=Z, alpha=torch.zeros(25, dtype=F64),
+                             S=torch.zeros(25, 25, dtype=F64), noise=torch.tensor(0.05, dtype=F64))
+    train = np.sort(np.random.default_rng(5).choice(1000, 200, replace=False))
+    rs = resample_sensitivity(st, x, y, torch.arange(1000), torch.as_tensor(train), n_draws=5, seed=7)
+
+    def textbook(rows):
+        Kzx = se_kernel(Z, x[rows], st.lengthscale, st.outputscale)
+        s2 = float(st.noise)
+        return torch.linalg.solve(se_gram(Z, st.lengthscale, st.outputscale) + Kzx @ Kzx.T / s2, Kzx @ (y[rows] / st.y_std) / s2)
+
+    rest = np.setdiff1d(np.arange(1000), train)
+    draws = np.random.default_rng(7)
+    ref = torch.stack([textbook(torch.as_tensor(np.sort(draws.choice(rest, 200, replace=False)))) for _ in range(5)]).mean(0)
+    torch.testing.assert_close(rs.delta[:, 0], ref - textbook(torch.as_tensor(train)), rtol=1e-6, atol=1e-9)
