@@ -199,14 +199,17 @@ def test_training_computes_the_calibrated_band(small):
 
 
 def test_training_stores_the_estimator_term_and_band_bench_agrees(small):
-    """The band's estimator term (eq. E2) is computed at training (K = 4 Savitzky–Golay neighbours);
+    """The band's estimator term (eq. E2) is computed at training (K = 4 Savitzky–Golay neighbours, and the resample
+    column of eq. R2);
     `bench band` scores the exported band on the run's references exactly as the run's evaluation did."""
     from bemlearn.bench.band_bench import format_band_bench, run_band_bench
 
     _, _, out, metrics = small
     st = load_learned_bem(out).state
     est = metrics["uncertainty"]["estimator_term"]
-    assert st.n_estimators == 4 == len(est["estimators"]) and all(s > 0 for s in est["rms_shift"])
+    assert len(est["estimators"]) == 4 and all(s > 0 for s in est["rms_shift"])
+    rs = metrics["uncertainty"]["resample_term"]   # eq. R2: one more column, μ's deviation from 16 other draws of its rows
+    assert st.n_estimators == 4 + 1 and rs["n_draws"] == 16 and rs["rms_shift"] > 0 and rs["spread"] > 0
     assert float(st.estimator_delta.abs().max()) > 0
     (res,) = run_band_bench([out], progress=lambda *_: None)
     b = metrics["bem_heldout"]

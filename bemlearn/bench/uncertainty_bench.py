@@ -237,7 +237,8 @@ def run_case(case: BenchCase, *, progress=print) -> dict:
     c = float(banded.std_scale)
     rows.append(_score(f"(e) trial-split replicas (c = {c:.2f})", e, c * lat, e_s - f_s, costs["scale_us"], val_cov(c * lv)))
     only_f = dataclasses.replace(state, estimator_delta=banded.estimator_delta)
-    rows.append(_score(f"(f) estimator neighbours, K = {banded.n_estimators}", e,
+    n_rs = int((summary.get("resample_term") or {}).get("n_draws") or 0) > 0   # the resample column (eq. R2) rides with (f)
+    rows.append(_score(f"(f) estimator neighbours, K = {banded.n_estimators - n_rs}" + (" + resample term (R2)" if n_rs else ""), e,
                        band_reference(only_f, x, n_inputs=state.dim - 2)[1].numpy(), f_s, costs["band_us"],
                        val_cov(band_reference(only_f, xv)[1].numpy())))
     no_f = dataclasses.replace(banded, estimator_delta=None)

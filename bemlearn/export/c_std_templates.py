@@ -122,7 +122,8 @@ NO_BAND_GRADIENT = Template(r"""static $real ${p}_${name}_gradient2(const $real 
 """)
 
 # Σ_k ε_k² of the band (eq. B1): ε_k = Σ_j E_kj k_j, E_kj = y_std σ_f² δ_jk / √K, so
-# ε_k = y_std k_Z(x̃)ᵀ δ_k / √K is the mean's shift under estimator k over √K.
+# ε_k = y_std k_Z(x̃)ᵀ δ_k / √K is the mean's k-th shift column over √K (a neighbouring derivative estimator,
+# or the deviation from other draws of the training rows: pipeline.uncertainty).
 ESTIMATOR_TERM = Template(r"""static $real ${p}_estimator2(const $real *k)
 {
     $real e, sum = 0;

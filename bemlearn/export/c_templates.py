@@ -52,7 +52,7 @@ extern "C" {
 #define ${P}_KIND "$kind"
 #define ${P}_BANDED $banded              /* 1: ${p}_forward's band has an input-noise term (input_std > 0 on a BEM input) */
 #define ${P}_FULL_BANDED $full_banded         /* the same for ${p}_predict_full (any of the 3m + 2 inputs) */
-#define ${P}_N_ESTIMATORS $n_estimators        /* K: estimator columns of the band of both (0: no estimator term) */
+#define ${P}_N_ESTIMATORS $n_estimators        /* K: shift columns of the band of both (derivative estimators, resampled rows; 0: none) */
 
 #define ${P}_OK 0                        /* success */
 #define ${P}_ERR_NONFINITE 1             /* an entry of x is NaN or +-inf; *mean = *std = NAN */

@@ -229,7 +229,8 @@ def artifact_metadata(meta: PredictorMetadata, state: PredictorState) -> dict[st
             "forward_latent": ["mean", "latent_std"],
             "predict_full_latent": ["mean", "latent_std"],
             "std": "calibrated band: std² = std_scale² · latent_std² + max(Σ_i (input_std_i · ∂mean/∂x_i)² over the "
-                   "method's input columns, mean_k (mean's shift under neighbouring derivative estimator k)²) "
+                   "method's input columns, mean_k (mean's shift column k)²: the neighbouring derivative estimators' shifts and the mean's deviation "
+                   "from other draws of its training rows, their variances summed) "
                    "(docs/uncertainty.md); observation noise excluded",
             "latent_std": "latent posterior std of f (eq. 12), observation noise excluded",
         },

@@ -14,7 +14,9 @@ compared on trained runs: docs/uncertainty.md).
 (trial-split replica calibration), s = ``PredictorState.input_std`` (Savitzky–Golay
 quantization model, eq. N3 of :mod:`bemlearn.models.input_noise`), ∂μ/∂x of eq. (N2),
 δ = ``PredictorState.estimator_delta`` (eq. E2 of :mod:`bemlearn.fitting.estimator_sensitivity`;
-no term when K = 0), and n the number of columns the caller supplies: 3m for the BEM query x_0^e of eq. (14)
+no term when K = 0; a training run appends one column, μ's deviation from other draws of its training
+rows, eq. R2 of :mod:`bemlearn.fitting.resample_sensitivity`, scaled so that the mean square is
+σ_est² + σ_rs²), and n the number of columns the caller supplies: 3m for the BEM query x_0^e of eq. (14)
 (q̈_u = q̇_u = 0 are exact there), all d for the full map of eq. (11).  This module is
 the dense reference; the exported predictor folds the same formula
 (:class:`~bemlearn.export.folded_posterior.FoldedPosterior`).
@@ -33,7 +35,7 @@ __all__ = ["band_and_gradient", "band_extra_variance", "band_reference", "BAND_F
 #: Eq. (B1) as computed by :func:`band_extra_variance`, in plain ASCII: the one text of the formula that
 #: the exported C header (and any other plain-text description of the band) prints.
 BAND_FORMULA = ("std^2 = std_scale^2 latent_std^2 + max(sum_i (input_std_i dmean/dx_i)^2, "
-                "(1/K) sum_k (mean's shift under derivative estimator k)^2)")
+                "(1/K) sum_k (mean's shift column k: derivative estimators, resampled training rows)^2)")
 
 
 def band_reference(state: PredictorState, x: torch.Tensor, *, n_inputs: int | None = None

@@ -35,7 +35,8 @@ The calibrated band (docs/uncertainty.md) adds three fields: ``std_scale`` c (tr
 replica calibration, :mod:`bemlearn.fitting.calibration`), ``input_std`` s (the
 derivative estimator's quantization noise in each input column, :mod:`bemlearn.models.input_noise`)
 and ``estimator_delta`` δ (how the mean weights move under the neighbouring derivative
-estimators, :mod:`bemlearn.fitting.estimator_sensitivity`):
+estimators, :mod:`bemlearn.fitting.estimator_sensitivity`, and with the draw of the training rows,
+:mod:`bemlearn.fitting.resample_sensitivity`):
 
     σ_band(x)² = c² y_std² σ̃²(x̃) + max(Σ_{i ∈ inputs} (s_i ∂μ/∂x_i)², (1/K) Σ_k (y_std k_Z(x̃)ᵀ δ_k)²)
 
@@ -86,8 +87,10 @@ class PredictorState:
         n_train: number of training points the posterior was conditioned on.
         std_scale: ``()`` c ≥ 1 of the calibrated band (default 1).
         input_std: ``(d,)`` s ≥ 0, noise std of each input column, physical units (default 0).
-        estimator_delta: ``(M, K)`` δ, the mean weights' shift under each of K neighbouring
-            derivative estimators, normalized output units (default K = 0: no estimator term).
+        estimator_delta: ``(M, K)`` δ, the mean weights' shift columns of the band, normalized output units: one
+            per neighbouring derivative estimator, and after ``bemlearn train`` one more for the mean's deviation
+            from other draws of its training rows (eq. R2), scaled so that their mean square is the sum of both
+            terms' variances (default K = 0: no such term).
         S_chol: ``(M, M)`` lower-triangular L, L Lᵀ = K_ZZ + j I (sparse kinds), or ``None``.
         S_inner: ``(M, M)`` symmetric C with S = L⁻ᵀ C L⁻¹ (given with ``S_chol``), or ``None``.
     """

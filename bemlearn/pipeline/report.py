@@ -271,12 +271,24 @@ def _band_lines(train: RunMetrics, unit: str) -> list[str]:
     units = train.units or {}
     return ["### The exported std (calibrated band, eq. B1)", "",
             f"std² = c² · latent std² + max(Σ_i (s_i ∂μ/∂x_i)², mean over the neighbouring derivative estimators of the BEM's "
-            f"shift²); c = {_f(unc.std_scale, '.3f')} ({_replica_text(unc)}); "
+            f"shift² + μ's deviation² from the mean of other draws of its training rows); c = {_f(unc.std_scale, '.3f')} ({_replica_text(unc)}); "
             + ("s from the quantization steps " + ", ".join(f"{k} {v:.3g} {units.get(f'q_{k}', 'rad')}" for k, v in (unc.quantization_step or {}).items())
                if unc.quantization_step else "no quantization grid detected (s = 0)") + "; "
             + (f"{len(names)} neighbouring estimators (median BEM shift at held-out queries, {unit}): "
                + ", ".join(f"{n} {_f(m, '.2g')}" for n, m in zip(names, med)) if names else "no estimator term (the estimator has no neighbours)")
-            + ".", ""]
+            + _resample_text(unc, unit) + ".", ""]
+
+
+def _resample_text(unc, unit: str) -> str:
+    """The resample term (eq. R2, ``uncertainty.resample_term``): μ's deviation from the mean of other draws of its rows."""
+    rs = unc.extra.get("resample_term") if isinstance(unc.extra, dict) else None
+    if not isinstance(rs, dict):
+        return ""
+    if not rs.get("n_draws"):
+        return f"; no resample term ({rs.get('reason') or 'no other draw of the training rows'})"
+    return (f"; plus μ's deviation from the mean of {rs['n_draws']} other draws of its {rs.get('n_points')} training rows "
+            f"(eq. R2, added to the estimator term's square; median at held-out queries {_f(rs.get('median_shift'), '.2g')} {unit}, "
+            f"one draw's spread {_f(rs.get('spread'), '.2g')} {unit})")
 
 
 def _replica_text(unc) -> str:
