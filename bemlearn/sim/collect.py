@@ -25,9 +25,11 @@ does not depend on the number of worker processes.
 Where the fixed gains do not hold the linearisation at a pose the reference reaches (a turntable's yaw turns the
 pole's plane away from the slide that balanced it at 0), the gains are scheduled over that coordinate
 (:func:`_gain_schedule`, :func:`~bemlearn.control.lqr.pose_gain_schedule`: u = (K + ΔK(q̂_a)) ∘ scale, the measured
-pose in the tick); an unlimited hinge whose extent is a half turn also sweeps it (:func:`_sweep_components`), at rates
-to which that balance holds turning (:func:`~bemlearn.control.lqr.turning_rate_limit`).  Every other robot's trials are
-unchanged, draw for draw.
+pose in the tick); a hinge whose extent reaches :data:`SWEEP_SPAN` also sweeps it (:func:`_sweep_components`) to
+rates beyond the stiffening speed, its own sines to the accelerations λ·√(a P) (:func:`_component_extent`), and the
+balance along that known motion is the finite-horizon LQR of the tick maps at the reference's pose *and rate*
+(:func:`_tracking_gains`, :func:`~bemlearn.control.lqr.tracking_gains`).  Every other robot's trials are unchanged,
+draw for draw.
 """
 
 from __future__ import annotations
