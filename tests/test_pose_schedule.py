@@ -128,9 +128,13 @@ def test_sweep_only_where_the_pose_turns_the_slopes_over_a_wide_extent(turntable
     sw = _sweep_components(turntable, CollectConfig(excursion=ext), np.random.default_rng(0), pose)
     assert sw is not None and sw[0] == (0.0, 0.0, 0.0, 1.0) and sw[1] == (0.0, 0.0, 0.0, 1.0)   # slides: no sweep
     A, w, _, keep = sw[2]
-    v = math.sqrt(math.pi * 9.0)
-    assert pytest.approx(math.pi) == A and keep == 1.0 and 0.5 * v <= A * w <= v   # unlimited yaw: peak rate A ω in [v/2, v]
-    assert A * w**2 <= 9.0 * (1 + 1e-12)   # and its acceleration within the extent
+    # the peak rate reaches SWEEP_REACH × the stiffening speed v = √(m g l / (I_⊥ + m l² − I_∥)) (pole: 0.2 kg at 0.25 m,
+    # I_⊥ = 0.004, I_∥ = 1e-5): the design region's rates reach v
+    from bemlearn.sim.collect import SWEEP_REACH
+
+    v = math.sqrt(0.2 * 9.81 * 0.25 / (0.004 + 0.2 * 0.25**2 - 1e-5))
+    top = SWEEP_REACH * v
+    assert pytest.approx(math.pi) == A and keep == 1.0 and 0.5 * top <= A * w <= top * (1 + 1e-6)   # unlimited yaw: in [Ω_top/2, Ω_top]
     rng = np.random.default_rng(0)
     before = rng.bit_generator.state
     narrow = (0.3, 0.3, 0.8, 2.0, 2.0, 9.0)   # a yaw extent below a radian: the sines visit it
@@ -275,16 +279,17 @@ def test_turning_rate_the_pose_schedule_holds_is_where_steady_turning_grows_in_m
 
 
 def test_sweep_peak_rate_within_the_rate_the_balance_holds_turning(turntable, servo_turntable):
-    """The yaw sweep's peak rate A ω ~ U(0.5, 1) min(√(a P), Ω_hold) (before: U(0.5, 1) √(a P), beyond the rate at
-    which the pose-scheduled balance holds turning: fam0_029 lost 17 of 24 trials), drawn the same way (the same
-    draws from the trial's generator), and unchanged where the balance holds turning at √(a P)."""
+    """Where a schedule's Ω_hold bounds it (no LQR along the reference: several swept hinges), the yaw sweep's peak rate
+    A ω ~ U(0.5, 1) min(Ω_top, Ω_hold) (beyond the rate at which the pose-scheduled balance holds turning fam0_029 lost
+    17 of 24 trials), drawn the same way (the same draws from the trial's generator), and unchanged where the balance
+    holds turning at Ω_top."""
     import dataclasses
 
-    from bemlearn.sim.collect import CollectConfig, _pose_slopes, _sweep_components
+    from bemlearn.sim.collect import CollectConfig, _pose_slopes, _sweep_components, sweep_top
 
     _, _, sched = servo_turntable
     ext = (0.3, 0.3, math.pi, 2.0, 2.0, 9.0)
-    v = math.sqrt(math.pi * 9.0)
+    v = float(sweep_top(turntable, CollectConfig(excursion=ext))[2])
     pose = _pose_slopes(turntable, np.array(ext[:3]), 6.0)
     held = dataclasses.replace(sched, turn_rate=(1.2,), growth=(0.3,))
     free = dataclasses.replace(sched, turn_rate=(v,), growth=(-0.5,))
@@ -337,3 +342,131 @@ def test_a_pose_where_scipys_riccati_solver_fails_gets_the_recursions_gains(turn
     P = riccati_iteration(A, B, Q, R)
     assert P is not None
     np.testing.assert_allclose(P, real(A, B, Q, R), rtol=1e-7, atol=1e-9 * np.abs(P).max())
+
+
+def _fixed_maps(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, S: np.ndarray | None, *, by_rate: np.ndarray | None = None):
+    """TurningMaps whose tick map is (A, B) at every pose, plus ``by_rate`` × the rate (linear in it) where given."""
+    from bemlearn.control.lqr import TurningMaps
+
+    poses, rates = np.linspace(-math.pi, math.pi, 5), np.array([-2.0, -0.5, 1.0, 3.0])
+    As = np.broadcast_to(A, (5, 4, *A.shape)).copy()
+    if by_rate is not None:
+        As += rates[None, :, None, None] * by_rate
+    Bs = np.broadcast_to(B, (5, 4, *B.shape)).copy()
+    return TurningMaps(2, poses, rates, As, Bs, True, Q, R, S, np.zeros(B.shape[::-1]), 1.0)
+
+
+def test_tracking_gains_are_the_finite_horizon_lqr(turntable):
+    """tracking_gains along a motion whose tick map does not change is the finite-horizon LQR of a fixed system (closed
+    forms): at the last tick (P = Q) K = −(R + BᵀQB)⁻¹(BᵀQA + Sᵀ); far from it the stationary gains of SciPy's DARE; and
+    with a map linear in the rate, held at a rate between the grid's, the DARE of that rate's map (the interpolation is
+    exact there)."""
+    import scipy.linalg
+
+    from bemlearn.control.lqr import tracking_gains
+
+    A, B, _, _ = linearize(turntable, rate_hz=RATE, at=np.array([0.0, 0.0, 0.4]))
+    nx = A.shape[0]
+    Q, R = np.diag(np.linspace(1.0, 3.0, nx)), np.diag([0.5, 0.7, 2.0])
+    S = 0.01 * np.ones((nx, 3))
+    T = 4000   # 16 s at 250 Hz: the recursion forgets its start within a few of the loop's settling times
+    psi = np.linspace(-4.0, 4.0, T)   # wraps at ±π
+    G = tracking_gains(_fixed_maps(A, B, Q, R, S), psi, np.full(T, 0.7))
+    K_last = -np.linalg.solve(R + B.T @ Q @ B, B.T @ Q @ A + S.T)
+    np.testing.assert_allclose(G[-1], K_last, rtol=1e-12, atol=1e-12 * np.abs(K_last).max())
+    P = scipy.linalg.solve_discrete_are(A, B, Q, R, s=S)
+    K_inf = -np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A + S.T)
+    np.testing.assert_allclose(G[0], K_inf, rtol=1e-8, atol=1e-9 * np.abs(K_inf).max())
+    E = np.zeros_like(A)
+    E[0, 4], E[4, 1] = 1e-3, -2e-3   # a coupling of the slides that grows with the rate (the Coriolis terms' form)
+    r = 1.7
+    G = tracking_gains(_fixed_maps(A, B, Q, R, S, by_rate=E), psi, np.full(T, r))
+    Ar = A + r * E
+    P = scipy.linalg.solve_discrete_are(Ar, B, Q, R, s=S)
+    np.testing.assert_allclose(G[0], -np.linalg.solve(R + B.T @ P @ B, B.T @ P @ Ar + S.T), rtol=1e-8, atol=1e-9 * np.abs(K_inf).max())
+
+
+def _follow(robot, gains, ref, seconds: float, tilt: float = 0.02) -> float:
+    """MuJoCo itself: the yaw commanded along ``ref(t) -> (ψ_t, ψ̇_t, ψ̈_t)`` with the pole upright, u = gains(k, q) e + the
+    model's inverse along it, from a ``tilt`` off upright and the reference's rate; the largest |x|, |y|, |ψ − ψ_t|,
+    |q_u − q_u*| over the last second (1 where it passed 1 on the way)."""
+    import mujoco
+
+    from bemlearn.control.actuator_inverse import MujocoActuatorInverse
+
+    model, data = robot.model, mujoco.MjData(robot.model)
+    inverse = MujocoActuatorInverse(robot)
+    iu, ia, n = robot.unactuated_index, list(robot.actuated_index), robot.n
+    q = np.zeros(n)
+    q[iu] = robot.qu_nominal + tilt
+    qd = np.zeros(n)
+    q[ia[2]], qd[ia[2]], _ = ref(0.0)
+    data.qpos[:], data.qvel[:] = robot.state_to_mujoco(q, qd)
+    mujoco.mj_forward(model, data)
+    steps = int(round(1.0 / (RATE * model.opt.timestep)))
+    ticks = int(seconds * RATE)
+    last = 0.0
+    for k in range(ticks):
+        q_ref, qd_ref, qdd_ref = np.zeros(n), np.zeros(n), np.zeros(n)
+        q_ref[iu] = robot.qu_nominal
+        q_ref[ia[2]], qd_ref[ia[2]], qdd_ref[ia[2]] = ref(k / RATE)
+        q = robot.coordinates_of(data.qpos)
+        qd = robot.T_np @ data.qvel
+        dev = float(np.max(np.abs(np.r_[q[ia[:2]], q[ia[2]] - q_ref[ia[2]], q[iu] - robot.qu_nominal])))
+        if dev > 1.0:
+            return 1.0
+        if k >= ticks - int(RATE):
+            last = max(last, dev)
+        D, h = robot.terms(q_ref, qd_ref)
+        u = gains(k, q) @ np.concatenate([q - q_ref, qd - qd_ref])
+        data.ctrl[:] = u + inverse.command((D @ qdd_ref + h)[ia], q_ref, qd_ref, clip=False)
+        for _ in range(steps):
+            mujoco.mj_step(model, data)
+    return last
+
+
+def test_lqr_along_a_known_turn_holds_where_the_pose_schedule_loses_it(servo_turntable):
+    """The position-servo turntable turning steadily at 1.6 × the rate to which the balance scheduled over the pose at
+    rest holds turning (Ω_hold ≈ 2.5 rad/s, above): with that schedule the slides and the tilt grow (the robot falls or
+    ends far off, as above); with the LQR along the known turn (tick maps at its pose *and* rate, turning_maps /
+    tracking_gains) the tilt and the slides settle (MuJoCo, nonlinear)."""
+    from bemlearn.control.lqr import tracking_gains, turning_maps
+
+    robot, K0, sched = servo_turntable
+    rate, seconds = 4.0, 20.0   # 1.6 × 2.49 (Ω_hold, measured with 12 levels)
+    maps = turning_maps(robot, j=2, extent=math.pi, rate_max=5.0, rate_hz=RATE, timestep=None, design_qu=0.2, qu0=0.05,
+                        qa0=0.05, points=25, levels=4)
+    np.testing.assert_allclose(maps.K_rest, K0, rtol=1e-6, atol=1e-9 * np.abs(K0).max())   # the rest design's gains
+    t = np.arange(int(seconds * RATE) + int(math.ceil(5 * maps.settle_s * RATE))) / RATE
+    G = tracking_gains(maps, rate * t, np.full(t.size, rate))
+
+    def spin(t: float) -> tuple[float, float, float]:
+        return rate * t, rate, 0.0
+
+    ia = list(robot.actuated_index)
+    assert _follow(robot, lambda k, q: K0 + G[k] - maps.K_rest, spin, seconds) < 0.02 / 4
+    assert _follow(robot, lambda k, q: K0 + sched.delta(q[ia]), spin, seconds) > 0.02 * 5
+
+
+def test_a_hinge_with_rounding_size_slopes_gets_the_half_turn_scale(tmp_path):
+    """Family robot (0, 41), a turntable with a motor yaw: at rest its yaw's slope is of rounding size (s_a ≈ 1e-12 rad per
+    rad/s², its BEM gain at λ ≈ 3.5e-11, above the 1e-12 that marked a yaw idle): its Bryson scale was d/gain ≈ 6e9 rad,
+    its LQR gains ≈ 1e-9 and the yaw ran off its reference by tens of turns (7 of 8 replayed trials fell).  Slopes
+    ≤ 1e-9 per unit are no motion of the BEM (as in the excitation's extents): the half-turn scale of a yaw, and gains
+    that hold it."""
+    from bemlearn.bench.family.generator import generate_robot
+    from bemlearn.control.lqr import bryson_scales
+    from bemlearn.robots.scales import bem_gain, bem_slopes, instability_rate
+
+    xml, _ = generate_robot(0, 41, hold_check=False)
+    path = tmp_path / "fam0_041.xml"
+    path.write_text(xml)
+    robot = load(str(path))
+    j = list(robot.actuated_names).index("yaw")
+    slopes = bem_slopes(robot)
+    gain = bem_gain(slopes, instability_rate(robot))
+    assert np.max(np.abs(slopes[:, j])) <= 1e-9 and gain[j] > 1e-12   # the case: rounding-size, not exactly 0
+    xmax, _, _ = bryson_scales(robot, design_qu=0.2)
+    assert xmax[robot.actuated_index[j]] == pytest.approx(math.pi)
+    K = discrete_lqr(robot, rate_hz=100.0, design_qu=0.2, qu0=0.05, qa0=0.04).K
+    assert abs(K[j, robot.actuated_index[j]]) > 1e-2 and abs(K[j, robot.n + robot.actuated_index[j]]) > 1e-3

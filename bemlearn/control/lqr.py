@@ -54,7 +54,8 @@ from bemlearn.warnings import DesignWarning, warn
 if TYPE_CHECKING:
     from bemlearn.robots.mujoco_robot import MujocoRobot
 
-__all__ = ["LQRResult", "ActuatorLimits", "GainSchedule", "actuator_limits", "holds_in_mujoco", "linearize", "discrete_lqr", "pose_gain_schedule", "riccati_iteration", "turning_rate_limit", "upright_at"]
+__all__ = ["LQRResult", "ActuatorLimits", "GainSchedule", "actuator_limits", "holds_in_mujoco", "linearize", "discrete_lqr", "pose_gain_schedule", "riccati_iteration", "tracking_gains", "turning_maps", "turning_rate_limit",
+           "TurningMaps", "upright_at"]
 
 log = logging.getLogger(__name__)
 
@@ -210,13 +211,18 @@ def bryson_scales(robot: MujocoRobot, *, design_qu: float = 0.2) -> tuple[np.nda
     dq = min(design_qu, qu_half_range(robot))
     xmax[iu] = dq
     qa_max = qa_half_ranges(robot)
-    gain = bem_gain(bem_slopes(robot), lam)
+    slopes = bem_slopes(robot)
+    gain = bem_gain(slopes, lam)
     need = dq / np.maximum(gain, 1e-12)
     limited = _limited_actuated(robot)
     # an unlimited hinge that does not move the BEM at rest (a turntable's yaw: it turns the slides' slopes instead)
-    # would get no weight at all, and nothing would hold it to its reference: a half turn is its scale
+    # would get no weight at all, and nothing would hold it to its reference: a half turn is its scale.  Slopes of
+    # rounding size (≤ 1e-9 per unit, as in the excitation's extents, derive.excitation_directions) are no motion of the
+    # BEM: fam0_041's yaw, s_a = 1.1e-12 rad per rad/s², got a scale of 5.8e9 rad and gains of 1e-9, and ran off its
+    # reference by tens of turns
+    flat = np.max(np.abs(np.asarray(slopes)), axis=0) <= 1e-9
     kinds = tuple(getattr(robot, "coordinate_kinds", ()))
-    idle = np.array([g <= 1e-12 and len(kinds) == n and kinds[j] == "hinge" for g, j in zip(gain, ia)], dtype=bool)
+    idle = np.array([(g <= 1e-12 or f) and len(kinds) == n and kinds[j] == "hinge" for g, f, j in zip(gain, flat, ia)], dtype=bool)
     need = np.where(~limited & idle, np.maximum(qa_max, math.pi), need)
     xmax[ia] = np.where(limited, qa_max, np.maximum(qa_max, need))
     xmax[n:] = xmax[:n] * max(lam, 1.0)
@@ -579,8 +585,6 @@ def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, tim
     under the slides' loop).
     Cached per robot, gains, rate and extents.
     """
-    from scipy.linalg import solve_discrete_are
-
     K = np.asarray(K, dtype=np.float64)
     key = (robot.name, robot.model.nq, K.tobytes(), float(rate_hz), timestep, tuple(float(x) for x in extents),
            float(design_qu), float(qu0), qa0, points, None if rates is None else tuple(float(x) for x in rates), horizon_s)
@@ -608,13 +612,7 @@ def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, tim
     Q, R, S = res.Q, res.R, res.S
 
     def design(A: np.ndarray, B: np.ndarray) -> np.ndarray | None:
-        try:
-            P = solve_discrete_are(A, B, Q, R, s=S)
-        except (np.linalg.LinAlgError, ValueError):   # SciPy's Schur reordering can fail at a well-posed pose
-            P = riccati_iteration(A, B, Q, R, S)
-            if P is None:
-                return None
-        return -np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A + (S.T if S is not None else 0.0))
+        return _design(A, B, Q, R, S)
 
     K_rest = design(res.A, res.B)
     if K_rest is None:
@@ -728,3 +726,128 @@ def turning_rate_limit(robot: MujocoRobot, K: np.ndarray, j: int, grid: np.ndarr
         else:
             lo = mid
     return lo, fastest
+
+
+
+def _design(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, S: np.ndarray | None) -> np.ndarray | None:
+    """Discrete LQR gains ``(nu, 2n)`` in collect's convention (u = K x) of (A, B) with the weights Q, R, S: SciPy's DARE,
+    or the Riccati recursion where its Schur reordering fails (:func:`riccati_iteration`); ``None`` where neither
+    stabilises."""
+    from scipy.linalg import solve_discrete_are
+
+    try:
+        P = solve_discrete_are(A, B, Q, R, s=S)
+    except (np.linalg.LinAlgError, ValueError):   # SciPy's Schur reordering can fail at a well-posed pose
+        P = riccati_iteration(A, B, Q, R, S)
+        if P is None:
+            return None
+    return -np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A + (S.T if S is not None else 0.0))
+
+
+@dataclass(frozen=True)
+class TurningMaps:
+    """Tick maps of the robot linearised at poses *and* rates of one actuated hinge (:func:`turning_maps`), with the
+    weights of the rest design.
+
+    Attributes:
+        j: the actuated coordinate (0 … m−1).
+        poses: ``(P,)`` its poses (its unit), increasing (:func:`_pose_grid`); ``periodic``: they span [−π, π] of an
+            unlimited hinge.
+        rates: ``(R,)`` its rates (unit/s), increasing, symmetric about 0.
+        A: ``(P, R, 2n, 2n)``, B: ``(P, R, 2n, m)``: the tick maps there (:func:`linearize` with ``at``, ``at_rate``;
+            B per command, ctrl = W u).
+        periodic: whether the poses wrap.
+        Q, R, S: the rest design's weights (:func:`discrete_lqr`; S ``None`` for its design 1).
+        K_rest: ``(m, 2n)`` the gains of those weights at rest (collect's convention).
+        settle_s: the rest loop's slowest time constant, −(1/rate)/ln ρ(A + B K_rest), s.
+    """
+
+    j: int
+    poses: np.ndarray
+    rates: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    periodic: bool
+    Q: np.ndarray
+    R: np.ndarray
+    S: np.ndarray | None
+    K_rest: np.ndarray
+    settle_s: float
+
+
+_TURNING: dict = {}
+
+
+def turning_maps(robot: MujocoRobot, *, j: int, extent: float, rate_max: float, rate_hz: float, timestep: float | None,
+                 design_qu: float, qu0: float, qa0: float | None, points: int = 49, levels: int = 12) -> TurningMaps:
+    """:class:`TurningMaps` of actuated hinge ``j``: the poses of :func:`pose_gain_schedule`'s grid (``points`` over ±1.5
+    ``extent`` within its range, or [−π, π] on an unlimited hinge reaching a half turn), 2·``levels`` + 1 rates over
+    ±``rate_max`` (unit/s), and the weights of :func:`discrete_lqr`'s design (``design_qu``, ``qu0``, ``qa0``).  The
+    pole's plane turning at q̇_j brings Coriolis and centrifugal terms into the maps (linear and quadratic in the rate:
+    a turntable's slides see the pole's reaction turn).  Cached per robot and arguments."""
+    key = (robot.name, robot.model.nq, j, float(extent), float(rate_max), float(rate_hz), timestep, float(design_qu),
+           float(qu0), qa0, points, levels)
+    if key in _TURNING:
+        return _TURNING[key]
+    m = robot.m
+    grid, periodic = _pose_grid(robot, j, extent, points)
+    rates = float(rate_max) * np.arange(-levels, levels + 1) / levels
+    As = np.empty((len(grid), len(rates), 2 * robot.n, 2 * robot.n))
+    Bs = np.empty((len(grid), len(rates), 2 * robot.n, m))
+    for a, q in enumerate(grid):
+        for b, om in enumerate(rates):
+            at = np.zeros(m)
+            at[j] = q
+            rate = np.zeros(m)
+            rate[j] = om
+            A, B, _, _ = linearize(robot, rate_hz=rate_hz, timestep=timestep, at=at, at_rate=rate)
+            As[a, b], Bs[a, b] = A, (B @ robot.actuation.W if robot.actuation.grouped else B)
+    res = discrete_lqr(robot, rate_hz=rate_hz, timestep=timestep, design_qu=design_qu, qu0=qu0, qa0=qa0)
+    K_rest = _design(res.A, res.B, res.Q, res.R, res.S)
+    if K_rest is None:
+        raise NumericalError(f"turning_maps: {robot.name}: no stabilising LQR at rest with the design's weights")
+    rho = float(np.max(np.abs(np.linalg.eigvals(res.A + res.B @ K_rest))))
+    settle = -1.0 / (rate_hz * math.log(min(max(rho, 1e-300), 1.0 - 1e-12)))
+    out = TurningMaps(j, grid, rates, As, Bs, periodic, res.Q, res.R, res.S, K_rest, settle)
+    _TURNING[key] = out
+    return out
+
+
+def tracking_gains(maps: TurningMaps, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """``(T, m, 2n)`` gains (collect's convention, u = K x) of the finite-horizon LQR along a known motion of the hinge
+    ``maps.j``: its poses ``q (T,)`` and rates ``qd (T,)`` at the ticks, the tick maps (A_k, B_k) interpolated
+    (bilinear, held at the grid's ends, periodic poses wrapped) from ``maps``, the rest design's weights, the
+    recursion run backward from P = Q after the last tick:
+
+        K_k = −(R + B_kᵀ P_{k+1} B_k)⁻¹ (B_kᵀ P_{k+1} A_k + Sᵀ),   P_k = Q + A_kᵀ P_{k+1} A_k + (A_kᵀ P_{k+1} B_k + S) K_k
+
+    Unlike a schedule over the pose and rate, the gains at tick k anticipate the motion after it (a sweep's reversal).
+    The gains far (several settling times) before the end do not depend on the start P."""
+    g, r = maps.poses, maps.rates
+    qq = np.asarray(q, dtype=np.float64)
+    if maps.periodic:
+        qq = (qq + math.pi) % (2 * math.pi) - math.pi
+    qq = np.clip(qq, g[0], g[-1])
+    rr = np.clip(np.asarray(qd, dtype=np.float64), r[0], r[-1])
+    ki = np.clip(np.searchsorted(g, qq) - 1, 0, len(g) - 2)
+    wi = ((qq - g[ki]) / (g[ki + 1] - g[ki]))[:, None, None]
+    li = np.clip(np.searchsorted(r, rr) - 1, 0, len(r) - 2)
+    wl = ((rr - r[li]) / (r[li + 1] - r[li]))[:, None, None]
+
+    def at(M: np.ndarray) -> np.ndarray:
+        return ((1 - wi) * ((1 - wl) * M[ki, li] + wl * M[ki, li + 1])
+                + wi * ((1 - wl) * M[ki + 1, li] + wl * M[ki + 1, li + 1]))
+
+    A, B = at(maps.A), at(maps.B)
+    Q, R = maps.Q, maps.R
+    S = maps.S if maps.S is not None else np.zeros(B.shape[1:])
+    P = Q.copy()
+    out = np.empty((len(qq), B.shape[2], A.shape[1]))
+    for k in range(len(qq) - 1, -1, -1):
+        Ak, Bk = A[k], B[k]
+        PB = P @ Bk
+        Kk = -np.linalg.solve(R + Bk.T @ PB, PB.T @ Ak + S.T)
+        P = Q + Ak.T @ P @ Ak + (Ak.T @ PB + S) @ Kk
+        P = 0.5 * (P + P.T)
+        out[k] = Kk
+    return out

@@ -25,9 +25,11 @@ does not depend on the number of worker processes.
 Where the fixed gains do not hold the linearisation at a pose the reference reaches (a turntable's yaw turns the
 pole's plane away from the slide that balanced it at 0), the gains are scheduled over that coordinate
 (:func:`_gain_schedule`, :func:`~bemlearn.control.lqr.pose_gain_schedule`: u = (K + ΔK(q̂_a)) ∘ scale, the measured
-pose in the tick); an unlimited hinge whose extent is a half turn also sweeps it (:func:`_sweep_components`), at rates
-to which that balance holds turning (:func:`~bemlearn.control.lqr.turning_rate_limit`).  Every other robot's trials are
-unchanged, draw for draw.
+pose in the tick); a hinge whose extent reaches :data:`SWEEP_SPAN` also sweeps it (:func:`_sweep_components`) to
+rates beyond the stiffening speed, its own sines to the accelerations λ·√(a P) (:func:`_component_extent`), and the
+balance along that known motion is the finite-horizon LQR of the tick maps at the reference's pose *and rate*
+(:func:`_tracking_gains`, :func:`~bemlearn.control.lqr.tracking_gains`).  Every other robot's trials are unchanged,
+draw for draw.
 """
 
 from __future__ import annotations
@@ -172,7 +174,6 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
     K0 = K.reshape(m, 2 * n)
     K_scale = rng.uniform(*config.gain_scale, size=(m, 2 * n))
     K = K0 * K_scale
-    schedule = _gain_schedule(robot, config, K0)
     # reference: per actuated joint a random sum of sines
     n_sines = rng.integers(config.n_sines[0], config.n_sines[1] + 1, size=m)
     comps = [
@@ -183,11 +184,19 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
         ext = np.asarray(config.excursion, dtype=np.float64)
         if ext.size != 2 * m or not np.all(ext > 0):
             raise ConfigError(f"collect.excursion: expected 2·m = {2 * m} positive extents (positions, then accelerations) or [], got {list(ext)}")
-        comps = [(A * np.minimum(ext[j], ext[m + j] / w**2), w, ph) for j, (A, w, ph) in enumerate(comps)]
     ia, iu = list(robot.actuated_index), robot.unactuated_index
     pose = None
     if config.reference_bem and config.excursion:
         pose = _pose_slopes(robot, np.asarray(config.excursion, dtype=np.float64)[:m], float(config.reference_bem[-1]))
+    if config.excursion:
+        comps = [(A * _component_extent(config, j, w, swept), w, ph)
+                 for j, ((A, w, ph), swept) in enumerate(zip(comps, _swept(robot, config, pose)))]
+    # the balance: scheduled over the pose where the fixed gains fail there; a swept hinge's known motion gets the
+    # LQR along it (_tracking_gains), else the sweep's rate is bounded by the turning rate the schedule holds
+    schedule = _gain_schedule(robot, config, K0, turning=False)
+    tracked = _tracked_hinge(robot, config, pose, schedule)
+    if tracked is None and schedule is not None:
+        schedule = _gain_schedule(robot, config, K0)
     sweep = _sweep_components(robot, config, rng, pose, schedule)
     stiff_v = None
     if sweep is not None:
@@ -197,6 +206,7 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
                  for (A, w, ph), (a_s, w_s, p_s, keep) in zip(comps, sweep)]
         stiff_v = velocity_stiffening_speed(robot)
     traj = _trajectory_reference(config.reference_bem, comps, m)
+    along = None if tracked is None or sweep is None else _tracking_gains(robot, config, tracked, comps[tracked])
     if traj is None:
         pose = None
     inverse = None
@@ -228,7 +238,10 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
             break
         y, v = plant.measure(q_true)
         q_ref, qd_ref, qdd_ref = _reference_state(t, comps, traj, ia, iu, n, robot.qu_nominal, pose, stiff_v)
-        Kt = K if schedule is None else (K0 + schedule.delta(y[ia])) * K_scale
+        if along is not None:
+            Kt = (K0 + along[tick]) * K_scale
+        else:
+            Kt = K if schedule is None else (K0 + schedule.delta(y[ia])) * K_scale
         ctrl = groups.ctrl(Kt @ np.concatenate([y - q_ref, v - qd_ref]))
         if inverse is not None:
             D, h = robot.terms(q_ref, qd_ref)
@@ -244,13 +257,14 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
     return TrialResult(trial_id, failed, times, *(rec[name][:k] for name in ("q_meas", "u", "q", "qd", "qdd")))
 
 
-def _gain_schedule(robot: MujocoRobot, config: CollectConfig, K: np.ndarray):
+def _gain_schedule(robot: MujocoRobot, config: CollectConfig, K: np.ndarray, *, turning: bool = True):
     """The excitation balance scheduled over the actuated pose (:func:`~bemlearn.control.lqr.pose_gain_schedule`), or
     ``None`` where the fixed gains ``K (m, 2n)`` stabilise the linearisation at every pose the reference reaches (each
     coordinate's ``excursion`` extent, or with the paper's excitation n_max × the top amplitude).  The design is the
     derived one's: |q_u| ≤ d (:func:`~bemlearn.robots.scales.design_bound`), a d/4 q_u start, the ``initial_qa`` start.
-    With ``excursion``, an unlimited hinge's rates to √(a_j P_j) are checked too: the schedule's ``turn_rate``, the rate
-    to which it holds turning steadily (a trial's ``duration_s`` the horizon), bounds the sweep (:func:`_sweep_components`)."""
+    With ``excursion`` and ``turning``, an unlimited hinge's rates to √(a_j P_j) are checked too: the schedule's
+    ``turn_rate``, the rate to which it holds turning steadily (a trial's ``duration_s`` the horizon), bounds the sweep
+    (:func:`_sweep_components`) where no LQR along the sweep holds it (:func:`_tracked_hinge`)."""
     from bemlearn.control.lqr import pose_gain_schedule
     from bemlearn.robots.scales import design_bound
 
@@ -260,13 +274,36 @@ def _gain_schedule(robot: MujocoRobot, config: CollectConfig, K: np.ndarray):
     if config.excursion:
         ext = np.asarray(config.excursion, dtype=np.float64)
         extents = ext[:m]
-        rates = np.sqrt(ext[:m] * ext[m:2 * m])   # the components' and a sweep's speed bound √(a P)
+        if turning:
+            rates = np.sqrt(ext[:m] * ext[m:2 * m])   # the components' and a sweep's speed bound √(a P)
     else:
         extents = np.full(m, config.n_sines[1] * config.amplitude[1])
     d = design_bound(robot)
     qa0 = float(config.initial_qa[1]) or None
     return pose_gain_schedule(robot, K, rate_hz=config.rate_hz, timestep=config.physics_timestep, extents=extents,
                               design_qu=d, qu0=d / 4, qa0=qa0, rates=rates, horizon_s=config.duration_s)
+
+
+def _component_extent(config: CollectConfig, j: int, w: np.ndarray, swept: bool) -> np.ndarray:
+    """``(k,)`` the extent a sine at ω (``w (k,)``, rad/s) on actuated coordinate j multiplies its drawn amplitude by
+    (``collect.excursion``: P_j, then a_j):
+
+        min(P_j, a_j/ω²)                     its position and acceleration extents, or on a swept hinge (:func:`_swept`)
+        min(P_j, λ V_j/ω², V_j/ω)            V_j = √(a_j P_j), λ = ``reference_bem``'s instability rate
+
+    a_j of a hinge that does not move the BEM at rest (a turntable's yaw) keeps its speed √(a_j P_j) within the
+    stiffening speed; as an acceleration bound it leaves the yaw's own sines at a_j ≪ λ v_j, the accelerations the design
+    region asks for (:func:`~bemlearn.pipeline.design_evaluation.design_grid`).  The GP then curved away beyond the data:
+    ``fam0_017`` (yaw accelerations to 9.5 rad/s² (95 %) of the box's 29) had errors of 0.034 rad RMSE at |ψ̈| = 30–50
+    against 0.0065 at |ψ̈| < 5, where the BEM does not depend on ψ̈ at all.  The swept hinge's own sines then reach the
+    accelerations λ V_j at the speeds V_j."""
+    ext = np.asarray(config.excursion, dtype=np.float64)
+    m = ext.size // 2
+    P, a = float(ext[j]), float(ext[m + j])
+    if not swept or not config.reference_bem:
+        return np.minimum(P, a / w**2)
+    V, lam = math.sqrt(a * P), float(config.reference_bem[-1])
+    return np.minimum(np.minimum(P, lam * V / w**2), V / w)
 
 
 def _trajectory_reference(reference_bem: tuple[float, ...] | None, comps: list, m: int) -> list | None:
@@ -328,36 +365,33 @@ def _sweep_components(robot: MujocoRobot, config: CollectConfig, rng: np.random.
     """Per actuated coordinate ``(A_s, ω_s, φ_s, keep)``: one more sine for a hinge whose pose turns the BEM's slopes
     (``pose``, :func:`_pose_slopes`: a turntable's yaw) over an ``excursion`` extent P_j ≥ :data:`SWEEP_SPAN`
     (A_s = 0 elsewhere): A_s = P_j (0.75 P_j on a limited joint, whose own sines are then halved, ``keep`` = 0.5, to
-    stay off its stops) at ω_s = Ω/A_s, Ω ~ U(0.5, 1) √(a_j A_s) (a_j its acceleration extent: the sweep's
-    acceleration stays within it; √(a_j P_j) is the components' speed bound, within the stiffening speed,
-    :func:`~bemlearn.pipeline.derive.excitation_directions`), φ_s ~ U(0, 2π).  The sines shared among n components
-    (each ≤ P_j/√n_max) keep such a coordinate near its start — a turntable's yaw within ±1.9 rad and its rate below
-    3.3 rad/s of the ±π and 5.6 rad/s its design region spans (measured on ``fam0_005``); the sweep visits the
-    whole extent at rates up to that speed.  ``None`` (no draw from ``rng``) where no coordinate sweeps: every other
-    robot's trials are unchanged.
+    stay off its stops) at ω_s = Ω/A_s, Ω ~ U(0.5, 1) Ω_top, φ_s ~ U(0, 2π).  Ω_top = :data:`SWEEP_REACH` × v_j, v_j the
+    speed that doubles the upright's stiffness (:func:`~bemlearn.robots.scales.velocity_stiffening_speed`), which the
+    design region's rates reach (:func:`~bemlearn.pipeline.design_evaluation.design_grid`): a sine's rate dwells at its
+    peak, and the data then cover the region to its edge (``fam0_029``, Ω_top = √(a P) = 5.7 rad/s of v = 6.8: errors
+    to 0.068 rad at |ψ̇| = 6–6.8); √(a_j A_s) where v_j is infinite.  The sines shared among n components (each ≤
+    P_j/√n_max) keep such a coordinate near its start — a turntable's yaw within ±1.9 rad and its rate below 3.3 rad/s of
+    the ±π and 5.6 rad/s its design region spans (measured on ``fam0_005``); the sweep visits the whole extent at rates
+    up to that speed.  ``None`` (no draw from ``rng``) where no coordinate sweeps: every other robot's trials are
+    unchanged.
 
-    With the excitation's gain ``schedule`` (:func:`_gain_schedule`): the sweep's peak rate is also bounded by the
-    largest steady rate at which the balance, scheduled over the pose at rest, still holds turning
-    (:func:`~bemlearn.control.lqr.turning_rate_limit`, ``GainSchedule.turn_rate``): Ω ~ U(0.5, 1) min(√(a_j A_s),
-    Ω_hold).  Turning at ψ̇ turns the pole's plane under the slides' loop; on ``fam0_029`` (Ω_hold 1.73 rad/s of the
-    5.7 √(a P)) 17 of 24 trials fell at the full rate, with the slides running off their references while the weak yaw
-    servo followed its own."""
-    if not config.excursion or pose is None:
+    The balance that holds these turns is the LQR along the trial's known reference (:func:`_tracking_gains`).  Where
+    there is none (several swept hinges) and the excitation's gain ``schedule`` (:func:`_gain_schedule`) gives one, the
+    peak rate is also bounded by the largest steady rate at which the balance, scheduled over the pose at rest, still
+    holds turning (:func:`~bemlearn.control.lqr.turning_rate_limit`, ``GainSchedule.turn_rate``): Ω ~ U(0.5, 1)
+    min(Ω_top, Ω_hold).  Turning at ψ̇ turns the pole's plane under the slides' loop; on ``fam0_029`` (Ω_hold 1.73 rad/s)
+    17 of 24 trials fell at 5.7 rad/s with that schedule, with the slides running off their references while the weak
+    yaw servo followed its own."""
+    turns = _swept(robot, config, pose)
+    if not any(turns):
         return None
     from bemlearn.robots.scales import qa_limited
 
     m = robot.m
     ext = np.asarray(config.excursion, dtype=np.float64)
-    kinds = tuple(getattr(robot, "coordinate_kinds", ()))
     limited = qa_limited(robot)
-    deltas = pose[1]
-    scale = max(float(np.max(np.abs(d))) for d in deltas) or 1.0
-    turns = [len(kinds) == robot.n and kinds[robot.actuated_index[j]] == "hinge" and ext[j] >= SWEEP_SPAN
-             and float(np.max(np.abs(deltas[j]))) > 1e-3 * scale for j in range(m)]
-    if not any(turns):
-        return None
     amp = np.where(limited, 0.75, 1.0) * ext[:m]
-    top = np.sqrt(amp * ext[m:2 * m])
+    top = sweep_top(robot, config)
     if schedule is not None and schedule.turn_rate is not None:
         for i, hold in zip(schedule.coords, schedule.turn_rate):
             if hold is not None:
@@ -367,6 +401,82 @@ def _sweep_components(robot: MujocoRobot, config: CollectConfig, rng: np.random.
     return [(float(amp[j]), float(rate[j] / amp[j]), float(phase[j]), 0.5 if limited[j] else 1.0) if turns[j]
             else (0.0, 0.0, 0.0, 1.0) for j in range(m)]
 
+
+def _swept(robot: MujocoRobot, config: CollectConfig, pose: tuple | None) -> list[bool]:
+    """Per actuated coordinate whether the excitation sweeps it (:func:`_sweep_components`): a hinge whose pose turns
+    the BEM's slopes (``pose``, :func:`_pose_slopes`; by more than 10⁻³ of the largest change) over an ``excursion``
+    extent P_j ≥ :data:`SWEEP_SPAN`.  All ``False`` without ``excursion`` or ``pose``."""
+    m = robot.m
+    if not config.excursion or pose is None:
+        return [False] * m
+    ext = np.asarray(config.excursion, dtype=np.float64)
+    kinds = tuple(getattr(robot, "coordinate_kinds", ()))
+    deltas = pose[1]
+    scale = max(float(np.max(np.abs(d))) for d in deltas) or 1.0
+    return [len(kinds) == robot.n and kinds[robot.actuated_index[j]] == "hinge" and bool(ext[j] >= SWEEP_SPAN)
+            and float(np.max(np.abs(deltas[j]))) > 1e-3 * scale for j in range(m)]
+
+
+def _tracked_hinge(robot: MujocoRobot, config: CollectConfig, pose: tuple | None, schedule) -> int | None:
+    """The swept hinge (:func:`_swept`) whose balance is the LQR along its known motion (:func:`_tracking_gains`): the
+    one swept coordinate, where the gain ``schedule`` (:func:`_gain_schedule`) holds it (its pose changes the
+    linearisation); ``None`` otherwise (no sweep, or several: the schedule over the pose and the sweep's rate bounded
+    by the turning rate it holds)."""
+    swept = [j for j, s in enumerate(_swept(robot, config, pose)) if s]
+    if len(swept) != 1 or schedule is None or swept[0] not in schedule.coords:
+        return None
+    return swept[0]
+
+
+def _tracking_gains(robot: MujocoRobot, config: CollectConfig, j: int, comps_j: tuple) -> np.ndarray:
+    """ΔK ``(T, m, 2n)`` per tick of a trial (T = ``duration_s`` × ``rate_hz``, collect's convention): the balance along the
+    swept hinge j's reference q_t,j(t) = Σ_k A_k sin(ω_k t + φ_k) (``comps_j``, the sweep included), the finite-horizon
+    LQR of the tick maps linearised at that reference's pose *and rate* (:func:`~bemlearn.control.lqr.tracking_gains`,
+    the rest design's weights) less the rest design's gains.
+
+    Turning at ψ̇ turns the pole's plane under the slides' loop, and the gains of a steady turn differ strongly between
+    +ψ̇ and −ψ̇ (the slides' slow position modes anticipate the turn); the sweep reverses.  The LQR along the known
+    reference anticipates exactly the turns it will make: on ``fam0_029`` (weak yaw servo, position-servo slides) 0 of
+    24 trials fell with the sweep at its full rate (√(a P) = 5.7 rad/s), 17 with the pose schedule.  The recursion starts
+    at P = Q a tail of 5 × the rest loop's slowest time constant after the trial's end (:class:`~bemlearn.control.lqr
+    .TurningMaps` ``settle_s``; it forgets its start at twice that rate).  The maps' rates reach the reference's
+    bound: the sweep's Ω_top (:func:`sweep_top`) and n_max × the top amplitude × √(a_j P_j) of the joint's own sines
+    (:func:`_component_extent`)."""
+    from bemlearn.control.lqr import tracking_gains, turning_maps
+    from bemlearn.robots.scales import design_bound
+
+    assert config.rate_hz is not None and config.initial_qa is not None and config.n_sines is not None and config.amplitude is not None
+    m = robot.m
+    ext = np.asarray(config.excursion, dtype=np.float64)
+    own = config.n_sines[1] * config.amplitude[1] * math.sqrt(ext[j] * ext[m + j])
+    d = design_bound(robot)
+    qa0 = float(config.initial_qa[1]) or None
+    maps = turning_maps(robot, j=j, extent=float(ext[j]), rate_max=float(sweep_top(robot, config)[j]) + own, rate_hz=config.rate_hz,
+                        timestep=config.physics_timestep, design_qu=d, qu0=d / 4, qa0=qa0)
+    n_ticks = int(round(config.duration_s * config.rate_hz))
+    t = np.arange(n_ticks + int(math.ceil(5 * maps.settle_s * config.rate_hz))) / config.rate_hz
+    A, w, ph = comps_j
+    arg = w[None, :] * t[:, None] + ph[None, :]
+    G = tracking_gains(maps, np.sin(arg) @ A, np.cos(arg) @ (A * w))
+    return G[:n_ticks] - maps.K_rest
+
+
+def sweep_top(robot: MujocoRobot, config: CollectConfig) -> np.ndarray:
+    """``(m,)`` the sweep's top peak rate Ω_top per actuated coordinate (:func:`_sweep_components`; its unit per s):
+    :data:`SWEEP_REACH` × the stiffening speed v_j where that is finite, else √(a_j A_s) (A_s = P_j, 0.75 P_j on a
+    limited joint; ``collect.excursion``)."""
+    from bemlearn.robots.scales import qa_limited, velocity_stiffening_speed
+
+    m = robot.m
+    ext = np.asarray(config.excursion, dtype=np.float64)
+    amp = np.where(qa_limited(robot), 0.75, 1.0) * ext[:m]
+    v = velocity_stiffening_speed(robot)
+    return np.where(np.isfinite(v), SWEEP_REACH * np.where(np.isfinite(v), v, 0.0), np.sqrt(amp * ext[m:2 * m]))
+
+
+#: The sweep's peak rate reaches this × the stiffening speed v_j (:func:`sweep_top`): the design region's rates reach
+#: v_j, and the data reach a little beyond its edge.
+SWEEP_REACH = 1.1
 
 #: A hinge whose pose turns the BEM's slopes sweeps its extent when that is at least this (rad): beyond it cos and sin
 #: of the pose are far from linear, and sines shared among components leave most of the extent unvisited.
