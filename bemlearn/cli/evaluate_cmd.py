@@ -71,7 +71,7 @@ def _evaluate(args, ck) -> int:
     if ecfg.design_points > 0:
         from bemlearn.pipeline.design_evaluation import design_grid, evaluate_design_region
 
-        region = evaluate_design_region(ck.predictor_state, design_grid(robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed))
+        region = evaluate_design_region(ck.predictor_state, design_grid(robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed), robot)
         ev["bem_design_region"] = region.as_dict()   # over the whole design region (D1, D2); ev["design_region"] is along the references
     c = result.curves
     unit = ck.metadata.units.get(f"qd_{ck.metadata.unactuated_name}", "rad/s").removesuffix("/s")

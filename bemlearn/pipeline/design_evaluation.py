@@ -23,10 +23,22 @@ with e = μ(x_0^e) − q_u^e (eq. 14 vs 9):
 
 a gain below 1 is a learned BEM that under-reacts (e.g. derivatives that attenuate q̈), above
 1 one that over-reacts.
+
+The sample's max |e| is a lower bound of the region's sup, and in 3m dimensions a loose one (a turntable,
+3m = 9: the sample's 0.039 rad where the error reaches 0.047).  With the robot at hand the max is refined
+(:func:`refine_max`): a pattern search of |e| in the box from the :data:`REFINE_STARTS` worst points of the
+sample, each step trying ± a step along every coordinate of the actuated motion, moving to the best
+improvement and halving the step where none improves, over points whose model BEM stays in the region:
+
+    max |e| = max(sample max, refined max),                                                     (D3)
+
+and ``worst`` is where it was found.  RMSE and gain stay those of the sample (unbiased estimates over the
+region); the max is what the check of the region's worst case needs.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -41,8 +53,13 @@ if TYPE_CHECKING:
     from bemlearn.pipeline.evaluation import EvaluationConfig
     from bemlearn.robots.protocol import ControlRobot
 
-__all__ = ["DesignGrid", "DesignRegionResult", "DesignRegionCurve", "design_grid", "evaluate_design_region", "least_squares_gain",
-           "design_region_figure"]
+__all__ = ["DesignGrid", "DesignRegionResult", "DesignRegionCurve", "REFINE_STARTS", "design_grid", "evaluate_design_region",
+           "least_squares_gain", "design_region_figure", "pattern_search_max", "refine_max"]
+
+#: Starts of (D3)'s pattern search: the sample's worst points (distinct local maxima of |e| are few in practice).
+REFINE_STARTS = 8
+#: (D3)'s first step, a fraction of each half width of the box; the search ends after this many halvings.
+REFINE_STEP, REFINE_HALVINGS = 0.05, 6
 
 
 @dataclass(frozen=True)
@@ -180,6 +197,8 @@ class DesignRegionResult:
         coverage_2sigma_band: share of the model BEM inside the exported band's ±2σ.
         worst: the query ``x0e`` and both BEMs where |error| is largest (``None`` for an empty grid).
         curve: the points, for :func:`design_region_figure` (not serialized).
+        max_sampled: the sample's max |error| before (D3) refined it (``None``: not refined).
+        refine_evaluations: model BEMs evaluated by (D3)'s search (0: not refined).
     """
 
     rmse: float
@@ -193,16 +212,20 @@ class DesignRegionResult:
     coverage_2sigma_band: float
     worst: dict[str, Any] | None
     curve: DesignRegionCurve
+    max_sampled: float | None = None
+    refine_evaluations: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         """The JSON-ready summary (``metrics.json`` → ``bem_design_region``), without ``curve``."""
         return {"rmse": self.rmse, "max_abs": self.max_abs, "gain": self.gain, "intercept": self.intercept,
                 "n_points": self.n_points, "n_drawn": self.n_drawn, "bound": self.bound, "box": self.box,
-                "coverage_2sigma_band": self.coverage_2sigma_band, "worst": self.worst}
+                "coverage_2sigma_band": self.coverage_2sigma_band, "worst": self.worst, "max_sampled": self.max_sampled,
+                "refine_evaluations": self.refine_evaluations}
 
 
-def evaluate_design_region(state: PredictorState, grid: DesignGrid) -> DesignRegionResult:
-    """(D2) of ``state``'s learned BEM on ``grid`` (module docstring)."""
+def evaluate_design_region(state: PredictorState, grid: DesignGrid, robot: ControlRobot | None = None) -> DesignRegionResult:
+    """(D2) of ``state``'s learned BEM on ``grid`` (module docstring); with ``robot`` (the model the grid's BEM came
+    from) the max refined by (D3), :func:`refine_max`."""
     if len(grid.qu) == 0:
         empty = np.zeros(0)
         return DesignRegionResult(math.nan, math.nan, math.nan, math.nan, 0, grid.n_drawn, grid.bound, grid.box, math.nan, None,
@@ -211,11 +234,102 @@ def evaluate_design_region(state: PredictorState, grid: DesignGrid) -> DesignReg
     e = mean - grid.qu
     gain, icpt = least_squares_gain(grid.qu, mean)
     i = int(np.argmax(np.abs(e)))
-    return DesignRegionResult(
+    result = DesignRegionResult(
         rmse=float(np.sqrt(np.mean(e**2))), max_abs=float(np.abs(e).max()), gain=gain, intercept=icpt, n_points=int(e.size),
         n_drawn=grid.n_drawn, bound=grid.bound, box=grid.box, coverage_2sigma_band=float(np.mean(np.abs(e) <= 2 * band)),
         worst={"x0e": [float(v) for v in grid.x[i, :-2]], "model": float(grid.qu[i]), "learned": float(mean[i])},
         curve=DesignRegionCurve(grid.qu, mean, band))
+    return result if robot is None else refine_max(state, robot, grid, result)
+
+
+def refine_max(state: PredictorState, robot: ControlRobot, grid: DesignGrid, result: DesignRegionResult, *,
+               starts: int = REFINE_STARTS, step: float = REFINE_STEP, halvings: int = REFINE_HALVINGS) -> DesignRegionResult:
+    """(D3): ``result`` with its max |e| refined by a pattern search in ``grid``'s box (module docstring).
+
+    Args:
+        state: the learned BEM.
+        robot: the model whose BEM (eq. 9) ``grid`` holds (``robot.bem`` on batches of actuated motions).
+        grid: the sample of (D1), its box and bound.
+        result: (D2) on ``grid``.
+        starts: the sample's worst points the search starts from.
+        step: the first step, a fraction of each half width of the box.
+        halvings: the search at a start ends after this many halvings of its step.
+
+    Returns:
+        ``result`` with ``max_abs``, ``worst``, ``max_sampled`` and ``refine_evaluations`` set (``result`` as it is for
+        an empty grid).
+    """
+    if len(grid.qu) == 0 or starts < 1:
+        return result
+    m = robot.m
+    half = np.array([[grid.box[k]["qdd"] for k in grid.box], [grid.box[k]["qd"] for k in grid.box],
+                     [grid.box[k]["q"] for k in grid.box]], dtype=np.float64).reshape(-1)        # (3m,) [A, V, Q]
+    nominal, d = float(robot.qu_nominal), float(grid.bound)
+    found: dict[str, np.ndarray] = {}
+
+    def error(u: np.ndarray) -> np.ndarray:
+        """|e| at box coordinates u (B, 3m); −1 outside the region or without a root."""
+        x = u * half
+        res = robot.bem(torch.from_numpy(x[:, 2 * m:]), torch.from_numpy(x[:, m:2 * m]), torch.from_numpy(x[:, :m]))
+        qu = res.qu.numpy()
+        ok = res.valid.numpy() & (np.abs(qu - nominal) <= d)
+        mu = band_reference(state, torch.from_numpy(np.concatenate([x, np.zeros((len(x), 2))], axis=1)), n_inputs=state.dim - 2)[0].numpy()
+        found["qu"], found["mu"] = qu, mu
+        return np.where(ok, np.abs(mu - qu), -1.0)
+
+    e_all = np.abs(result.curve.learned - result.curve.model)
+    order = np.argsort(-e_all)[:starts]
+    live = half > 0
+    u0 = np.where(live, grid.x[:, :3 * m].numpy()[order] / np.where(live, half, 1.0), 0.0)
+    u, best, evaluations = pattern_search_max(error, u0, e_all[order], step=step, halvings=halvings, live=live)
+    top = int(np.argmax(best))
+    if best[top] <= result.max_abs:
+        return dataclasses.replace(result, max_sampled=result.max_abs, refine_evaluations=evaluations)
+    error(u[top:top + 1])                                                   # the two BEMs at the worst point found
+    return dataclasses.replace(result, max_abs=float(best[top]), max_sampled=result.max_abs, refine_evaluations=evaluations,
+                               worst={"x0e": [float(v) for v in u[top] * half], "model": float(found["qu"][0]),
+                                      "learned": float(found["mu"][0])})
+
+
+def pattern_search_max(f, u0: np.ndarray, f0: np.ndarray, *, step: float = REFINE_STEP, halvings: int = REFINE_HALVINGS,
+                       live: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+    """Local maxima of ``f`` over the box [−1, 1]^k from each start, by compass search (D3).
+
+    At each start, every step tries u ± h e_i along the ``live`` coordinates (all by default), moves to the best
+    candidate when it improves on the current value and halves h otherwise, until h < ``step`` · 2^−``halvings``.
+    The starts step together: ``f`` is called once per step on all of their candidates.
+
+    Args:
+        f: ``f(U)`` for ``U (B, k)`` in the box → ``(B,)`` values to maximise (a value below every start's marks a
+            point outside the feasible set).
+        u0: ``(S, k)`` starts in the box.
+        f0: ``(S,)`` ``f`` at the starts.
+        step: the first h.
+        halvings: halvings of h before a start stops.
+        live: ``(k,)`` bool, the coordinates that move.
+
+    Returns:
+        ``(u (S, k), f(u) (S,), evaluations)``: where each start ended, its value, and the points ``f`` was given.
+    """
+    u, best = np.array(u0, dtype=np.float64), np.array(f0, dtype=np.float64)
+    k = u.shape[1]
+    live = np.ones(k, dtype=bool) if live is None else np.asarray(live, dtype=bool)
+    directions = np.concatenate([np.eye(k)[live], -np.eye(k)[live]])                        # (2k', k)
+    h = np.full(len(u), float(step))
+    floor = step * 0.5**halvings
+    evaluations = 0
+    while len(directions) and np.any(h >= floor):
+        active = np.flatnonzero(h >= floor)
+        cand = np.clip(u[active, None, :] + h[active, None, None] * directions[None], -1.0, 1.0)   # (S', 2k', k)
+        val = np.asarray(f(cand.reshape(-1, k)), dtype=np.float64).reshape(len(active), -1)
+        evaluations += cand.shape[0] * cand.shape[1]
+        j = np.argmax(val, axis=1)
+        for r, s in enumerate(active):
+            if val[r, j[r]] > best[s]:
+                u[s], best[s] = cand[r, j[r]], val[r, j[r]]
+            else:
+                h[s] *= 0.5
+    return u, best, evaluations
 
 
 def design_region_figure(result: DesignRegionResult, qu_name: str, unit: str = "rad"):

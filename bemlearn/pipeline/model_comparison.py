@@ -40,7 +40,8 @@ def compare_with_model(state: PredictorState, truth_robot: ControlRobot, ecfg: E
     if ecfg.design_points > 0:   # over the whole design region (D1, D2), not only along the references
         from bemlearn.pipeline.design_evaluation import design_grid, design_region_figure, evaluate_design_region
 
-        dr = evaluate_design_region(state, design_grid(truth_robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed, excursion=excursion))
+        dr = evaluate_design_region(state, design_grid(truth_robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed, excursion=excursion),
+                                    truth_robot)
         metrics["bem_design_region"] = dr.as_dict()
         for k in ("rmse", "max_abs", "gain"):
             writer.add_scalar(f"bem/design_region_{k}", getattr(dr, k), 0)

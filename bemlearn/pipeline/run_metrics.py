@@ -183,6 +183,8 @@ class DesignRegionInfo(_Record):
     box: dict[str, dict[str, float]] | None = None
     coverage_2sigma_band: float | None = None
     worst: dict[str, Any] | None = None
+    max_sampled: float | None = None
+    refine_evaluations: int | None = None
 
 
 @dataclass(kw_only=True)

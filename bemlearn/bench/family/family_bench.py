@@ -226,7 +226,7 @@ def write_results(out: Path, rows: list[dict], table: list[dict], md: str, *, se
 
     from bemlearn.files import atomic_write_files
 
-    cols = ["name", "topology", *FEATURES, "qu_upright", "holdable", "verdict", "right", "false_ok", "rmse", "max_abs", "gain",
+    cols = ["name", "topology", *FEATURES, "qu_upright", "holdable", "verdict", "right", "false_ok", "rmse", "max_abs", "max_sampled", "gain",
             "learned_at_rest_minus_upright", "band_coverage", "balanced_at_upright", "bem_right", "reason_true", "first_check", "first_reason", "hold_reason",
             "balance_note", "exit_code", "wall_s", "commit"]
     buf = io.StringIO()
