@@ -260,3 +260,21 @@ def test_the_refined_design_max_reaches_a_dense_samples_max(cartpole_state):
     model = robot.bem(torch.from_numpy(x[:, 2:3]), torch.from_numpy(x[:, 1:2]), torch.from_numpy(x[:, 0:1])).qu.numpy()[0]
     learned = band_reference(st, torch.from_numpy(np.concatenate([x, np.zeros((1, 2))], 1)), n_inputs=3)[0].numpy()[0]
     assert abs(abs(learned - model) - refined.max_abs) < 1e-12 and abs(model - robot.qu_nominal) <= small.bound
+
+
+def test_a_position_that_moves_the_bem_is_checked_to_where_it_moves_it_by_d():
+    """(D1): the pendubot's shoulder (s_p ≠ 0) is checked to min(d/|s_p|, 0.8 h) whatever the references' amplitude;
+    the cart-pole's cart (s_p = 0: its position does not move the BEM) to the references' amplitude."""
+    from bemlearn.pipeline.evaluation import EvaluationConfig
+    from bemlearn.robots import load
+    from bemlearn.robots.scales import bem_slopes, qa_half_ranges
+
+    ecfg = EvaluationConfig(n_sines=(2, 3), amplitude_max=0.05, amplitude_min=0.02, frequency_hz=(0.1, 0.8))
+    pend = load(str(ROBOTS / "pendubot.xml"))
+    s_p = abs(float(bem_slopes(pend)[0][0]))
+    expected = min(0.2 / s_p, 0.8 * float(qa_half_ranges(pend)[0]))
+    assert s_p > 0.1 and expected > 0.05
+    assert abs(design_grid(pend, ecfg, n_points=64, seed=0).box["shoulder"]["q"] - expected) < 1e-12
+    cart = load(str(ROBOTS / "cartpole.xml"))
+    assert abs(float(bem_slopes(cart)[0][0])) < 1e-9
+    assert design_grid(cart, ecfg, n_points=64, seed=0).box["slider"]["q"] == 0.05

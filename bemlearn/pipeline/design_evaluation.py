@@ -9,13 +9,14 @@ This evaluation looks where a user will use the BEM: every actuated motion whose
 The actuated motions are a scrambled Sobol set (``scipy.stats.qmc``) in the box, per actuated
 coordinate j,
 
-    |q_a,j| ≤ Q_j,    |q̇_a,j| ≤ Q_j ω,    |q̈_a,j| ≤ max(Q_j ω², 1.3 d / |s_a,j|)           (D1)
+    |q_a,j| ≤ max(Q_j, min(d / |s_p,j|, 0.8 h_j)),    |q̇_a,j| ≤ Q_j ω,    |q̈_a,j| ≤ max(Q_j ω², 1.3 d / |s_a,j|)   (D1)
 
 widened to the excitation's own extents where it has them (m ≥ 2, ``collect.excursion``: :func:`design_grid`)
 
 with Q_j = min(Σ|A| of the held-out references, the joint's half range), ω = 2π × their top
-frequency (``evaluate:``), and s_a,j = ∂q_u^e/∂q̈_a,j at upright (:func:`~bemlearn.robots.scales.bem_slopes`):
-the acceleration range reaches past the design bound whatever the references' amplitudes.  The
+frequency (``evaluate:``), h_j the joint's half range, and s_p,j = ∂q_u^e/∂q_a,j, s_a,j = ∂q_u^e/∂q̈_a,j at upright
+(:func:`~bemlearn.robots.scales.bem_slopes`; a term with a slope of rounding size, below 10⁻⁹, is left out): the
+position and acceleration ranges reach the design bound whatever the references' amplitudes.  The
 points whose model BEM lies outside the design region (or has no root) are left out.  On them,
 with e = μ(x_0^e) − q_u^e (eq. 14 vs 9):
 
@@ -119,6 +120,12 @@ def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_poi
     # an s_a of rounding size (a turntable's yaw: 1e-18 rad per rad/s², where it is 0) is 0, as in the excitation's
     # extents (derive.excitation_directions): else the box asks for yaw accelerations of 1e17 rad/s²
     A = np.maximum(Q * w * w, np.where(s_a > 1e-9, 1.3 * d / np.maximum(s_a, 1e-300), 0.0))
+    # a coordinate whose position moves the BEM (s_p ≠ 0: a pendubot's shoulder, an arm's joints) is checked to the
+    # offset at which it alone moves the BEM by d, within 0.8 × its half range, as its acceleration is checked to
+    # 1.3 d/|s_a|: the references' amplitude reached a third of that on a two-link arm of the robot family, whose
+    # learned BEM was off by 0.046 rad beyond it and said ok; the velocities stay the references' (Q ω from before)
+    s_p = np.abs(bem_slopes(robot)[0])
+    Q = np.maximum(Q, np.where(s_p > 1e-9, np.minimum(d / np.maximum(s_p, 1e-300), 0.8 * qa_half_ranges(robot)), 0.0))
     if excursion:
         ext = np.asarray(excursion, dtype=np.float64)
         P, a = ext[:m], ext[m:2 * m]
