@@ -227,42 +227,10 @@ def servo_turntable(tmp_path_factory):
 
 
 def _spin(robot, K0: np.ndarray, sched, rate: float, seconds: float, tilt: float = 0.02) -> float:
-    """MuJoCo itself (nonlinear, the file's integrator): the yaw commanded to turn steadily at ``rate`` with the pole
-    upright, u = (K0 + ΔK(ψ)) e + the model's inverse along the turn, from a ``tilt`` off upright; the largest |x|, |y|,
-    |ψ − rate·t|, |q_u − q_u*| over the last second (or 1 where it passed 1 before the end)."""
-    import mujoco
-
-    from bemlearn.control.actuator_inverse import MujocoActuatorInverse
-
-    model, data = robot.model, mujoco.MjData(robot.model)
-    inverse = MujocoActuatorInverse(robot)
-    iu, ia, n = robot.unactuated_index, list(robot.actuated_index), robot.n
-    q = np.zeros(n)
-    q[iu] = robot.qu_nominal + tilt
-    qd = np.zeros(n)
-    qd[ia[2]] = rate
-    data.qpos[:], data.qvel[:] = robot.state_to_mujoco(q, qd)
-    mujoco.mj_forward(model, data)
-    steps = int(round(1.0 / (RATE * model.opt.timestep)))
-    ticks = int(seconds * RATE)
-    last = 0.0
-    for k in range(ticks):
-        q_ref, qd_ref = np.zeros(n), np.zeros(n)
-        q_ref[iu] = robot.qu_nominal
-        q_ref[ia[2]], qd_ref[ia[2]] = rate * k / RATE, rate
-        q = robot.coordinates_of(data.qpos)
-        qd = robot.T_np @ data.qvel
-        dev = float(np.max(np.abs(np.r_[q[ia[:2]], q[ia[2]] - q_ref[ia[2]], q[iu] - robot.qu_nominal])))
-        if dev > 1.0:
-            return 1.0
-        if k >= ticks - int(RATE):
-            last = max(last, dev)
-        bias = np.asarray(robot.terms(q_ref, qd_ref)[1], dtype=np.float64)
-        u = (K0 + sched.delta(q[ia])) @ np.concatenate([q - q_ref, qd - qd_ref])
-        data.ctrl[:] = u + inverse.command(bias[ia], q_ref, qd_ref, clip=False)
-        for _ in range(steps):
-            mujoco.mj_step(model, data)
-    return last
+    """:func:`_follow` with the yaw commanded to turn steadily at ``rate`` and the pose-scheduled gains
+    u = (K0 + ΔK(ψ)) e (the model's inverse along the turn: its bias alone, q̈_t = 0)."""
+    ia = list(robot.actuated_index)
+    return _follow(robot, lambda k, q: K0 + sched.delta(q[ia]), lambda t: (rate * t, rate, 0.0), seconds, tilt)
 
 
 def test_turning_rate_the_pose_schedule_holds_is_where_steady_turning_grows_in_mujoco(servo_turntable):
