@@ -92,9 +92,10 @@ def _info(args) -> int:
         print(f"rolling    {r.floating.describe(r.model)}")
     from bemlearn.robots.cyclic import cyclic_coordinates, unbounded_cyclic
 
-    cyclic = [name for name, c in zip(r.joint_names, cyclic_coordinates(r)) if c]
+    flags = cyclic_coordinates(r)
+    cyclic = [name for name, c in zip(r.joint_names, flags) if c]
     if cyclic:
-        left = unbounded_cyclic(r)
+        left = unbounded_cyclic(r, flags)
         print(f"cyclic     {', '.join(cyclic)}: the dynamics (D, h of eq. 1) do not depend on {'its' if len(cyclic) == 1 else 'their'} position"
               + (f"; {', '.join(left)} without a joint range: left out of the GP inputs (dataset.cyclic)" if left else ""))
     from bemlearn.robots.scales import upright_stiffness

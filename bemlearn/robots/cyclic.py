@@ -58,17 +58,17 @@ def cyclic_coordinates(robot: ControlRobot, *, n_states: int = 4, step: float = 
     return tuple(bool(c) for c in cyclic)
 
 
-def unbounded_cyclic(robot: ControlRobot) -> tuple[str, ...]:
+def unbounded_cyclic(robot: ControlRobot, cyclic: tuple[bool, ...] | None = None) -> tuple[str, ...]:
     """The actuated coordinates that are cyclic (:func:`cyclic_coordinates`) and have no joint range, by name.
 
     Only a :class:`~bemlearn.robots.MujocoRobot` declares ranges; any other robot gives ``()`` (nothing is known
-    to be unbounded).
+    to be unbounded).  ``cyclic``: :func:`cyclic_coordinates` ``(robot)`` when the caller has it already.
     """
     from bemlearn.robots.mujoco_robot import MujocoRobot
     from bemlearn.robots.scales import qa_limited
 
     if not isinstance(robot, MujocoRobot):
         return ()
-    cyclic = cyclic_coordinates(robot)
+    cyclic = cyclic_coordinates(robot) if cyclic is None else cyclic
     limited = qa_limited(robot)
     return tuple(robot.joint_names[i] for j, i in enumerate(robot.actuated_index) if cyclic[i] and not limited[j])
