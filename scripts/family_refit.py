@@ -57,19 +57,12 @@ def _truth(cfg: dict[str, Any]) -> tuple[str, dict]:
 
 
 def _score(predictor: Any, xml: str, truth: dict) -> dict:
-    """compare_predictor on a predictor file or an in-memory object with the predictor's three methods."""
-    import bemlearn.bench.family.score as score
+    """The bench's score of a predictor file, or of an in-memory object with the predictor's three methods."""
+    from bemlearn.bench.family.score import compare_module, compare_predictor
 
     if isinstance(predictor, Path):
-        return score.compare_predictor(predictor, xml, truth)
-    import bemlearn.export.torchscript as ts
-
-    loader = ts.load_torchscript
-    ts.load_torchscript = lambda _path: predictor   # compare_predictor imports the loader when called
-    try:
-        return score.compare_predictor("in-memory", xml, truth)
-    finally:
-        ts.load_torchscript = loader
+        return compare_predictor(predictor, xml, truth)
+    return compare_module(predictor, xml, truth, where="the in-memory fit")
 
 
 def _line(name: str, what: str, r: dict) -> str:

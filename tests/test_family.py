@@ -332,3 +332,31 @@ def test_three_family_robots_zero_config_through_the_pipeline_and_scored(tmp_pat
     for f in ("results.csv", "results.json", "table.md"):
         assert (tmp_path / f).is_file()
     assert "| all |  | 3 |" in (tmp_path / "table.md").read_text()
+
+
+def test_a_loaded_or_in_memory_predictor_scores_as_its_file(tmp_path):
+    """compare_module takes what compare_predictor loads: the same dict for the same predictor, and an object that is
+    not a file (here the loaded module behind a plain wrapper) names itself in the error when its joints are others."""
+    from bemlearn.bench.family.score import compare_module, compare_predictor
+    from bemlearn.errors import CheckpointError
+    from bemlearn.export.torchscript import load_torchscript
+
+    xml, truth = generate_robot(0, 6, hold_check=False)
+    pred = _predictor_file(tmp_path, xml, truth, scale=0.5)
+    from_file = compare_predictor(pred, xml, truth, n_queries=64)
+    loaded = load_torchscript(pred)
+
+    class Wrapped:
+        def __call__(self, x):
+            return loaded(x)
+
+        def bem_mean(self, x):
+            return loaded.bem_mean(x)
+
+        def metadata(self):
+            return loaded.metadata()
+
+    assert compare_module(Wrapped(), xml, truth, n_queries=64) == pytest.approx(from_file, nan_ok=True)
+    other = dict(truth, actuated_joints=["elsewhere"])
+    with pytest.raises(CheckpointError, match="^the fit in memory: actuated inputs"):
+        compare_module(Wrapped(), xml, other, n_queries=64, where="the fit in memory")

@@ -438,3 +438,25 @@ def test_a_hinge_with_rounding_size_slopes_gets_the_half_turn_scale(tmp_path):
     assert xmax[robot.actuated_index[j]] == pytest.approx(math.pi)
     K = discrete_lqr(robot, rate_hz=100.0, design_qu=0.2, qu0=0.05, qa0=0.04).K
     assert abs(K[j, robot.actuated_index[j]]) > 1e-2 and abs(K[j, robot.n + robot.actuated_index[j]]) > 1e-3
+
+
+def test_poses_without_a_design_take_their_neighbours_change_on_a_limited_and_a_full_turn_grid():
+    """fill_between_poses: linear interpolation from the poses that have a design, on a limited joint's grid (where a
+    run of fam1_021 crashed: the grid's poses against the good poses' values) and across ±2π on a full turn."""
+    from bemlearn.control.lqr import fill_between_poses
+
+    grid = np.linspace(-1.0, 1.0, 9)
+    d = np.stack([grid, 2 * grid], axis=1)[:, None, :]          # (9, 1, 2): a change linear in the pose
+    ok = np.ones(9, dtype=bool)
+    ok[[0, 3, 4]] = False
+    got = fill_between_poses(grid, np.where(ok[:, None, None], d, np.nan), ok, periodic=False)
+    want = d.copy()
+    want[0] = d[1]                                               # before the first good pose: its value
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-15)
+    turn = np.linspace(-math.pi, math.pi, 8, endpoint=False)
+    dt = np.cos(turn)[:, None, None] * np.ones((1, 1, 2))
+    okt = np.ones(8, dtype=bool)
+    okt[0] = False                                               # −π: between 3π/4 (one turn back) and −3π/4
+    gt = fill_between_poses(turn, np.where(okt[:, None, None], dt, np.nan), okt, periodic=True)
+    np.testing.assert_allclose(gt[0], 0.5 * (dt[1] + dt[7]), rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(gt[1:], dt[1:])

@@ -54,7 +54,7 @@ from bemlearn.warnings import DesignWarning, warn
 if TYPE_CHECKING:
     from bemlearn.robots.mujoco_robot import MujocoRobot
 
-__all__ = ["LQRResult", "ActuatorLimits", "GainSchedule", "actuator_limits", "holds_in_mujoco", "linearize", "discrete_lqr", "pose_gain_schedule", "riccati_iteration", "tracking_gains", "turning_maps", "turning_rate_limit",
+__all__ = ["LQRResult", "ActuatorLimits", "GainSchedule", "actuator_limits", "holds_in_mujoco", "linearize", "discrete_lqr", "fill_between_poses", "pose_gain_schedule", "riccati_iteration", "tracking_gains", "turning_maps", "turning_rate_limit",
            "TurningMaps", "upright_at"]
 
 log = logging.getLogger(__name__)
@@ -565,6 +565,28 @@ def riccati_iteration(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray
     return None
 
 
+def fill_between_poses(grid: np.ndarray, d: np.ndarray, ok: np.ndarray, *, periodic: bool) -> np.ndarray:
+    """``d`` with its rows where ``ok`` is False interpolated linearly over ``grid`` from the rows where it is True.
+
+    Args:
+        grid: ``(G,)`` increasing poses of one coordinate (rad or m).
+        d: ``(G, ...)`` a value per pose (a gain change); rows where ``ok`` is False are replaced.
+        ok: ``(G,)`` bool, at least one True.
+        periodic: the grid spans a full turn of an unlimited hinge: interpolate across ±2π (the first and last poses
+            are neighbours); else a pose beyond the last good one takes its value.
+
+    Returns:
+        a copy of ``d``.
+    """
+    good = grid[ok]
+    x = good if not periodic else np.concatenate([good - 2 * math.pi, good, good + 2 * math.pi])
+    y = d[ok] if not periodic else np.concatenate([d[ok]] * 3)
+    flat = y.reshape(len(y), -1)
+    out = d.copy()
+    out[~ok] = np.stack([np.interp(grid[~ok], x, flat[:, c]) for c in range(flat.shape[1])], axis=1).reshape(-1, *d.shape[1:])
+    return out
+
+
 def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, timestep: float | None, extents: np.ndarray,
                        design_qu: float, qu0: float, qa0: float | None, points: int = 49,
                        rates: np.ndarray | None = None, horizon_s: float | None = None) -> GainSchedule | None:
@@ -630,10 +652,7 @@ def pose_gain_schedule(robot: MujocoRobot, K: np.ndarray, *, rate_hz: float, tim
             if Kq is not None:
                 d[k], ok[k] = Kq - K_rest, True
         if ok.any() and not ok.all():   # no stabilising design at a pose: its neighbours' change, not the gains at rest
-            x = grid if not periodic else np.concatenate([grid[ok] - 2 * math.pi, grid[ok], grid[ok] + 2 * math.pi])
-            y = d[ok] if not periodic else np.concatenate([d[ok]] * 3)
-            flat = y.reshape(len(y), -1)
-            d[~ok] = np.stack([np.interp(grid[~ok], x, flat[:, c]) for c in range(flat.shape[1])], axis=1).reshape(-1, *K.shape)
+            d = fill_between_poses(grid, d, ok, periodic=periodic)
         for k, (A, B) in enumerate(maps):
             worst = max(worst, float(np.max(np.abs(np.linalg.eigvals(A + B @ (K + d[k]))))))
         coords.append(j)

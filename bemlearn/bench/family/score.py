@@ -12,7 +12,7 @@ import numpy as np
 
 from bemlearn.pipeline.run_metrics import RunMetrics
 
-__all__ = ["FEATURES", "compare_predictor", "balanced_at_upright", "judge_reason", "score_run", "feature_table", "format_table"]
+__all__ = ["FEATURES", "compare_predictor", "compare_module", "balanced_at_upright", "judge_reason", "score_run", "feature_table", "format_table"]
 
 #: issue 28's bar for a right learned BEM over the design region (rad for the family's hinge q_u)
 RMSE_MAX, MAX_MAX, GAIN_RANGE = 0.01, 0.04, (0.95, 1.05)
@@ -51,22 +51,32 @@ def compare_predictor(predictor_path: str | Path, xml: str, truth: dict, *, n_qu
     Returns: ``{"rmse", "max_abs", "gain", "intercept", "n_queries", "learned_at_rest_minus_upright", "band_coverage"}``
     (rad; ``band_coverage`` a share).
     """
+    from bemlearn.export.torchscript import load_torchscript
+
+    return compare_module(load_torchscript(predictor_path), xml, truth, n_queries=n_queries, seed=seed, probe=probe,
+                          refine=refine, where=str(predictor_path))
+
+
+def compare_module(module: Any, xml: str, truth: dict, *, n_queries: int = N_QUERIES, seed: int = 0,
+                   probe: Mapping[str, Any] | None = None, refine: bool = True, where: str = "predictor") -> dict:
+    """:func:`compare_predictor` on a loaded predictor: any object with the exported predictor's ``forward``
+    (``module(x) -> (mean, std)`` for x = [q̈_a, q̇_a, q_a] ``(B, 3m)`` float64), ``bem_mean(x)`` and
+    ``metadata()`` (JSON naming ``actuated_names``), e.g. a posterior fitted in memory.  ``where`` names it in errors.
+    """
     import torch
 
     from bemlearn.bench.family.oracle import Oracle, wrap_angle
     from bemlearn.errors import CheckpointError
-    from bemlearn.export.torchscript import load_torchscript
 
     oracle = Oracle(xml, qu_upright=truth["qu_upright"])
     q = oracle.design_queries(n_queries, seed=seed)
     n_random = len(q["bem"])
     if probe is not None:
         q = _with_probe(oracle, q, probe, truth["actuated_joints"])
-    module = load_torchscript(predictor_path)
     meta = json.loads(module.metadata())
     names = list(meta["actuated_names"])
     if sorted(names) != sorted(truth["actuated_joints"]):
-        raise CheckpointError(f"{predictor_path}: actuated inputs {names}, the robot's actuated joints are {truth['actuated_joints']}")
+        raise CheckpointError(f"{where}: actuated inputs {names}, the robot's actuated joints are {truth['actuated_joints']}")
     order = [truth["actuated_joints"].index(n) for n in names]
     x = np.concatenate([q["qdda"][:, order], q["qda"][:, order], q["qa"][:, order]], axis=1)
     with torch.no_grad():
