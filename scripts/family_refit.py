@@ -93,6 +93,7 @@ def refit(run: Path, out: Path, sets: list[str]) -> str:
 def _datasets(run: Path, cfg: dict[str, Any]):
     from bemlearn.config import from_dict
     from bemlearn.data.dataset import DatasetConfig, build_datasets
+    from bemlearn.data.features import gp_inputs
     from bemlearn.data.trajectory_io import read_trajectory
 
     train = build_datasets(read_trajectory(run / "data.npz"), from_dict(DatasetConfig, cfg["dataset"])).train
@@ -100,12 +101,9 @@ def _datasets(run: Path, cfg: dict[str, Any]):
     if not exact_path.is_file():
         sys.exit(f"{exact_path}: no such file (the simulator's exact states are written by 'bemlearn collect')")
     exact = np.load(exact_path)
-    meta = train.meta
-    u = meta.unactuated_index
-    a = [i for i in range(len(meta.joint_names)) if i != u]
+    u = train.meta.unactuated_index
     rows = train.row.numpy()
-    x_exact = np.concatenate([exact["qdd"][rows][:, a], exact["qd"][rows][:, a], exact["q"][rows][:, a],
-                              exact["qdd"][rows][:, [u]], exact["qd"][rows][:, [u]]], axis=1)
+    x_exact = gp_inputs(exact["q"][rows], exact["qd"][rows], exact["qdd"][rows], unactuated_index=u)
     return train, x_exact, exact["q"][rows, u]
 
 
