@@ -278,3 +278,34 @@ def test_a_position_that_moves_the_bem_is_checked_to_where_it_moves_it_by_d():
     cart = load(str(ROBOTS / "cartpole.xml"))
     assert abs(float(bem_slopes(cart)[0][0])) < 1e-9
     assert design_grid(cart, ecfg, n_points=64, seed=0).box["slider"]["q"] == 0.05
+
+
+def test_the_excited_velocities_are_checked_on_the_balance_time_scale_as_the_family_oracle_does(tmp_path):
+    """(D1) with the excitation's extents (m ≥ 2): a joint's velocity is checked to min(√(a_j P_j), A_j/(1.3 λ), v_j),
+    the speed of a motion on the balance's own time scale whose acceleration reaches the box's A_j/1.3, not √(a_j P_j)
+    (a slow sweep that fills both extents: 1.7–2.4× faster on the robot family's two-link arms).  Checked against the
+    family oracle's a_i/ω_u, computed independently (Newton on ``mj_inverse``, its own reach and ω_u), within 3 %."""
+    from bemlearn.bench.family.generator import generate_robot
+    from bemlearn.bench.family.oracle import Oracle
+    from bemlearn.pipeline import derive
+    from bemlearn.pipeline.evaluation import EvaluationConfig
+    from bemlearn.robots import load
+    from bemlearn.robots.scales import instability_rate
+
+    xml, truth = generate_robot(1, 28, hold_check=False)   # a two-link arm (shoulder, elbow) balancing a pole
+    path = tmp_path / "arm.xml"
+    path.write_text(xml)
+    robot = load(str(path))
+    assert robot.m == 2
+    rate = derive.control_rate(robot).value
+    ext = np.asarray(derive.excitation_directions(robot, rate, derive.excitation_signals(robot, rate).value).value["excursion"])
+    P, a = ext[:2], ext[2:]
+    lam = instability_rate(robot)
+    # the references' own velocity (Σ|A| ω) kept below the balance's, so that the excitation's extents set the box
+    ecfg = EvaluationConfig(n_sines=(2, 3), amplitude_max=0.01, amplitude_min=0.005, frequency_hz=(0.1, 0.8))
+    box = design_grid(robot, ecfg, n_points=64, seed=0, excursion=(*P, *a)).box
+    oracle = Oracle(xml, qu_upright=truth["qu_upright"]).scales()
+    for j, name in enumerate(robot.actuated_names):
+        assert np.sqrt(a[j] * P[j]) > 1.3 * box[name]["qd"]           # the old extent, √(a P), is not what is checked
+        assert box[name]["qd"] == pytest.approx(box[name]["qdd"] / (1.3 * lam), rel=1e-9)
+        assert box[name]["qd"] == pytest.approx(oracle["vel"][truth["actuated_joints"].index(name)], rel=0.03)

@@ -11,7 +11,8 @@ coordinate j,
 
     |q_a,j| ≤ max(Q_j, min(d / |s_p,j|, 0.8 h_j)),    |q̇_a,j| ≤ Q_j ω,    |q̈_a,j| ≤ max(Q_j ω², 1.3 d / |s_a,j|)   (D1)
 
-widened to the excitation's own extents where it has them (m ≥ 2, ``collect.excursion``: :func:`design_grid`)
+widened to the excitation's own extents where it has them (m ≥ 2, ``collect.excursion``: :func:`design_grid`; its
+velocities to those of a motion on the balance's time scale 1/λ that reaches the box's accelerations)
 
 with Q_j = min(Σ|A| of the held-out references, the joint's half range), ω = 2π × their top
 frequency (``evaluate:``), h_j the joint's half range, and s_p,j = ∂q_u^e/∂q_a,j, s_a,j = ∂q_u^e/∂q̈_a,j at upright
@@ -94,8 +95,12 @@ def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_poi
         seed: the Sobol scrambling seed.
         bound: d (default :func:`~bemlearn.pipeline.derive.design_region`).
         excursion: the excitation's per-direction extents (``collect.excursion``: P_j, then a_j; m ≥ 2): the box
-            then reaches them too, |q_a,j| ≤ max(Q_j, P_j), |q̇_a,j| ≤ max(V_j, √(a_j P_j)), |q̈_a,j| ≤ max(A_j, a_j),
-            so that the check covers every motion the run claims to have excited (a turntable's yaw over ±π), not only
+            then reaches them too, |q_a,j| ≤ max(Q_j, P_j), |q̈_a,j| ≤ A_j = max(A_j, a_j) and
+            |q̇_a,j| ≤ max(V_j, min(√(a_j P_j), A_j / (1.3 λ), v_j)) — the velocity of the excited motions that the
+            balance performs on its own time scale 1/λ (λ the instability rate): a motion reaching the design
+            acceleration A_j/1.3 moves at A_j/(1.3 λ), none faster than v_j, the speed that doubles the upright's
+            stiffness (the robot family's oracle defines its region's velocities the same way, a_i/ω_u and v_tip),
+            so that the check covers the motions the run claims to have excited (a turntable's yaw over ±π), not only
             the held-out references' amplitude.  A hinge the excitation sweeps is checked over its whole design region:
             poses to 0.8 × its half range (a half turn where unlimited), rates to its stiffening speed v_j
             (:func:`~bemlearn.robots.scales.velocity_stiffening_speed`) and accelerations to λ·v_j (λ the instability
@@ -129,14 +134,25 @@ def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_poi
     if excursion:
         ext = np.asarray(excursion, dtype=np.float64)
         P, a = ext[:m], ext[m:2 * m]
-        Q, V, A = np.maximum(Q, P), np.maximum(V, np.sqrt(a * P)), np.maximum(A, a)
+        from bemlearn.robots.scales import instability_rate, velocity_stiffening_speed
+
+        lam = instability_rate(robot)
+        v = velocity_stiffening_speed(robot)
+        Q, A = np.maximum(Q, P), np.maximum(A, a)
+        # the velocities of the excitation's motions that the balance performs on its own time scale 1/λ: a motion
+        # whose acceleration reaches the design extent A_j / 1.3 (the box's acceleration without its margin) moves at
+        # A_j / (1.3 λ), and no joint faster than the speed v_j that doubles the upright's stiffness (the family
+        # oracle's a_i / ω_u and v_tip).  √(a_j P_j), the speed of a sine that fills both extents, is slower than λ
+        # where P_j > a_j / λ²: a quasi-static sweep whose velocity the balance never meets at its accelerations
+        # (fam1_028: the shoulder's box to 2.4× the oracle's velocity, degraded on a max the oracle's box does not have)
+        V = np.maximum(V, np.minimum(np.sqrt(a * P), np.minimum(A / (1.3 * lam), np.where(np.isfinite(v), v, np.inf))))
         # a hinge the excitation sweeps (its pose turns the BEM's slopes over ≥ SWEEP_SPAN, sim.collect._sweep_components)
         # is checked over its whole design region: the poses to 0.8 × its half range (a half turn where unlimited) and
         # the rates to the speed that doubles the upright's stiffness, not only as far as the sweep's effort-scaled
         # extents went (fam0_053: yaw to 1.55 rad and 4.6 rad/s of 1.89 and 5.6; ok by its own box, RMSE 0.011 by
         # the oracle's)
         from bemlearn.robots.mujoco_robot import MujocoRobot
-        from bemlearn.robots.scales import instability_rate, qa_limited, velocity_stiffening_speed
+        from bemlearn.robots.scales import qa_limited
         from bemlearn.sim.collect import SWEEP_SPAN
 
         kinds = tuple(getattr(robot, "coordinate_kinds", ()))
@@ -145,14 +161,13 @@ def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_poi
         if swept.any():
             limited = qa_limited(robot) if isinstance(robot, MujocoRobot) else np.ones(m, dtype=bool)
             whole = np.where(limited, 0.8 * qa_half_ranges(robot), math.pi)
-            v = velocity_stiffening_speed(robot)
             vf = np.where(np.isfinite(v), v, 0.0)
             Q = np.where(swept, np.maximum(Q, whole), Q)
             V = np.where(swept & np.isfinite(v), np.maximum(V, vf), V)
             # and the accelerations of a motion on the balance's own time scale that reaches that speed, λ·v_j (the
             # same extent as a flat joint's in the family oracle): fam0_017's yaw was checked to 9.2 rad/s² of λ·v =
             # 29; ok by its own box (max 0.039 rad), max 0.055 by the oracle's
-            A = np.where(swept & np.isfinite(v), np.maximum(A, instability_rate(robot) * vf), A)
+            A = np.where(swept & np.isfinite(v), np.maximum(A, lam * vf), A)
     k = max(4, int(math.ceil(math.log2(max(n_points, 16)))))
     u = qmc.Sobol(3 * m, scramble=True, seed=seed).random_base2(k) * 2.0 - 1.0
     qadd, qad, qa = u[:, :m] * A, u[:, m:2 * m] * V, u[:, 2 * m:] * Q
