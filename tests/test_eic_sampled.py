@@ -144,7 +144,37 @@ def test_excitation_amplitude_set_by_the_bem_budget_is_checked_by_trials_too(tmp
     assert not sig["effort_capped"]
     resolved = resolve_pipeline_config({"robot": str(path)})
     assert resolved.config.collect.amplitude[1] == pytest.approx(0.5 * sig["amplitude"][1], rel=1e-12)
-    assert "fall at A × 0.5: A × 0.5" in resolved.notes["collect.n_sines"]
+    assert "fall at A × 0.5 and" in resolved.notes["collect.n_sines"] and "of 20 s trials: A × 0.5" in resolved.notes["collect.n_sines"]
+
+
+def test_the_excitation_level_the_first_trials_choose_is_confirmed_by_independent_trials(tmp_path):
+    """Family robot (1, 33), a pendubot on a position servo: at A × ½ the check's first 24 five-second trials had 4 falls
+    and passed, yet the collection there lost 15 of 24 trials (ten other seeds' five-second batches: 6–13 falls).  The
+    level is confirmed by 24 independent trials as long as the collection's (at most a third may fall); here they
+    reject it, and the collection's own trials at the level chosen stay up."""
+    import dataclasses
+
+    from bemlearn.bench.family.generator import generate_robot
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
+    from bemlearn.sim.collect import simulate_trial
+
+    xml, _ = generate_robot(1, 33, hold_check=False)
+    path = tmp_path / "fam1_033.xml"
+    path.write_text(xml)
+    robot = MujocoRobot.from_xml(path)
+    sig = derive.excitation_signals(robot, derive.control_rate(robot).value).value
+    resolved = resolve_pipeline_config({"robot": str(path)})
+    note = resolved.notes["collect.n_sines"]
+    assert "4/24 fall at A × 0.5 and" in note and note.endswith(": A × 0.25"), note
+    collect = resolved.config.collect
+    assert collect.amplitude[1] == pytest.approx(0.25 * sig["amplitude"][1], rel=1e-12)
+    # the collection's own seeds (not the check's), its whole 20 s: at the level chosen few fall, at the level the first
+    # batch alone chose most do
+    seqs = np.random.SeedSequence(collect.seed).spawn(collect.n_trials)
+    fell = sum(simulate_trial(robot, collect, i, s).failed for i, s in enumerate(seqs))
+    twice = dataclasses.replace(collect, amplitude=tuple(2 * a for a in collect.amplitude))
+    fell_twice = sum(simulate_trial(robot, twice, i, s).failed for i, s in enumerate(seqs))
+    assert fell <= collect.n_trials / 8 and fell_twice > collect.n_trials / 2, (fell, fell_twice)
 
 
 def test_eic_gains_hold_the_closed_loop_reference_not_only_a_recovery(tmp_path):

@@ -249,10 +249,17 @@ EXCITATION_CHECK_SEED = 20261127
 
 def excitation_amplitude_check(robot, collect, *, trials: int = 24, duration_s: float = 5.0, halvings: int = 3) -> Derived:
     """The factor s ∈ {1, 1/2, …, 2^−``halvings``} on ``collect.amplitude`` (both ends): the largest at which at most
-    a quarter of ``trials`` excitation trials fall in MuJoCo (more than half fallen makes a run degraded:
-    the check keeps a margin for the trials it did not run; a fall rate of one half passes it with probability
-    1 % with 24 trials, 7 % with 12, 14 % with 8).  Most falls come in the first seconds (the tracking error
-    the reference starts with), so 5 s trials.
+    a quarter of ``trials`` excitation trials of ``duration_s`` fall in MuJoCo (more than half fallen makes a run
+    degraded: the check keeps a margin for the trials it did not run; a fall rate of one half passes it with
+    probability 1 % with 24 trials, 7 % with 12, 14 % with 8), and at most a third of ``trials`` more, with
+    independent seeds and as long as the collection's trials (``collect.duration_s``).  Most falls come in the first
+    seconds (the tracking error the reference starts with; 218 of the robot family's 296 collection falls came within
+    5 s), so the first batch's 5 s trials reject the levels that fall often at little cost; the second batch takes
+    the first one's luck out of the choice (the level is the first whose first batch passes, so that count is biased
+    low: the family's collections fell 2–4× as often as the check's accepted count; a pendubot of it, 4 of 24 at the
+    chosen level where ten other seeds' batches gave 6–13 and the collection 15 of 24) and counts the late falls.
+    With 24 trials it passes a level whose trials fall at a rate of one half with probability 8 %, one of a fifth
+    with 96 %.
 
     Whatever sets the top amplitude (:func:`excitation_signals`), whether the balance holds it depends on the
     balance loop: where the actuator limits set it, the reference takes half of them and the balance the rest,
@@ -320,15 +327,25 @@ def _excitation_amplitude_trials(robot, collect, *, trials: int, duration_s: flo
     """
     import dataclasses
 
-    seqs = np.random.SeedSequence(EXCITATION_CHECK_SEED).spawn(trials)
+    seqs = np.random.SeedSequence(EXCITATION_CHECK_SEED).spawn(2 * trials)
+    choose, confirm = seqs[:trials], seqs[trials:]
     lo, hi = collect.amplitude
     tried = []
     for k in range(halvings + 1):
         s = 0.5**k
         cfg = dataclasses.replace(collect, amplitude=(lo * s, hi * s), duration_s=min(duration_s, collect.duration_s))
-        fell = sum(_trials_fell(robot, cfg, seqs))
+        fell = sum(_trials_fell(robot, cfg, choose))
         tried.append(f"{fell}/{trials} fall at A × {s:g}")
-        if fell <= trials / 4:
+        if fell > trials / 4:
+            continue
+        # a level the first batch passes is confirmed by a second, independent batch as long as the collection's
+        # trials: chosen by the first batch's count alone it is chosen partly by that batch's luck, and a quarter of
+        # the falls come after 5 s (fam1_033 of the robot family: 4/24 fell at the chosen A × ½, ten other seeds'
+        # batches 6–13/24, the collection 15/24)
+        full = dataclasses.replace(cfg, duration_s=collect.duration_s)
+        fell_full = sum(_trials_fell(robot, full, confirm))
+        tried[-1] += f" and {fell_full}/{trials} of {collect.duration_s:g} s trials"
+        if fell_full <= trials / 3:
             break
     return Derived(s, f"excitation trials in MuJoCo ({min(duration_s, collect.duration_s):g} s each): " + ", ".join(tried))
 
