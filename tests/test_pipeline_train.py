@@ -218,3 +218,29 @@ def test_training_stores_the_estimator_term_and_band_bench_agrees(small):
     assert res["rows"]["exported band (eq. B1)"]["median_std_over_rmse"] == pytest.approx(b["median_band_std_over_rmse"], rel=1e-9)
     assert res["rows"]["latent"]["inside_2sigma"] == pytest.approx(b["coverage_2sigma_latent"], abs=0)
     assert "exported band (eq. B1)" in format_band_bench([res])
+
+
+def test_evaluate_reads_the_excitation_extents_the_run_checked(small, tmp_path):
+    """``bemlearn evaluate`` widens the design region's box to the extents the run's data were collected with (m ≥ 2:
+    ``collect.excursion`` in the data file the checkpoint names), as the run's own check did; a data file that is
+    gone is said, not silently replaced by the references' box."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from bemlearn.cli.evaluate_cmd import _collected_excursion
+    from bemlearn.data.trajectory_io import read_trajectory, write_trajectory
+    from bemlearn.export.checkpoint import load_checkpoint
+
+    _, data, out, _ = small
+    assert _collected_excursion(load_checkpoint(out)) == (None, "")     # m = 1: the paper's excitation has no extents
+    ck = SimpleNamespace(metadata=SimpleNamespace(extra={}))
+    assert _collected_excursion(ck) == (None, "")                       # a checkpoint that names no data file
+    traj = read_trajectory(data)
+    wide = dataclasses.replace(traj, meta=dataclasses.replace(traj.meta, extra={"collect_config": {"excursion": [0.3, 4.0]}}))
+    path = tmp_path / "wide.npz"
+    write_trajectory(wide, path)
+    ck.metadata.extra["data_file"] = str(path)
+    assert _collected_excursion(ck) == ((0.3, 4.0), "")
+    path.unlink()
+    excursion, why = _collected_excursion(ck)
+    assert excursion is None and str(path) in why and "not there" in why

@@ -71,7 +71,11 @@ def _evaluate(args, ck) -> int:
     if ecfg.design_points > 0:
         from bemlearn.pipeline.design_evaluation import design_grid, evaluate_design_region
 
-        region = evaluate_design_region(ck.predictor_state, design_grid(robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed), robot)
+        excursion, why = _collected_excursion(ck)
+        if why:
+            print(why)
+        region = evaluate_design_region(ck.predictor_state, design_grid(robot, ecfg, n_points=ecfg.design_points, seed=ecfg.seed,
+                                                                        excursion=excursion), robot)
         ev["bem_design_region"] = region.as_dict()   # over the whole design region (D1, D2); ev["design_region"] is along the references
     c = result.curves
     unit = ck.metadata.units.get(f"qd_{ck.metadata.unactuated_name}", "rad/s").removesuffix("/s")
@@ -102,3 +106,19 @@ def _evaluate(args, ck) -> int:
               f"max {region.max_abs:.5f} {unit}, gain {region.gain:.3f} (least-squares slope of learned on model)")
     print(f"wrote {out / 'evaluation.json'} and {out / 'evaluation.png'}")
     return 0
+
+
+def _collected_excursion(ck) -> tuple[tuple[float, ...] | None, str]:
+    """The excitation's extents the run's training data were collected with (``collect.excursion``, m ≥ 2), read from
+    the data file the checkpoint names, so that the design region's box is the one the run checked
+    (:func:`~bemlearn.pipeline.design_evaluation.design_grid`); ``(None, why)`` where that file is not there."""
+    from bemlearn.data.trajectory_io import read_trajectory
+
+    data = ck.metadata.extra.get("data_file")
+    if not data:
+        return None, ""
+    path = Path(data)
+    if not path.is_file():
+        return None, (f"note: {path}, the run's data file, is not there: the design region's box is the held-out "
+                      "references' alone, not widened to the excitation's extents as the run's own check was")
+    return read_trajectory(path).meta.collected_excursion, ""
