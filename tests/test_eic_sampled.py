@@ -331,3 +331,27 @@ def test_a_loop_off_its_bem_with_dry_friction_is_not_held():
     gains = EICGains(kp_a=w_a**2, kd_a=2 * w_a, kp_u=w_u**2, kd_u=2 * w_u)
     ok, how = derive.eic_recovery(robot, gains, rate, qu0=d / 4, velocity_cutoff=wc)
     assert not ok and "no stick-slip cycle" in how, how
+
+
+def test_the_confirming_trials_last_the_collection_trials_within_a_cap(monkeypatch):
+    """The confirming batch of the excitation check plays the collection's trial length, at most CONFIRM_LENGTHS times the
+    first batch's: a config asking for 100 000 s trials does not make the derivation play them."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    played = []
+
+    def fell(robot, cfg, seqs):
+        played.append(cfg.duration_s)
+        return [False] * len(seqs)
+
+    monkeypatch.setattr(derive, "_trials_fell", fell)
+    collect = SimpleNamespace(amplitude=(0.01, 0.1), duration_s=100000.0)
+    monkeypatch.setattr(dataclasses, "replace", lambda obj, **kw: SimpleNamespace(**{**vars(obj), **kw}))
+    out = derive._excitation_amplitude_trials(None, collect, trials=4, duration_s=5.0, halvings=1)
+    assert out.value == 1.0 and played == [5.0, derive.CONFIRM_LENGTHS * 5.0]
+    assert "0/4 fall at A × 1 and 0/4 of 20 s trials" in out.note
+    played.clear()
+    short = SimpleNamespace(amplitude=(0.01, 0.1), duration_s=8.0)
+    derive._excitation_amplitude_trials(None, short, trials=4, duration_s=5.0, halvings=1)
+    assert played == [5.0, 8.0]

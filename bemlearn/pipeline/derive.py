@@ -244,6 +244,10 @@ def excitation_signals(robot, rate: RateChoice, *, n_sines: tuple[int, int] = (2
 
 
 EXCITATION_CHECK_SEED = 20261127
+#: The confirming trials of :func:`excitation_amplitude_check` last the collection's trials, at most this many times the
+#: first batch's (20 s for 5 s: the length of a default collection trial, over which the robot family's late falls
+#: were counted; a config asking for hour-long trials does not make the check play them).
+CONFIRM_LENGTHS = 4
 """Entropy of the seeds of :func:`excitation_amplitude_check`'s trials (fixed: a derivation is a function of the robot)."""
 
 
@@ -252,7 +256,8 @@ def excitation_amplitude_check(robot, collect, *, trials: int = 24, duration_s: 
     a quarter of ``trials`` excitation trials of ``duration_s`` fall in MuJoCo (more than half fallen makes a run
     degraded: the check keeps a margin for the trials it did not run; a fall rate of one half passes it with
     probability 1 % with 24 trials, 7 % with 12, 14 % with 8), and at most a third of ``trials`` more, with
-    independent seeds and as long as the collection's trials (``collect.duration_s``).  Most falls come in the first
+    independent seeds and as long as the collection's trials (``collect.duration_s``, at most :data:`CONFIRM_LENGTHS`
+    × ``duration_s``).  Most falls come in the first
     seconds (the tracking error the reference starts with; 218 of the robot family's 296 collection falls came within
     5 s), so the first batch's 5 s trials reject the levels that fall often at little cost; the second batch takes
     the first one's luck out of the choice (the level is the first whose first batch passes, so that count is biased
@@ -342,9 +347,9 @@ def _excitation_amplitude_trials(robot, collect, *, trials: int, duration_s: flo
         # trials: chosen by the first batch's count alone it is chosen partly by that batch's luck, and a quarter of
         # the falls come after 5 s (fam1_033 of the robot family: 4/24 fell at the chosen A × ½, ten other seeds'
         # batches 6–13/24, the collection 15/24)
-        full = dataclasses.replace(cfg, duration_s=collect.duration_s)
+        full = dataclasses.replace(cfg, duration_s=min(collect.duration_s, CONFIRM_LENGTHS * duration_s))
         fell_full = sum(_trials_fell(robot, full, confirm))
-        tried[-1] += f" and {fell_full}/{trials} of {collect.duration_s:g} s trials"
+        tried[-1] += f" and {fell_full}/{trials} of {full.duration_s:g} s trials"
         if fell_full <= trials / 3:
             break
     return Derived(s, f"excitation trials in MuJoCo ({min(duration_s, collect.duration_s):g} s each): " + ", ".join(tried))
