@@ -341,17 +341,22 @@ def test_the_confirming_trials_last_the_collection_trials_within_a_cap(monkeypat
 
     played = []
 
-    def fell(robot, cfg, seqs):
+    def fell(robot, cfg, seqs):   # one of each batch falls: the first batch passes, the second confirms
         played.append(cfg.duration_s)
-        return [False] * len(seqs)
+        return [True] + [False] * (len(seqs) - 1)
 
     monkeypatch.setattr(derive, "_trials_fell", fell)
     collect = SimpleNamespace(amplitude=(0.01, 0.1), duration_s=100000.0)
     monkeypatch.setattr(dataclasses, "replace", lambda obj, **kw: SimpleNamespace(**{**vars(obj), **kw}))
     out = derive._excitation_amplitude_trials(None, collect, trials=4, duration_s=5.0, halvings=1)
     assert out.value == 1.0 and played == [5.0, derive.CONFIRM_LENGTHS * 5.0]
-    assert "0/4 fall at A × 1 and 0/4 of 20 s trials" in out.note
+    assert "1/4 fall at A × 1 and 1/4 of 20 s trials" in out.note
     played.clear()
     short = SimpleNamespace(amplitude=(0.01, 0.1), duration_s=8.0)
     derive._excitation_amplitude_trials(None, short, trials=4, duration_s=5.0, halvings=1)
     assert played == [5.0, 8.0]
+    # a level at which none of the first batch fell is not confirmed (its 5 s fall rate is below 12 % at 95 %)
+    played.clear()
+    monkeypatch.setattr(derive, "_trials_fell", lambda robot, cfg, seqs: played.append(cfg.duration_s) or [False] * len(seqs))
+    out = derive._excitation_amplitude_trials(None, collect, trials=4, duration_s=5.0, halvings=1)
+    assert out.value == 1.0 and played == [5.0] and out.note.endswith("0/4 fall at A × 1")
