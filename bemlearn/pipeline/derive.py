@@ -244,11 +244,12 @@ def excitation_signals(robot, rate: RateChoice, *, n_sines: tuple[int, int] = (2
 
 
 EXCITATION_CHECK_SEED = 20261127
-#: The confirming trials of :func:`excitation_amplitude_check` last the collection's trials, at most this many times the
-#: first batch's (20 s for 5 s: the length of a default collection trial, over which the robot family's late falls
-#: were counted; a config asking for hour-long trials does not make the check play them).
-CONFIRM_LENGTHS = 4
 """Entropy of the seeds of :func:`excitation_amplitude_check`'s trials (fixed: a derivation is a function of the robot)."""
+
+CONFIRM_LENGTHS = 4
+"""The confirming trials of :func:`excitation_amplitude_check` last the collection's trials, at most this many times the
+first batch's (20 s for 5 s: the length of a default collection trial, over which the robot family's late falls were
+counted; a config asking for hour-long trials does not make the check play them)."""
 
 
 def excitation_amplitude_check(robot, collect, *, trials: int = 24, duration_s: float = 5.0, halvings: int = 3) -> Derived:
