@@ -337,7 +337,11 @@ def test_the_confirming_trials_last_the_collection_trials_within_a_cap(monkeypat
     """The confirming batch of the excitation check plays the collection's trial length, at most CONFIRM_LENGTHS times the
     first batch's: a config asking for 100 000 s trials does not make the derivation play them."""
     import dataclasses
-    from types import SimpleNamespace
+
+    @dataclasses.dataclass(frozen=True)
+    class Collect:   # the two fields of CollectConfig the check reads and replaces
+        amplitude: tuple[float, float]
+        duration_s: float
 
     played = []
 
@@ -346,13 +350,12 @@ def test_the_confirming_trials_last_the_collection_trials_within_a_cap(monkeypat
         return [True] + [False] * (len(seqs) - 1)
 
     monkeypatch.setattr(derive, "_trials_fell", fell)
-    collect = SimpleNamespace(amplitude=(0.01, 0.1), duration_s=100000.0)
-    monkeypatch.setattr(dataclasses, "replace", lambda obj, **kw: SimpleNamespace(**{**vars(obj), **kw}))
+    collect = Collect(amplitude=(0.01, 0.1), duration_s=100000.0)
     out = derive._excitation_amplitude_trials(None, collect, trials=4, duration_s=5.0, halvings=1)
     assert out.value == 1.0 and played == [5.0, derive.CONFIRM_LENGTHS * 5.0]
     assert "1/4 fall at A × 1 and 1/4 of 20 s trials" in out.note
     played.clear()
-    short = SimpleNamespace(amplitude=(0.01, 0.1), duration_s=8.0)
+    short = Collect(amplitude=(0.01, 0.1), duration_s=8.0)
     derive._excitation_amplitude_trials(None, short, trials=4, duration_s=5.0, halvings=1)
     assert played == [5.0, 8.0]
     # a level at which none of the first batch fell is not confirmed (its 5 s fall rate is below 12 % at 95 %)

@@ -145,7 +145,7 @@ def design_grid(robot: ControlRobot, evaluate_config: EvaluationConfig, *, n_poi
         # oracle's a_i / ω_u and v_tip).  √(a_j P_j), the speed of a sine that fills both extents, is slower than λ
         # where P_j > a_j / λ²: a quasi-static sweep whose velocity the balance never meets at its accelerations
         # (fam1_028: the shoulder's box to 2.4× the oracle's velocity, degraded on a max the oracle's box does not have)
-        V = np.maximum(V, np.minimum(np.sqrt(a * P), np.minimum(A / (1.3 * lam), np.where(np.isfinite(v), v, np.inf))))
+        V = np.maximum(V, np.minimum.reduce([np.sqrt(a * P), A / (1.3 * lam), v]))   # v: inf where a velocity does not stiffen
         # a hinge the excitation sweeps (its pose turns the BEM's slopes over ≥ SWEEP_SPAN, sim.collect._sweep_components)
         # is checked over its whole design region: the poses to 0.8 × its half range (a half turn where unlimited) and
         # the rates to the speed that doubles the upright's stiffness, not only as far as the sweep's effort-scaled
