@@ -115,6 +115,10 @@ def _with_flags(predictor, bem: dict[str, bool], full: dict[str, bool]):
         for name, value in chosen.items():
             setattr(sub, name, value)
         sub.FT, sub.RT, sub.signs = FT, RT, signs
+        # the linear prior mean's buffers with values no other buffer has (equal constant tensors share one name in
+        # the exported code; a fitted plane and its band term never equal another buffer)
+        n = int(sub.sb.shape[0])
+        sub.plane, sub.sb = torch.linspace(0.11, 0.19, n + 1, **f64), torch.linspace(0.21, 0.29, n, **f64)
     return p
 
 
@@ -122,8 +126,10 @@ def _flag_combinations() -> list[dict[str, bool]]:
     names = structural_flags()
     combos = [dict(zip(names, values)) for values in itertools.product((False, True), repeat=len(names))]
     # the variance paths the exporter writes: a triangular solve (exact), then a dense factor
-    # (factored sparse), or a dense factor alone; a factored one is always triangular
-    return [c for c in combos if not (c.get("factored") and not c.get("triangular"))]
+    # (factored sparse), or a dense factor alone; a factored one is always triangular; the plane's band term
+    # exists only with the plane and the band's gradient term
+    return [c for c in combos if not (c.get("factored") and not c.get("triangular"))
+            and not (c.get("plane_band") and not (c.get("linear") and c.get("banded")))]
 
 
 def _digest(text: str) -> str:

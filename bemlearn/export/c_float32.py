@@ -93,6 +93,8 @@ def _f32_gradient2(post: CPosterior, u: np.ndarray, k: np.ndarray, hn: np.ndarra
     if post.banded:
         h = k @ post.P.astype(F32).T                           # (B, n)
         g = h + post.gamma.astype(F32) * (u * hn[:, None])
+        if post.sb is not None:
+            g = g + post.sb.astype(F32)
         grad = (g * g).sum(1, dtype=F32)
     if post.n_estimators:
         e = k @ post.E.astype(F32).T                           # (B, K)
@@ -111,6 +113,8 @@ def float32_errors(post: CPosterior, reference: FoldedPosterior, x: np.ndarray) 
     wk = k * post.w.astype(F32)
     hn = wk.sum(1, dtype=F32)
     mean = F32(post.y0) + hn
+    if post.lin is not None:   # the linear prior mean l0 + Σ_i lin_i u_i (eq. L1)
+        mean = mean + (F32(post.l0) + (u * post.lin.astype(F32)).sum(1, dtype=F32))
     var = _f32_var(post, k)
     latent = np.sqrt(var)
     band = np.sqrt(F32(post.scale2) * var + _f32_gradient2(post, u, k, hn))

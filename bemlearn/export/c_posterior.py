@@ -21,6 +21,9 @@ and ε_k = Σ_j E_kj exp(e_j) = y_std k_Z(x̃)ᵀ δ_k / √K:
     g_i = h_i + γ_i v_i h_n                     (g_i = s_i ∂μ/∂x_i, rad)
     σ_band(x) = sqrt(c² σ(x)² + max(Σ_i g_i², Σ_k ε_k²)),  c² = ``scale2``
 
+A linear prior mean (eq. L1, :mod:`bemlearn.export.folded_posterior`) adds l_0 + Σ_i λ_i v_i to μ after the
+kernel sum (h_n stays the kernel sum) and s_i y_std β̃_i / x_std_i (``sb``) to g_i.
+
 Only e_j differs between the two C forms:
 
 * ``"folded"`` (float64): e_j = c_j + q(v) + Σ_i W_ij v_i with v = x (raw) or v = a∘x − b
@@ -82,6 +85,9 @@ class CPosterior:
         scale2: c², the square of the band's ``std_scale``.
         E: ``(K, M)`` estimator weights y_std σ_f² δ_jk / √K (estimator-major), rad; K = 0: no
             estimator term.
+        lin: ``(n,)`` λ of a linear prior mean (weights on v), or ``None`` (zero mean).
+        l0: its constant, rad (0 without one).
+        sb: ``(n,)`` its band-gradient term s_i y_std β̃_i / x_std_i, rad (zeros without one).
     """
 
     form: Literal["folded", "distance"]
@@ -103,6 +109,9 @@ class CPosterior:
     scale2: float
     E: np.ndarray
     inner: np.ndarray | None = None
+    lin: np.ndarray | None = None
+    l0: float = 0.0
+    sb: np.ndarray | None = None
 
     @property
     def n_inputs(self) -> int:
@@ -169,6 +178,8 @@ def c_posterior(post: FoldedPosterior, *, form: Literal["folded", "distance"] = 
         triangular=bool(post.triangular), factor=factor, signs=_np(post.signs) if post.signed else None,
         banded=bool(post.banded) and bool(np.any(gamma != 0) or np.any(P != 0)), P=P, gamma=gamma,
         scale2=float(post.scale2), E=np.ascontiguousarray(G[:M, n + 1 :].T), inner=inner,
+        lin=_np(post.plane)[:-1] if post.linear else None, l0=float(_np(post.plane)[-1]) if post.linear else 0.0,
+        sb=_np(post.sb) if post.plane_band else None,
     )
 
 

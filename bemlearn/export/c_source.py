@@ -47,7 +47,7 @@ from bemlearn.export.c_std_templates import (
     NO_ESTIMATOR_TERM,
     TRIANGULAR_STD,
 )
-from bemlearn.export.c_templates import DISTANCE_EXPONENTS, FOLDED_EXPONENTS, HEADER, POSTERIOR, SOURCE
+from bemlearn.export.c_templates import DISTANCE_EXPONENTS, FOLDED_EXPONENTS, HEADER, PLANE, POSTERIOR, SOURCE
 from bemlearn.export.folded_posterior import SENTINEL_BOUND, FoldedPosterior
 from bemlearn.export.metadata import PredictorMetadata
 from bemlearn.export.variance_factor import VarianceFactor
@@ -130,8 +130,13 @@ def _posterior_constants(p: str, name: str, post: CPosterior, dtype: CDtype, rea
         parts.append(_array(f"{p}_{name}_W", post.W, dtype, real))
     else:   # the first n rows of the full map's weights
         parts.append(f"static const {real} *const {p}_{name}_W = {share_W};\n")
+    if post.lin is not None:   # the linear prior mean (eq. L1)
+        parts.append(_array(f"{p}_{name}_lin", post.lin, dtype, real))
+        parts.append(f"static const {real} {p}_{name}_l0 = {_literal(post.l0, dtype)};\n")
     if post.banded:   # the band's gradient term (unused, hence not written, without input noise)
         parts.append(_array(f"{p}_{name}_gamma", post.gamma, dtype, real))
+        if post.sb is not None:
+            parts.append(_array(f"{p}_{name}_sb", post.sb, dtype, real))
         if share_P is None:
             parts.append(_array(f"{p}_{name}_P", post.P, dtype, real))
         else:
@@ -258,11 +263,14 @@ def c_sources(
         sub, version=__version__, constants=constants, exp_block=exp_block,
         exponents="\n".join(exponents.substitute(sub, name=nm, n=n) for nm, n in (("bem", n_bem), ("full", n_full))),
         std=KERNELS.substitute(sub) + "\n" + std + "\n" + (ESTIMATOR_TERM if K else NO_ESTIMATOR_TERM).substitute(sub) + "\n"
-            + "\n".join((BAND_GRADIENT if post.banded else NO_BAND_GRADIENT).substitute(sub, name=nm, n=post.n_inputs)
+            + "\n".join((BAND_GRADIENT if post.banded else NO_BAND_GRADIENT).substitute(
+                             sub, name=nm, n=post.n_inputs, sb_term="" if post.sb is None else f" + {p}_{nm}_sb[i]")
                          for nm, post in (("bem", bem), ("full", full))),
-        posteriors="\n".join(POSTERIOR.substitute(sub, name=nm, n=n, lo=f"{p}_{pre}input_lo", hi=f"{p}_{pre}input_hi",
-                                                   beyond=f"!(s >= {-0.5 * SENTINEL_BOUND!r}) ? 2 : 0" if dtype == "float64" else "0")
-                              for nm, n, pre in (("bem", n_bem, ""), ("full", n_full, "full_"))),
+        posteriors="\n".join(POSTERIOR.substitute(sub, name=nm, n=post.n_inputs, lo=f"{p}_{pre}input_lo", hi=f"{p}_{pre}input_hi",
+                                                   beyond=f"!(s >= {-0.5 * SENTINEL_BOUND!r}) ? 2 : 0" if dtype == "float64" else "0",
+                                                   plane="" if post.lin is None else f" + {p}_{nm}_plane(v)",
+                                                   plane_fn="" if post.lin is None else PLANE.substitute(sub, name=nm, n=post.n_inputs))
+                              for nm, post, pre in (("bem", bem, ""), ("full", full, "full_"))),
     )
     units = doc["units"]
     size = 8 if dtype == "float64" else 4

@@ -98,13 +98,13 @@ DENSE_STD = Template(r"""static $real ${p}_latent_var($real *k)
 """)
 
 # Σ_i g_i² of the band (eq. B1): h_i = Σ_j P_ij k_j, g_i = h_i + γ_i v_i h_n,
-# h_n = Σ_j w_j k_j = μ − y0 (the mean's own sum).
+# h_n = Σ_j w_j k_j = μ − y0 (the mean's own kernel sum); a linear prior mean adds its constant sb_i.
 BAND_GRADIENT = Template(r"""static $real ${p}_${name}_gradient2(const $real *v, const $real *k, $real hn)
 {
     $real g, sum = 0;
     int i;
     for (i = 0; i < $n; ++i) {
-        g = ${p}_dot(${p}_${name}_P + (size_t)i * ${P}_N_SUPPORT, k, ${P}_N_SUPPORT) + ${p}_${name}_gamma[i] * (v[i] * hn);
+        g = ${p}_dot(${p}_${name}_P + (size_t)i * ${P}_N_SUPPORT, k, ${P}_N_SUPPORT) + ${p}_${name}_gamma[i] * (v[i] * hn)$sb_term;
         sum += g * g;
     }
     return sum;

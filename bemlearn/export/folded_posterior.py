@@ -36,6 +36,13 @@ q_i = W[·, n + i] (the same −½ a_i² or −½ in every row), ∂e_j/∂x_i =
 c = ``std_scale``, s = ``input_std``, δ = ``estimator_delta`` (K columns) of the state; with
 s = 0 and K = 0 the ``mm`` is skipped).
 
+A linear prior mean (eq. L1 of :mod:`bemlearn.models.predictor_state`, y_std β̃ᵀx̃) is affine in v as well:
+
+    μ(x) += l_0 + Σ_i λ_i v_i,   λ = y_std β̃ / x_std (raw) or y_std β̃ ∘ ℓ (centered),
+
+l_0 its constant (the x_mean terms in the raw form, the columns held at zero in both), and its
+constant gradient adds s_i y_std β̃_i / x_std_i to g_i; with β̃ = 0 neither is computed.
+
 One extra *sentinel* column j = M guards the range in which float64 can evaluate the kernel:
 its exponent is e_M = ‖u‖² − 10³⁰⁰ (zero linear weights; quadratic weights 1 on u∘u in the
 centered form, a∘a on x∘x in the raw one, where u ≈ a∘x far from the data), its mean weight
@@ -95,6 +102,8 @@ class FoldedPosterior(nn.Module):
     triangular: bool
     factored: bool
     banded: bool
+    linear: bool
+    plane_band: bool
     var0: float
     scale2: float
     # buffers (registered in __init__; declared for the type checker)
@@ -110,6 +119,8 @@ class FoldedPosterior(nn.Module):
     signs: torch.Tensor
     G: torch.Tensor
     gamma: torch.Tensor
+    plane: torch.Tensor
+    sb: torch.Tensor
 
     def __init__(
         self,
@@ -202,6 +213,24 @@ class FoldedPosterior(nn.Module):
         self.register_buffer("gamma", 2.0 * W[0, n_inputs:] * s_in * rho if M > 0 else torch.zeros(n_inputs, **f64))
         self.banded = bool((s_in > 0).any()) or K > 0
         self.scale2 = float(state.std_scale) ** 2
+        # linear prior mean (module docstring): l_0 + λᵀv, and its gradient's band term s ∘ y_std β̃ / x_std
+        assert state.mean_slope is not None  # filled by PredictorState.__post_init__
+        beta = state.mean_slope.to(**f64)
+        grad_lin = state.y_std * beta / state.x_std
+        x0 = state.x_mean / state.x_std
+        if self.centered:
+            Lv = state.y_std * beta[free] * state.lengthscale[free]
+            l0 = -state.y_std * (beta[fixed] * x0[fixed]).sum()
+        else:
+            Lv = grad_lin[free]
+            l0 = -state.y_std * (beta * x0).sum()
+        # one buffer [λ, l_0] (a separate constant equal to another one would share its name in the exported code
+        # and change its layout: archive_check); the flags switch the plane and its band term on where nonzero
+        self.linear = state.linear_mean
+        sb = s_in * grad_lin[free]
+        self.plane_band = self.linear and bool((sb != 0).any())
+        self.register_buffer("plane", torch.cat([Lv, l0.reshape(1)]).to(**f64).contiguous())
+        self.register_buffer("sb", sb.contiguous())
 
     def _kernel(self, x: torch.Tensor) -> torch.Tensor:
         """exp(e): ``(B, M + 1)`` kernel row / σ_f² (last column: sentinel) for ``x: (B, n)``."""
@@ -264,22 +293,31 @@ class FoldedPosterior(nn.Module):
             q = torch.linalg.vecdot(v, v)
         return torch.rsub(q, self.var0).clamp_min_(0.0)
 
+    def _plane(self, mean: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+        """``mean`` plus the linear prior mean l_0 + λᵀv (module docstring), when there is one."""
+        if self.linear:
+            return mean + torch.addmv(self.plane[-1:], v, self.plane[:-1])
+        return mean
+
     def _mean_band(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         k, v = self._kernel_v(x)
-        mean = torch.addmv(self.offset, k, self.w)
+        mean = self._plane(torch.addmv(self.offset, k, self.w), v)
         var = self._latent_var(k)
         if self.banded:
             h = torch.mm(k, self.G)
             n = self.n_inputs
             g = torch.addcmul(h[:, :n], v * h[:, n : n + 1], self.gamma)
+            if self.plane_band:
+                g = g + self.sb
             e = h[:, n + 1 :]
             extra = torch.maximum(torch.linalg.vecdot(g, g), torch.linalg.vecdot(e, e))
             return mean, torch.add(extra, var, alpha=self.scale2).sqrt_()
         return mean, var.mul_(self.scale2).sqrt_()
 
     def _mean(self, x: torch.Tensor) -> torch.Tensor:
-        return torch.addmv(self.offset, self._kernel(x), self.w)
+        k, v = self._kernel_v(x)
+        return self._plane(torch.addmv(self.offset, k, self.w), v)
 
     def _mean_std(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        k = self._kernel(x)
-        return torch.addmv(self.offset, k, self.w), self._latent_var(k).sqrt_()
+        k, v = self._kernel_v(x)
+        return self._plane(torch.addmv(self.offset, k, self.w), v), self._latent_var(k).sqrt_()

@@ -4,7 +4,7 @@ The reference evaluates the kernel row by explicit differences,
 k_j = σ_f² exp(−½ ‖(x̃ − z_j)/ℓ‖²) (:meth:`PredictorState.kernel_row`), not by the folded
 exponent the exported predictor uses, and
 
-    exact:       μ = y_mean + y_std kᵀα,   σ² = y_std² (σ_f² − kᵀ v),  K v = k solved by Cholesky
+    exact:       μ = y_mean + y_std (kᵀα + β̃ᵀx̃)  (β̃ = 0 but for a linear prior mean, eq. L1),   σ² = y_std² (σ_f² − kᵀ v),  K v = k solved by Cholesky
                  with two steps of iterative refinement (accurate even when K is ill-conditioned,
                  where kᵀ S k with the explicit inverse S = K⁻¹ loses digits); the predictor's
                  σ_f² − ‖L⁻¹k‖² comes from one triangular solve, and the rounding bound per
@@ -52,7 +52,7 @@ def reference_posterior(state: PredictorState, x: torch.Tensor) -> tuple[torch.T
     for _ in range(2):
         v = v + torch.cholesky_solve(k.T - K @ v, L)
     var = (state.outputscale - (k.T * v).sum(0)).clamp_min(0.0)
-    return state.y_mean + state.y_std * (k @ state.alpha), state.y_std * var.sqrt(), _cholesky_route_bound(state, L, k, v)
+    return state.y_mean + state.y_std * (k @ state.alpha) + state.prior_mean(x), state.y_std * var.sqrt(), _cholesky_route_bound(state, L, k, v)
 
 
 def _cholesky_route_bound(state: PredictorState, L: torch.Tensor, k: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
@@ -87,7 +87,7 @@ def _factored_reference(state: PredictorState, x: torch.Tensor) -> tuple[torch.T
     var = (state.outputscale - (v * (C @ v)).sum(0)).clamp_min(0.0)
     c_norm = float(torch.linalg.matrix_norm(C, ord=2))
     bound = 64 * state.n_support * _EPS * c_norm * float(state.outputscale) * float(state.y_std) ** 2
-    return state.y_mean + state.y_std * (k @ state.alpha), state.y_std * var.sqrt(), bound
+    return state.y_mean + state.y_std * (k @ state.alpha) + state.prior_mean(x), state.y_std * var.sqrt(), bound
 
 
 def _estimator_rounding(state: PredictorState, x: torch.Tensor) -> torch.Tensor:
@@ -162,7 +162,8 @@ def verify_predictor(
         predictor: anything with ``forward``, ``bem_mean`` and ``predict_full`` (a loaded
             TorchScript module, a :class:`~bemlearn.export.pt2.Pt2Predictor`, a BEMPredictor).
         state: the posterior it was built from.
-        mean_atol: accepted |Δμ| in q_u's unit, plus the rounding allowance 10⁻¹² y_std σ_f² ‖α‖₁.
+        mean_atol: accepted |Δμ| in q_u's unit, plus the rounding allowance 10⁻¹² y_std σ_f² ‖α‖₁ (and
+            10⁻¹² y_std Σ_i |β̃_i| (|x_mean_i| / x_std_i + 10) for a linear prior mean).
         var_rtol: accepted |Δσ²| / σ²_ref, plus the reference's rounding bound.
         cases: the references, :func:`verification_cases` of ``state`` (with ``n``, ``seed``), when the
             caller checks several predictors of one state; default: computed here.
@@ -178,6 +179,9 @@ def verify_predictor(
     elif not hasattr(predictor, "forward_latent"):
         cases = tuple(c for c in cases if not c.name.endswith("_latent"))
     mean_tol = mean_atol + 1e-12 * float(state.y_std * state.outputscale) * float(state.alpha.abs().sum())
+    if state.linear_mean:   # the plane y_std β̃ᵀx̃ of eq. (L1), summed from physical (raw) or centred inputs
+        assert state.mean_slope is not None
+        mean_tol += 1e-12 * float(state.y_std * (state.mean_slope.abs() * (state.x_mean.abs() / state.x_std + 10.0)).sum())
     worst_mean, worst_var = 0.0, 0.0
     for case in cases:
         name, x = case.name, case.x

@@ -13,6 +13,7 @@ if TYPE_CHECKING:  # imported on first use: bemlearn._lazy
     from bemlearn.fitting.gpdm_fit import GPDMConfig, fit_gpdm, gpdm_metrics
     from bemlearn.fitting.init import data_hyperparameters, initial_hyperparameters, select_inducing_points, set_hyperparameters
     from bemlearn.fitting.kinds import FIT_RECIPES, FitRecipe, fit_recipe
+    from bemlearn.fitting.linear_mean import choose_prior_mean, least_squares_slope
     from bemlearn.fitting.optimize import NumericalFailure, minimize
     from bemlearn.fitting.result import Callback, FitResult, hyperparameter_metrics
     from bemlearn.fitting.sgpr import fit_sgpr
@@ -45,6 +46,8 @@ __all__ = [
     "set_hyperparameters",
     "select_inducing_points",
     "hyperparameter_metrics",
+    "least_squares_slope",
+    "choose_prior_mean",
 ]
 
 __getattr__, __dir__ = lazy_namespace(__name__, __file__)

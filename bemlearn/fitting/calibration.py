@@ -115,14 +115,24 @@ def condition_state(state: PredictorState, x: torch.Tensor, y: torch.Tensor) -> 
         x: ``(N, d)`` physical inputs; y: ``(N,)`` outputs, in q_u's unit.
 
     Returns:
-        an exact-kind state (α = K⁻¹ỹ, S = K⁻¹, K = K_XX + σ_0² I on normalized data).
+        an exact-kind state (α = K⁻¹ỹ, S = K⁻¹, K = K_XX + σ_0² I on normalized data).  A state with a linear
+        prior mean (eq. L1) gets its plane refitted to these data (:func:`~bemlearn.fitting.linear_mean.least_squares_slope`,
+        the columns ``state`` does not use kept out), and α is that of the residual: a replica is the whole fit on
+        other data, so the spread of the plane between replicas reaches the calibration.
     """
     xn = (x.to(torch.float64) - state.x_mean) / state.x_std
     yn = (y.to(torch.float64) - state.y_mean) / state.y_std
     n = xn.shape[0]
+    assert state.mean_slope is not None  # filled by PredictorState.__post_init__
+    slope = state.mean_slope
+    if state.linear_mean:
+        from bemlearn.fitting.linear_mean import least_squares_slope
+
+        slope = least_squares_slope(xn, yn, fixed=[j for j in range(state.dim) if float(state.mean_slope[j]) == 0.0])
+        yn = yn - xn @ slope
     probe = dataclasses.replace(state, kind="exact", Z=xn, alpha=torch.zeros(n, dtype=torch.float64),
                                 S=torch.zeros(n, n, dtype=torch.float64), n_train=n, estimator_delta=None,
-                                S_chol=None, S_inner=None)
+                                S_chol=None, S_inner=None, mean_slope=slope)
     K = probe.gram()
     L, info = torch.linalg.cholesky_ex(K)
     jitter = 1e-10 * float(state.outputscale)

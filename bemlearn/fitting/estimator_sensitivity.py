@@ -56,10 +56,12 @@ def projected_weights(state: PredictorState, x: torch.Tensor, y: torch.Tensor) -
     """α(X) of (E1): ``(M,)`` normalized weights on ``state.Z`` for data ``x (N, d)``, ``y (N,)`` (physical units).
 
     Computed as α = L⁻ᵀ B⁻¹ A ỹ / σ_0 with L Lᵀ = K_ZZ (+ jitter), A = L⁻¹ K_ZX / σ_0,
-    B = I + A Aᵀ, which stays accurate when K_ZZ is ill-conditioned.
+    B = I + A Aᵀ, which stays accurate when K_ZZ is ill-conditioned.  With a linear prior mean (eq. L1 of
+    :mod:`bemlearn.models.predictor_state`) ỹ is the residual from the state's plane, held fixed: δ is a shift of
+    the kernel weights only.
     """
     xn = (x.to(torch.float64) - state.x_mean) / state.x_std
-    yn = (y.to(torch.float64) - state.y_mean) / state.y_std
+    yn = state.label_residual(x, y)
     sigma = float(state.noise) ** 0.5
     Kzz = _cross(state, state.Z)
     jitter = 1e-10 * float(state.outputscale)

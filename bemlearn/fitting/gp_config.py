@@ -29,6 +29,13 @@ class GPConfig:
 
     Attributes:
         kind: ``"exact"``, ``"sgpr"`` or ``"svgp"`` (see ``bemlearn.models.GP_KINDS``).
+        mean: the GP's prior mean: ``"zero"`` (eq. 11 as written), ``"linear"``, a least-squares plane in the
+            inputs with the kernel on its residual (eq. L1 of ``bemlearn.fitting.linear_mean``: the BEM's
+            linearisation at the upright), or ``"auto"``: both are fitted and the data choose by the marginal
+            likelihood with the plane's coefficients priced (eq. L2).  The plane extrapolates the mean better
+            beyond the excited states, but its band there is the residual's, often too narrow (docs/family.md);
+            the zero mean's band widens.  Applied by the training stage (``bemlearn.pipeline.fit_bem_gp``);
+            ``train_gp`` fits the labels it is given.
         n_inducing: number of inducing points M (sgpr, svgp).
         inducing_init: ``"kmeans++"`` (D²-weighted seeding) or ``"random"`` subset of the inputs.
         learn_inducing: optimize the inducing inputs Z.
@@ -56,6 +63,7 @@ class GPConfig:
     """
 
     kind: Literal["exact", "sgpr", "svgp"] = "exact"
+    mean: Literal["zero", "linear", "auto"] = "zero"
     n_inducing: int = 256
     inducing_init: Literal["kmeans++", "random"] = "kmeans++"
     learn_inducing: bool = True

@@ -72,6 +72,7 @@ def predictor_state(
     y_std: torch.Tensor | float,
     input_names: Sequence[str],
     n_train: int,
+    mean_slope: torch.Tensor | None = None,
 ) -> PredictorState:
     """The frozen float64 posterior of ``model`` (any kind), detached from GPyTorch.
 
@@ -84,10 +85,12 @@ def predictor_state(
         y_std: ``()`` output normalization's std, in q_u's unit.
         input_names: the d column names in order.
         n_train: number of training points the posterior was conditioned on.
+        mean_slope: ``(d,)`` β̃ of a linear prior mean (eq. L1 of :mod:`bemlearn.models.predictor_state`) when
+            ``model`` was fitted to the residual ỹ − β̃ᵀx̃; ``None``: a zero mean.
 
     Returns:
         a :class:`PredictorState` whose ``predict_reference`` equals :func:`~bemlearn.models.predict.predict`
-        mapped to physical units.
+        mapped to physical units (plus the plane y_std β̃ᵀx̃ of ``mean_slope``).
     """
     kind = as_gp(model).kind
     Z, alpha, S = posterior_weights(model, likelihood)
@@ -121,4 +124,5 @@ def predictor_state(
         n_train=int(n_train),
         S_chol=None if factor is None else _t(factor[0]),
         S_inner=None if factor is None else _t(factor[1]),
+        mean_slope=None if mean_slope is None else _t(mean_slope).reshape(-1),
     )

@@ -8,9 +8,10 @@ expansion of the posterior mean: the output picks up the variance
 with, for the squared-exponential mean μ(x) = y_mean + y_std Σ_j α_j σ_f² exp(−½‖(x̃ − z_j)/ℓ‖²)
 (eq. 11, 12), x̃ = (x − x_mean)/x_std,
 
-    ∂μ/∂x_i = −(y_std / x_std_i) Σ_j α_j k_j (x̃_i − z_ji) / ℓ_i²                   (N2)
+    ∂μ/∂x_i = −(y_std / x_std_i) Σ_j α_j k_j (x̃_i − z_ji) / ℓ_i²  [+ y_std β̃_i / x_std_i]   (N2)
 
-(a weighted sum of the same exponentials as μ).  For Savitzky–Golay derivatives of
+(a weighted sum of the same exponentials as μ; the bracket is the constant slope of a linear prior
+mean, eq. L1 of :mod:`bemlearn.models.predictor_state`).  For Savitzky–Golay derivatives of
 angles quantized with step Δ (white, variance Δ²/12), the filter is linear, so
 
     s(q) = Δ/√12 ‖h₀‖,   s(q̇) = Δ/√12 ‖h₁‖,   s(q̈) = Δ/√12 ‖h₂‖                     (N3)
@@ -59,7 +60,7 @@ def mean_gradient_from_row(state: PredictorState, x: torch.Tensor, k: torch.Tens
         rows = slice(i, i + GRADIENT_BLOCK)
         diff = (xn[rows, None, :] - state.Z[None, :, :]) / state.lengthscale  # (rows, M, d)
         g[rows] = -(ak[rows, :, None] * diff).sum(1) / state.lengthscale     # ∂μ̃/∂x̃
-    return state.y_std * g / state.x_std
+    return state.y_std * g / state.x_std + state.prior_mean_gradient()   # + y_std β̃/x_std of a linear prior mean (L1)
 
 
 def savgol_noise_std(window: int, polyorder: int, sample_rate_hz: float, step: float) -> tuple[float, float]:

@@ -31,6 +31,15 @@ authoritative and S is only its explicit product.
 
 and in physical units μ(x) = y_mean + y_std μ̃(x̃), σ(x) = y_std σ̃(x̃).
 
+A *linear prior mean* (``mean_slope`` β̃, :mod:`bemlearn.fitting.linear_mean`) puts the GP on the
+residual of a least-squares plane: the label is modelled as ỹ = β̃ᵀx̃ + f(x̃), so
+
+    μ̃(x̃) = β̃ᵀx̃ + k_Z(x̃)ᵀ α                     (L1)
+
+with α the weights of the residual ỹ − β̃ᵀx̃ (the training columns are centred by the normalization,
+so the plane needs no intercept); σ̃ is unchanged (β̃ is held fixed; its spread between training
+trials reaches the band through the replica calibration c, which refits it, docs/uncertainty.md).  β̃ = 0 (the default) is the zero-mean GP of eq. (11).
+
 The calibrated band (docs/uncertainty.md) adds three fields: ``std_scale`` c (trial-split
 replica calibration, :mod:`bemlearn.fitting.calibration`), ``input_std`` s (the
 derivative estimator's quantization noise in each input column, :mod:`bemlearn.models.input_noise`)
@@ -93,6 +102,8 @@ class PredictorState:
             terms' variances (default K = 0: no such term).
         S_chol: ``(M, M)`` lower-triangular L, L Lᵀ = K_ZZ + j I (sparse kinds), or ``None``.
         S_inner: ``(M, M)`` symmetric C with S = L⁻ᵀ C L⁻¹ (given with ``S_chol``), or ``None``.
+        mean_slope: ``(d,)`` β̃ of the linear prior mean (L1), normalized output per normalized input
+            (default zeros: the zero-mean GP).
     """
 
     kind: GPKind
@@ -113,6 +124,7 @@ class PredictorState:
     estimator_delta: torch.Tensor | None = None
     S_chol: torch.Tensor | None = None
     S_inner: torch.Tensor | None = None
+    mean_slope: torch.Tensor | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in GP_KINDS:
@@ -125,7 +137,10 @@ class PredictorState:
         if self.estimator_delta is None or (self.estimator_delta.ndim == 2 and self.estimator_delta.shape[1] == 0):
             # the empty default carries no information; it follows Z (e.g. through dataclasses.replace)
             object.__setattr__(self, "estimator_delta", torch.zeros(M, 0, dtype=self.Z.dtype, device=self.Z.device))
+        if self.mean_slope is None:
+            object.__setattr__(self, "mean_slope", torch.zeros(d, dtype=self.Z.dtype, device=self.Z.device))
         assert self.std_scale is not None and self.input_std is not None and self.estimator_delta is not None
+        assert self.mean_slope is not None
         checks = {
             "alpha": (self.alpha, (M,)),
             "S": (self.S, (M, M)),
@@ -138,6 +153,7 @@ class PredictorState:
             "y_std": (self.y_std, ()),
             "std_scale": (self.std_scale, ()),
             "input_std": (self.input_std, (d,)),
+            "mean_slope": (self.mean_slope, (d,)),
             "estimator_delta": (self.estimator_delta, (M, int(self.estimator_delta.shape[-1]) if self.estimator_delta.ndim == 2 else "K")),
         }
         for name, (t, shape) in checks.items():
@@ -211,6 +227,30 @@ class PredictorState:
         return dataclasses.replace(self, **moved)
 
     @property
+    def linear_mean(self) -> bool:
+        """Whether the prior mean is the plane β̃ᵀx̃ of (L1) (some β̃_i ≠ 0) rather than zero."""
+        assert self.mean_slope is not None  # filled by __post_init__
+        return bool((self.mean_slope != 0).any())
+
+    def prior_mean(self, x: torch.Tensor) -> torch.Tensor:
+        """y_std β̃ᵀx̃ of (L1): ``(B,)`` in q_u's unit for ``x: (B, d)`` physical inputs (zeros for a zero mean);
+        μ = y_mean + prior_mean(x) + y_std k_Z(x̃)ᵀα."""
+        assert self.mean_slope is not None  # filled by __post_init__
+        return self.y_std * (self.normalize(x) @ self.mean_slope)
+
+    def prior_mean_gradient(self) -> torch.Tensor:
+        """∂(prior_mean)/∂x = y_std β̃ / x_std: ``(d,)``, q_u's unit per input unit (constant)."""
+        assert self.mean_slope is not None  # filled by __post_init__
+        return self.y_std * self.mean_slope / self.x_std
+
+    def label_residual(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        """ỹ − β̃ᵀx̃, the normalized label the kernel part of (L1) is conditioned on: ``(N,)`` for physical
+        ``x: (N, d)`` and ``y: (N,)`` in q_u's unit."""
+        yn = (y.to(torch.float64) - self.y_mean) / self.y_std
+        assert self.mean_slope is not None  # filled by __post_init__
+        return yn - self.normalize(x.to(torch.float64)) @ self.mean_slope
+
+    @property
     def factored(self) -> bool:
         """Whether S is held as L⁻ᵀ C L⁻¹ (``S_chol``, ``S_inner``; sparse kinds)."""
         return self.S_chol is not None
@@ -275,4 +315,4 @@ class PredictorState:
         else:
             var = self.outputscale - ((k @ self.S) * k).sum(-1)
         std = var.clamp_min(0.0).sqrt()
-        return self.y_mean + self.y_std * mean, self.y_std * std, k
+        return self.y_mean + self.y_std * mean + self.prior_mean(x), self.y_std * std, k

@@ -3,7 +3,9 @@
     q_u = f(x) + ε,  x = [q̈_a, q̇_a, q_a, q̈_u, q̇_u],  f ~ GP(0, k),  ε ~ N(0, σ_0²)      (11)
 
 :func:`fit_bem_gp` takes the training points in physical units with their normalization,
-builds and fits the configured GP (exact, sgpr, svgp), logs the fit to TensorBoard, freezes
+builds and fits the configured GP (exact, sgpr, svgp) — with the configured prior mean: zero as in eq. (11), or a
+least-squares plane under the kernel (``train.mean``, eq. L1–L2 of :mod:`bemlearn.fitting.linear_mean`) —,
+logs the fit to TensorBoard, freezes
 the posterior (:class:`~bemlearn.models.PredictorState`) and writes ``checkpoint.pt``.
 The generic pipeline (:func:`bemlearn.pipeline.train.train_run`) and the applications (e.g.
 the biped's torso BEM) both call it; exporting the predictor is the next shared stage,
@@ -27,6 +29,7 @@ from bemlearn.errors import ArgumentError
 from bemlearn.export.checkpoint import load_checkpoint, write_checkpoint
 from bemlearn.fitting import build_gp, fit_gp, hyperparameter_metrics
 from bemlearn.fitting.gp_config import GPConfig
+from bemlearn.fitting.linear_mean import choose_prior_mean, least_squares_slope
 from bemlearn.models import predictor_state
 from bemlearn.models.kernels import LEFT_OUT_LENGTHSCALE
 from bemlearn.models.predictor_state import PredictorState
@@ -137,10 +140,40 @@ def fit_bem_gp(
         xn = xn.clone()
         xn[:, left] = 0.0
         log.info("GP inputs left out (ℓ = %g): %s", LEFT_OUT_LENGTHSCALE, ", ".join(left_out))
-    model, lik = build_gp(xn, yn, config=config)
-    if resume:
-        _resume(model, lik, out)
-    fit, interrupted = _fit(model, lik, xn, yn, config=config, writer=writer, names=names, progress=progress)
+    slope: torch.Tensor | None = None
+    mean_choice: dict[str, Any] | None = None
+    explained: float | None = None
+    if config.mean == "zero":
+        model, lik = build_gp(xn, yn, config=config)
+        if resume:
+            _resume(model, lik, out)
+        fit, interrupted = _fit(model, lik, xn, yn, config=config, writer=writer, names=names, progress=progress)
+    else:   # eq. (L1): the plane first, the kernel on its residual
+        slope = least_squares_slope(xn, yn, fixed=left)
+        residual = yn - (xn.to(torch.float64) @ slope).to(dtype)
+        explained = 1.0 - float(residual.var() / yn.var().clamp_min(1e-300))
+        log.info("GP prior mean: a least-squares plane (eq. L1) explains %.4g %% of the label's variance", 100.0 * explained)
+        model, lik = build_gp(xn, residual, config=config)
+        if resume:
+            _resume(model, lik, out)
+        fit, interrupted = _fit(model, lik, xn, residual, config=config, writer=writer, names=names, progress=progress)
+        if config.mean == "auto" and not interrupted:
+            zero = build_gp(xn, yn, config=config)
+            if resume:
+                _resume(*zero, out)
+            zero_fit, interrupted = _fit(*zero, xn, yn, config=config, writer=writer, names=names, progress=progress,
+                                         tag="train_zero_mean")
+            if not interrupted:
+                mean_choice = choose_prior_mean(fit["loss"], zero_fit["loss"], n=int(yn.shape[0]),
+                                                n_coefficients=int((slope != 0).sum()), explained=explained)
+                log.info("GP prior mean (eq. L2): %s — −log p: plane %.1f + price %.1f vs zero mean %.1f nats",
+                         mean_choice["chosen"], mean_choice["nlml_linear"], mean_choice["penalty"], mean_choice["nlml_zero"])
+                if mean_choice["chosen"] == "zero":
+                    slope, (model, lik), fit = None, zero, zero_fit
+    if mean_choice is None:   # as configured (or auto cut short by Ctrl-C)
+        mean_choice = {"chosen": "linear" if slope is not None else "zero", "by": f"train.mean: {config.mean}",
+                       **({"explained": explained} if slope is not None and explained is not None else {})}
+    fit["prior_mean"] = mean_choice
     if left:
         kernel: Any = model.covar_module   # a gpytorch ScaleKernel: nn.Module attributes are untyped
         ls = kernel.base_kernel.lengthscale.detach().clone()
@@ -150,7 +183,7 @@ def fit_bem_gp(
     lik.eval()
     state = predictor_state(
         model, lik, x_mean=normalization.x_mean, x_std=normalization.x_std, y_mean=normalization.y_mean,
-        y_std=normalization.y_std, input_names=names, n_train=int(y.shape[0]),
+        y_std=normalization.y_std, input_names=names, n_train=int(y.shape[0]), mean_slope=slope,
     )
     latent_check = None if interrupted else _frozen_latent_check(state, model, lik, xn, dtype, config.device)
     calibration = None
@@ -163,6 +196,7 @@ def fit_bem_gp(
     hyp = hyperparameter_metrics(model, lik)
     phys_ls = {n: (None if n in left_out else float(state.lengthscale[j] * state.x_std[j])) for j, n in enumerate(names)}
     extra = {"interrupted": interrupted, "robot_ref": dict(provenance.robot), **dict(provenance.extra),
+             "prior_mean": fit["prior_mean"],
              **({"frozen_latent_check": latent_check} if latent_check is not None else {}),
              **({"uncertainty": calibration} if calibration is not None else {})}
     path = write_checkpoint(
@@ -185,15 +219,18 @@ def _resume(model, lik, out: Path) -> None:
 
 
 def _fit(model, lik, xn: torch.Tensor, yn: torch.Tensor, *, config: GPConfig, writer, names: tuple[str, ...],
-         progress: bool) -> tuple[dict[str, Any], bool]:
-    """Fit in place, logging to ``writer``; returns the fit summary and whether Ctrl-C stopped it."""
+         progress: bool, tag: str = "train") -> tuple[dict[str, Any], bool]:
+    """Fit in place, logging to ``writer`` under ``tag``; returns the fit summary and whether Ctrl-C stopped it."""
 
     def callback(step: int, metrics: dict[str, float]) -> None:
         if writer is None:
             return
         for k, v in metrics.items():
-            tag = f"lengthscale/{names[int(k.split('_')[1])]}" if k.startswith("lengthscale_") else f"train/{k}"
-            writer.add_scalar(tag, v, step)
+            if k.startswith("lengthscale_"):   # the fit that is kept: lengthscale/<input>; a compared one under its tag
+                name = f"lengthscale/{names[int(k.split('_')[1])]}"
+                writer.add_scalar(name if tag == "train" else f"{tag}/{name}", v, step)
+            else:
+                writer.add_scalar(f"{tag}/{k}", v, step)
 
     log.info("fit: %s GP on %d points, %s", config.kind, int(yn.shape[0]), config.optimizer)
     t0 = time.perf_counter()

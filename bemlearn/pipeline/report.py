@@ -131,7 +131,22 @@ def _fit_lines(config, train: RunMetrics) -> list[str]:
     steps = fit.steps if fit and fit.steps is not None else "—"
     return ["## Learned BEM (eq. 11–14)",
             f"{config.train.kind} GP on {train.n_train} points: the fit {how} after {steps} evaluations "
-            f"in {_f(fit.seconds if fit else None, '.1f')} s" + (" (interrupted)" if train.interrupted else "") + ".", ""]
+            f"in {_f(fit.seconds if fit else None, '.1f')} s" + (" (interrupted)" if train.interrupted else "") + "."
+            + _prior_mean_text(fit.prior_mean if fit else None), ""]
+
+
+def _prior_mean_text(pm) -> str:
+    """The prior mean in a sentence (eq. L1, L2), or nothing for the zero mean asked for by the config."""
+    if pm is None or (pm.chosen == "zero" and pm.nlml_zero is None):
+        return ""
+    plane = f"a least-squares plane in the inputs (eq. L1, explaining {_f(100 * pm.explained, '.2f')} % of the label's variance)" \
+        if pm.explained is not None else "a least-squares plane in the inputs (eq. L1)"
+    if pm.nlml_zero is None:
+        return f" Prior mean: {plane}."
+    compared = (f"−log p {_f(pm.nlml_linear, '.1f')} + {_f(pm.penalty, '.1f')} for its coefficients against "
+                f"{_f(pm.nlml_zero, '.1f')} nats for the zero mean, eq. L2")
+    return (f" Prior mean: {plane} ({compared})." if pm.chosen == "linear" else
+            f" Prior mean: zero; {plane} did not pay for its coefficients ({compared}).")
 
 
 def _data_only_lines(train: RunMetrics, unit: str, config=None) -> list[str]:

@@ -149,12 +149,25 @@ class DatasetInfo(_Record):
 
 
 @dataclass(kw_only=True)
+class PriorMeanInfo(_Record):
+    """The GP's prior mean (``fit.prior_mean``: :func:`~bemlearn.fitting.linear_mean.choose_prior_mean`'s record, or
+    the configured one)."""
+
+    chosen: str | None = None
+    explained: float | None = None
+    nlml_linear: float | None = None
+    nlml_zero: float | None = None
+    penalty: float | None = None
+
+
+@dataclass(kw_only=True)
 class FitInfo(_Record):
     """The GP fit (``fit``)."""
 
     stop_reason: str | None = None
     steps: int | None = None
     seconds: float | None = None
+    prior_mean: PriorMeanInfo | None = field(default=None, metadata=_one(PriorMeanInfo))
 
 
 @dataclass(kw_only=True)

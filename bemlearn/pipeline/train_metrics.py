@@ -64,7 +64,7 @@ def _validation_metrics(stage: GPStageResult, train: BEMDataset, val: BEMDataset
     state, model, lik = stage.state, stage.model, stage.likelihood
     dtype = gp_cfg.torch_dtype
     mean, var = predict(model, lik, val.x_normalized.to(device=gp_cfg.device, dtype=dtype), noisy=True)
-    mean = mean.cpu().to(torch.float64) * train.y_std + train.y_mean
+    mean = mean.cpu().to(torch.float64) * train.y_std + train.y_mean + state.prior_mean(val.x.to(torch.float64))   # eq. (L1)
     var_pred = var.cpu().to(torch.float64) * train.y_std**2
     err = mean - val.y
     rmse = float(err.pow(2).mean().sqrt())

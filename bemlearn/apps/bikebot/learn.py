@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from bemlearn.apps.bikebot.ride import RideLog, RideReference, simulate_ride
-from bemlearn.errors import DataError
+from bemlearn.errors import ConfigError, DataError
 from bemlearn.fitting.gp_config import GPConfig
 
 __all__ = ["INPUT_NAMES", "excitation_references", "excitation_rides", "ride_gp_data", "RollGP", "fit_roll_gp",
@@ -178,10 +178,17 @@ class RollGP:
 def fit_roll_gp(X: np.ndarray, y: np.ndarray, *, rear_radius: float, config: GPConfig | None = None,
                 progress: bool = False) -> RollGP:
     """Fit the GP of φ on ``X (N, 7)``, ``y (N,)`` (float64) with :func:`bemlearn.fitting.train_gp`
-    (``config`` default: an exact GP)."""
+    (``config`` default: an exact GP).
+
+    Raises:
+        ConfigError: ``config.mean`` other than ``"zero"`` (the roll GP has no plane).
+    """
     from bemlearn.data import Normalization
     from bemlearn.fitting import train_gp
 
+    if config is not None and config.mean != "zero":
+        raise ConfigError(f"fit_roll_gp: train.mean {config.mean!r}: the roll GP is fitted with a zero prior mean (eq. 11); "
+                          "set mean: zero")
     x, yt = torch.as_tensor(X, dtype=torch.float64), torch.as_tensor(y, dtype=torch.float64)
     nrm = Normalization.fit(x, yt, names=INPUT_NAMES)
     model, lik, res = train_gp(nrm.normalize_x(x), nrm.normalize_y(yt), config=config or GPConfig(), progress=progress)
