@@ -233,3 +233,18 @@ def test_the_report_says_which_prior_mean_the_run_used_and_why():
     assert "Prior mean: a least-squares plane" in text(chosen) and "−log p -1500.0 + 15.5" in text(chosen)
     kept_zero = choose_prior_mean(-2.91, -2.9, n=500, n_coefficients=5, explained=0.02)  # 5 nats gained, 15.5 priced
     assert text(kept_zero).startswith(" Prior mean: zero; a least-squares plane in the inputs (eq. L1, explaining 2.00 %")
+
+
+def test_the_exported_metadata_states_the_plane_in_physical_units():
+    import json
+
+    _, base = _exact_case(100, 1, seed=7)
+    st = _linear(base)
+    doc = json.loads(BEMPredictor(st, _metadata(st, 1)).metadata_json)
+    slope = doc["prior_mean"]["slope"]
+    assert doc["prior_mean"]["kind"] == "linear" and list(slope) == list(st.input_names)
+    # ∂(plane)/∂x_i = y_std β̃_i / x_std_i, q_u's unit per the column's unit
+    for i, name in enumerate(st.input_names):
+        assert slope[name] == pytest.approx(float(st.y_std * st.mean_slope[i] / st.x_std[i]), rel=1e-15)
+    assert doc["normalization"]["mean_slope"] == st.mean_slope.tolist()
+    assert "prior_mean" not in json.loads(BEMPredictor(base, _metadata(base, 1)).metadata_json)   # zero mean: as before

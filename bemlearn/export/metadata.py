@@ -260,6 +260,10 @@ def artifact_metadata(meta: PredictorMetadata, state: PredictorState) -> dict[st
         "bemlearn_version": meta.bemlearn_version,
         "data_sha256": meta.data_sha256,
     }
+    if state.linear_mean:   # eq. (L1): the plane under the GP, normalized and per input unit (q_u's unit per column unit)
+        assert state.mean_slope is not None
+        doc["normalization"]["mean_slope"] = state.mean_slope.tolist()
+        doc["prior_mean"] = {"kind": "linear", "slope": {n: float(g) for n, g in zip(meta.input_names, state.prior_mean_gradient().tolist())}}
     if meta.extra:
         doc["extra"] = jsonable(meta.extra, where="metadata")
         if "checkpoint_sha256" in meta.extra:  # recorded by export_run (bemlearn.export.staleness)
