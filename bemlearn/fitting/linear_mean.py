@@ -59,15 +59,17 @@ def least_squares_slope(xn: torch.Tensor, yn: torch.Tensor, *, fixed: Sequence[i
         raise ArgumentError(f"least_squares_slope: {n} rows for {d} columns; a plane needs more rows than columns")
     if not (bool(torch.isfinite(xn).all()) and bool(torch.isfinite(yn).all())):
         raise ArgumentError("least_squares_slope: non-finite training inputs or labels")
-    x = xn.to(torch.float64).clone()
-    use = [j for j in range(d) if j not in set(fixed)]
+    left = set(fixed)
+    use = [j for j in range(d) if j not in left]
     beta = torch.zeros(d, dtype=torch.float64)
     if not use:
         return beta
-    A = x[:, use] - x[:, use].mean(0)
+    A = xn[:, use].to(torch.float64)
+    A = A - A.mean(0)
+    y = yn.to(torch.float64)
     gram = A.T @ A
     gram.diagonal().add_(RIDGE * n)
-    beta[use] = torch.linalg.solve(gram, A.T @ (yn.to(torch.float64) - yn.to(torch.float64).mean()))
+    beta[use] = torch.linalg.solve(gram, A.T @ (y - y.mean()))
     return beta
 
 

@@ -140,39 +140,37 @@ def fit_bem_gp(
         xn = xn.clone()
         xn[:, left] = 0.0
         log.info("GP inputs left out (ℓ = %g): %s", LEFT_OUT_LENGTHSCALE, ", ".join(left_out))
+
+    def fit_to(labels: torch.Tensor, tag: str = "train"):
+        """A GP of the configured kind fitted to ``labels`` (resumed from the checkpoint in ``out`` if asked)."""
+        gp, likelihood = build_gp(xn, labels, config=config)
+        if resume:
+            _resume(gp, likelihood, out)
+        summary, stopped = _fit(gp, likelihood, xn, labels, config=config, writer=writer, names=names, progress=progress, tag=tag)
+        return gp, likelihood, summary, stopped
+
     slope: torch.Tensor | None = None
     mean_choice: dict[str, Any] | None = None
-    explained: float | None = None
     if config.mean == "zero":
-        model, lik = build_gp(xn, yn, config=config)
-        if resume:
-            _resume(model, lik, out)
-        fit, interrupted = _fit(model, lik, xn, yn, config=config, writer=writer, names=names, progress=progress)
+        model, lik, fit, interrupted = fit_to(yn)
+        mean_choice = {"chosen": "zero", "by": "train.mean: zero"}
     else:   # eq. (L1): the plane first, the kernel on its residual
         slope = least_squares_slope(xn, yn, fixed=left)
         residual = yn - (xn.to(torch.float64) @ slope).to(dtype)
         explained = 1.0 - float(residual.var() / yn.var().clamp_min(1e-300))
         log.info("GP prior mean: a least-squares plane (eq. L1) explains %.4g %% of the label's variance", 100.0 * explained)
-        model, lik = build_gp(xn, residual, config=config)
-        if resume:
-            _resume(model, lik, out)
-        fit, interrupted = _fit(model, lik, xn, residual, config=config, writer=writer, names=names, progress=progress)
+        model, lik, fit, interrupted = fit_to(residual)
         if config.mean == "auto" and not interrupted:
-            zero = build_gp(xn, yn, config=config)
-            if resume:
-                _resume(*zero, out)
-            zero_fit, interrupted = _fit(*zero, xn, yn, config=config, writer=writer, names=names, progress=progress,
-                                         tag="train_zero_mean")
+            zero_model, zero_lik, zero_fit, interrupted = fit_to(yn, "train_zero_mean")
             if not interrupted:
                 mean_choice = choose_prior_mean(fit["loss"], zero_fit["loss"], n=int(yn.shape[0]),
                                                 n_coefficients=int((slope != 0).sum()), explained=explained)
                 log.info("GP prior mean (eq. L2): %s — −log p: plane %.1f + price %.1f vs zero mean %.1f nats",
                          mean_choice["chosen"], mean_choice["nlml_linear"], mean_choice["penalty"], mean_choice["nlml_zero"])
                 if mean_choice["chosen"] == "zero":
-                    slope, (model, lik), fit = None, zero, zero_fit
-    if mean_choice is None:   # as configured (or auto cut short by Ctrl-C)
-        mean_choice = {"chosen": "linear" if slope is not None else "zero", "by": f"train.mean: {config.mean}",
-                       **({"explained": explained} if slope is not None and explained is not None else {})}
+                    slope, model, lik, fit = None, zero_model, zero_lik, zero_fit
+        if mean_choice is None:   # as configured (or auto cut short by Ctrl-C)
+            mean_choice = {"chosen": "linear", "by": f"train.mean: {config.mean}", "explained": explained}
     fit["prior_mean"] = mean_choice
     if left:
         kernel: Any = model.covar_module   # a gpytorch ScaleKernel: nn.Module attributes are untyped
