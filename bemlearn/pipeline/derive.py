@@ -413,7 +413,8 @@ def excitation_directions(robot, rate: RateChoice, signals: dict) -> Derived:
     (:func:`~bemlearn.robots.scales.velocity_stiffening_speed`: a component's peak speed √(a_j P_j) stays below it);
     both scaled down together until (q_a,j = ±P_j, q̈_a,j = ∓a_j) alone takes at most half the actuator limits
     (:func:`actuator_effort`); a component at ω on j has amplitude U(0.2, 1)/√n_max · min(P_j, a_j/ω²) (random
-    phases: n components add up as √n).
+    phases: n components add up as √n), and two of them are a slow and a fast anchor that bring the coordinate's
+    position and acceleration to their extents together (:func:`~bemlearn.sim.collect._two_band`).
 
     Returns:
         ``Derived({"reference_bem", "excursion", "amplitude"}, note)``.
@@ -465,6 +466,8 @@ def excitation_directions(robot, rate: RateChoice, signals: dict) -> Derived:
                 scaled.append(robot.joint_names[robot.actuated_index[j]])
     except (RobotModelError, NumericalError):
         pass
+    from bemlearn.sim.collect import ANCHOR_FRACTION
+
     n_max = signals["n_sines"][1]
     frac = (0.2 / math.sqrt(n_max), 1.0 / math.sqrt(n_max))
     ref = tuple(float(f"{x:.6g}") for x in (*sp, *sv, *sa, lam))
@@ -475,7 +478,8 @@ def excitation_directions(robot, rate: RateChoice, signals: dict) -> Derived:
             f"0.8 × half range, ±π for an unlimited hinge; a ≤ v²/P, v = {tuple(round(float(x), 3) for x in v_tip)} the speed "
             f"that doubles the upright's stiffness"
             f"{'; scaled to half the actuator limits on ' + ', '.join(scaled) if scaled else ''}); "
-            f"component amplitude U{tuple(round(x, 3) for x in frac)} × min(P_j, a_j/ω²)")
+            f"component amplitude U{tuple(round(x, 3) for x in frac)} × min(P_j, a_j/ω²), two of them a slow and a fast "
+            f"anchor at U{ANCHOR_FRACTION} of P_j and a_j (sim.collect._two_band)")
     return Derived({"reference_bem": ref, "excursion": ext, "amplitude": frac}, note)
 
 

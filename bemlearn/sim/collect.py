@@ -91,7 +91,8 @@ class CollectConfig:
             coordinates).  Else per actuated coordinate j its position extent P_j, then its acceleration extent a_j
             (2m values, its units): a component at ω on coordinate j has amplitude U(amplitude) · min(P_j, a_j/ω²),
             ``amplitude`` then a dimensionless fraction, so that each direction moves within its own scales whatever
-            the frequency (``null``: derived from the model, see ``bemlearn config show``).
+            the frequency; two of them become a slow and a fast anchor that bring q_a,j and q̈_a,j to their extents
+            together (:func:`_two_band`) (``null``: derived from the model, see ``bemlearn config show``).
         seed: master seed.
         workers: processes (0 = one per core, 1 = in-process).
         sensor: the encoder and velocity-filter model.
@@ -189,8 +190,9 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
     if config.reference_bem and config.excursion:
         pose = _pose_slopes(robot, np.asarray(config.excursion, dtype=np.float64)[:m], float(config.reference_bem[-1]))
     if config.excursion:
-        comps = [(A * _component_extent(config, j, w, swept), w, ph)
-                 for j, ((A, w, ph), swept) in enumerate(zip(comps, _swept(robot, config, pose)))]
+        swept_j = _swept(robot, config, pose)
+        comps = [(A * _component_extent(config, j, w, swept), w, ph) for j, ((A, w, ph), swept) in enumerate(zip(comps, swept_j))]
+        comps = [c if swept else _two_band(config, j, c, rng) for j, (c, swept) in enumerate(zip(comps, swept_j))]
     # the balance: scheduled over the pose where the fixed gains fail there; a swept hinge's known motion gets the
     # LQR along it (_tracking_gains), else the sweep's rate is bounded by the turning rate the schedule holds
     schedule = _gain_schedule(robot, config, K0, turning=False)
@@ -304,6 +306,49 @@ def _component_extent(config: CollectConfig, j: int, w: np.ndarray, swept: bool)
         return np.minimum(P, a / w**2)
     V, lam = math.sqrt(a * P), float(config.reference_bem[-1])
     return np.minimum(np.minimum(P, lam * V / w**2), V / w)
+
+
+#: The two anchor components of a coordinate's sines (:func:`_two_band`) take U(lo, hi) of its extent at the derived
+#: level (the level check's factor scales them with ``collect.amplitude``).
+ANCHOR_FRACTION = (0.6, 0.9)
+
+
+def _two_band(config: CollectConfig, j: int, comp: tuple, rng: np.random.Generator) -> tuple:
+    """Actuated coordinate j's sines ``comp = (A, ω, φ)`` (``(k,)`` each, after :func:`_component_extent`) with a slow
+    and a fast anchor, so that its position and acceleration reach their extents *together* (``collect.excursion``: P_j,
+    a_j; ω_lo, ω_hi from ``frequency_hz``):
+
+        ω₀ = ω_lo (ω_c/ω_lo)^(u/2),   A₀ = f₀ P_j                 (a slow sine: q to f₀ P_j, q̈ ≪ a_j)
+        ω₁ = ω_hi (ω_c/ω_hi)^(u'/2),  A₁ = f₁ a_j/ω₁²             (a fast sine: q̈ to f₁ a_j, q ≪ P_j)
+        ω_c = √(a_j/P_j),  f₀, f₁ ~ κ U(:data:`ANCHOR_FRACTION`),  κ = √n_max × ``amplitude``'s top,  u, u' ~ U(0, 1)
+
+    and the other components at half their drawn amplitude.  One sine has q̈ = −ω² q: it never puts position and
+    acceleration at their extents with the same sign, and a sum of k sines of similar fractions (U(0.2, 1)/√n_max
+    each) rarely puts either at its extent; but the design region's worst points lie where every actuated input is
+    at its edge at once (docs/family.md: on a two-link arm, 1–2 % of the samples had |q| and |q̈| beyond half their
+    extents with the same sign, and the design queries' nearest samples lay about 2 box half-widths away).  Two sines a
+    decade apart in frequency put (q, q̈) on the product of their ranges; the slow anchor's acceleration
+    (P_j ω₀² ≤ √(ω_lo/ω_c) a_j) and the fast one's excursion (a_j/ω₁² ≤ √(ω_c/ω_hi) P_j) stay small beside the
+    other's.  κ = 1 at the derived level; the excitation level check's halvings of ``amplitude`` halve it too.  A
+    coordinate whose crossover ω_c lies outside (ω_lo, ω_hi), or with a single component, keeps its sines."""
+    assert config.n_sines is not None and config.amplitude is not None and config.frequency_hz is not None
+    A, w, ph = (np.array(x, dtype=np.float64) for x in comp)
+    ext = np.asarray(config.excursion, dtype=np.float64)
+    m = ext.size // 2
+    P, a = float(ext[j]), float(ext[m + j])
+    w_lo, w_hi = 2 * math.pi * float(config.frequency_hz[0]), 2 * math.pi * float(config.frequency_hz[1])
+    w_c = math.sqrt(a / P)
+    if A.size < 2 or not w_lo < w_c < w_hi:
+        return comp
+    kappa = math.sqrt(config.n_sines[1]) * float(config.amplitude[1])
+    u = rng.uniform(size=2)
+    f = kappa * rng.uniform(*ANCHOR_FRACTION, size=2)
+    w[0] = w_lo * (w_c / w_lo) ** (0.5 * u[0])
+    w[1] = w_hi * (w_c / w_hi) ** (0.5 * u[1])
+    A[2:] *= 0.5
+    A[0] = f[0] * P
+    A[1] = f[1] * a / w[1] ** 2
+    return (A, w, ph)
 
 
 def _trajectory_reference(reference_bem: tuple[float, ...] | None, comps: list, m: int) -> list | None:
