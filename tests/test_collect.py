@@ -119,3 +119,60 @@ def test_reference_bem_and_excursion_are_checked():
         _trajectory_reference((1.0, 2.0), [(np.ones(1), np.ones(1), np.zeros(1))] * 2, 2)
     with pytest.raises(ConfigError, match="reference_bem"):
         _trajectory_reference((0.0,) * 6 + (-1.0,), [(np.ones(1), np.ones(1), np.zeros(1))] * 2, 2)
+
+
+def _anchored_draws(config: CollectConfig, j: int, seeds: range, anchored: bool) -> list[tuple]:
+    """Coordinate j's sines as :func:`simulate_trial` draws them (then extents, then the anchors when ``anchored``)."""
+    import math
+
+    from bemlearn.sim.collect import _component_extent, _two_band
+
+    out = []
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        k = int(rng.integers(config.n_sines[0], config.n_sines[1] + 1))
+        A = rng.uniform(*config.amplitude, size=k)
+        w = 2 * math.pi * rng.uniform(*config.frequency_hz, size=k)
+        ph = rng.uniform(0, 2 * math.pi, size=k)
+        comp = (A * _component_extent(config, j, w, False), w, ph)
+        out.append(_two_band(config, j, comp, rng) if anchored else comp)
+    return out
+
+
+def test_two_band_anchors_put_position_and_acceleration_at_their_extents_together():
+    """One sine has q̈ = −ω² q; the slow and the fast anchor (m ≥ 2, ``excursion``) make q > P/2 with q̈ > a/2 (same
+    sign) a regular state of the reference instead of an absent one, within the stated bands and scaled with the level."""
+    import math
+
+    P, a = 0.2, 5.0
+    config = CollectConfig(n_sines=(2, 4), amplitude=(0.1, 0.5), frequency_hz=(0.12, 1.8), excursion=(P, 0.3, a, 4.0))
+    t = np.arange(0.0, 400.0, 0.01)
+
+    def same_sign_share(comp):
+        A, w, ph = comp
+        s = np.sin(np.outer(t, w) + ph)
+        q, qdd = s @ A / P, -(s @ (A * w**2)) / a
+        return float(np.mean((np.abs(q) > 0.5) & (np.abs(qdd) > 0.5) & (np.sign(q) == np.sign(qdd)))), np.abs(q).max(), np.abs(qdd).max()
+
+    plain = [same_sign_share(c) for c in _anchored_draws(config, 0, range(20), False)]
+    anchored = [same_sign_share(c) for c in _anchored_draws(config, 0, range(20), True)]
+    assert np.median([p[0] for p in plain]) < 0.002
+    assert np.median([p[0] for p in anchored]) > 0.01
+    # every anchored draw reaches ≥ 0.6 × both extents (the anchors' fraction) and stays within 1.5 × them
+    assert min(p[1] for p in anchored) >= 0.6 and min(p[2] for p in anchored) >= 0.6
+    assert max(p[1] for p in anchored) <= 1.5 and max(p[2] for p in anchored) <= 1.5
+    # the anchors' frequencies lie in their bands: below √(ω_lo ω_c), above √(ω_c ω_hi)
+    w_lo, w_hi, w_c = 2 * math.pi * 0.12, 2 * math.pi * 1.8, math.sqrt(a / P)
+    for A, w, _ in _anchored_draws(config, 0, range(20), True):
+        assert w_lo <= w[0] <= math.sqrt(w_lo * w_c) + 1e-12 and math.sqrt(w_c * w_hi) - 1e-12 <= w[1] <= w_hi
+        assert 0.6 * P - 1e-12 <= A[0] <= 0.9 * P + 1e-12 and 0.6 * a - 1e-9 <= A[1] * w[1] ** 2 <= 0.9 * a + 1e-9
+    # the level check's halving of ``amplitude`` halves the anchors too
+    half = dataclasses.replace(config, amplitude=(0.05, 0.25))
+    for (A1, w1, _), (A2, w2, _) in zip(_anchored_draws(config, 0, range(5), True), _anchored_draws(half, 0, range(5), True)):
+        np.testing.assert_allclose(w2, w1)
+        np.testing.assert_allclose(A2, 0.5 * A1, rtol=1e-12)
+    # a coordinate whose crossover √(a/P) lies outside the band keeps its sines
+    flat = dataclasses.replace(config, excursion=(P, 0.3, 1000.0, 4.0))
+    for c1, c2 in zip(_anchored_draws(flat, 0, range(5), False), _anchored_draws(flat, 0, range(5), True)):
+        for x1, x2 in zip(c1, c2):
+            np.testing.assert_array_equal(x1, x2)

@@ -327,10 +327,11 @@ def _two_band(config: CollectConfig, j: int, comp: tuple, rng: np.random.Generat
     each) rarely puts either at its extent; but the design region's worst points lie where every actuated input is
     at its edge at once (docs/family.md: on a two-link arm, 1–2 % of the samples had |q| and |q̈| beyond half their
     extents with the same sign, and the design queries' nearest samples lay about 2 box half-widths away).  Two sines a
-    decade apart in frequency put (q, q̈) on the product of their ranges; the slow anchor's acceleration
-    (P_j ω₀² ≤ √(ω_lo/ω_c) a_j) and the fast one's excursion (a_j/ω₁² ≤ √(ω_c/ω_hi) P_j) stay small beside the
-    other's.  κ = 1 at the derived level; the excitation level check's halvings of ``amplitude`` halve it too.  A
-    coordinate whose crossover ω_c lies outside (ω_lo, ω_hi), or with a single component, keeps its sines."""
+    apart in frequency put (q, q̈) on nearly the product of their ranges: the slow anchor's acceleration is at most
+    (ω₀/ω_c)² ≤ ω_lo/ω_c of a_j and the fast one's excursion at most (ω_c/ω₁)² ≤ ω_c/ω_hi of P_j (on a two-link arm
+    of the robot family about 0.15 and 0.4: the band ω_hi/ω_lo is 15, the balance's own).  κ = 1 at the derived
+    level; the excitation level check's halvings of ``amplitude`` halve it too.  A coordinate whose crossover ω_c lies
+    outside (ω_lo, ω_hi), or with a single component, keeps its sines."""
     assert config.n_sines is not None and config.amplitude is not None and config.frequency_hz is not None
     A, w, ph = (np.array(x, dtype=np.float64) for x in comp)
     ext = np.asarray(config.excursion, dtype=np.float64)
