@@ -48,6 +48,7 @@ DERIVED_KEYS.update(f"simulate.gains.{k}" for k in _EIC_GAINS)
 DERIVED_KEYS.update(f"simulate.reference.{k}" for k in _REFERENCE)
 DERIVED_KEYS.update(f"simulate.sensor.{k}" for k in _MODEL_SENSOR)
 DERIVED_KEYS.update(f"evaluate.{k}" for k in _EVALUATE)
+DERIVED_KEYS.add("train.mean")   # zero, or auto where the excitation moves each actuated direction on its own
 #: The keys a model-free run's ``model:`` derives (the held-out references its learned BEM is compared along).
 MODEL_DERIVED_KEYS: set[str] = {f"evaluate.{k}" for k in _EVALUATE}
 
@@ -178,6 +179,9 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
     if wanted("simulate.sensor", _SENSOR):
         sen_sim = derive.closed_loop_sensor(robot, rs)
         _leaves("simulate.sensor", sen_sim.value, sen_sim.note, out)
+    if not _given(given, "train.mean"):
+        ext = config.collect.excursion if _given(given, "collect.excursion") else out.get("collect.excursion", ((), ""))[0]
+        _leaves("train.mean", "auto" if ext else "zero", PRIOR_MEAN_NOTE["auto" if ext else "zero"], out)
     if not _given(given, "dataset.cyclic"):
         from bemlearn.robots.cyclic import unbounded_cyclic
 
@@ -187,6 +191,16 @@ def derive_pipeline_values(robot, config: PipelineConfig, given: set[str] | froz
                                          "position is left out of the GP inputs" if left else
                                          "no actuated coordinate is both cyclic and without a joint range"), out)
     return out
+
+
+#: Why ``train.mean`` is derived as it is (:func:`derive_pipeline_values`).
+PRIOR_MEAN_NOTE = {
+    "auto": ("the excitation moves each actuated direction on its own (collect.excursion): the design region's 3m-dimensional "
+             "box has corners beyond the data jointly, where the trend the data support carries further than the zero "
+             "mean; the marginal likelihood chooses between the plane and the zero mean (eq. L2; docs/family.md)"),
+    "zero": ("the paper's excitation (one actuated direction, or amplitudes given in the joints' units): eq. 11's zero "
+             "mean (the plane the likelihood preferred bent an m = 1 robot's BEM at its design-box corners; docs/family.md)"),
+}
 
 
 def _collect_for_check(robot, config: PipelineConfig, given, out: dict, signals: dict, rate: RateChoice, fall_window: float):
