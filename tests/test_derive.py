@@ -503,3 +503,19 @@ def test_eic_gains_are_searched_in_mujoco_when_joint_friction_leaves_a_limit_cyc
     assert "the first choice" in chosen.note and "bring the robot back in MuJoCo" in chosen.note, chosen.note
     ok2, how2, tail2 = derive._recovery_run(arm, chosen.value, rate, qu0=e0, velocity_cutoff=wc)
     assert ok2 and tail2 < 0.25 * tail, (how2, tail)
+
+
+def test_prior_mean_is_derived_from_how_the_excitation_moves_the_actuated_directions():
+    """``train.mean``: ``zero`` (eq. 11) for the paper's excitation, ``auto`` (eq. L2) where the excitation moves
+    each actuated direction on its own (``collect.excursion`` non-empty); a given value is kept."""
+    from bemlearn.pipeline.derived_defaults import DERIVED_KEYS, PRIOR_MEAN_NOTE
+    from bemlearn.pipeline.resolve import resolve_pipeline_config
+
+    xml = str(ROBOTS / "cartpole.xml")
+    plain = resolve_pipeline_config({"robot": xml})
+    assert plain.config.train.mean == "zero" and plain.origins["train.mean"] == "derived"
+    assert plain.notes["train.mean"] == PRIOR_MEAN_NOTE["zero"] and "train.mean" in DERIVED_KEYS
+    directions = resolve_pipeline_config({"robot": xml, "collect": {"excursion": [0.2, 3.0]}})
+    assert directions.config.train.mean == "auto" and directions.notes["train.mean"] == PRIOR_MEAN_NOTE["auto"]
+    given = resolve_pipeline_config({"robot": xml, "collect": {"excursion": [0.2, 3.0]}, "train": {"mean": "linear"}})
+    assert given.config.train.mean == "linear" and given.origins["train.mean"] == "given"

@@ -35,7 +35,9 @@ class GPConfig:
             likelihood with the plane's coefficients priced (eq. L2).  The plane extrapolates the mean better
             beyond the excited states, but its band there is the residual's, often too narrow (docs/family.md);
             the zero mean's band widens.  Applied by the training stage (``bemlearn.pipeline.fit_bem_gp``);
-            ``train_gp`` fits the labels it is given.
+            ``train_gp`` fits the labels it is given.  A run with ``robot:`` derives it when the config does not give
+            it: ``auto`` where the excitation moves each actuated direction on its own (m ≥ 2, ``collect.excursion``),
+            else ``zero`` (``bemlearn config show``; ``bemlearn.pipeline.derived_defaults.PRIOR_MEAN_NOTE``).
         n_inducing: number of inducing points M (sgpr, svgp).
         inducing_init: ``"kmeans++"`` (D²-weighted seeding) or ``"random"`` subset of the inputs.
         learn_inducing: optimize the inducing inputs Z.
