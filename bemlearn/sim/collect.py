@@ -326,7 +326,7 @@ def _two_band(config: CollectConfig, j: int, comp: tuple, rng: np.random.Generat
     acceleration at their extents with the same sign, and a sum of k sines of similar fractions (U(0.2, 1)/√n_max
     each) rarely puts either at its extent; but the design region's worst points lie where every actuated input is
     at its edge at once (docs/family.md: on a two-link arm, 1–2 % of the samples had |q| and |q̈| beyond half their
-    extents with the same sign, and the design queries' nearest samples lay about 2 box half-widths away).  Two sines a
+    extents with the same sign, and the design queries' nearest samples lay about 2 box half-widths away).  Two sines far
     apart in frequency put (q, q̈) on nearly the product of their ranges: the slow anchor's acceleration is at most
     (ω₀/ω_c)² ≤ ω_lo/ω_c of a_j and the fast one's excursion at most (ω_c/ω₁)² ≤ ω_c/ω_hi of P_j (on a two-link arm
     of the robot family about 0.15 and 0.4: the band ω_hi/ω_lo is 15, the balance's own).  κ = 1 at the derived
