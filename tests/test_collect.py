@@ -123,17 +123,12 @@ def test_reference_bem_and_excursion_are_checked():
 
 def _anchored_draws(config: CollectConfig, j: int, seeds: range, anchored: bool) -> list[tuple]:
     """Coordinate j's sines as :func:`simulate_trial` draws them (then extents, then the anchors when ``anchored``)."""
-    import math
-
-    from bemlearn.sim.collect import _component_extent, _two_band
+    from bemlearn.sim.collect import _component_extent, _draw_sines, _two_band
 
     out = []
     for seed in seeds:
         rng = np.random.default_rng(seed)
-        k = int(rng.integers(config.n_sines[0], config.n_sines[1] + 1))
-        A = rng.uniform(*config.amplitude, size=k)
-        w = 2 * math.pi * rng.uniform(*config.frequency_hz, size=k)
-        ph = rng.uniform(0, 2 * math.pi, size=k)
+        A, w, ph = _draw_sines(config, 1, rng)[0]
         comp = (A * _component_extent(config, j, w, False), w, ph)
         out.append(_two_band(config, j, comp, rng) if anchored else comp)
     return out

@@ -176,11 +176,7 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
     K_scale = rng.uniform(*config.gain_scale, size=(m, 2 * n))
     K = K0 * K_scale
     # reference: per actuated joint a random sum of sines
-    n_sines = rng.integers(config.n_sines[0], config.n_sines[1] + 1, size=m)
-    comps = [
-        (rng.uniform(*config.amplitude, size=k), 2 * math.pi * rng.uniform(*config.frequency_hz, size=k), rng.uniform(0, 2 * math.pi, size=k))
-        for k in n_sines
-    ]
+    comps = _draw_sines(config, m, rng)
     if config.excursion:
         ext = np.asarray(config.excursion, dtype=np.float64)
         if ext.size != 2 * m or not np.all(ext > 0):
@@ -257,6 +253,15 @@ def simulate_trial(robot: MujocoRobot, config: CollectConfig, trial_id: int, see
         rec["q_meas"][tick], rec["u"][tick], rec["q"][tick], rec["qd"][tick], rec["qdd"][tick] = y, u, q_true, qd, qdd
     times = np.arange(k) * dt
     return TrialResult(trial_id, failed, times, *(rec[name][:k] for name in ("q_meas", "u", "q", "qd", "qdd")))
+
+
+def _draw_sines(config: CollectConfig, m: int, rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per actuated coordinate its reference's sines ``(A, ω, φ)`` (``(k,)`` each): k ~ U{``n_sines``}, A ~ U(``amplitude``),
+    ω = 2π U(``frequency_hz``), φ ~ U(0, 2π); the counts of all m coordinates are drawn first."""
+    assert config.n_sines is not None and config.amplitude is not None and config.frequency_hz is not None
+    n_sines = rng.integers(config.n_sines[0], config.n_sines[1] + 1, size=m)
+    return [(rng.uniform(*config.amplitude, size=k), 2 * math.pi * rng.uniform(*config.frequency_hz, size=k), rng.uniform(0, 2 * math.pi, size=k))
+            for k in n_sines]
 
 
 def _gain_schedule(robot: MujocoRobot, config: CollectConfig, K: np.ndarray, *, turning: bool = True):
