@@ -363,3 +363,34 @@ def test_the_confirming_trials_last_the_collection_trials_within_a_cap(monkeypat
     monkeypatch.setattr(derive, "_trials_fell", lambda robot, cfg, seqs: played.append(cfg.duration_s) or [False] * len(seqs))
     out = derive._excitation_amplitude_trials(None, collect, trials=4, duration_s=5.0, halvings=1)
     assert out.value == 1.0 and played == [5.0] and out.note.endswith("0/4 fall at A × 1")
+
+
+def test_eic_gains_search_damping_ratios_where_no_critically_damped_pair_brings_the_robot_back(tmp_path):
+    """Family robot (4, 9), a pendubot on a velocity servo at 294 Hz: two critically damped pairs of the grid make the
+    sampled loop stable (decaying at 0.28 and 0.36 1/s) and neither brings the pole back from d/4 in MuJoCo; the
+    second grid, with damping ratios (derive._damped_search), finds gains that do, k_d = 2 ζ ω with ζ ≠ 1."""
+    from bemlearn.bench.family.generator import generate_robot
+    from bemlearn.control.lqr import linearize
+
+    xml, _ = generate_robot(4, 9, hold_check=False)
+    path = tmp_path / "fam4_009.xml"
+    path.write_text(xml)
+    robot = MujocoRobot.from_xml(path)
+    rate = derive.control_rate(robot).value
+    wc = derive.closed_loop_sensor(robot, rate).value["velocity_cutoff"]
+    e0 = derive.design_region(robot).value / 4
+    lam = instability_rate(robot)
+    plant = linearize(robot, rate_hz=rate.rate_hz, timestep=rate.timestep)[:2]
+    critical = [derive._critical(wl * lam, r) for wl in derive.EIC_GRID_OMEGA_U for r in derive.EIC_GRID_RATIO
+                if wl * lam <= 2 * math.pi * rate.rate_hz / 10]
+    stable = [g for g in critical if eic_tick_loop(robot, g, rate_hz=rate.rate_hz, velocity_cutoff=wc, plant=plant).spectral_radius < 1]
+    assert 0 < len(stable) <= derive.EIC_SEARCH_TRIES
+    assert not any(derive.eic_recovery(robot, g, rate, qu0=e0, velocity_cutoff=wc)[0] for g in stable)
+    got = derive.eic_gains(robot, rate)
+    g = got.value
+    w_u, w_a = math.sqrt(g.kp_u), math.sqrt(g.kp_a)
+    zeta_u, zeta_a = g.kd_u / (2 * w_u), g.kd_a / (2 * w_a)
+    assert (zeta_u, zeta_a) != pytest.approx((1.0, 1.0)) and "ζ_u" in got.note
+    assert min(abs(zeta_u - z) for z in derive.EIC_GRID_DAMPING) < 1e-12
+    assert eic_tick_loop(robot, g, rate_hz=rate.rate_hz, velocity_cutoff=wc, plant=plant).spectral_radius < 1
+    assert derive.eic_recovery(robot, g, rate, qu0=e0, velocity_cutoff=wc)[0]

@@ -180,7 +180,7 @@ def _eic_checks(robot: MujocoRobot, config: PipelineConfig, d: float, qu_unit: s
             "eic_recovery", 0.0 if ok else 1.0, 0.0, "unusable",
             "the EIC loop with the model BEM in MuJoCo (sensors, actuator limits) " + (
                 f"brings {robot.unactuated_name} back: {how}" if ok else
-                f"cannot bring {robot.unactuated_name} back from {d / 4:g} {qu_unit} with the gains {_gains(sim.gains)}: it {how}")))
+                f"cannot bring {robot.unactuated_name} back from {d / 4:g} {qu_unit} with the gains {_gains(sim.gains)}: {how}")))
     return out
 
 
