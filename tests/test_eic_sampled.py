@@ -19,6 +19,18 @@ from bemlearn.robots.scales import instability_rate
 from bemlearn.sim.closed_loop import ReferenceConfig, SimulateConfig, simulate
 
 ROBOTS = Path(__file__).parent / "robots"
+
+
+def _family_robot(tmp_path: Path, seed: int, index: int) -> tuple[MujocoRobot, Path]:
+    """Robot ``index`` of the generated family ``seed`` (``bemlearn.bench.family``), written to ``tmp_path`` and loaded."""
+    from bemlearn.bench.family.generator import generate_robot
+
+    xml, _ = generate_robot(seed, index, hold_check=False)
+    path = tmp_path / f"fam{seed}_{index:03d}.xml"
+    path.write_text(xml)
+    return MujocoRobot.from_xml(path), path
+
+
 AT_REST = ReferenceConfig((0.0,), (0.0,), (0.0,), 0.0)
 
 
@@ -60,12 +72,7 @@ def test_velocity_filter_lag_destabilises_a_pendubot_the_continuous_model_calls_
     is stable but the sampled loop with its velocity filter grows, and the closed loop falls in MuJoCo; the derived
     gains (the search) make the sampled loop decay and the robot recover from a d/4 error.  (With the
     family's 4096-count encoder the rule's loop falls in the pipeline's closed loop at 1.3 s, docs/family.md.)"""
-    from bemlearn.bench.family.generator import generate_robot
-
-    xml, _ = generate_robot(0, 33, hold_check=False)
-    path = tmp_path / "fam0_033.xml"
-    path.write_text(xml)
-    robot = MujocoRobot.from_xml(path)
+    robot, _ = _family_robot(tmp_path, 0, 33)
     rate = derive.control_rate(robot).value
     wc = derive.closed_loop_sensor(robot, rate).value["velocity_cutoff"]
     w_u = 2.2 * instability_rate(robot)
@@ -107,14 +114,10 @@ def test_effort_capped_excitation_is_halved_until_its_trials_stay_up(tmp_path):
     trials the check never ran (other seeds) fewer fall."""
     import dataclasses
 
-    from bemlearn.bench.family.generator import generate_robot
     from bemlearn.pipeline.resolve import resolve_pipeline_config
     from bemlearn.sim.collect import simulate_trial
 
-    xml, _ = generate_robot(0, 27, hold_check=False)
-    path = tmp_path / "fam0_027.xml"
-    path.write_text(xml)
-    robot = MujocoRobot.from_xml(path)
+    robot, path = _family_robot(tmp_path, 0, 27)
     rate = derive.control_rate(robot).value
     sig = derive.excitation_signals(robot, rate).value
     assert sig["effort_capped"]
@@ -133,13 +136,9 @@ def test_excitation_amplitude_set_by_the_bem_budget_is_checked_by_trials_too(tmp
     """Family robot (1, 15), a pendubot on a velocity servo at 192 Hz: the BEM budget, not the actuator limits, sets the
     amplitude (0.063 rad), yet 11 of 12 five-second trials fell there (none without sines); the trials decide, and
     the derived amplitude is halved."""
-    from bemlearn.bench.family.generator import generate_robot
     from bemlearn.pipeline.resolve import resolve_pipeline_config
 
-    xml, _ = generate_robot(1, 15, hold_check=False)
-    path = tmp_path / "fam1_015.xml"
-    path.write_text(xml)
-    robot = MujocoRobot.from_xml(path)
+    robot, path = _family_robot(tmp_path, 1, 15)
     sig = derive.excitation_signals(robot, derive.control_rate(robot).value).value
     assert not sig["effort_capped"]
     resolved = resolve_pipeline_config({"robot": str(path)})
@@ -154,14 +153,10 @@ def test_the_excitation_level_the_first_trials_choose_is_confirmed_by_independen
     reject it, and the collection's own trials at the level chosen stay up."""
     import dataclasses
 
-    from bemlearn.bench.family.generator import generate_robot
     from bemlearn.pipeline.resolve import resolve_pipeline_config
     from bemlearn.sim.collect import simulate_trial
 
-    xml, _ = generate_robot(1, 33, hold_check=False)
-    path = tmp_path / "fam1_033.xml"
-    path.write_text(xml)
-    robot = MujocoRobot.from_xml(path)
+    robot, path = _family_robot(tmp_path, 1, 33)
     sig = derive.excitation_signals(robot, derive.control_rate(robot).value).value
     resolved = resolve_pipeline_config({"robot": str(path)})
     note = resolved.notes["collect.n_sines"]
@@ -184,12 +179,7 @@ def test_eic_gains_hold_the_closed_loop_reference_not_only_a_recovery(tmp_path):
     with an ideal encoder it tracks within 0.02 rad)."""
     import dataclasses
 
-    from bemlearn.bench.family.generator import generate_robot
-
-    xml, _ = generate_robot(0, 58, hold_check=False)
-    path = tmp_path / "fam0_058.xml"
-    path.write_text(xml)
-    robot = MujocoRobot.from_xml(path)
+    robot, _ = _family_robot(tmp_path, 0, 58)
     rate = derive.control_rate(robot).value
     sig = derive.excitation_signals(robot, rate).value
     ref = derive.closed_loop_reference(robot, sig).value
@@ -214,12 +204,7 @@ def test_eic_gains_derived_with_the_reference_hold_it(tmp_path):
     """Family robot (0, 58) (the test above): the gains :func:`derive.eic_gains` derives with the closed-loop
     reference hold that reference in MuJoCo (model BEM, encoders, limits) and track it within 0.05 rad RMS
     (measured 0.015); the gain search runs several MuJoCo loops (about 10 s on a quiet machine)."""
-    from bemlearn.bench.family.generator import generate_robot
-
-    xml, _ = generate_robot(0, 58, hold_check=False)
-    path = tmp_path / "fam0_058.xml"
-    path.write_text(xml)
-    robot = MujocoRobot.from_xml(path)
+    robot, _ = _family_robot(tmp_path, 0, 58)
     rate = derive.control_rate(robot).value
     ref = derive.closed_loop_reference(robot, derive.excitation_signals(robot, rate).value).value
     wc = derive.closed_loop_sensor(robot, rate).value["velocity_cutoff"]
@@ -369,13 +354,9 @@ def test_eic_gains_search_damping_ratios_where_no_critically_damped_pair_brings_
     """Family robot (4, 9), a pendubot on a velocity servo at 294 Hz: two critically damped pairs of the grid make the
     sampled loop stable (decaying at 0.28 and 0.36 1/s) and neither brings the pole back from d/4 in MuJoCo; the
     second grid, with damping ratios (derive._damped_search), finds gains that do, k_d = 2 ζ ω with ζ ≠ 1."""
-    from bemlearn.bench.family.generator import generate_robot
     from bemlearn.control.lqr import linearize
 
-    xml, _ = generate_robot(4, 9, hold_check=False)
-    path = tmp_path / "fam4_009.xml"
-    path.write_text(xml)
-    robot = MujocoRobot.from_xml(path)
+    robot, _ = _family_robot(tmp_path, 4, 9)
     rate = derive.control_rate(robot).value
     wc = derive.closed_loop_sensor(robot, rate).value["velocity_cutoff"]
     e0 = derive.design_region(robot).value / 4
