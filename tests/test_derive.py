@@ -496,7 +496,7 @@ def test_eic_gains_are_searched_in_mujoco_when_joint_friction_leaves_a_limit_cyc
     wc = derive.closed_loop_sensor(arm, rate).value["velocity_cutoff"]
     lam = instability_rate(arm)
     w_u, w_a, _ = eic_fastest_gains(arm, lam, 2 * math.pi * rate.rate_hz / 20)
-    ok, how, tail = derive._recovery_run(arm, derive._critical(w_u, w_u / w_a), rate, qu0=e0, velocity_cutoff=wc)
+    ok, how, tail = derive._recovery_run(arm, derive._loop_gains(w_u, w_u / w_a), rate, qu0=e0, velocity_cutoff=wc)
     end = float(how.split("(ends ")[1].split(")")[0])
     assert not ok and end <= e0 < 2 * e0 < tail, how
     chosen = derive.eic_gains(arm, rate)

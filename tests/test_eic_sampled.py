@@ -362,7 +362,7 @@ def test_eic_gains_search_damping_ratios_where_no_critically_damped_pair_brings_
     e0 = derive.design_region(robot).value / 4
     lam = instability_rate(robot)
     plant = linearize(robot, rate_hz=rate.rate_hz, timestep=rate.timestep)[:2]
-    critical = [derive._critical(wl * lam, r) for wl in derive.EIC_GRID_OMEGA_U for r in derive.EIC_GRID_RATIO
+    critical = [derive._loop_gains(wl * lam, r) for wl in derive.EIC_GRID_OMEGA_U for r in derive.EIC_GRID_RATIO
                 if wl * lam <= 2 * math.pi * rate.rate_hz / 10]
     stable = [g for g in critical if eic_tick_loop(robot, g, rate_hz=rate.rate_hz, velocity_cutoff=wc, plant=plant).spectral_radius < 1]
     assert 0 < len(stable) <= derive.EIC_SEARCH_TRIES

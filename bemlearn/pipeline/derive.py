@@ -672,7 +672,7 @@ EIC_GRID_DAMPING = (0.5, 0.7, 1.0, 1.5, 2.0)
 damped pair of the first one brings the robot back in MuJoCo."""
 
 
-def _critical(w_u: float, ratio: float, zeta_u: float = 1.0, zeta_a: float = 1.0):
+def _loop_gains(w_u: float, ratio: float, zeta_u: float = 1.0, zeta_a: float = 1.0):
     """EIC gains k_p = ω², k_d = 2 ζ ω of the internal (ω_u) and external (ω_a = ω_u/``ratio``) loops; critically
     damped by default."""
     from bemlearn.control.eic import EICGains
@@ -766,7 +766,7 @@ def _eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, veloci
         w_u, w_a, ab = eic_fastest_gains(robot, lam, w_max)
         peak = _eic_peak(robot, w_u, e0)
         if peak <= 1.0 and ab < 0:
-            gf = _critical(w_u, w_u / w_a)
+            gf = _loop_gains(w_u, w_u / w_a)
             nf = (f"m = {robot.m}: ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/{w_u / w_a:.3g}: "
                   f"the critically damped gains whose linearised EIC loop (eq. 8 with the null-space projector) decays "
                   f"fastest, max Re λ = {ab:.3g} 1/s (ω_u ∈ [1.2 λ, min(6 λ, 2π·rate/20)], ω_u/ω_a ∈ [2, 60]); "
@@ -787,7 +787,7 @@ def _eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, veloci
     while peak > 1.0 and w_u > 1.2 * lam:
         w_u = max(1.2 * lam, 0.9 * w_u)
         peak = _eic_peak(robot, w_u, e0)
-    g = _critical(w_u, 7.0)
+    g = _loop_gains(w_u, 7.0)
     note = (f"ω_u = {w_u:.3g} rad/s ({w_u / lam:.2g} λ, λ = {lam:.3g}), ω_a = ω_u/7, critically damped; "
             f"linearised command for a {e0:.3g} q_u error = {peak:.2f} × the actuator limits (ctrlrange, forcerange){fastest_fails}")
     if first is not None:
@@ -825,7 +825,7 @@ def _eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, veloci
         if wu > 2 * math.pi * rate.rate_hz / 10:
             continue
         for ratio in EIC_GRID_RATIO:
-            gg = _critical(wu, ratio)
+            gg = _loop_gains(wu, ratio)
             lp = sampled(gg)
             if lp.spectral_radius < 1.0:
                 stable.append((lp.decay_rate, wl, ratio, gg))
@@ -906,7 +906,7 @@ def _damped_search(robot, rate: RateChoice, lam: float, sampled: Callable, refer
         wu = wl * lam
         if (zu == 1.0 and za == 1.0) or wu > 2 * math.pi * rate.rate_hz / 10:
             continue
-        gg = _critical(wu, ratio, zu, za)
+        gg = _loop_gains(wu, ratio, zu, za)
         lp = sampled(gg)
         if lp is not None and lp.spectral_radius < 1.0:
             stable.append((lp.decay_rate, wl, ratio, zu, za, gg))
