@@ -714,10 +714,11 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     the same loop without the friction recovering; :func:`_friction_cycle_gains`): a two-link arm with a pole
     whose BEM moves with both joint angles (its external loop confined to ω_a ≈ 1 rad/s by the stable ridge) and
     0.024–0.038 N·m of static friction sticks off rest by up to 0.1 rad with the pole upright over it, q_u
-    (relative to the forearm) off nominal by as much, for every gain of the grid.  Otherwise the same grid with
-    damping ratios ζ_u, ζ_a ∈ :data:`EIC_GRID_DAMPING` (:func:`_damped_search`: the velocity filter's lag and the
-    held command move the damping that makes the loop as it runs decay away from 1).  Otherwise the
-    fastest-decaying critically damped pair (the model check ``eic_recovery`` then says the robot cannot be
+    (relative to the forearm) off nominal by as much, for every gain of the grid.  Otherwise, where no critically
+    damped pair is sampled-stable or one tried stayed up without settling, the same grid with damping ratios
+    ζ_u, ζ_a ∈ :data:`EIC_GRID_DAMPING` (:func:`_damped_search`: the velocity filter's lag and the held command move
+    the damping that makes the loop as it runs decay away from 1; where every pair tried fell, the basin is what
+    fails, as on the acrobots, and the damping is not searched).  Otherwise the fastest-decaying critically damped pair (the model check ``eic_recovery`` then says the robot cannot be
     balanced by the EIC).
 
     With ``reference`` (the closed-loop reference the run will play, :func:`closed_loop_reference`'s fields) a
@@ -870,7 +871,9 @@ def _eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, veloci
         return Derived(gg, f"{label}: none of the gains tried brings q_u back within {e0:.3g} of nominal (the first choice: {why}; "
                            f"the grid: " + "; ".join(tried) + f"); these hold the robot in the smallest stick-slip cycle of "
                            f"the joints' dry friction: {how}")
-    damped = _damped_search(robot, rate, lam, sampled, reference, qu0=e0, velocity_cutoff=wc)
+    # a loop that stayed up without settling is damped too lightly as it runs: the damping is searched; where every
+    # one tried fell, the basin is what fails (the acrobots fall within 0.2-0.5 s with every damping tried) and not
+    damped = _damped_search(robot, rate, lam, sampled, reference, qu0=e0, velocity_cutoff=wc) if unsettled else None
     if damped is not None:
         return Derived(damped[0], f"{damped[1]}: the first choice fails ({why}), and none of the {len(tried)} fastest-decaying "
                                   f"critically damped sampled-stable gains of the grid brings the robot back in MuJoCo: "
