@@ -460,3 +460,33 @@ def test_poses_without_a_design_take_their_neighbours_change_on_a_limited_and_a_
     gt = fill_between_poses(turn, np.where(okt[:, None, None], dt, np.nan), okt, periodic=True)
     np.testing.assert_allclose(gt[0], 0.5 * (dt[1] + dt[7]), rtol=0, atol=1e-15)
     np.testing.assert_array_equal(gt[1:], dt[1:])
+
+
+def test_tracking_gains_tail_is_at_most_the_trial_when_the_rest_loop_is_slower_than_it(turntable, monkeypatch):
+    """The backward recursion of collect._tracking_gains runs 5 × the rest loop's slowest time constant past the trial,
+    at most the trial's length (collect.tail_ticks): a rest design with a 10⁴ s mode would otherwise ask for 10⁷ ticks
+    (the maps interpolated at each: gigabytes); the gains returned are one per tick of the trial."""
+    import dataclasses
+
+    import bemlearn.control.lqr as lqr_mod
+    from bemlearn.sim import collect as col
+    from bemlearn.sim.collect import CollectConfig, tail_ticks
+
+    assert tail_ticks(0.9, 200.0, 4000) == 900 and tail_ticks(1400.0, 208.0, 4160) == 4160
+    n = turntable.n
+    A, B = np.eye(2 * n), np.zeros((2 * n, turntable.m))
+    maps = dataclasses.replace(_fixed_maps(A, B, np.eye(2 * n), np.eye(turntable.m), None), settle_s=1.0e4)
+    lengths = []
+
+    def fake_tracking(m, q, qd):
+        lengths.append(len(q))
+        return np.zeros((len(q), turntable.m, 2 * n))
+
+    monkeypatch.setattr(lqr_mod, "turning_maps", lambda *a, **k: maps)
+    monkeypatch.setattr(lqr_mod, "tracking_gains", fake_tracking)
+    cfg = CollectConfig(rate_hz=RATE, duration_s=2.0, n_sines=(2, 3), amplitude=(0.1, 0.5), initial_qa=(0.0, 0.05),
+                        excursion=(0.3, 0.3, math.pi, 2.0, 2.0, 8.0))
+    comps = (np.array([1.0, 0.5]), np.array([1.0, 3.0]), np.array([0.0, 0.3]))
+    G = col._tracking_gains(turntable, cfg, 2, comps)
+    n_ticks = int(round(cfg.duration_s * RATE))
+    assert lengths == [2 * n_ticks] and G.shape == (n_ticks, turntable.m, 2 * n)

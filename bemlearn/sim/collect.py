@@ -490,7 +490,7 @@ def _tracking_gains(robot: MujocoRobot, config: CollectConfig, j: int, comps_j: 
     reference anticipates exactly the turns it will make: on ``fam0_029`` (weak yaw servo, position-servo slides) 0 of
     24 trials fell with the sweep at its full rate (√(a P) = 5.7 rad/s), 17 with the pose schedule.  The recursion starts
     at P = Q a tail of 5 × the rest loop's slowest time constant after the trial's end (:class:`~bemlearn.control.lqr
-    .TurningMaps` ``settle_s``; it forgets its start at twice that rate).  The maps' rates reach the reference's
+    .TurningMaps` ``settle_s``; it forgets its start at twice that rate), at most the trial's length (:func:`tail_ticks`).  The maps' rates reach the reference's
     bound: the sweep's Ω_top (:func:`sweep_top`) and n_max × the top amplitude × √(a_j P_j) of the joint's own sines
     (:func:`_component_extent`)."""
     from bemlearn.control.lqr import tracking_gains, turning_maps
@@ -505,11 +505,22 @@ def _tracking_gains(robot: MujocoRobot, config: CollectConfig, j: int, comps_j: 
     maps = turning_maps(robot, j=j, extent=float(ext[j]), rate_max=float(sweep_top(robot, config)[j]) + own, rate_hz=config.rate_hz,
                         timestep=config.physics_timestep, design_qu=d, qu0=d / 4, qa0=qa0)
     n_ticks = int(round(config.duration_s * config.rate_hz))
-    t = np.arange(n_ticks + int(math.ceil(5 * maps.settle_s * config.rate_hz))) / config.rate_hz
+    t = np.arange(n_ticks + tail_ticks(maps.settle_s, config.rate_hz, n_ticks)) / config.rate_hz
     A, w, ph = comps_j
     arg = w[None, :] * t[:, None] + ph[None, :]
     G = tracking_gains(maps, np.sin(arg) @ A, np.cos(arg) @ (A * w))
     return G[:n_ticks] - maps.K_rest
+
+
+def tail_ticks(settle_s: float, rate_hz: float, n_ticks: int) -> int:
+    """The ticks :func:`_tracking_gains`' backward recursion runs past a trial of ``n_ticks`` ticks: 5 × the rest loop's
+    slowest time constant ``settle_s`` (s) at ``rate_hz``, at most the trial's own length.  On the robot family the
+    time constants were 0.5–0.9 s (tails of 2.5–4.5 s against trials of 20 s, never capped); a rest design whose R
+    was raised far to stay within the actuator limits can have a mode slower than the trial itself (one generated
+    turntable: 1400 s, a tail of 7.3 M ticks whose interpolated maps took 3.5 GB each, and two collection workers were
+    killed for memory).  There the gains along the trial depend on the recursion's start whatever the tail, and a
+    tail as long as the trial keeps the cost bounded."""
+    return min(int(math.ceil(5 * settle_s * rate_hz)), int(n_ticks))
 
 
 def sweep_top(robot: MujocoRobot, config: CollectConfig) -> np.ndarray:
