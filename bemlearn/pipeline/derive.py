@@ -718,8 +718,8 @@ def eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, velocit
     damped pair is sampled-stable or one tried stayed up without settling, the same grid with damping ratios
     ζ_u, ζ_a ∈ :data:`EIC_GRID_DAMPING` (:func:`_damped_search`: the velocity filter's lag and the held command move
     the damping that makes the loop as it runs decay away from 1; where every pair tried fell, the basin is what
-    fails, as on the acrobots, and the damping is not searched).  Otherwise the fastest-decaying critically damped pair (the model check ``eic_recovery`` then says the robot cannot be
-    balanced by the EIC).
+    fails, as on the acrobots, and the damping is not searched).  Otherwise the fastest-decaying critically damped
+    pair (the model check ``eic_recovery`` then says the robot cannot be balanced by the EIC).
 
     With ``reference`` (the closed-loop reference the run will play, :func:`closed_loop_reference`'s fields) a
     candidate must also hold that loop: the model BEM, the same sensors and limits, the reference played from rest
@@ -820,16 +820,7 @@ def _eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, veloci
             why = f"in MuJoCo they bring the robot back ({how}) but {how_ref}"
         else:
             why = f"in MuJoCo they do not bring the robot back ({how})"
-    stable = []
-    for wl in EIC_GRID_OMEGA_U:
-        wu = wl * lam
-        if wu > 2 * math.pi * rate.rate_hz / 10:
-            continue
-        for ratio in EIC_GRID_RATIO:
-            gg = _loop_gains(wu, ratio)
-            lp = sampled(gg)
-            if lp.spectral_radius < 1.0:
-                stable.append((lp.decay_rate, wl, ratio, gg))
+    stable = _grid_stable(lam, rate, sampled, ((1.0, 1.0),))
     if not stable:
         cycles = _friction_cycle_gains(robot, unsettled, rate, reference, qu0=e0, velocity_cutoff=wc)
         if cycles is not None:
@@ -842,25 +833,11 @@ def _eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, veloci
                                       f"(ω_u = 1.2–8 λ, ω_u/ω_a = 3–60) makes the sampled loop stable")
         warn(DesignWarning, log, "%s: no EIC gains of the grid make the sampled loop stable at upright", robot.name)
         return Derived(g, note + f"; {why}, and no gain of the grid (ω_u = 1.2–8 λ, ω_u/ω_a = 3–60) makes the sampled loop stable")
-    stable.sort(key=lambda c: -c[0])
-    tried, held, recovered = [], [], []
-    for decay, wl, ratio, gg in stable[:EIC_SEARCH_TRIES]:
-        ok, how, tail = _recovery_run(robot, gg, rate, qu0=e0, velocity_cutoff=wc)
-        if not ok and math.isfinite(tail):
-            unsettled.append((tail, f"ω_u = {wl:g} λ (λ = {lam:.3g} 1/s), ω_a = ω_u/{ratio:g}, critically damped", gg))
-        if ok:
-            recovered.append((tail, decay, wl, ratio, gg, how))
-            held_ref, how_ref, _ = _reference_run(robot, gg, rate, reference, velocity_cutoff=wc)
-            if held_ref:
-                held.append((tail, decay, wl, ratio, gg, how + (f"; {how_ref}" if how_ref else "")))
-            else:
-                how += f", but {how_ref}"
-        tried.append(f"{wl:g} λ, ω_u/ω_a = {ratio:g}: {how}")
-    if not held and recovered:   # none holds the reference loop: the recovery alone decides (as without a reference)
-        warn(DesignWarning, log, "%s: no EIC gains tried hold the closed-loop reference in MuJoCo", robot.name)
-        held = recovered
+    held, _, tried_runs, stayed_up = _try_in_mujoco(robot, stable, rate, reference, qu0=e0, velocity_cutoff=wc)
+    unsettled += [(tail, f"ω_u = {c[1]:g} λ (λ = {lam:.3g} 1/s), ω_a = ω_u/{c[2]:g}, critically damped", c[5]) for tail, c in stayed_up]
+    tried = [f"{c[1]:g} λ, ω_u/ω_a = {c[2]:g}: {how}" for c, how in tried_runs]
     if held:
-        tail, decay, wl, ratio, gg, how = min(held, key=lambda c: c[0])
+        tail, (decay, wl, ratio, _, _, gg), how = min(held, key=lambda h: h[0])
         return Derived(gg, f"ω_u = {wl:g} λ (λ = {lam:.3g} 1/s), ω_a = ω_u/{ratio:g}, critically damped: the first choice ({note}) "
                            f"fails: {why}; of the {len(tried)} fastest-decaying sampled-stable gains of the grid, {len(held)} bring "
                            f"the robot back in MuJoCo, and these leave the smallest residual motion (max |q_u − nominal| "
@@ -878,7 +855,7 @@ def _eic_gains(robot, rate: RateChoice, *, qu_error: float | None = None, veloci
         return Derived(damped[0], f"{damped[1]}: the first choice fails ({why}), and none of the {len(tried)} fastest-decaying "
                                   f"critically damped sampled-stable gains of the grid brings the robot back in MuJoCo: "
                                   + "; ".join(tried))
-    decay, wl, ratio, gg = stable[0]
+    decay, wl, ratio, _, _, gg = stable[0]
     warn(DesignWarning, log, "%s: no sampled-stable EIC gains bring the robot back from a %.3g q_u error in MuJoCo", robot.name, e0)
     return Derived(gg, f"ω_u = {wl:g} λ (λ = {lam:.3g} 1/s), ω_a = ω_u/{ratio:g}, critically damped, the fastest decaying "
                        f"({decay:.3g} 1/s) of the grid's sampled-stable gains (the first choice fails: {why}); none brings the "
@@ -902,38 +879,64 @@ def _damped_search(robot, rate: RateChoice, lam: float, sampled: Callable, refer
     fastest-decaying are run in MuJoCo (:func:`_recovery_run`, :func:`_reference_run`), and of those that bring the
     robot back the one with the smallest residual motion over the last second is kept (those that also hold the
     reference first).  Returns ``(gains, note)``, or ``None`` where none does (the caller's last resort stands)."""
-    import itertools
-
-    stable = []
-    for wl, ratio, zu, za in itertools.product(EIC_GRID_OMEGA_U, EIC_GRID_RATIO, EIC_GRID_DAMPING, EIC_GRID_DAMPING):
-        wu = wl * lam
-        if (zu == 1.0 and za == 1.0) or wu > 2 * math.pi * rate.rate_hz / 10:
-            continue
-        gg = _loop_gains(wu, ratio, zu, za)
-        lp = sampled(gg)
-        if lp is not None and lp.spectral_radius < 1.0:
-            stable.append((lp.decay_rate, wl, ratio, zu, za, gg))
-    stable.sort(key=lambda c: -c[0])
-    recovered, held = [], []
-    for decay, wl, ratio, zu, za, gg in stable[:EIC_SEARCH_TRIES]:
-        ok, how, tail = _recovery_run(robot, gg, rate, qu0=qu0, velocity_cutoff=velocity_cutoff)
-        if not ok:
-            continue
-        label = f"ω_u = {wl:g} λ (λ = {lam:.3g} 1/s), ω_a = ω_u/{ratio:g}, ζ_u = {zu:g}, ζ_a = {za:g}"
-        recovered.append((tail, decay, label, gg, how))
-        held_ref, how_ref, _ = _reference_run(robot, gg, rate, reference, velocity_cutoff=velocity_cutoff)
-        if held_ref:
-            held.append((tail, decay, label, gg, how + (f"; {how_ref}" if how_ref else "")))
-    if not held and recovered:
-        warn(DesignWarning, log, "%s: no EIC gains tried hold the closed-loop reference in MuJoCo", robot.name)
-    chosen = held or recovered
+    pairs = tuple((zu, za) for zu in EIC_GRID_DAMPING for za in EIC_GRID_DAMPING if (zu, za) != (1.0, 1.0))
+    stable = _grid_stable(lam, rate, sampled, pairs)
+    chosen, n_recovered, _, _ = _try_in_mujoco(robot, stable, rate, reference, qu0=qu0, velocity_cutoff=velocity_cutoff)
     if not chosen:
         return None
-    tail, decay, label, gg, how = min(chosen, key=lambda c: c[0])
-    return gg, (f"{label}: of the {min(len(stable), EIC_SEARCH_TRIES)} fastest-decaying of {len(stable)} sampled-stable "
-                f"gains with damping ratios ζ_u, ζ_a ∈ {EIC_GRID_DAMPING}, {len(recovered)} bring the robot back in MuJoCo, "
+    tail, (decay, wl, ratio, zu, za, gg), how = min(chosen, key=lambda h: h[0])
+    return gg, (f"ω_u = {wl:g} λ (λ = {lam:.3g} 1/s), ω_a = ω_u/{ratio:g}, ζ_u = {zu:g}, ζ_a = {za:g}: of the "
+                f"{min(len(stable), EIC_SEARCH_TRIES)} fastest-decaying of {len(stable)} sampled-stable "
+                f"gains with damping ratios ζ_u, ζ_a ∈ {EIC_GRID_DAMPING}, {n_recovered} bring the robot back in MuJoCo, "
                 f"and these leave the smallest residual motion (max |q_u − nominal| {tail:.3g} over the last second; "
                 f"decay {decay:.3g} 1/s; {how})")
+
+
+def _grid_stable(lam: float, rate: RateChoice, sampled: Callable, dampings: tuple[tuple[float, float], ...]) -> list[tuple]:
+    """The EIC gain grid's pairs whose loop as it runs is stable (``sampled(gains)``:
+    :func:`~bemlearn.control.eic_linear.eic_tick_loop`), fastest decay first: ``(decay, ω_u/λ, ω_u/ω_a, ζ_u, ζ_a, gains)``
+    over ω_u ∈ :data:`EIC_GRID_OMEGA_U` λ (≤ 2π·rate/10), :data:`EIC_GRID_RATIO` and the ``dampings`` (ζ_u, ζ_a)."""
+    stable = []
+    for wl in EIC_GRID_OMEGA_U:
+        wu = wl * lam
+        if wu > 2 * math.pi * rate.rate_hz / 10:
+            continue
+        for ratio in EIC_GRID_RATIO:
+            for zu, za in dampings:
+                gg = _loop_gains(wu, ratio, zu, za)
+                lp = sampled(gg)
+                if lp is not None and lp.spectral_radius < 1.0:
+                    stable.append((lp.decay_rate, wl, ratio, zu, za, gg))
+    stable.sort(key=lambda c: -c[0])
+    return stable
+
+
+def _try_in_mujoco(robot, candidates: list[tuple], rate: RateChoice, reference: dict | None, *, qu0: float,
+                   velocity_cutoff: float) -> tuple[list, int, list, list]:
+    """The first :data:`EIC_SEARCH_TRIES` of ``candidates`` (:func:`_grid_stable`'s rows) run in MuJoCo: the recovery
+    from ``qu0`` (:func:`_recovery_run`), then, where it recovers, the closed-loop reference (:func:`_reference_run`).
+
+    Returns ``(chosen, recovered, tried, stayed_up)``: ``chosen`` the ``(tail, candidate, what happened)`` of those that
+    recover and hold the reference, else (with a warning) of those that recover; ``recovered`` their count; ``tried``
+    ``(candidate, what happened)`` per run; ``stayed_up`` ``(tail, candidate)`` of the loops that stayed up with q_u
+    off nominal (the friction cycle's and the damping search's material)."""
+    held, recovered, tried, stayed_up = [], [], [], []
+    for c in candidates[:EIC_SEARCH_TRIES]:
+        gg = c[-1]
+        ok, how, tail = _recovery_run(robot, gg, rate, qu0=qu0, velocity_cutoff=velocity_cutoff)
+        if not ok and math.isfinite(tail):
+            stayed_up.append((tail, c))
+        if ok:
+            recovered.append((tail, c, how))
+            held_ref, how_ref, _ = _reference_run(robot, gg, rate, reference, velocity_cutoff=velocity_cutoff)
+            if held_ref:
+                held.append((tail, c, how + (f"; {how_ref}" if how_ref else "")))
+            else:
+                how += f", but {how_ref}"
+        tried.append((c, how))
+    if not held and recovered:   # none holds the reference loop: the recovery alone decides (as without a reference)
+        warn(DesignWarning, log, "%s: no EIC gains tried hold the closed-loop reference in MuJoCo", robot.name)
+    return held or recovered, len(recovered), tried, stayed_up
 
 
 def _friction_cycle_gains(robot, unsettled: list, rate: RateChoice, reference: dict | None, *, qu0: float,

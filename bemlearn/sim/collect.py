@@ -490,8 +490,8 @@ def _tracking_gains(robot: MujocoRobot, config: CollectConfig, j: int, comps_j: 
     reference anticipates exactly the turns it will make: on ``fam0_029`` (weak yaw servo, position-servo slides) 0 of
     24 trials fell with the sweep at its full rate (√(a P) = 5.7 rad/s), 17 with the pose schedule.  The recursion starts
     at P = Q a tail of 5 × the rest loop's slowest time constant after the trial's end (:class:`~bemlearn.control.lqr
-    .TurningMaps` ``settle_s``; it forgets its start at twice that rate), at most the trial's length (:func:`tail_ticks`).  The maps' rates reach the reference's
-    bound: the sweep's Ω_top (:func:`sweep_top`) and n_max × the top amplitude × √(a_j P_j) of the joint's own sines
+    .TurningMaps` ``settle_s``; it forgets its start at twice that rate), at most the trial's length
+    (:func:`tail_ticks`).  The maps' rates reach the reference's bound: the sweep's Ω_top (:func:`sweep_top`) and n_max × the top amplitude × √(a_j P_j) of the joint's own sines
     (:func:`_component_extent`)."""
     from bemlearn.control.lqr import tracking_gains, turning_maps
     from bemlearn.robots.scales import design_bound
