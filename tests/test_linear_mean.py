@@ -26,6 +26,7 @@ from bemlearn.fitting.gp_config import GPConfig
 from bemlearn.fitting.linear_mean import choose_prior_mean, least_squares_slope
 from bemlearn.models.band import band_reference
 from bemlearn.models.input_noise import mean_gradient
+from bemlearn.models.plane_variance import with_plane_variance
 from bemlearn.models.predictor_state import PredictorState
 from bemlearn.pipeline.gp_stage import CheckpointProvenance, fit_bem_gp
 
@@ -118,6 +119,18 @@ def _linear(state: PredictorState, seed: int = 3) -> PredictorState:
     return dataclasses.replace(state, mean_slope=torch.randn(state.dim, generator=g, dtype=torch.float64))
 
 
+def _with_coefficients(state: PredictorState, seed: int = 4) -> PredictorState:
+    """``state`` with the plane coefficients' variance (eq. L3): computed for an exact state, drawn (random P, a
+    positive semi-definite A of rank d − 1, so that a direction without variance is exercised too) for a sparse one."""
+    if not state.sparse:
+        return with_plane_variance(state)
+    g = torch.Generator().manual_seed(seed)
+    B = torch.randn(state.dim, state.dim - 1, generator=g, dtype=torch.float64)
+    A = 0.05 * B @ B.T
+    return dataclasses.replace(state, plane_weights=0.1 * torch.randn(state.n_support, state.dim, generator=g, dtype=torch.float64),
+                               plane_cov=0.5 * (A + A.T))
+
+
 def test_the_plane_enters_the_reference_mean_and_its_gradient():
     _, base = _exact_case(200, 1, seed=7)
     st = _linear(_banded(base))
@@ -142,10 +155,13 @@ def test_exports_carry_the_plane(build, tmp_path):
     without its plane is refused."""
     _, base = build(300, 2, seed=7)
     g = torch.Generator().manual_seed(5)
-    st = _linear(dataclasses.replace(_banded(base), estimator_delta=1e-3 * torch.randn(base.n_support, N_ESTIMATORS,
-                                                                                         generator=g, dtype=torch.float64)))
+    st = _with_coefficients(_linear(dataclasses.replace(_banded(base), estimator_delta=1e-3 * torch.randn(
+        base.n_support, N_ESTIMATORS, generator=g, dtype=torch.float64))))
+    assert st.plane_variance
     meta = _metadata(st, 2)
     verify_predictor(BEMPredictor(st, meta), st)
+    with pytest.raises(CheckpointError, match="disagrees with the dense posterior"):   # the term counts in the export
+        verify_predictor(BEMPredictor(st, meta), dataclasses.replace(st, plane_weights=None, plane_cov=None))
     factor = variance_factor(st)
     x = st.x_mean + 2 * st.x_std * torch.randn(300, st.dim, generator=g, dtype=torch.float64)
     for form in ("raw", "centered"):
@@ -162,7 +178,7 @@ def test_exports_carry_the_plane(build, tmp_path):
     lib, ts = _build(st, meta, tmp_path)
     verify_predictor(ts, st)
     with pytest.raises(CheckpointError, match="disagrees with the dense posterior"):
-        verify_predictor(ts, dataclasses.replace(st, mean_slope=None))
+        verify_predictor(ts, dataclasses.replace(st, mean_slope=None, plane_weights=None, plane_cov=None))
     for full in (False, True):
         x, _, _ = _in_range(st, 1000, seed=1, width=st.dim if full else 6)
         x = np.ascontiguousarray(x)
@@ -178,9 +194,16 @@ def test_float32_c_export_carries_the_plane(tmp_path):
     if find_cc() is None:
         pytest.skip("no C compiler (cc, gcc, clang or $CC) on PATH")
     _, base = _sgpr_factored_case(400, 2, seed=7)
-    st = _linear(_banded(base))
+    st = _with_coefficients(_linear(_banded(base)))
     meta = _metadata(st, 2)
     lib, ts = _build(st, meta, tmp_path, prefix="lin32", dtype="float32")
+    x, _, _ = _in_range(st, 1000, seed=3, width=6)
+    x = x.astype(np.float32).astype(np.float64)
+    ref_mean, ref_std = (t.numpy() for t in ts.forward_latent(torch.from_numpy(x)))
+    mean, std, codes = lib.forward(x, latent=True)
+    assert np.all(codes == 0) and np.abs(std / ref_std - 1).max() <= 1e-3   # the coefficients' variance (eq. L3) too
+    st = _linear(_banded(base))
+    lib, ts = _build(st, meta, tmp_path / "plain", prefix="lin32", dtype="float32")
     x, _, _ = _in_range(st, 1000, seed=3, width=6)
     x = x.astype(np.float32).astype(np.float64)
     ref_mean = ts.forward(torch.from_numpy(x))[0].numpy()
@@ -190,6 +213,48 @@ def test_float32_c_export_carries_the_plane(tmp_path):
     plane = (st.predict_reference(torch.cat([torch.from_numpy(x), torch.zeros(len(x), 2, dtype=torch.float64)], 1))[0]
              - base.predict_reference(torch.cat([torch.from_numpy(x), torch.zeros(len(x), 2, dtype=torch.float64)], 1))[0])
     assert float(plane.abs().max()) > 100 * 1e-4
+
+
+def test_the_coefficients_variance_is_the_vague_prior_limit_of_a_gp_with_the_plane_in_its_kernel():
+    """Eq. (L3) against an independent computation: the plane's coefficients drawn from N(0, b I) are a kernel
+    b h(x)ᵀh(x') added to the GP's (Rasmussen & Williams 2006, §2.7); its exact posterior variance with a large b
+    tends to (L3).  The term vanishes at the training rows (to the noise's order) and grows beyond them."""
+    _, base = _exact_case(120, 1, seed=7)
+    st = with_plane_variance(dataclasses.replace(base, mean_slope=torch.tensor([0.4, 0.0, -0.3, 0.2, 0.0], dtype=torch.float64)))
+    used = [0, 2, 3]
+    assert st.plane_variance and torch.equal(st.plane_cov[1], torch.zeros(5, dtype=torch.float64))
+    X, H = st.Z, st.Z[:, used]
+    x = st.x_mean + 3 * st.x_std * torch.randn(40, 5, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    xn = st.normalize(x)
+    b = 1e7
+    k = st.kernel_row(x)
+    kx = k + b * xn[:, used] @ H.T
+    Kb = st.gram() + b * H @ H.T
+    var_b = st.outputscale + b * xn[:, used].square().sum(1) - (kx * torch.linalg.solve(Kb, kx.T).T).sum(1)
+    latent = st.predict_reference(x)[1]
+    torch.testing.assert_close(latent.square(), st.y_std**2 * var_b, rtol=1e-5, atol=0)
+    # without the term: the kernel's own variance, smaller
+    assert bool((latent > base.predict_reference(x)[1] * (1 + 1e-9)).all())
+    # at the training rows the coefficients are known through the data: the term is of the noise's order there
+    train = st.x_mean + st.x_std * X
+    assert float(st.plane_term(train, st.kernel_row(train)).max()) < 10 * float(st.noise)
+    # far out r → x̃: the term grows like the squared distance along a used column
+    far = [st.plane_term(p, st.kernel_row(p)).item() for p in (st.x_mean + st.x_std * s * torch.eye(5, dtype=torch.float64)[0:1]
+                                                               for s in (50.0, 100.0))]
+    assert far[1] / far[0] == pytest.approx(4.0, rel=1e-6)
+
+
+def test_an_exact_fit_with_the_plane_carries_its_coefficients_variance(tmp_path):
+    x = _inputs(300, 1)
+    g = torch.Generator().manual_seed(2)
+    y = x @ PLANE + 0.02 * torch.sin(x[:, 1]) + 1e-3 * torch.randn(300, generator=g, dtype=torch.float64)
+    st = _fit(tmp_path, x, y, "linear").state
+    assert st.plane_variance
+    expected = with_plane_variance(dataclasses.replace(st, plane_weights=None, plane_cov=None))
+    torch.testing.assert_close(st.plane_cov, expected.plane_cov, rtol=0, atol=0)
+    # a replica conditioned on other rows carries the term for its own rows
+    rep = condition_state(st, x[:150], y[:150])
+    assert rep.plane_variance and rep.plane_weights.shape == (150, 5)
 
 
 def test_a_replica_refits_the_plane_on_its_own_data():
@@ -212,6 +277,13 @@ def test_the_plane_survives_the_checkpoint_and_an_older_state_reads_as_zero_mean
     st = _linear(base)
     back = PredictorState.from_dict(st.to_dict())
     assert torch.equal(back.mean_slope, st.mean_slope)
+    full = with_plane_variance(dataclasses.replace(st, S=torch.cholesky_inverse(torch.linalg.cholesky(st.gram()))))
+    back = PredictorState.from_dict(full.to_dict())
+    assert torch.equal(back.plane_cov, full.plane_cov) and torch.equal(back.plane_weights, full.plane_weights)
+    with pytest.raises(CheckpointError, match="give both"):
+        dataclasses.replace(full, plane_weights=None)
+    with pytest.raises(CheckpointError, match="needs a plane"):
+        dataclasses.replace(full, mean_slope=None)
     old = st.to_dict()
     del old["mean_slope"]
     assert not PredictorState.from_dict(old).linear_mean

@@ -119,6 +119,9 @@ def _with_flags(predictor, bem: dict[str, bool], full: dict[str, bool]):
         # the exported code; a fitted plane and its band term never equal another buffer)
         n = int(sub.sb.shape[0])
         sub.plane, sub.sb = torch.linspace(0.11, 0.19, n + 1, **f64), torch.linspace(0.21, 0.29, n, **f64)
+        # the plane coefficients' variance maps (eq. L3), one column
+        sub.PV = torch.linspace(0.31, 0.39, n + 1, **f64)[:, None].contiguous()
+        sub.PK = torch.linspace(0.41, 0.49, M + 1, **f64)[:, None].contiguous()
     return p
 
 

@@ -116,6 +116,10 @@ def float32_errors(post: CPosterior, reference: FoldedPosterior, x: np.ndarray) 
     if post.lin is not None:   # the linear prior mean l0 + Σ_i lin_i u_i (eq. L1)
         mean = mean + (F32(post.l0) + (u * post.lin.astype(F32)).sum(1, dtype=F32))
     var = _f32_var(post, k)
+    if post.pv is not None:    # the plane coefficients' variance Σ_l t_l² (eq. L3)
+        assert post.pv0 is not None and post.pk is not None
+        t = post.pv0.astype(F32) - k @ post.pk.astype(F32).T + u @ post.pv.astype(F32).T
+        var = var + (t * t).sum(1, dtype=F32)
     latent = np.sqrt(var)
     band = np.sqrt(F32(post.scale2) * var + _f32_gradient2(post, u, k, hn))
     x64 = torch.from_numpy(np.ascontiguousarray(x, dtype=np.float64))

@@ -22,7 +22,9 @@ and ε_k = Σ_j E_kj exp(e_j) = y_std k_Z(x̃)ᵀ δ_k / √K:
     σ_band(x) = sqrt(c² σ(x)² + max(Σ_i g_i², Σ_k ε_k²)),  c² = ``scale2``
 
 A linear prior mean (eq. L1, :mod:`bemlearn.export.folded_posterior`) adds l_0 + Σ_i λ_i v_i to μ after the
-kernel sum (h_n stays the kernel sum) and s_i y_std β̃_i / x_std_i (``sb``) to g_i.
+kernel sum (h_n stays the kernel sum) and s_i y_std β̃_i / x_std_i (``sb``) to g_i, and its coefficients'
+variance (eq. L3) adds Σ_l t_l² to σ(x)², t_l = t0_l + Σ_i Tv_li v_i − Σ_j Tk_lj exp(e_j) (computed before the
+latent variance, which overwrites the kernel row).
 
 Only e_j differs between the two C forms:
 
@@ -88,6 +90,10 @@ class CPosterior:
         lin: ``(n,)`` λ of a linear prior mean (weights on v), or ``None`` (zero mean).
         l0: its constant, rad (0 without one).
         sb: ``(n,)`` its band-gradient term s_i y_std β̃_i / x_std_i, rad (zeros without one).
+        pv: ``(p, n)`` T_v of the plane coefficients' variance (eq. L3), rad per input unit (row-major by
+            term), or ``None`` (no term).
+        pv0: ``(p,)`` its constant t_0, rad.
+        pk: ``(p, M)`` its kernel weights T_k, rad.
     """
 
     form: Literal["folded", "distance"]
@@ -112,6 +118,14 @@ class CPosterior:
     lin: np.ndarray | None = None
     l0: float = 0.0
     sb: np.ndarray | None = None
+    pv: np.ndarray | None = None
+    pv0: np.ndarray | None = None
+    pk: np.ndarray | None = None
+
+    @property
+    def n_plane_terms(self) -> int:
+        """p, the squares of the plane coefficients' variance (0: no term)."""
+        return 0 if self.pv is None else int(self.pv.shape[0])
 
     @property
     def n_inputs(self) -> int:
@@ -180,7 +194,19 @@ def c_posterior(post: FoldedPosterior, *, form: Literal["folded", "distance"] = 
         scale2=float(post.scale2), E=np.ascontiguousarray(G[:M, n + 1 :].T), inner=inner,
         lin=_np(post.plane)[:-1] if post.linear else None, l0=float(_np(post.plane)[-1]) if post.linear else 0.0,
         sb=_np(post.sb) if post.plane_band else None,
+        **_plane_variance(post, M),
     )
+
+
+def _plane_variance(post: FoldedPosterior, M: int) -> dict[str, np.ndarray | None]:
+    """``pv``, ``pv0``, ``pk`` of the plane coefficients' variance from ``PV``, ``PK`` (``None`` without the term)."""
+    PV, PK = _np(post.PV), _np(post.PK)
+    if not post.linear or not (np.any(PV != 0) or np.any(PK != 0)):
+        return {"pv": None, "pv0": None, "pk": None}
+    if np.any(PK[M:] != 0):
+        raise ArgumentError("FoldedPosterior.PK: expected the sentinel row zero")
+    return {"pv": np.ascontiguousarray(PV[:-1].T), "pv0": np.ascontiguousarray(PV[-1]),
+            "pk": np.ascontiguousarray(PK[:M].T)}
 
 
 def support_box(Z: torch.Tensor, x_mean: torch.Tensor, x_std: torch.Tensor, lengthscale: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:

@@ -47,7 +47,7 @@ from bemlearn.export.c_std_templates import (
     NO_ESTIMATOR_TERM,
     TRIANGULAR_STD,
 )
-from bemlearn.export.c_templates import DISTANCE_EXPONENTS, FOLDED_EXPONENTS, HEADER, PLANE, POSTERIOR, SOURCE
+from bemlearn.export.c_templates import DISTANCE_EXPONENTS, FOLDED_EXPONENTS, HEADER, PLANE, PLANE_VARIANCE, POSTERIOR, SOURCE
 from bemlearn.export.folded_posterior import SENTINEL_BOUND, FoldedPosterior
 from bemlearn.export.metadata import PredictorMetadata
 from bemlearn.export.variance_factor import VarianceFactor
@@ -118,7 +118,7 @@ def machine_independent(doc):
 
 
 def _posterior_constants(p: str, name: str, post: CPosterior, dtype: CDtype, real: str, share_W: str | None,
-                         share_P: str | None) -> str:
+                         share_P: str | None, share_pk: str | None = None) -> str:
     parts = [
         f"static const int {p}_{name}_centered = {int(post.centered)};\n",
         _array(f"{p}_{name}_a", post.a, dtype, real),
@@ -133,6 +133,14 @@ def _posterior_constants(p: str, name: str, post: CPosterior, dtype: CDtype, rea
     if post.lin is not None:   # the linear prior mean (eq. L1)
         parts.append(_array(f"{p}_{name}_lin", post.lin, dtype, real))
         parts.append(f"static const {real} {p}_{name}_l0 = {_literal(post.l0, dtype)};\n")
+    if post.pv is not None:   # the plane coefficients' variance (eq. L3)
+        assert post.pv0 is not None and post.pk is not None   # given with pv (c_posterior)
+        parts.append(_array(f"{p}_{name}_pv", post.pv, dtype, real))
+        parts.append(_array(f"{p}_{name}_pv0", post.pv0, dtype, real))
+        if share_pk is None:
+            parts.append(_array(f"{p}_{name}_pk", post.pk, dtype, real))
+        else:
+            parts.append(f"static const {real} *const {p}_{name}_pk = {share_pk};\n")
     if post.banded:   # the band's gradient term (unused, hence not written, without input noise)
         parts.append(_array(f"{p}_{name}_gamma", post.gamma, dtype, real))
         if post.sb is not None:
@@ -237,6 +245,8 @@ def c_sources(
         }
     share = f"{p}_full_W" if bem.form == full.form and np.array_equal(bem.W, full.W[:n_bem]) else None
     share_P = f"{p}_full_P" if bem.banded and full.banded and np.array_equal(bem.P, full.P[:n_bem]) else None
+    share_pk = (f"{p}_full_pk" if bem.pk is not None and full.pk is not None and np.array_equal(bem.pk, full.pk)
+                else None)
     sub = {"p": p, "P": P, "real": real, "exp": exp, "sqrt": sqrt}
     exponents = DISTANCE_EXPONENTS if bem.form == "distance" else FOLDED_EXPONENTS
     signed_term = "s * s" if bem.signs is None else f"{p}_signs[i] * s * s"
@@ -248,7 +258,7 @@ def c_sources(
         std = DENSE_STD.substitute(sub, signed_term=signed_term)
     constants = "".join([
         _posterior_constants(p, "full", full, dtype, real, None, None),
-        _posterior_constants(p, "bem", bem, dtype, real, share, share_P),
+        _posterior_constants(p, "bem", bem, dtype, real, share, share_P, share_pk),
         _array(f"{p}_w", bem.w, dtype, real),
         f"static const {real} {p}_y0 = {_literal(bem.y0, dtype)};\n",
         f"static const {real} {p}_var0 = {_literal(bem.var0, dtype)};\n",
@@ -269,7 +279,11 @@ def c_sources(
         posteriors="\n".join(POSTERIOR.substitute(sub, name=nm, n=post.n_inputs, lo=f"{p}_{pre}input_lo", hi=f"{p}_{pre}input_hi",
                                                    beyond=f"!(s >= {-0.5 * SENTINEL_BOUND!r}) ? 2 : 0" if dtype == "float64" else "0",
                                                    plane="" if post.lin is None else f" + {p}_{nm}_plane(v)",
-                                                   plane_fn="" if post.lin is None else PLANE.substitute(sub, name=nm, n=post.n_inputs))
+                                                   plane_fn=("" if post.lin is None else PLANE.substitute(sub, name=nm, n=post.n_inputs))
+                                                            + ("" if post.pv is None else PLANE_VARIANCE.substitute(
+                                                                sub, name=nm, n=post.n_inputs, n_terms=post.n_plane_terms)),
+                                                   pv_pre="" if post.pv is None else f"{real} pv = {p}_{nm}_plane_var(v, k);   /* eq. L3 */\n    ",
+                                                   pv_add="" if post.pv is None else " + pv")
                               for nm, post, pre in (("bem", bem, ""), ("full", full, "full_"))),
     )
     units = doc["units"]

@@ -43,8 +43,8 @@ _STATE_TENSORS = tuple(
     f.name for f in dataclasses.fields(PredictorState) if f.name not in ("kind", "input_names", "n_train")
 )
 #: Tensors added after v1 checkpoints were first written (calibrated band; the sparse kinds' factored
-#: S = L⁻ᵀ C L⁻¹); absent → defaults (S used as given).
-_OPTIONAL_TENSORS = ("std_scale", "input_std", "estimator_delta", "S_chol", "S_inner")
+#: S = L⁻ᵀ C L⁻¹; the plane coefficients' variance of eq. L3); absent → defaults (S used as given, no term).
+_OPTIONAL_TENSORS = ("std_scale", "input_std", "estimator_delta", "S_chol", "S_inner", "plane_weights", "plane_cov")
 
 
 @dataclass(frozen=True)

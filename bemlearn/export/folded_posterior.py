@@ -41,7 +41,15 @@ A linear prior mean (eq. L1 of :mod:`bemlearn.models.predictor_state`, y_std β�
     μ(x) += l_0 + Σ_i λ_i v_i,   λ = y_std β̃ / x_std (raw) or y_std β̃ ∘ ℓ (centered),
 
 l_0 its constant (the x_mean terms in the raw form, the columns held at zero in both), and its
-constant gradient adds s_i y_std β̃_i / x_std_i to g_i; with β̃ = 0 neither is computed.
+constant gradient adds s_i y_std β̃_i / x_std_i to g_i; with β̃ = 0 neither is computed.  Its coefficients'
+variance (eq. L3 of :mod:`bemlearn.models.plane_variance`, y_std² rᵀAr with r = x̃ − Pᵀk_Z) is a sum of
+squares of a map affine in v and in the kernel row: with A = R Rᵀ (R ``(d, p)`` from A's eigenvectors),
+
+    y_std rᵀR = v T_v + t_0 − exp(e) T_k,   T_k = y_std σ_f² P R  (sentinel row zero),
+    T_v = y_std diag(1/x_std) R (raw) or y_std diag(ℓ) R (centered), over the free columns,
+
+t_0 the rest (x_mean's terms, the columns held at zero); the latent variance adds ‖v T_v + t_0 − exp(e) T_k‖²
+(``PV`` = [T_v; t_0], ``PK`` = T_k; one zero column without the term).
 
 One extra *sentinel* column j = M guards the range in which float64 can evaluate the kernel:
 its exponent is e_M = ‖u‖² − 10³⁰⁰ (zero linear weights; quadratic weights 1 on u∘u in the
@@ -121,6 +129,8 @@ class FoldedPosterior(nn.Module):
     gamma: torch.Tensor
     plane: torch.Tensor
     sb: torch.Tensor
+    PV: torch.Tensor
+    PK: torch.Tensor
 
     def __init__(
         self,
@@ -231,6 +241,9 @@ class FoldedPosterior(nn.Module):
         self.plane_band = self.linear and bool((sb != 0).any())
         self.register_buffer("plane", torch.cat([Lv, l0.reshape(1)]).to(**f64).contiguous())
         self.register_buffer("sb", sb.contiguous())
+        PV, PK = _plane_variance_maps(state, n_inputs, self.centered)
+        self.register_buffer("PV", PV)
+        self.register_buffer("PK", share.PK if share is not None and share.PK.shape == PK.shape else PK)
 
     def _kernel(self, x: torch.Tensor) -> torch.Tensor:
         """exp(e): ``(B, M + 1)`` kernel row / σ_f² (last column: sentinel) for ``x: (B, n)``."""
@@ -280,7 +293,15 @@ class FoldedPosterior(nn.Module):
             mean[i : i + self.chunk], std[i : i + self.chunk] = self._mean_band(xi) if band else self._mean_std(xi)
         return mean, std
 
-    def _latent_var(self, k: torch.Tensor) -> torch.Tensor:
+    def _latent_var(self, k: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+        """Latent variance (eq. 12), with the plane coefficients' term (eq. L3) when there is a plane."""
+        var = self._kernel_var(k)
+        if self.linear:
+            t = torch.addmm(self.PV[-1], v, self.PV[:-1]) - torch.mm(k, self.PK)
+            var = var + torch.linalg.vecdot(t, t)
+        return var
+
+    def _kernel_var(self, k: torch.Tensor) -> torch.Tensor:
         if self.triangular:
             v = torch.linalg.solve_triangular(self.FT, k, upper=True, left=False)
             if self.factored:
@@ -302,7 +323,7 @@ class FoldedPosterior(nn.Module):
     def _mean_band(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         k, v = self._kernel_v(x)
         mean = self._plane(torch.addmv(self.offset, k, self.w), v)
-        var = self._latent_var(k)
+        var = self._latent_var(k, v)
         if self.banded:
             h = torch.mm(k, self.G)
             n = self.n_inputs
@@ -320,4 +341,29 @@ class FoldedPosterior(nn.Module):
 
     def _mean_std(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         k, v = self._kernel_v(x)
-        return self._plane(torch.addmv(self.offset, k, self.w), v), self._latent_var(k).sqrt_()
+        return self._plane(torch.addmv(self.offset, k, self.w), v), self._latent_var(k, v).sqrt_()
+
+
+def _plane_variance_maps(state: PredictorState, n_inputs: int, centered: bool) -> tuple[torch.Tensor, torch.Tensor]:
+    """``PV`` ``(n + 1, p)`` = [T_v; t_0] and ``PK`` ``(M + 1, p)`` = T_k of the plane coefficients' variance
+    (module docstring; one zero column without the term)."""
+    f64: dict[str, Any] = dict(dtype=torch.float64)
+    d, M = state.dim, state.n_support
+    if not state.plane_variance:   # one zero column (a frozen TorchScript module cannot hold a row view of an empty PV)
+        return torch.zeros(n_inputs + 1, 1, **f64), torch.zeros(M + 1, 1, **f64)
+    assert state.plane_weights is not None and state.plane_cov is not None
+    lam, vec = torch.linalg.eigh(state.plane_cov.to(**f64))
+    keep = lam > lam.max() * 1e-14
+    R = state.y_std * vec[:, keep] * lam[keep].sqrt()        # (d, p): y_std² A = R Rᵀ
+    free, fixed = slice(0, n_inputs), slice(n_inputs, d)
+    x0 = state.x_mean / state.x_std                           # x̃ = x / x_std − x0
+    PV = torch.zeros(n_inputs + 1, R.shape[1], **f64)
+    if centered:                                              # x̃ = ℓ ∘ u on the free columns
+        PV[:n_inputs] = state.lengthscale[free, None] * R[free]
+        PV[n_inputs] = -(x0[fixed, None] * R[fixed]).sum(0)
+    else:
+        PV[:n_inputs] = R[free] / state.x_std[free, None]
+        PV[n_inputs] = -(x0[:, None] * R).sum(0)
+    PK = torch.zeros(M + 1, R.shape[1], **f64)
+    PK[:M] = state.outputscale * (state.plane_weights.to(**f64) @ R)
+    return PV.contiguous(), PK.contiguous()

@@ -263,7 +263,9 @@ def artifact_metadata(meta: PredictorMetadata, state: PredictorState) -> dict[st
     if state.linear_mean:   # eq. (L1): the plane under the GP, normalized and per input unit (q_u's unit per column unit)
         assert state.mean_slope is not None
         doc["normalization"]["mean_slope"] = state.mean_slope.tolist()
-        doc["prior_mean"] = {"kind": "linear", "slope": {n: float(g) for n, g in zip(meta.input_names, state.prior_mean_gradient().tolist())}}
+        doc["prior_mean"] = {"kind": "linear", "slope": {n: float(g) for n, g in zip(meta.input_names, state.prior_mean_gradient().tolist())},
+                             # eq. (L3): the coefficients' variance is part of the latent std (and the band)
+                             "coefficient_variance": state.plane_variance}
     if meta.extra:
         doc["extra"] = jsonable(meta.extra, where="metadata")
         if "checkpoint_sha256" in meta.extra:  # recorded by export_run (bemlearn.export.staleness)

@@ -17,6 +17,10 @@ exponent the exported predictor uses, and
                  kᵀ (K_ZZ + jI)⁻¹ k ≤ k(x, x) for a kernel row);
     sgpr, svgp:  :meth:`PredictorState.predict_reference` (S is given as is), with the variance
     (unfactored) compared up to the rounding bound 64 M ε ‖S‖₂ σ_f⁴ y_std² of forming kᵀ S k.
+
+With a linear prior mean the plane coefficients' variance y_std² rᵀAr (eq. L3) is added: for the exact kind
+with r = x̃ − Zᵀ(K⁻¹k) from the refined solve (the stored P = K⁻¹H is not used; its rounding enters the bound,
+``_plane_term_bound``), for the sparse kinds with the stored P.
 """
 
 from __future__ import annotations
@@ -52,7 +56,31 @@ def reference_posterior(state: PredictorState, x: torch.Tensor) -> tuple[torch.T
     for _ in range(2):
         v = v + torch.cholesky_solve(k.T - K @ v, L)
     var = (state.outputscale - (k.T * v).sum(0)).clamp_min(0.0)
-    return state.y_mean + state.y_std * (k @ state.alpha) + state.prior_mean(x), state.y_std * var.sqrt(), _cholesky_route_bound(state, L, k, v)
+    route = _cholesky_route_bound(state, L, k, v)
+    if state.plane_variance:   # eq. (L3) with Hᵀ K⁻¹ k from the refined solve, not from the stored P = K⁻¹H
+        assert state.plane_cov is not None and state.plane_weights is not None
+        xn = state.normalize(x)
+        r = xn - v.T @ state.Z
+        var = var + ((r @ state.plane_cov) * r).sum(1)
+        route = route + _plane_term_bound(state, L, k, v, xn, r) * float(state.y_std) ** 2
+    return state.y_mean + state.y_std * (k @ state.alpha) + state.prior_mean(x), state.y_std * var.sqrt(), route
+
+
+def _plane_term_bound(state: PredictorState, L: torch.Tensor, k: torch.Tensor, v: torch.Tensor, xn: torch.Tensor,
+                      r: torch.Tensor) -> torch.Tensor:
+    """Rounding bound (normalized units squared, ``(B,)``) of the exported rᵀAr of eq. (L3), r = x̃ − Pᵀk.
+
+    First order: P = K⁻¹H from the computed factor moves Pᵀk by at most γ_{M+1} |P|ᵀ|L||Lᵀ||v| (as in
+    :func:`_cholesky_route_bound`), and forming r from x̃, Pᵀk and the folded maps rounds by
+    (M + d) ε (|x̃| + |P|ᵀ|k|); then |Δ(rᵀAr)| ≤ 2 |r|ᵀ|A| δr + δrᵀ|A| δr.
+    """
+    assert state.plane_cov is not None and state.plane_weights is not None
+    M, d = state.n_support, state.dim
+    gamma = (M + 1) * _EPS / (1 - (M + 1) * _EPS)
+    P, A = state.plane_weights.abs(), state.plane_cov.abs()
+    L_abs = L.abs()
+    dr = gamma * (L_abs @ (L_abs.T @ v.abs())).T @ P + 64 * (M + d) * _EPS * (xn.abs() + k.abs() @ P)
+    return 2 * ((r.abs() @ A) * dr).sum(1) + ((dr @ A) * dr).sum(1)
 
 
 def _cholesky_route_bound(state: PredictorState, L: torch.Tensor, k: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
@@ -84,7 +112,7 @@ def _factored_reference(state: PredictorState, x: torch.Tensor) -> tuple[torch.T
     L, C = state.S_chol, state.S_inner
     v = torch.linalg.solve_triangular(L, k.T, upper=False)
     v = v + torch.linalg.solve_triangular(L, k.T - L @ v, upper=False)
-    var = (state.outputscale - (v * (C @ v)).sum(0)).clamp_min(0.0)
+    var = (state.outputscale - (v * (C @ v)).sum(0)).clamp_min(0.0) + state.plane_term(x, k)   # eq. (L3), if any
     c_norm = float(torch.linalg.matrix_norm(C, ord=2))
     bound = 64 * state.n_support * _EPS * c_norm * float(state.outputscale) * float(state.y_std) ** 2
     return state.y_mean + state.y_std * (k @ state.alpha) + state.prior_mean(x), state.y_std * var.sqrt(), bound

@@ -55,6 +55,7 @@ import numpy as np
 import torch
 
 from bemlearn.errors import ArgumentError, DataError
+from bemlearn.models.plane_variance import with_plane_variance
 from bemlearn.warnings import UncertaintyWarning, warn
 
 if TYPE_CHECKING:  # bemlearn.models loads GPyTorch: not needed for gaussian_quantile
@@ -118,7 +119,9 @@ def condition_state(state: PredictorState, x: torch.Tensor, y: torch.Tensor) -> 
         an exact-kind state (α = K⁻¹ỹ, S = K⁻¹, K = K_XX + σ_0² I on normalized data).  A state with a linear
         prior mean (eq. L1) gets its plane refitted to these data (:func:`~bemlearn.fitting.linear_mean.least_squares_slope`,
         the columns ``state`` does not use kept out), and α is that of the residual: a replica is the whole fit on
-        other data, so the spread of the plane between replicas reaches the calibration.
+        other data, so the spread of the plane between replicas reaches the calibration, and where ``state`` carries
+        the plane coefficients' variance (eq. L3 of :mod:`bemlearn.models.plane_variance`) so does the replica, for
+        its own rows.
     """
     xn = (x.to(torch.float64) - state.x_mean) / state.x_std
     yn = (y.to(torch.float64) - state.y_mean) / state.y_std
@@ -132,7 +135,7 @@ def condition_state(state: PredictorState, x: torch.Tensor, y: torch.Tensor) -> 
         yn = yn - xn @ slope
     probe = dataclasses.replace(state, kind="exact", Z=xn, alpha=torch.zeros(n, dtype=torch.float64),
                                 S=torch.zeros(n, n, dtype=torch.float64), n_train=n, estimator_delta=None,
-                                S_chol=None, S_inner=None, mean_slope=slope)
+                                S_chol=None, S_inner=None, mean_slope=slope, plane_weights=None, plane_cov=None)
     K = probe.gram()
     L, info = torch.linalg.cholesky_ex(K)
     jitter = 1e-10 * float(state.outputscale)
@@ -141,7 +144,9 @@ def condition_state(state: PredictorState, x: torch.Tensor, y: torch.Tensor) -> 
         jitter *= 10
         L, info = torch.linalg.cholesky_ex(K)
     alpha = torch.cholesky_solve(yn[:, None], L)[:, 0]
-    return dataclasses.replace(probe, alpha=alpha, S=torch.cholesky_inverse(L))
+    replica = dataclasses.replace(probe, alpha=alpha, S=torch.cholesky_inverse(L))
+    # the replica's own plane coefficients' variance (eq. L3) where the fitted state carries that term
+    return with_plane_variance(replica) if state.plane_variance else replica
 
 
 def calibrate_replicas(

@@ -37,8 +37,19 @@ residual of a least-squares plane: the label is modelled as ỹ = β̃ᵀx̃ + f
     μ̃(x̃) = β̃ᵀx̃ + k_Z(x̃)ᵀ α                     (L1)
 
 with α the weights of the residual ỹ − β̃ᵀx̃ (the training columns are centred by the normalization,
-so the plane needs no intercept); σ̃ is unchanged (β̃ is held fixed; its spread between training
-trials reaches the band through the replica calibration c, which refits it, docs/uncertainty.md).  β̃ = 0 (the default) is the zero-mean GP of eq. (11).
+so the plane needs no intercept).  β̃ = 0 (the default) is the zero-mean GP of eq. (11).  The plane's
+coefficients are uncertain too; with a vague prior on them (Rasmussen & Williams 2006, §2.7) the latent
+variance gains
+
+    σ̃²(x̃) += rᵀ A r,   r = x̃ − Pᵀ k_Z(x̃),   P = K⁻¹H,   A = (Hᵀ K⁻¹ H)⁻¹             (L3)
+
+(H the training rows' plane columns, K = K_ZZ + σ_0² I; ``plane_weights`` P and ``plane_cov`` A, embedded in
+d columns with zeros where β̃_j = 0, :mod:`bemlearn.models.plane_variance`).  Near the data Pᵀk_Z ≈ x̃ and
+the term vanishes; beyond them r → x̃ and it grows with the distance, where the plane is extrapolated.  The
+term is the generalized-least-squares coefficients' covariance, while β̃ is the ordinary least-squares
+plane; both are unbiased, and the replica calibration c (which refits the plane on each replica) scales
+the variance the term is part of.  Without ``plane_cov`` (zero mean, or a state frozen before it) there is
+no term.
 
 The calibrated band (docs/uncertainty.md) adds three fields: ``std_scale`` c (trial-split
 replica calibration, :mod:`bemlearn.fitting.calibration`), ``input_std`` s (the
@@ -104,6 +115,10 @@ class PredictorState:
         S_inner: ``(M, M)`` symmetric C with S = L⁻ᵀ C L⁻¹ (given with ``S_chol``), or ``None``.
         mean_slope: ``(d,)`` β̃ of the linear prior mean (L1), normalized output per normalized input
             (default zeros: the zero-mean GP).
+        plane_weights: ``(M, d)`` P = K⁻¹H of (L3), normalized units (zero columns where β̃_j = 0), or ``None``.
+        plane_cov: ``(d, d)`` A = (Hᵀ K⁻¹ H)⁻¹ of (L3), the plane coefficients' covariance in normalized output
+            units squared (zero rows and columns where β̃_j = 0), given with ``plane_weights``, or ``None``
+            (no coefficient term).
     """
 
     kind: GPKind
@@ -125,6 +140,8 @@ class PredictorState:
     S_chol: torch.Tensor | None = None
     S_inner: torch.Tensor | None = None
     mean_slope: torch.Tensor | None = None
+    plane_weights: torch.Tensor | None = None
+    plane_cov: torch.Tensor | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in GP_KINDS:
@@ -162,6 +179,37 @@ class PredictorState:
         if len(self.input_names) != d:
             raise CheckpointError(f"PredictorState.input_names: expected {d} names, got {len(self.input_names)}")
         self._check_factor(M)
+        self._check_plane(M, d)
+
+    def _check_plane(self, M: int, d: int) -> None:
+        """plane_weights, plane_cov of (L3): both or neither, (M, d) and a symmetric (d, d), only with a plane."""
+        if self.plane_weights is None and self.plane_cov is None:
+            return
+        if self.plane_weights is None or self.plane_cov is None:
+            raise CheckpointError("PredictorState.plane_weights, plane_cov: give both (eq. L3) or neither")
+        for name, shape in (("plane_weights", (M, d)), ("plane_cov", (d, d))):
+            t = getattr(self, name)
+            if tuple(t.shape) != shape:
+                raise CheckpointError(f"PredictorState.{name}: expected shape {shape}, got {tuple(t.shape)}")
+        if not bool(torch.equal(self.plane_cov, self.plane_cov.mT)):
+            raise CheckpointError("PredictorState.plane_cov: expected a symmetric matrix (A = Aᵀ exactly)")
+        if not self.linear_mean:
+            raise CheckpointError("PredictorState.plane_weights, plane_cov: the coefficient term (L3) needs a plane "
+                                  "(some mean_slope ≠ 0)")
+
+    @property
+    def plane_variance(self) -> bool:
+        """Whether the latent variance carries the plane coefficients' term rᵀAr of (L3)."""
+        return self.plane_cov is not None and bool((self.plane_cov != 0).any())
+
+    def plane_term(self, x: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
+        """rᵀ A r of (L3): ``(B,)`` in normalized output units squared, for physical ``x: (B, d)`` and their kernel
+        row ``k: (B, M)`` (zeros without the term)."""
+        if not self.plane_variance:
+            return torch.zeros(k.shape[0], dtype=k.dtype, device=k.device)
+        assert self.plane_weights is not None and self.plane_cov is not None
+        r = self.normalize(x) - k @ self.plane_weights
+        return ((r @ self.plane_cov) * r).sum(-1)
 
     def _check_factor(self, M: int) -> None:
         """S_chol, S_inner: both or neither, sparse kinds only, (M, M), L lower-triangular with a
@@ -314,5 +362,5 @@ class PredictorState:
             var = self.outputscale - (v * (self.S_inner @ v)).sum(0)
         else:
             var = self.outputscale - ((k @ self.S) * k).sum(-1)
-        std = var.clamp_min(0.0).sqrt()
+        std = (var.clamp_min(0.0) + self.plane_term(x, k)).sqrt()   # (L3) is a quadratic form of A ⪰ 0
         return self.y_mean + self.y_std * mean + self.prior_mean(x), self.y_std * std, k

@@ -1,0 +1,68 @@
+"""The plane coefficients' share of the latent variance, for a GP with a linear prior mean (eq. L3).
+
+With the plane β̃ᵀx̃ as prior mean (eq. L1 of :mod:`bemlearn.models.predictor_state`) and a vague prior on
+its coefficients, the posterior variance of the BEM is the kernel's plus the coefficients' (Rasmussen &
+Williams 2006, eq. 2.42 with B⁻¹ → 0):
+
+    σ̃²(x̃) += rᵀ A r,   r = h(x̃) − Hᵀ K⁻¹ k_Z(x̃),   A = (Hᵀ K⁻¹ H)⁻¹                       (L3)
+
+with H ``(M, p)`` the support rows' plane columns (the training inputs of an exact GP), h(x̃) the query's, and
+K = K_ZZ + σ_0² I.  The state stores P = K⁻¹H and A embedded in all d columns (zeros where β̃_j = 0), so
+that r = x̃ − Pᵀ k_Z(x̃) over every column (the unused ones meet zero rows of A).  The term vanishes where the
+kernel reproduces the plane's columns from the data (near them, Pᵀk_Z ≈ x̃) and grows like the distance
+squared beyond them, where the BEM is the extrapolated plane.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+
+from bemlearn.errors import ArgumentError
+from bemlearn.models.predictor_state import PredictorState
+
+__all__ = ["with_plane_variance"]
+
+
+def with_plane_variance(state: PredictorState) -> PredictorState:
+    """``state`` with P and A of (L3) filled in (``plane_weights``, ``plane_cov``).
+
+    Only for an exact posterior (Z the training inputs, K = K_ZZ + σ_0² I); a state without a plane is returned
+    unchanged.  K's Cholesky factor is :meth:`~PredictorState.gram_cholesky`, with a growing jitter where K is
+    not numerically positive definite.
+
+    Raises:
+        ArgumentError: a sparse kind (its Z are inducing points, not the rows the plane was fitted on), or a
+            plane whose columns the data do not determine (Hᵀ K⁻¹ H singular).
+    """
+    if not state.linear_mean:
+        return state
+    if state.sparse:
+        raise ArgumentError(f"with_plane_variance: an exact posterior is needed (its Z are the training rows); got {state.kind!r}")
+    assert state.mean_slope is not None  # filled by PredictorState.__post_init__
+    used = (state.mean_slope != 0).nonzero().flatten()
+    L = state.gram_cholesky()
+    if L is None:
+        K = state.gram()
+        jitter = 1e-10 * float(state.outputscale)
+        L, info = torch.linalg.cholesky_ex(K)
+        while int(info) != 0:
+            K.diagonal().add_(jitter)
+            jitter *= 10
+            L, info = torch.linalg.cholesky_ex(K)
+    H = state.Z[:, used]
+    P_used = torch.cholesky_solve(H, L)                       # K⁻¹H (M, p)
+    G = H.mT @ P_used
+    G = 0.5 * (G + G.mT)
+    chol, info = torch.linalg.cholesky_ex(G)
+    if int(info) != 0:
+        raise ArgumentError("with_plane_variance: Hᵀ K⁻¹ H is singular: the data do not determine the plane's "
+                            f"coefficients (columns {[state.input_names[int(j)] for j in used]})")
+    A_used = torch.cholesky_inverse(chol)
+    d, M = state.dim, state.n_support
+    P = torch.zeros(M, d, dtype=torch.float64, device=state.Z.device)
+    A = torch.zeros(d, d, dtype=torch.float64, device=state.Z.device)
+    P[:, used] = P_used
+    A[used[:, None], used[None, :]] = 0.5 * (A_used + A_used.mT)
+    return dataclasses.replace(state, plane_weights=P, plane_cov=A)
