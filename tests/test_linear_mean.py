@@ -244,6 +244,29 @@ def test_the_coefficients_variance_is_the_vague_prior_limit_of_a_gp_with_the_pla
     assert far[1] / far[0] == pytest.approx(4.0, rel=1e-6)
 
 
+def test_the_coefficients_variance_names_what_it_cannot_compute():
+    """A sparse state is refused, a plane column the rows do not vary is named, and a Gram matrix that is not
+    numerically positive definite (repeated rows, no noise) is factored with a jitter and a warning."""
+    from bemlearn.errors import ArgumentError
+    from bemlearn.warnings import NumericalWarning
+
+    _, sparse = _sgpr_factored_case(200, 1, seed=7)
+    with pytest.raises(ArgumentError, match="an exact posterior is needed"):
+        with_plane_variance(_linear(sparse))
+    _, base = _exact_case(60, 1, seed=7)
+    slope = torch.tensor([0.4, 0.0, -0.3, 0.0, 0.0], dtype=torch.float64)
+    flat = base.Z.clone()
+    flat[:, 2] = 0.0
+    with pytest.raises(ArgumentError, match=r"do not determine the plane's coefficients \(columns \['qdd_arm', 'q_arm'\]\)"):
+        with_plane_variance(dataclasses.replace(base, Z=flat, mean_slope=slope, input_names=NAMES))
+    doubled = torch.cat([base.Z, base.Z])
+    st = dataclasses.replace(base, Z=doubled, alpha=torch.cat([base.alpha, base.alpha]), S=torch.zeros(120, 120, dtype=torch.float64),
+                             estimator_delta=None, noise=torch.tensor(0.0, dtype=torch.float64), mean_slope=slope)
+    with pytest.warns(NumericalWarning, match="plane coefficients' variance"):
+        st = with_plane_variance(st)
+    assert st.plane_variance and bool(torch.isfinite(st.plane_cov).all())
+
+
 def test_an_exact_fit_with_the_plane_carries_its_coefficients_variance(tmp_path):
     x = _inputs(300, 1)
     g = torch.Generator().manual_seed(2)
@@ -319,4 +342,7 @@ def test_the_exported_metadata_states_the_plane_in_physical_units():
     for i, name in enumerate(st.input_names):
         assert slope[name] == pytest.approx(float(st.y_std * st.mean_slope[i] / st.x_std[i]), rel=1e-15)
     assert doc["normalization"]["mean_slope"] == st.mean_slope.tolist()
+    assert doc["prior_mean"]["coefficient_variance"] is False       # a plane without its coefficients' term
+    full = with_plane_variance(dataclasses.replace(st, S=torch.cholesky_inverse(torch.linalg.cholesky(st.gram()))))
+    assert json.loads(BEMPredictor(full, _metadata(full, 1)).metadata_json)["prior_mean"]["coefficient_variance"] is True
     assert "prior_mean" not in json.loads(BEMPredictor(base, _metadata(base, 1)).metadata_json)   # zero mean: as before

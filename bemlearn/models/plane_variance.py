@@ -21,6 +21,7 @@ import torch
 
 from bemlearn.errors import ArgumentError
 from bemlearn.models.predictor_state import PredictorState
+from bemlearn.models.solver import robust_cholesky
 
 __all__ = ["with_plane_variance"]
 
@@ -29,8 +30,8 @@ def with_plane_variance(state: PredictorState) -> PredictorState:
     """``state`` with P and A of (L3) filled in (``plane_weights``, ``plane_cov``).
 
     Only for an exact posterior (Z the training inputs, K = K_ZZ + σ_0² I); a state without a plane is returned
-    unchanged.  K's Cholesky factor is :meth:`~PredictorState.gram_cholesky`, with a growing jitter where K is
-    not numerically positive definite.
+    unchanged.  K's Cholesky factor is :meth:`~PredictorState.gram_cholesky`, or where K is not numerically
+    positive definite :func:`~bemlearn.models.solver.robust_cholesky`'s (a growing jitter, with a warning).
 
     Raises:
         ArgumentError: a sparse kind (its Z are inducing points, not the rows the plane was fitted on), or a
@@ -44,13 +45,8 @@ def with_plane_variance(state: PredictorState) -> PredictorState:
     used = (state.mean_slope != 0).nonzero().flatten()
     L = state.gram_cholesky()
     if L is None:
-        K = state.gram()
-        jitter = 1e-10 * float(state.outputscale)
-        L, info = torch.linalg.cholesky_ex(K)
-        while int(info) != 0:
-            K.diagonal().add_(jitter)
-            jitter *= 10
-            L, info = torch.linalg.cholesky_ex(K)
+        L, _ = robust_cholesky(state.gram(), what="K_ZZ + σ_0² I (the plane coefficients' variance, eq. L3)",
+                               jitter=1e-10 * float(state.outputscale))
     H = state.Z[:, used]
     P_used = torch.cholesky_solve(H, L)                       # K⁻¹H (M, p)
     G = H.mT @ P_used
