@@ -240,6 +240,26 @@ def test_compare_predictor_scores_a_right_and_two_wrong_learned_bems(tmp_path):
     assert hanging["rmse"] > 3.0
 
 
+def test_a_predictor_the_bench_cannot_read_is_named_under_the_table_not_only_counted(tmp_path):
+    """An ok run whose predictor file this tree refuses (another tree's exporter, or damage) counts as a false ok, and
+    the table says which run and why, with the way to score it."""
+    import json
+
+    from bemlearn.bench.family.score import score_run, unscored_note
+
+    xml, truth = generate_robot(0, 6, hold_check=False)
+    truth = {**truth, "holdable": True, "hold": {"reason": "not checked here"}}
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "metrics.json").write_text(json.dumps({"verdict": {"status": "ok", "findings": []}}))
+    (run / "bem_predictor.pt").write_bytes(b"PK\x03\x04 not a predictor")
+    row = score_run(run, xml, truth, {"exit_code": 0})
+    assert row["verdict"] == "ok" and row["false_ok"] is True and row["rmse"] is None
+    note = unscored_note([row])
+    assert note.startswith("\nNot scored (1)") and f"- {truth['name']} (verdict ok): " in note and "--checkout TREE" in note
+    assert unscored_note([{**row, "compare_error": None}]) == ""
+
+
 def test_the_runs_worst_point_is_one_more_query_moved_into_the_oracles_box(tmp_path):
     """The run's own worst design-region point (here 10× the box's velocity, a slide rate a cart-pole's BEM does not
     depend on, and 10× its position span) is clipped into the

@@ -15,7 +15,16 @@ from pathlib import Path
 
 import numpy as np
 
-from bemlearn.bench.family.score import FEATURES, GAIN_RANGE, MAX_MAX, RMSE_MAX, feature_table, format_table, score_run
+from bemlearn.bench.family.score import (
+    FEATURES,
+    GAIN_RANGE,
+    MAX_MAX,
+    RMSE_MAX,
+    feature_table,
+    format_table,
+    score_run,
+    unscored_note,
+)
 from bemlearn.errors import ArgumentError, OutputExistsError
 
 __all__ = ["write_family", "family_rows", "to_json_text", "run_family", "score_sweep", "write_results"]
@@ -214,7 +223,7 @@ def run_family(seed: int, count: int, out: str | Path, *, only: list[int] | None
         truth = json.loads((robots / f"{name}.json").read_text())
         rows.append(score_run(run_dir, xml, truth, json.loads(rec_path.read_text())))
     table = feature_table(rows)
-    md = format_table(table)
+    md = format_table(table) + unscored_note(rows)
     write_results(out, rows, table, md, seed=seed, count=count)
     return {"rows": rows, "table": table, "markdown": md}
 
@@ -228,7 +237,7 @@ def write_results(out: Path, rows: list[dict], table: list[dict], md: str, *, se
 
     cols = ["name", "topology", *FEATURES, "qu_upright", "holdable", "verdict", "right", "false_ok", "rmse", "max_abs", "max_sampled", "gain",
             "learned_at_rest_minus_upright", "band_coverage", "balanced_at_upright", "bem_right", "reason_true", "first_check", "first_reason", "hold_reason",
-            "balance_note", "exit_code", "wall_s", "commit"]
+            "balance_note", "exit_code", "wall_s", "commit", "compare_error"]
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=cols, extrasaction="ignore")
     w.writeheader()
@@ -271,6 +280,6 @@ def score_sweep(sweep_dir: str | Path, family_dir: str | Path) -> dict:
         raise MissingFileError(f"--sweep {sweep_dir}: no complete cell runs a robot of {family_dir}")
     rows.sort(key=lambda r: r["name"])
     table = feature_table(rows)
-    md = format_table(table)
+    md = format_table(table) + unscored_note(rows)
     write_results(sweep_dir, rows, table, md, seed=index["seed"], count=index["count"])
     return {"rows": rows, "table": table, "markdown": md}

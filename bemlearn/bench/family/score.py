@@ -12,7 +12,7 @@ import numpy as np
 
 from bemlearn.pipeline.run_metrics import RunMetrics
 
-__all__ = ["FEATURES", "compare_predictor", "compare_module", "balanced_at_upright", "judge_reason", "score_run", "feature_table", "format_table"]
+__all__ = ["FEATURES", "compare_predictor", "compare_module", "balanced_at_upright", "judge_reason", "score_run", "feature_table", "format_table", "unscored_note"]
 
 #: issue 28's bar for a right learned BEM over the design region (rad for the family's hinge q_u)
 RMSE_MAX, MAX_MAX, GAIN_RANGE = 0.01, 0.04, (0.95, 1.05)
@@ -317,4 +317,20 @@ def format_table(table: list[dict]) -> str:
         lines.append(f"| {t['feature']} | {t['value']} | {t['count']} | {t['holdable']} | {rate} | {t['false_ok']} | "
                      f"{num(t['median_rmse'], '.3g')} | {num(t['median_gain'], '.3f')} | {t['reason_true']}/{t['reason_judged']} "
                      f"({t['non_ok']}) | {verd} |")
+    return "\n".join(lines)
+
+
+def unscored_note(rows: list[dict]) -> str:
+    """Markdown lines naming the runs whose predictor the bench could not score (``compare_error``), or ``""``.
+
+    Such a run has no learned-vs-oracle figures: with verdict ok it counts as a false ok (an ok the oracle cannot
+    confirm), so the table's false ok says nothing of its BEM until it is scored.
+    """
+    bad = [r for r in rows if r.get("compare_error")]
+    if not bad:
+        return ""
+    lines = [f"\nNot scored ({len(bad)}): the predictor could not be compared with the oracle; a run whose verdict is ok "
+             "counts as a false ok until it is. A predictor written by another source tree (`--checkout TREE`) is "
+             "refused by this one's loader: score it by running the bench from that tree."]
+    lines += [f"- {r['name']} (verdict {r['verdict']}): {r['compare_error'][:300]}" for r in bad]
     return "\n".join(lines)
