@@ -146,7 +146,7 @@ def condition_state(state: PredictorState, x: torch.Tensor, y: torch.Tensor) -> 
     alpha = torch.cholesky_solve(yn[:, None], L)[:, 0]
     replica = dataclasses.replace(probe, alpha=alpha, S=torch.cholesky_inverse(L))
     # the replica's own plane coefficients' variance (eq. L3) where the fitted state carries that term
-    return with_plane_variance(replica) if state.plane_variance else replica
+    return with_plane_variance(replica, cholesky=L) if state.plane_variance else replica
 
 
 def calibrate_replicas(

@@ -26,12 +26,13 @@ from bemlearn.models.solver import robust_cholesky
 __all__ = ["with_plane_variance"]
 
 
-def with_plane_variance(state: PredictorState) -> PredictorState:
+def with_plane_variance(state: PredictorState, *, cholesky: torch.Tensor | None = None) -> PredictorState:
     """``state`` with P and A of (L3) filled in (``plane_weights``, ``plane_cov``).
 
     Only for an exact posterior (Z the training inputs, K = K_ZZ + σ_0² I); a state without a plane is returned
-    unchanged.  K's Cholesky factor is :meth:`~PredictorState.gram_cholesky`, or where K is not numerically
-    positive definite :func:`~bemlearn.models.solver.robust_cholesky`'s (a growing jitter, with a warning).
+    unchanged.  K's Cholesky factor is ``cholesky`` when the caller has it (``(M, M)`` lower, the one its α was
+    solved with), else :meth:`~PredictorState.gram_cholesky`, or where K is not numerically positive definite
+    :func:`~bemlearn.models.solver.robust_cholesky`'s (a growing jitter, with a warning).
 
     Raises:
         ArgumentError: a sparse kind (its Z are inducing points, not the rows the plane was fitted on), or a
@@ -43,7 +44,7 @@ def with_plane_variance(state: PredictorState) -> PredictorState:
         raise ArgumentError(f"with_plane_variance: an exact posterior is needed (its Z are the training rows); got {state.kind!r}")
     assert state.mean_slope is not None  # filled by PredictorState.__post_init__
     used = (state.mean_slope != 0).nonzero().flatten()
-    L = state.gram_cholesky()
+    L = cholesky if cholesky is not None else state.gram_cholesky()
     if L is None:
         L, _ = robust_cholesky(state.gram(), what="K_ZZ + σ_0² I (the plane coefficients' variance, eq. L3)",
                                jitter=1e-10 * float(state.outputscale))
