@@ -112,12 +112,14 @@ class Lemma1Check:
     damping_coefficient: float = float("nan")
     r_model_damping: float = float("nan")
     damping_qu: float = 0.0
+    delta_gamma_qu: float = float("nan")
 
     def as_dict(self) -> dict[str, float]:
         return {"r_learned_vs_model_delta_gamma": self.r_learned_vs_model_delta_gamma,
                 "r_learned_vs_hdot": self.r_learned_vs_hdot, "model_gap": self.model_gap,
                 "hdot_coefficient": self.hdot_coefficient, "damping_coefficient": self.damping_coefficient,
-                "r_model_damping": self.r_model_damping, "damping_qu": self.damping_qu}
+                "r_model_damping": self.r_model_damping, "damping_qu": self.damping_qu,
+                "delta_gamma_qu": self.delta_gamma_qu}
 
 
 #: The entries of a loop that a run's ``metrics.json`` keeps under ``closed_loop.<source>``.

@@ -400,6 +400,7 @@ class Lemma1Info(_Record):
     damping_coefficient: float | None = None
     r_model_damping: float | None = None
     damping_qu: float | None = None
+    delta_gamma_qu: float | None = None
 
 
 @dataclass(kw_only=True)

@@ -189,7 +189,7 @@ def _run_loop(robot: BalanceRobot, nominal: BalanceRobot, config: PipelineConfig
                 log.info("simulate: Lemma 1 checked %s", how)
             L = learned_lemma1(pred, pred.full, nominal, ref)
             check = Lemma1Check(L.r, L.r_hdot, L.model_gap, L.hdot_coefficient, L.damping_coefficient, L.r_model_damping,
-                                L.damping_qu)
+                                L.damping_qu, L.delta_gamma_qu)
             lemma = {"t": L.t, "delta_gamma": L.delta_gamma_learned, "hdot": L.hdot, "delta_gamma_model": L.delta_gamma_model}
     ia, iu = nominal.actuated_index[0], nominal.unactuated_index
     kinds = nominal.coordinate_kinds
