@@ -42,7 +42,7 @@ A linear prior mean (eq. L1 of :mod:`bemlearn.models.predictor_state`, y_std β�
 
 l_0 its constant (the x_mean terms in the raw form, the columns held at zero in both), and its
 constant gradient adds s_i y_std β̃_i / x_std_i to g_i; with β̃ = 0 neither is computed.  Its coefficients'
-variance (eq. L3 of :mod:`bemlearn.models.plane_variance`, y_std² rᵀAr with r = x̃ − Pᵀk_Z) is a sum of
+variance (eq. L3 of :mod:`bemlearn.models.plane_posterior`, y_std² rᵀAr with r = x̃ − Pᵀk_Z) is a sum of
 squares of a map affine in v and in the kernel row: with A = R Rᵀ (R ``(d, p)`` from A's eigenvectors),
 
     y_std rᵀR = v T_v + t_0 − exp(e) T_k,   T_k = y_std σ_f² P R  (sentinel row zero),

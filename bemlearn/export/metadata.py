@@ -265,7 +265,9 @@ def artifact_metadata(meta: PredictorMetadata, state: PredictorState) -> dict[st
         doc["normalization"]["mean_slope"] = state.mean_slope.tolist()
         doc["prior_mean"] = {"kind": "linear", "slope": {n: float(g) for n, g in zip(meta.input_names, state.prior_mean_gradient().tolist())},
                              # eq. (L3): the coefficients' variance is part of the latent std (and the band)
-                             "coefficient_variance": state.plane_variance}
+                             "coefficient_variance": state.plane_variance,
+                             # eq. (L4): with the term the plane is the generalized-least-squares one under the kernel
+                             "estimate": "generalized least squares" if state.plane_variance else "least squares"}
     if meta.extra:
         doc["extra"] = jsonable(meta.extra, where="metadata")
         if "checkpoint_sha256" in meta.extra:  # recorded by export_run (bemlearn.export.staleness)

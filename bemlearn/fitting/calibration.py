@@ -55,7 +55,7 @@ import numpy as np
 import torch
 
 from bemlearn.errors import ArgumentError, DataError
-from bemlearn.models.plane_variance import with_plane_variance
+from bemlearn.models.plane_posterior import with_plane_posterior
 from bemlearn.warnings import UncertaintyWarning, warn
 
 if TYPE_CHECKING:  # bemlearn.models loads GPyTorch: not needed for gaussian_quantile
@@ -120,8 +120,8 @@ def condition_state(state: PredictorState, x: torch.Tensor, y: torch.Tensor) -> 
         prior mean (eq. L1) gets its plane refitted to these data (:func:`~bemlearn.fitting.linear_mean.least_squares_slope`,
         the columns ``state`` does not use kept out), and α is that of the residual: a replica is the whole fit on
         other data, so the spread of the plane between replicas reaches the calibration, and where ``state`` carries
-        the plane coefficients' variance (eq. L3 of :mod:`bemlearn.models.plane_variance`) so does the replica, for
-        its own rows.
+        the plane's posterior (eqs. L3–L4 of :mod:`bemlearn.models.plane_posterior`: the generalized-least-squares
+        plane and its coefficients' variance) so does the replica, for its own rows.
     """
     xn = (x.to(torch.float64) - state.x_mean) / state.x_std
     yn = (y.to(torch.float64) - state.y_mean) / state.y_std
@@ -145,8 +145,8 @@ def condition_state(state: PredictorState, x: torch.Tensor, y: torch.Tensor) -> 
         L, info = torch.linalg.cholesky_ex(K)
     alpha = torch.cholesky_solve(yn[:, None], L)[:, 0]
     replica = dataclasses.replace(probe, alpha=alpha, S=torch.cholesky_inverse(L))
-    # the replica's own plane coefficients' variance (eq. L3) where the fitted state carries that term
-    return with_plane_variance(replica, cholesky=L) if state.plane_variance else replica
+    # the replica's own plane posterior (eqs. L3–L4) where the fitted state carries it
+    return with_plane_posterior(replica, cholesky=L) if state.plane_variance else replica
 
 
 def calibrate_replicas(

@@ -8,7 +8,7 @@ from bemlearn.models.gpdm import GPDM, GPDMObjective, LatentComparison, compare_
 from bemlearn.models.input_noise import mean_gradient
 from bemlearn.models.kernels import ard_se_kernel, gaussian_likelihood, kernel_matrix, se_cross_covariance
 from bemlearn.models.learned_bem import BEMPrediction, LearnedBEM, srinivas_kappa
-from bemlearn.models.plane_variance import with_plane_variance
+from bemlearn.models.plane_posterior import with_plane_posterior
 from bemlearn.models.predict import predict
 from bemlearn.models.predictor_state import GPKind, PredictorState
 from bemlearn.models.sgpr import SGPRBEMGP
@@ -26,7 +26,7 @@ __all__ = [
     "srinivas_kappa",
     "band_reference",
     "mean_gradient",
-    "with_plane_variance",
+    "with_plane_posterior",
     "PredictorState",
     "GPKind",
     "GP_KINDS",

@@ -10,7 +10,7 @@ import gpytorch
 import torch
 
 from bemlearn.models.gp_kinds import as_gp
-from bemlearn.models.plane_variance import with_plane_variance
+from bemlearn.models.plane_posterior import with_plane_posterior
 from bemlearn.models.predictor_state import GPKind, PredictorState
 from bemlearn.models.solver import DEFAULT_JITTER, DEFAULT_MAX_TRIES, cholesky_policy
 
@@ -92,7 +92,8 @@ def predictor_state(
     Returns:
         a :class:`PredictorState` whose ``predict_reference`` equals :func:`~bemlearn.models.predict.predict`
         mapped to physical units (plus the plane y_std β̃ᵀx̃ of ``mean_slope``, and for an exact GP with a plane its
-        coefficients' variance, eq. L3 of :mod:`bemlearn.models.plane_variance`; the sparse kinds carry no such term).
+        coefficients' posterior: its generalized-least-squares plane and that plane's variance, eqs. L3–L4 of
+        :mod:`bemlearn.models.plane_posterior`; the sparse kinds keep the plane of ``mean_slope`` and carry no such term).
     """
     kind = as_gp(model).kind
     Z, alpha, S = posterior_weights(model, likelihood)
@@ -128,5 +129,5 @@ def predictor_state(
         S_inner=None if factor is None else _t(factor[1]),
         mean_slope=None if mean_slope is None else _t(mean_slope).reshape(-1),
     )
-    # the plane coefficients' variance (eq. L3) where Z are the rows the plane was fitted on
-    return state if state.sparse else with_plane_variance(state)
+    # the plane's posterior (eqs. L3–L4) where Z are the rows the plane was fitted on
+    return state if state.sparse else with_plane_posterior(state)

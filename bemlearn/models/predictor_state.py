@@ -44,12 +44,13 @@ variance gains
     σ̃²(x̃) += rᵀ A r,   r = x̃ − Pᵀ k_Z(x̃),   P = K⁻¹H,   A = (Hᵀ K⁻¹ H)⁻¹             (L3)
 
 (H the training rows' plane columns, K = K_ZZ + σ_0² I; ``plane_weights`` P and ``plane_cov`` A, embedded in
-d columns with zeros where β̃_j = 0, :mod:`bemlearn.models.plane_variance`).  Near the data Pᵀk_Z ≈ x̃ and
+d columns with zeros where β̃_j = 0, :mod:`bemlearn.models.plane_posterior`).  Near the data Pᵀk_Z ≈ x̃ and
 the term vanishes; beyond them r → x̃ and it grows with the distance, where the plane is extrapolated.  The
-term is the generalized-least-squares coefficients' covariance, while β̃ is the ordinary least-squares
-plane; both are unbiased, and the replica calibration c (which refits the plane on each replica) scales
-the variance the term is part of.  Without ``plane_cov`` (zero mean, or a state frozen before it) there is
-no term.
+term is the covariance of the generalized-least-squares coefficients β̄ = A Hᵀ K⁻¹ ỹ (eq. L4), and a state
+that carries it holds β̃ = β̄ (the plane of (L1) moved to (L4) once the kernel is fitted, α with it); the
+replica calibration c (which refits the plane on each replica the same way) scales the variance the term is
+part of.  Without ``plane_cov`` (zero mean, a sparse kind, or a state frozen before it) there is no term,
+and β̃ is the ordinary least-squares plane of (L1).
 
 The calibrated band (docs/uncertainty.md) adds three fields: ``std_scale`` c (trial-split
 replica calibration, :mod:`bemlearn.fitting.calibration`), ``input_std`` s (the
