@@ -92,6 +92,7 @@ def test_a_plane_is_learned_and_extrapolated_with_the_linear_mean_while_the_zero
     auto = _fit(tmp_path / "auto", x, y, "auto")
     zero = _fit(tmp_path / "zero", x, y, "zero")
     assert auto.fit["prior_mean"]["chosen"] == "linear" and auto.state.linear_mean
+    assert auto.fit["prior_mean"]["estimate"] == "generalized least squares"     # an exact GP: eq. (L4)
     assert zero.fit["prior_mean"]["chosen"] == "zero" and not zero.state.linear_mean
     q = torch.tensor([[40.0, 0.5, 0.1, 0.0, 0.0], [-40.0, -0.5, -0.2, 0.0, 0.0]], dtype=torch.float64)   # q̈_a at 10σ
     mu, sd = auto.state.predict_reference(q)[:2]
@@ -341,6 +342,9 @@ def test_the_report_says_which_prior_mean_the_run_used_and_why():
         " Prior mean: a least-squares plane in the inputs (eq. L1, explaining 99.87 % of the label's variance).")
     chosen = choose_prior_mean(-3.0, -2.9, n=500, n_coefficients=5, explained=0.99)      # 50 nats gained, 15.5 priced
     assert "Prior mean: a least-squares plane" in text(chosen) and "−log p -1500.0 + 15.5" in text(chosen)
+    assert text({**chosen, "estimate": "generalized least squares"}).startswith(
+        " Prior mean: a least-squares plane in the inputs (eq. L1, explaining 99.00 % of the label's variance); its coefficients "
+        "then by generalized least squares under the fitted kernel (eq. L4) (−log p")
     kept_zero = choose_prior_mean(-2.91, -2.9, n=500, n_coefficients=5, explained=0.02)  # 5 nats gained, 15.5 priced
     assert text(kept_zero).startswith(" Prior mean: zero; a least-squares plane in the inputs (eq. L1, explaining 2.00 %")
 

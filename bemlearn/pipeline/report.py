@@ -141,6 +141,8 @@ def _prior_mean_text(pm) -> str:
         return ""
     plane = f"a least-squares plane in the inputs (eq. L1, explaining {_f(100 * pm.explained, '.2f')} % of the label's variance)" \
         if pm.explained is not None else "a least-squares plane in the inputs (eq. L1)"
+    if pm.chosen == "linear" and pm.estimate == "generalized least squares":
+        plane += "; its coefficients then by generalized least squares under the fitted kernel (eq. L4)"
     if pm.nlml_zero is None:
         return f" Prior mean: {plane}."
     compared = (f"−log p {_f(pm.nlml_linear, '.1f')} + {_f(pm.penalty, '.1f')} for its coefficients against "

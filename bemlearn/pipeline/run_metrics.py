@@ -158,6 +158,7 @@ class PriorMeanInfo(_Record):
     nlml_linear: float | None = None
     nlml_zero: float | None = None
     penalty: float | None = None
+    estimate: str | None = None
 
 
 @dataclass(kw_only=True)
