@@ -267,7 +267,7 @@ def artifact_metadata(meta: PredictorMetadata, state: PredictorState) -> dict[st
                              # eq. (L3): the coefficients' variance is part of the latent std (and the band)
                              "coefficient_variance": state.plane_variance,
                              # eq. (L4): with the term the plane is the generalized-least-squares one under the kernel
-                             "estimate": "generalized least squares" if state.plane_variance else "least squares"}
+                             "estimate": state.plane_estimate}
     if meta.extra:
         doc["extra"] = jsonable(meta.extra, where="metadata")
         if "checkpoint_sha256" in meta.extra:  # recorded by export_run (bemlearn.export.staleness)

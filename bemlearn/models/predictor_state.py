@@ -203,6 +203,14 @@ class PredictorState:
         """Whether the latent variance carries the plane coefficients' term rᵀAr of (L3)."""
         return self.plane_cov is not None and bool((self.plane_cov != 0).any())
 
+    @property
+    def plane_estimate(self) -> str | None:
+        """How the plane's coefficients were estimated: ``"generalized least squares"`` where the state carries their
+        variance (eq. L4), ``"least squares"`` otherwise (eq. L1), ``None`` without a plane."""
+        if not self.linear_mean:
+            return None
+        return "generalized least squares" if self.plane_variance else "least squares"
+
     def plane_term(self, x: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
         """rᵀ A r of (L3): ``(B,)`` in normalized output units squared, for physical ``x: (B, d)`` and their kernel
         row ``k: (B, M)`` (zeros without the term)."""

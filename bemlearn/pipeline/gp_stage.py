@@ -184,7 +184,7 @@ def fit_bem_gp(
         y_std=normalization.y_std, input_names=names, n_train=int(y.shape[0]), mean_slope=slope,
     )
     if state.linear_mean and mean_choice is not None:   # eq. (L4): an exact GP freezes the generalized-least-squares plane (bemlearn.models.plane_posterior)
-        mean_choice["estimate"] = "generalized least squares" if state.plane_variance else "least squares"
+        mean_choice["estimate"] = state.plane_estimate
     latent_check = None if interrupted else _frozen_latent_check(state, model, lik, xn, dtype, config.device)
     calibration = None
     if calibrate is not None and not interrupted:  # Ctrl-C: write the best checkpoint at once, uncalibrated
